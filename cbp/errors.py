@@ -1,0 +1,123 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The exception hierarchy of cbp: one base class, a flat set of subclasses."""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+A = TypeVar("A")
+
+
+def close_matches(name: str, choices: Iterable[str], n: int = 3) -> list[str]:
+    """Return up to ``n`` entries of ``choices`` that look like ``name``."""
+    return difflib.get_close_matches(name, list(choices), n=n, cutoff=0.5)
+
+
+def suggestion(name: str, choices: Iterable[str]) -> str:
+    """Return "; did you mean 'x'?" for the nearest choice, or an empty string."""
+    matches = close_matches(name, choices, n=1)
+    return f"; did you mean '{matches[0]}'?" if matches else ""
+
+
+class CbpError(Exception):
+    """Base class of every error raised by cbp."""
+
+
+class ConfigError(CbpError, ValueError):
+    """A configuration value is invalid.
+
+    Attributes:
+        location: where the value came from, e.g. ``tasks[0].params.frame``; empty
+            when the value came from Python code rather than a file.
+    """
+
+    def __init__(self, message: str, location: str = "") -> None:
+        """Store the message and where the bad value sits."""
+        self.message = message
+        self.location = location
+        super().__init__(f"{location}: {message}" if location else message)
+
+
+def located(lookup: Callable[[A], T], name: A, location: str) -> T:
+    """Call ``lookup(name)``; a ConfigError it raises gets ``location`` attached.
+
+    Plugins use it to resolve a parameter (a frame or joint name) so that the error
+    names the parameter: ``located(robot.frame_id, params.frame, "frame")``.
+    """
+    try:
+        return lookup(name)
+    except ConfigError as exc:
+        raise type(exc)(exc.message, location=location) from None
+
+
+class ScenarioError(CbpError):
+    """A scenario file has one or more problems; all of them are listed."""
+
+    def __init__(self, path: str, problems: Sequence[str]) -> None:
+        """Collect every problem found in the file at ``path``."""
+        self.path = path
+        self.problems = list(problems)
+        lines = "\n".join(f"  {p}" for p in self.problems)
+        count = len(self.problems)
+        noun = "problem" if count == 1 else "problems"
+        super().__init__(f"{path}: {count} {noun}:\n{lines}")
+
+
+class UnknownPluginError(ConfigError):
+    """A plugin type name is not registered."""
+
+
+class FrameNotFoundError(ConfigError):
+    """A frame name does not exist in the robot model."""
+
+
+class JointNotFoundError(ConfigError):
+    """A joint name does not exist in the robot model."""
+
+
+class RobotNotFoundError(ConfigError):
+    """No robot description folder with that name."""
+
+
+class TargetNotSetError(CbpError):
+    """A plugin was evaluated before its target was set."""
+
+
+class InvalidTargetError(CbpError, ValueError):
+    """A target has the wrong shape or is not finite (e.g. a NaN goal)."""
+
+
+class PluginOutputError(CbpError):
+    """A plugin returned a value, Jacobian or bound of the wrong shape or not finite."""
+
+
+class SolveError(CbpError):
+    """The QP could not be solved.
+
+    Attributes:
+        problem: the assembled problem (a :class:`cbp.qp.QPProblem`).
+        status: the solver's own status, as text.
+        conflicting: names of the entries whose rows could not be met together,
+            found by a relaxed solve with slack variables; empty when unknown.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        problem: Any = None,
+        status: str = "",
+        conflicting: Sequence[str] = (),
+    ) -> None:
+        """Keep the problem and the solver's answer for post-mortem."""
+        self.problem = problem
+        self.status = status
+        self.conflicting = list(conflicting)
+        super().__init__(message)
+
+
+class JacobianMismatchError(CbpError, AssertionError):
+    """A plugin's analytic Jacobian disagrees with finite differences."""

@@ -1,0 +1,2 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Executors: ways of turning the engine's steps into robot motion."""

@@ -1,0 +1,448 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Robot models: a URDF loaded through pinocchio, with names resolved to indices.
+
+Configurations ``q`` have ``nq`` entries; velocities and displacements live in the
+tangent space and have ``nv`` entries. The two differ for continuous joints (cos, sin),
+planar bases (x, y, cos, sin) and floating bases (position + quaternion), which is why
+every change of configuration goes through :meth:`RobotModel.integrate` and
+:meth:`RobotModel.difference`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from cbp.errors import (
+    ConfigError,
+    FrameNotFoundError,
+    JointNotFoundError,
+    RobotNotFoundError,
+    close_matches,
+)
+from cbp.schema import load_file
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.intp]
+
+#: Rows of a tangent vector: a slice or an array of indices.
+IndexRows = slice | IntArray
+
+BaseType = Literal["fixed", "planar", "floating"]
+
+#: Pinocchio marks an unbounded coordinate with the largest double; treat anything this
+#: large as no bound at all.
+_UNBOUNDED = 1e300
+
+#: Where robot description folders are looked up, after ``CBP_ROBOT_PATH``.
+ROBOTS_DIR = Path(__file__).resolve().parent.parent / "robots"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotDescription:
+    """The schema of a robot folder's ``robot.yaml``."""
+
+    name: str
+    """Folder name, also the robot's name in scenarios."""
+    urdf: str
+    """URDF file, relative to the folder."""
+    end_effector: str
+    """Frame the default goal task controls."""
+    home: dict[str, float]
+    """Home posture, by joint name [rad or m]; joints left out take their neutral."""
+    locked_joints: dict[str, float] = field(default_factory=dict)
+    """Joints removed from the model and held at these positions [rad or m]."""
+    velocity_limits: dict[str, float] = field(default_factory=dict)
+    """Overrides of the URDF velocity limits, by joint name [rad/s or m/s]."""
+    acceleration_limits: dict[str, float] = field(default_factory=dict)
+    """Acceleration limits by joint name [rad/s^2 or m/s^2]; default 10 for all."""
+
+
+def find_robot_folder(name: str) -> Path:
+    """Return the folder of robot ``name``: a path, or a name under the robot path.
+
+    The search path is ``CBP_ROBOT_PATH`` (os.pathsep-separated) then ``robots/``.
+
+    Raises:
+        RobotNotFoundError: listing the robots available.
+    """
+    direct = Path(name)
+    if (direct / "robot.yaml").is_file():
+        return direct
+    roots = [
+        Path(p) for p in os.environ.get("CBP_ROBOT_PATH", "").split(os.pathsep) if p
+    ]
+    roots.append(ROBOTS_DIR)
+    for root in roots:
+        if (root / name / "robot.yaml").is_file():
+            return root / name
+    available = sorted(
+        {
+            p.parent.name
+            for root in roots
+            if root.is_dir()
+            for p in root.glob("*/robot.yaml")
+        }
+    )
+    hint = close_matches(name, available, n=1)
+    did_you_mean = f"; did you mean '{hint[0]}'?" if hint else ""
+    listing = ", ".join(available) or "(none)"
+    raise RobotNotFoundError(f"no robot '{name}'{did_you_mean} Available: {listing}.")
+
+
+class RobotModel:
+    """A kinematic model: pinocchio ``Model`` plus name lookup, limits and Lie algebra.
+
+    Attributes:
+        model: the pinocchio model (do not modify it).
+        name: the robot's name.
+        description: the parsed ``robot.yaml``, when loaded from a folder.
+        urdf_path: the URDF file the model came from, when there is one.
+        base: how the root is attached: ``fixed``, ``planar`` or ``floating``.
+        folder: the robot description folder, when loaded with :meth:`load`.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        *,
+        name: str | None = None,
+        description: RobotDescription | None = None,
+        urdf_path: Path | None = None,
+        base: BaseType = "fixed",
+    ) -> None:
+        """Wrap a pinocchio model; limits and name tables are computed once here."""
+        self.model = model
+        self.name = name or model.name
+        self.description = description
+        self.urdf_path = urdf_path
+        self.base = base
+        self.folder: Path | None = None
+        lower = np.array(model.lowerPositionLimit, dtype=float)
+        upper = np.array(model.upperPositionLimit, dtype=float)
+        lower[lower <= -_UNBOUNDED] = -np.inf
+        upper[upper >= _UNBOUNDED] = np.inf
+        self._lower = lower
+        self._upper = upper
+        self._joint_ids = {model.names[i]: i for i in range(1, model.njoints)}
+        self._frame_ids = {f.name: i for i, f in enumerate(model.frames)}
+        velocity = np.array(model.velocityLimit, dtype=float)
+        velocity[(velocity <= 0) | (velocity >= _UNBOUNDED)] = np.inf
+        accel = np.full(model.nv, 10.0)
+        if description is not None:
+            for joint, value in description.velocity_limits.items():
+                velocity[self.joint_v_slice(joint)] = value
+            for joint, value in description.acceleration_limits.items():
+                accel[self.joint_v_slice(joint)] = value
+        self._velocity = velocity
+        self._acceleration = accel
+        # Scalar coordinates with a finite range: what a joint-limit constraint bounds.
+        bounded_q: list[int] = []
+        bounded_v: list[int] = []
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            if joint.nq == 1 and joint.nv == 1:
+                iq, iv = joint.idx_q, joint.idx_v
+                if np.isfinite(lower[iq]) and np.isfinite(upper[iq]):
+                    bounded_q.append(iq)
+                    bounded_v.append(iv)
+        self.bounded_q: IntArray = np.array(bounded_q, dtype=np.intp)
+        self.bounded_v: IntArray = np.array(bounded_v, dtype=np.intp)
+        #: True when every joint has nq == nv (no rotations stored as cos/sin or
+        #: quaternions): then q1 ⊖ q0 = q1 - q0 and its Jacobian is the identity.
+        self.is_euclidean = model.nq == model.nv
+        self._identity = np.eye(model.nv)
+        self._selections: dict[object, FloatArray] = {}
+        for arr in (
+            self._lower,
+            self._upper,
+            self._velocity,
+            self._acceleration,
+            self._identity,
+        ):
+            arr.flags.writeable = False
+
+    # ------------------------------------------------------------------ loading
+
+    @classmethod
+    def from_urdf(
+        cls,
+        urdf: str | Path,
+        *,
+        base: BaseType = "fixed",
+        locked_joints: Mapping[str, float] | None = None,
+        name: str | None = None,
+        description: RobotDescription | None = None,
+    ) -> RobotModel:
+        """Load a URDF, optionally on a planar or floating base, with joints locked.
+
+        Args:
+            urdf: path of the URDF file.
+            base: ``fixed`` keeps the URDF root fixed to the world; ``planar`` adds
+                a planar joint (x, y, yaw; nq 4, nv 3); ``floating`` adds a free
+                flyer (nq 7, nv 6).
+            locked_joints: joints to remove, each held at the given position.
+            name: robot name (default: the URDF's).
+            description: the robot.yaml contents, when loading a robot folder.
+        """
+        path = Path(urdf)
+        if not path.is_file():
+            raise ConfigError(f"URDF file not found: {path}")
+        try:
+            if base == "fixed":
+                model = pin.buildModelFromUrdf(str(path))
+            elif base == "planar":
+                model = pin.buildModelFromUrdf(str(path), pin.JointModelPlanar())
+            elif base == "floating":
+                model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+            else:
+                raise ConfigError(
+                    f"unknown base '{base}'; expected fixed, planar or floating"
+                )
+        except (RuntimeError, ValueError) as exc:
+            raise ConfigError(f"cannot load URDF {path}: {exc}") from exc
+        if locked_joints:
+            full = cls(model, name=name)
+            ids = [full.joint_id(j) for j in locked_joints]
+            q_ref = pin.neutral(model)
+            for joint, value in locked_joints.items():
+                q_ref[model.joints[full.joint_id(joint)].idx_q] = value
+            model = pin.buildReducedModel(model, ids, q_ref)
+        return cls(model, name=name, description=description, urdf_path=path, base=base)
+
+    @classmethod
+    def load(cls, name: str, *, base: BaseType = "fixed") -> RobotModel:
+        """Load the robot folder ``name`` (see :func:`find_robot_folder`)."""
+        folder = find_robot_folder(name)
+        description = load_file(RobotDescription, folder / "robot.yaml")
+        robot = cls.from_urdf(
+            folder / description.urdf,
+            base=base,
+            locked_joints=description.locked_joints,
+            name=description.name,
+            description=description,
+        )
+        robot.folder = folder
+        for joint in description.home:
+            robot.joint_id(joint)  # a bad name in robot.yaml fails loudly here
+        return robot
+
+    # ------------------------------------------------------------------ sizes and names
+
+    @property
+    def nq(self) -> int:
+        """Number of configuration coordinates."""
+        return int(self.model.nq)
+
+    @property
+    def nv(self) -> int:
+        """Dimension of the tangent space: the number of QP variables."""
+        return int(self.model.nv)
+
+    @property
+    def joint_names(self) -> list[str]:
+        """Names of the model's joints (the universe excluded), in tree order."""
+        return list(self._joint_ids)
+
+    @property
+    def frame_names(self) -> list[str]:
+        """Names of every frame of the model."""
+        return list(self._frame_ids)
+
+    def frame_id(self, name: str) -> int:
+        """Return the frame index of ``name``; the error lists close matches."""
+        try:
+            return self._frame_ids[name]
+        except KeyError:
+            raise FrameNotFoundError(
+                f"no frame '{name}' in robot '{self.name}'"
+                + _matches(name, self._frame_ids)
+            ) from None
+
+    def joint_id(self, name: str) -> int:
+        """Return the joint index of ``name``; the error lists close matches."""
+        try:
+            return self._joint_ids[name]
+        except KeyError:
+            raise JointNotFoundError(
+                f"no joint '{name}' in robot '{self.name}'"
+                + _matches(name, self._joint_ids)
+            ) from None
+
+    def joint_v_slice(self, name: str) -> slice:
+        """Tangent-space indices of joint ``name``."""
+        joint = self.model.joints[self.joint_id(name)]
+        return slice(joint.idx_v, joint.idx_v + joint.nv)
+
+    def joint_q_slice(self, name: str) -> slice:
+        """Configuration indices of joint ``name``."""
+        joint = self.model.joints[self.joint_id(name)]
+        return slice(joint.idx_q, joint.idx_q + joint.nq)
+
+    def joint_v_indices(self, names: Sequence[str]) -> IntArray:
+        """Tangent-space indices of the joints ``names``, in the order given."""
+        idx: list[int] = []
+        for name in names:
+            sl = self.joint_v_slice(name)
+            idx.extend(range(sl.start, sl.stop))
+        return np.array(idx, dtype=np.intp)
+
+    def articulated_v_indices(self) -> slice:
+        """Tangent-space indices of every joint except a planar or floating root."""
+        if self.base == "fixed":
+            return slice(0, self.nv)
+        return slice(int(self.model.joints[1].nv), self.nv)
+
+    # ------------------------------------------------------------------ limits
+
+    @property
+    def lower_limits(self) -> FloatArray:
+        """Lower position limits (nq); -inf where unbounded."""
+        return self._lower
+
+    @property
+    def upper_limits(self) -> FloatArray:
+        """Upper position limits (nq); +inf where unbounded."""
+        return self._upper
+
+    @property
+    def velocity_limits(self) -> FloatArray:
+        """Velocity limits (nv) [rad/s or m/s]; +inf where none is known."""
+        return self._velocity
+
+    @property
+    def acceleration_limits(self) -> FloatArray:
+        """Acceleration limits (nv) [rad/s^2 or m/s^2]."""
+        return self._acceleration
+
+    # ------------------------------------------------------------------ configurations
+
+    def neutral(self) -> FloatArray:
+        """The neutral configuration (zeros, identity rotations)."""
+        return np.array(pin.neutral(self.model), dtype=float)
+
+    def home(self) -> FloatArray:
+        """The home posture of robot.yaml (neutral where a joint is not listed)."""
+        q = self.neutral()
+        if self.description is not None:
+            for joint, value in self.description.home.items():
+                q[self.joint_q_slice(joint)] = value
+        return q
+
+    def middle(self) -> FloatArray:
+        """Middle of the joint ranges where bounded, neutral elsewhere."""
+        q = self.neutral()
+        q[self.bounded_q] = 0.5 * (
+            self._lower[self.bounded_q] + self._upper[self.bounded_q]
+        )
+        return q
+
+    def integrate(self, q: FloatArray, dq: FloatArray) -> FloatArray:
+        """Return q ⊕ dq: the configuration reached from q by tangent step dq."""
+        return np.asarray(pin.integrate(self.model, q, dq), dtype=float)
+
+    def difference(self, q0: FloatArray, q1: FloatArray) -> FloatArray:
+        """Return q1 ⊖ q0: the tangent step that takes q0 to q1."""
+        if self.is_euclidean:
+            return q1 - q0
+        return np.asarray(pin.difference(self.model, q0, q1), dtype=float)
+
+    def difference_jacobian(
+        self, q0: FloatArray, q1: FloatArray, rows: IndexRows | None = None
+    ) -> FloatArray:
+        """Jacobian of (q1 ⊖ q0)[rows] with respect to a tangent perturbation of q1.
+
+        Shape (len(rows), nv), or (nv, nv) for all rows. On Euclidean models it is
+        a constant selection of the identity, cached and returned read-only: do not
+        modify it.
+        """
+        if rows is None:
+            key: object = None
+        elif isinstance(rows, slice):  # slices are unhashable before Python 3.12
+            key = (rows.start, rows.stop, rows.step)
+        else:
+            key = tuple(rows.tolist())
+        if self.is_euclidean:
+            selection = self._selections.get(key)
+            if selection is None:
+                selection = np.array(
+                    self._identity if rows is None else self._identity[rows]
+                )
+                selection.flags.writeable = False
+                self._selections[key] = selection
+            return selection
+        J = np.asarray(pin.dDifference(self.model, q0, q1, pin.ArgumentPosition.ARG1))
+        return J if rows is None else J[rows]
+
+    def check_configuration(self, q: npt.ArrayLike, what: str = "q") -> FloatArray:
+        """Return ``q`` as a float array after checking its size and finiteness."""
+        arr = np.asarray(q, dtype=float).reshape(-1)
+        if arr.shape != (self.nq,):
+            raise ConfigError(
+                f"{what} has {arr.size} entries, expected nq = {self.nq} for "
+                f"robot '{self.name}'"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise ConfigError(f"{what} is not finite: {arr}")
+        return arr
+
+    def random_configuration(
+        self, rng: np.random.Generator, *, margin: float = 0.0, base_range: float = 1.0
+    ) -> FloatArray:
+        """Sample a configuration uniformly inside the limits, shrunk by ``margin``.
+
+        Unbounded coordinates (a mobile base's position) are sampled in
+        ±``base_range``; rotations of planar, floating and continuous joints are
+        uniform. The draw is fully determined by ``rng``.
+        """
+        lower = np.where(np.isfinite(self._lower), self._lower + margin, -base_range)
+        upper = np.where(np.isfinite(self._upper), self._upper - margin, base_range)
+        q = self.neutral()
+        for j in range(1, self.model.njoints):
+            joint = self.model.joints[j]
+            iq, nq = joint.idx_q, joint.nq
+            kind = joint.shortname()
+            if kind == "JointModelFreeFlyer":
+                q[iq : iq + 3] = rng.uniform(lower[iq : iq + 3], upper[iq : iq + 3])
+                quat = rng.normal(size=4)
+                q[iq + 3 : iq + 7] = quat / np.linalg.norm(quat)
+            elif kind == "JointModelPlanar":
+                q[iq : iq + 2] = rng.uniform(lower[iq : iq + 2], upper[iq : iq + 2])
+                angle = rng.uniform(-np.pi, np.pi)
+                q[iq + 2 : iq + 4] = (np.cos(angle), np.sin(angle))
+            elif nq == 2 and joint.nv == 1:  # continuous joint: (cos, sin)
+                angle = rng.uniform(-np.pi, np.pi)
+                q[iq : iq + 2] = (np.cos(angle), np.sin(angle))
+            else:
+                q[iq : iq + nq] = rng.uniform(lower[iq : iq + nq], upper[iq : iq + nq])
+        return q
+
+    def __repr__(self) -> str:
+        """Name, base and sizes."""
+        return (
+            f"RobotModel({self.name!r}, base={self.base!r}, nq={self.nq}, nv={self.nv})"
+        )
+
+
+def _matches(name: str, choices: Sequence[str] | Mapping[str, int]) -> str:
+    matches = close_matches(name, list(choices))
+    return f"; close matches: {', '.join(matches)}" if matches else ""
+
+
+def compact_rows(rows: IntArray) -> IndexRows:
+    """Return ``rows`` as a slice when they are consecutive (cheaper to index with)."""
+    if rows.size and np.array_equal(rows, np.arange(rows[0], rows[0] + rows.size)):
+        return slice(int(rows[0]), int(rows[0] + rows.size))
+    return rows
+
+
+def rows_count(rows: IndexRows, n: int) -> int:
+    """Number of entries ``rows`` selects from a vector of length ``n``."""
+    return len(range(n)[rows]) if isinstance(rows, slice) else int(rows.size)

@@ -1,0 +1,392 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Scenario files: strict YAML loading into typed schemas, then into an engine.
+
+A scenario names the robot, the world, the goal input, the method (executor) and
+its settings, and the lists of task and constraint entries. Every entry has the
+engine keys ``type``, ``name``, ``priority``, ``weight`` and ``gain``; what the
+plugin itself needs goes under ``params``. All problems of a file are reported
+together, each with the file, line, path in the document, what was expected and
+the nearest valid choice (:class:`~cbp.errors.ScenarioError`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+
+from cbp.engine import Engine
+from cbp.errors import CbpError, ConfigError, suggestion
+from cbp.goals import GoalSpec, GoalStream
+from cbp.plugin import AnyPlugin, Plugin, Task
+from cbp.qp import Entry
+from cbp.registry import Registry
+from cbp.robot import BaseType, FloatArray, RobotModel
+from cbp.schema import INVALID, Document, join_path, mapping_items
+from cbp.solvers import SOLVERS
+from cbp.spatial import Pose
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotSpec:
+    """The ``robot:`` section."""
+
+    name: str
+    """Robot folder under ``robots/`` (or a path to one)."""
+    base: BaseType = "fixed"
+    """``fixed``, ``planar`` (x, y, yaw) or ``floating``."""
+    initial: dict[str, float] = field(default_factory=dict)
+    """Initial joint positions by name [rad or m]; others start at home."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class SolverSpec:
+    """The ``solver:`` section."""
+
+    name: Literal["daqp", "piqp", "cvxpy"] = "daqp"
+    """QP backend."""
+    regularization: float = 1e-9
+    """Added to the diagonal of the QP cost matrix."""
+
+    def __post_init__(self) -> None:
+        """Regularization must be positive."""
+        if not self.regularization > 0:
+            raise ConfigError(
+                f"must be > 0, got {self.regularization}", "regularization"
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class MethodSpec:
+    """The ``method:`` section: which executor runs the scenario, and its timing."""
+
+    name: Literal["kinematic"] = "kinematic"
+    """``kinematic``: integrate each QP step exactly (no simulator)."""
+    dt: float = 0.01
+    """Duration of one control step [s]."""
+
+    def __post_init__(self) -> None:
+        """Positive step."""
+        if not self.dt > 0:
+            raise ConfigError(f"must be > 0, got {self.dt}", "dt")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectSpec:
+    """One object of the world: a primitive at a pose."""
+
+    name: str
+    """Object name."""
+    shape: Literal["box", "sphere", "cylinder"]
+    """Primitive type."""
+    size: tuple[float, ...]
+    """box: (x, y, z) edges; sphere: (radius,); cylinder: (radius, length) [m]."""
+    pose: Pose
+    """Pose of the object's centre, world frame."""
+
+    def __post_init__(self) -> None:
+        """The size matches the shape and is positive."""
+        expected = {"box": 3, "sphere": 1, "cylinder": 2}[self.shape]
+        if len(self.size) != expected:
+            raise ConfigError(
+                f"a {self.shape} takes {expected} size values, got {len(self.size)}",
+                "size",
+            )
+        if not all(s > 0 for s in self.size):
+            raise ConfigError(f"sizes must be > 0, got {list(self.size)}", "size")
+
+
+@dataclass(frozen=True, kw_only=True)
+class WorldSpec:
+    """The ``world:`` section: the objects around the robot."""
+
+    objects: list[ObjectSpec] = field(default_factory=list)
+    """Objects, in the world frame."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ScenarioSpec:
+    """A whole scenario file (tasks and constraints are bound separately)."""
+
+    name: str
+    """Scenario name, used for output folders."""
+    description: str = ""
+    """What the scenario shows."""
+    robot: RobotSpec
+    """The robot."""
+    duration: float
+    """Length of a run [s]."""
+    method: MethodSpec = field(default_factory=MethodSpec)
+    """The executor and its timing."""
+    solver: SolverSpec = field(default_factory=SolverSpec)
+    """The QP backend."""
+    goal: GoalSpec | None = None
+    """The goal input, if any."""
+    world: WorldSpec = field(default_factory=WorldSpec)
+    """The objects around the robot."""
+    tasks: Any = None
+    """Task entries (bound by :func:`load_scenario`)."""
+    constraints: Any = None
+    """Constraint entries (bound by :func:`load_scenario`)."""
+
+    def __post_init__(self) -> None:
+        """Positive duration."""
+        if not self.duration > 0:
+            raise ConfigError(f"must be > 0, got {self.duration}", "duration")
+
+
+_ENTRY_KEYS = ("type", "name", "priority", "weight", "gain", "params")
+
+
+@dataclass
+class Scenario:
+    """A loaded scenario: its schema, the robot, and the bound entries.
+
+    Attributes:
+        path: the file it came from.
+        spec: the parsed schema.
+        robot: the loaded robot model.
+        entries: tasks then constraints, with their engine settings.
+        q0: the initial configuration.
+    """
+
+    path: Path
+    spec: ScenarioSpec
+    robot: RobotModel
+    entries: list[Entry]
+    q0: FloatArray
+
+    def make_engine(self) -> Engine:
+        """A fresh engine for these entries (plugins are shared, not copied)."""
+        return Engine(
+            self.robot,
+            self.entries,
+            solver=self.spec.solver.name,
+            regularization=self.spec.solver.regularization,
+        )
+
+    def goal_stream(self) -> GoalStream | None:
+        """The goal stream, if the scenario has one."""
+        return GoalStream(self.spec.goal) if self.spec.goal is not None else None
+
+    def goal_task(self) -> Task[Any] | None:
+        """The task entry that receives the goal (checked at load time)."""
+        goal = self.spec.goal
+        if goal is None:
+            return None
+        for entry in self.entries:
+            if _receives_goal(entry.plugin, goal.task):
+                assert isinstance(entry.plugin, Task)
+                return entry.plugin
+        return None  # pragma: no cover - load_scenario rejects this
+
+
+def _receives_goal(plugin: AnyPlugin, name: str | None) -> bool:
+    if name is not None:
+        return plugin.name == name
+    return plugin.type_name == "goal_pose"
+
+
+def load_scenario(
+    path: str | Path,
+    *,
+    tasks: Registry[Any] | None = None,
+    constraints: Registry[Any] | None = None,
+) -> Scenario:
+    """Read, check and bind a scenario file.
+
+    Args:
+        path: the YAML file.
+        tasks: task registry (default: the in-tree ``plugins.tasks.TASKS``).
+        constraints: constraint registry (default ``plugins.constraints.CONSTRAINTS``).
+
+    Raises:
+        ScenarioError: listing every problem in the file.
+    """
+    from plugins.constraints import CONSTRAINTS
+    from plugins.tasks import TASKS
+
+    tasks = TASKS if tasks is None else tasks
+    constraints = CONSTRAINTS if constraints is None else constraints
+    path = Path(path)
+    doc = Document.from_file(path)
+    root = doc.root
+    spec = doc.build(ScenarioSpec, root, "")
+    if spec is INVALID or root is None:
+        doc.raise_if_problems()
+        raise AssertionError("unreachable: an invalid document records a problem")
+    robot: RobotModel | None = None
+    try:
+        robot = RobotModel.load(spec.robot.name, base=spec.robot.base)
+    except CbpError as exc:
+        doc.report(_key_node(root, "robot"), "robot.name", str(exc))
+    entries: list[Entry] = []
+    q0 = np.zeros(0)
+    if robot is not None:
+        items = mapping_items(doc, root, "") or {}
+        for section, registry in (("tasks", tasks), ("constraints", constraints)):
+            node = items.get(section)
+            if node is not None:
+                entries += _bind_entries(
+                    doc, node, section, registry, robot, path.parent
+                )
+        q0 = _initial_configuration(doc, spec, robot, root)
+        _check_goal(doc, spec, entries, root)
+        names = [e.name for e in entries]
+        for name in sorted({n for n in names if names.count(n) > 1}):
+            doc.report(
+                None,
+                "tasks/constraints",
+                f"entry name '{name}' is used twice; give each entry its own 'name'",
+            )
+    doc.raise_if_problems()
+    assert robot is not None
+    return Scenario(path=path, spec=spec, robot=robot, entries=entries, q0=q0)
+
+
+def _key_node(root: yaml.Node, *keys: str) -> yaml.Node | None:
+    node: yaml.Node | None = root
+    for key in keys:
+        if not isinstance(node, yaml.MappingNode):
+            return None
+        node = next(
+            (
+                v
+                for k, v in node.value
+                if isinstance(k, yaml.ScalarNode) and k.value == key
+            ),
+            None,
+        )
+    return node
+
+
+def _bind_entries(
+    doc: Document,
+    node: yaml.Node,
+    section: str,
+    registry: Registry[Any],
+    robot: RobotModel,
+    folder: Path,
+) -> list[Entry]:
+    if not isinstance(node, yaml.SequenceNode):
+        doc.report(node, section, "expected a list of entries")
+        return []
+    entries: list[Entry] = []
+    for i, item in enumerate(node.value):
+        where = join_path(section, i)
+        entry = _bind_entry(doc, item, where, registry, robot, folder)
+        if entry is not None:
+            entries.append(entry)
+    return entries
+
+
+def _bind_entry(
+    doc: Document,
+    node: yaml.Node,
+    where: str,
+    registry: Registry[Any],
+    robot: RobotModel,
+    folder: Path,
+) -> Entry | None:
+    items = mapping_items(doc, node, where)
+    if items is None:
+        return None
+    for key, value in items.items():
+        if key not in _ENTRY_KEYS:
+            doc.report(
+                value,
+                join_path(where, key),
+                f"unknown key '{key}'{suggestion(key, _ENTRY_KEYS)} Entry keys: "
+                f"{', '.join(_ENTRY_KEYS)} (plugin parameters go under 'params').",
+            )
+    if "type" not in items:
+        doc.report(node, where, f"missing required key 'type' (a {registry.kind} type)")
+        return None
+    type_name = doc.build(str, items["type"], join_path(where, "type"))
+    name = doc.build(str | None, items.get("name"), join_path(where, "name"))
+    if type_name is INVALID or name is INVALID:
+        return None
+    label = f"{where} '{name}'" if name else where
+    try:
+        cls = registry.get(type_name, search_dirs=[folder])
+    except ConfigError as exc:
+        doc.report(items["type"], join_path(where, "type"), exc.message)
+        return None
+    label = f"{label} ({type_name})"
+    params = doc.build(cls.Params, items.get("params"), join_path(where, "params"))
+    settings = {
+        key: doc.build(tp, items[key], join_path(where, key))
+        for key, tp in (
+            ("priority", Literal["soft", "hard"]),
+            ("weight", float | tuple[float, ...]),
+            ("gain", float),
+        )
+        if key in items
+    }
+    if params is INVALID or INVALID in settings.values():
+        return None
+    try:
+        plugin: Plugin[Any] = cls(params, robot, name or "")
+    except ConfigError as exc:
+        loc = f"params.{exc.location}" if exc.location else "params"
+        key_node = _key_node(node, "params", *exc.location.split(".")[:1])
+        doc.report(key_node or node, join_path(where, loc), f"{label}: {exc.message}")
+        return None
+    try:
+        return Entry.make(plugin, **settings)
+    except ConfigError as exc:
+        doc.report(
+            items.get(exc.location, node),
+            join_path(where, exc.location),
+            f"{label}: {exc.message}",
+        )
+        return None
+
+
+def _initial_configuration(
+    doc: Document, spec: ScenarioSpec, robot: RobotModel, root: yaml.Node
+) -> FloatArray:
+    q0 = robot.home()
+    for joint, value in spec.robot.initial.items():
+        try:
+            q0[robot.joint_q_slice(joint)] = value
+        except ConfigError as exc:
+            doc.report(
+                _key_node(root, "robot", "initial", joint),
+                f"robot.initial.{joint}",
+                exc.message,
+            )
+    return q0
+
+
+def _check_goal(
+    doc: Document, spec: ScenarioSpec, entries: list[Entry], root: yaml.Node
+) -> None:
+    goal = spec.goal
+    if goal is None:
+        return
+    receivers = [e for e in entries if _receives_goal(e.plugin, goal.task)]
+    if not receivers or not hasattr(receivers[0].plugin, "set_target"):
+        tasks = [e.name for e in entries if isinstance(e.plugin, Task)]
+        if goal.task is None:
+            message = "the goal needs a 'goal_pose' task, or 'task:' naming the task"
+        else:
+            message = (
+                f"no task named '{goal.task}' with a pose target"
+                f"{suggestion(goal.task, tasks)} Tasks: {', '.join(tasks) or '(none)'}."
+            )
+        doc.report(_key_node(root, "goal"), "goal.task", message)
+
+
+def solver_names() -> list[str]:
+    """Names of the QP backends, for help texts."""
+    return list(SOLVERS)
+
+
+def spec_fields(cls: type) -> list[dataclasses.Field[Any]]:
+    """The fields of a schema dataclass, for documentation tools."""
+    return list(dataclasses.fields(cls))

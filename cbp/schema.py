@@ -1,0 +1,360 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Strict YAML to frozen-dataclass loading with located, collected error messages.
+
+A schema is a dataclass. Its fields' annotations say what a YAML value may be:
+``float``, ``int``, ``str``, ``bool``, ``Literal[...]``, ``X | None``, ``tuple[float,
+...]`` (any length), ``tuple[float, float, float]`` (fixed length), ``list[X]``,
+``dict[str, X]``, another dataclass, or ``Any`` (taken as parsed). Unknown keys,
+missing required keys, wrong types and wrong lengths are all reported, each with the
+file, the line, the path in the document and the closest valid choice, and all the
+problems of one file are reported together (:class:`~cbp.errors.ScenarioError`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, Literal, TypeVar
+
+import yaml
+
+from cbp.errors import ConfigError, ScenarioError, suggestion
+
+T = TypeVar("T")
+
+Node = yaml.Node
+
+
+class _Missing:
+    """Marker for a value that could not be built (its problem is already recorded)."""
+
+    def __repr__(self) -> str:
+        return "<invalid>"
+
+
+INVALID: Any = _Missing()
+
+
+def join_path(base: str, key: str | int) -> str:
+    """Append a mapping key or a sequence index to a document path."""
+    if isinstance(key, int):
+        return f"{base}[{key}]"
+    return f"{base}.{key}" if base else key
+
+
+class Document:
+    """A parsed YAML file: its node tree, and the problems found while reading it.
+
+    Attributes:
+        path: the file, as it should be shown to the user.
+        root: the root node, or None for an empty document.
+        problems: every problem found so far, each a located message.
+    """
+
+    def __init__(self, text: str, path: str = "<string>") -> None:
+        """Compose ``text`` into nodes; a syntax error becomes a ScenarioError."""
+        self.path = path
+        self.problems: list[str] = []
+        self._loader = yaml.SafeLoader(text)
+        try:
+            self.root: Node | None = self._loader.get_single_node()
+        except yaml.MarkedYAMLError as exc:
+            mark = exc.problem_mark or exc.context_mark
+            line = f"line {mark.line + 1}: " if mark is not None else ""
+            raise ScenarioError(
+                path, [f"{line}malformed YAML: {exc.problem or exc}"]
+            ) from exc
+        except yaml.YAMLError as exc:
+            raise ScenarioError(path, [f"malformed YAML: {exc}"]) from exc
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> Document:
+        """Read a YAML file; a missing file is a ScenarioError naming it."""
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ScenarioError(str(path), [f"cannot read file: {exc}"]) from exc
+        return cls(text, str(path))
+
+    def report(self, node: Node | None, where: str, message: str) -> None:
+        """Record a problem at ``where`` (a document path), with the node's line."""
+        line = f"line {node.start_mark.line + 1}: " if node is not None else ""
+        self.problems.append(f"{line}{where or '<document>'}: {message}")
+
+    def raise_if_problems(self) -> None:
+        """Raise one ScenarioError that lists every problem recorded."""
+        if self.problems:
+            raise ScenarioError(self.path, self.problems)
+
+    def scalar(self, node: ScalarNodeLike) -> Any:
+        """Return the Python value of a scalar node, typed by YAML's safe rules."""
+        return self._loader.construct_object(node, deep=True)
+
+    def plain(self, node: Node) -> Any:
+        """Return the Python value of any node (mappings and lists included)."""
+        return self._loader.construct_object(node, deep=True)
+
+    def build(self, tp: Any, node: Node | None, where: str) -> Any:
+        """Build a value of annotation ``tp`` from ``node``; INVALID on a problem."""
+        return _build(self, tp, node, where)
+
+
+ScalarNodeLike = yaml.ScalarNode
+
+
+def mapping_items(doc: Document, node: Node, where: str) -> dict[str, Node] | None:
+    """Return a mapping node's items keyed by string, or record a problem."""
+    if not isinstance(node, yaml.MappingNode):
+        doc.report(node, where, f"expected a mapping, got {_describe(doc, node)}")
+        return None
+    items: dict[str, Node] = {}
+    for key_node, value_node in node.value:
+        key = doc.scalar(key_node) if isinstance(key_node, yaml.ScalarNode) else None
+        if not isinstance(key, str):
+            doc.report(key_node, where, "mapping keys must be strings")
+            continue
+        if key in items:
+            doc.report(key_node, join_path(where, key), "duplicate key")
+        items[key] = value_node
+    return items
+
+
+def type_name(tp: Any) -> str:
+    """Describe an annotation in words a YAML author understands."""
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if tp is float:
+        return "a number"
+    if tp is int:
+        return "an integer"
+    if tp is str:
+        return "a string"
+    if tp is bool:
+        return "true or false"
+    if tp is Any:
+        return "any value"
+    if origin is Literal:
+        return "one of " + ", ".join(repr(a) for a in args)
+    if origin in (types.UnionType, typing.Union):
+        parts = [type_name(a) for a in args if a is not type(None)]
+        return " or ".join(parts) + (" or null" if type(None) in args else "")
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"a list of {_plural(args[0])}"
+        return f"a list of {len(args)} {_plural(args[0])}"
+    if origin is list:
+        return f"a list of {_plural(args[0])}"
+    if origin is dict:
+        return f"a mapping of names to {_plural(args[1])}"
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        return f"a mapping ({tp.__name__})"
+    return getattr(tp, "__name__", str(tp))
+
+
+def _plural(tp: Any) -> str:
+    return {float: "numbers", int: "integers", str: "strings", bool: "booleans"}.get(
+        tp, "entries"
+    )
+
+
+def _describe(doc: Document, node: Node | None) -> str:
+    if node is None:
+        return "nothing"
+    if isinstance(node, yaml.MappingNode):
+        return "a mapping"
+    if isinstance(node, yaml.SequenceNode):
+        return f"a list of {len(node.value)} entries"
+    value = doc.plain(node)
+    if value is None:
+        return "null"
+    return f"{type(value).__name__} {value!r}"
+
+
+def _build(doc: Document, tp: Any, node: Node | None, where: str) -> Any:
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if tp is Any:
+        return None if node is None else doc.plain(node)
+    if origin in (types.UnionType, typing.Union):
+        return _build_union(doc, args, node, where)
+    if dataclasses.is_dataclass(tp):
+        return _build_dataclass(doc, typing.cast(type, tp), node, where)
+    if origin is tuple or origin is list:
+        return _build_sequence(doc, tp, node, where)
+    if origin is dict:
+        return _build_dict(doc, args[1], node, where)
+    if node is None or not isinstance(node, yaml.ScalarNode):
+        doc.report(node, where, f"expected {type_name(tp)}, got {_describe(doc, node)}")
+        return INVALID
+    value = doc.scalar(node)
+    return _check_scalar(doc, tp, value, node, where)
+
+
+def _check_scalar(doc: Document, tp: Any, value: Any, node: Node, where: str) -> Any:
+    origin = typing.get_origin(tp)
+    if origin is Literal:
+        choices = typing.get_args(tp)
+        if value in choices and type(value) is type(choices[0]):
+            return value
+        hint = suggestion(str(value), [str(c) for c in choices])
+        doc.report(
+            node,
+            where,
+            f"got {value!r}, expected {type_name(tp)}{hint}",
+        )
+        return INVALID
+    # bool is a subclass of int: a YAML `yes` must not pass as a number.
+    if tp is float and isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    if tp is int and isinstance(value, int) and not isinstance(value, bool):
+        return value
+    if tp is str and isinstance(value, str):
+        return value
+    if tp is bool and isinstance(value, bool):
+        return value
+    doc.report(node, where, f"expected {type_name(tp)}, got {_describe(doc, node)}")
+    return INVALID
+
+
+def _build_union(
+    doc: Document, args: tuple[Any, ...], node: Node | None, where: str
+) -> Any:
+    optional = type(None) in args
+    if (
+        node is None
+        or (isinstance(node, yaml.ScalarNode) and doc.scalar(node) is None and optional)
+    ) and optional:
+        return None
+    members = [a for a in args if a is not type(None)]
+    # Try each member on a scratch document state; keep the first that builds.
+    for member in members:
+        saved = len(doc.problems)
+        value = _build(doc, member, node, where)
+        if value is not INVALID:
+            return value
+        del doc.problems[saved:]
+    expected = type_name(typing.Union[tuple(args)])  # noqa: UP007
+    doc.report(node, where, f"expected {expected}, got {_describe(doc, node)}")
+    return INVALID
+
+
+def _build_sequence(doc: Document, tp: Any, node: Node | None, where: str) -> Any:
+    args = typing.get_args(tp)
+    if not isinstance(node, yaml.SequenceNode):
+        doc.report(node, where, f"expected {type_name(tp)}, got {_describe(doc, node)}")
+        return INVALID
+    variadic = typing.get_origin(tp) is list or (len(args) == 2 and args[1] is Ellipsis)
+    if not variadic and len(node.value) != len(args):
+        doc.report(
+            node,
+            where,
+            f"expected {type_name(tp)}, got a list of {len(node.value)} entries",
+        )
+        return INVALID
+    item_types = [args[0]] * len(node.value) if variadic else list(args)
+    items = [
+        _build(doc, item_tp, item, join_path(where, i))
+        for i, (item_tp, item) in enumerate(zip(item_types, node.value, strict=True))
+    ]
+    if any(item is INVALID for item in items):
+        return INVALID
+    return list(items) if typing.get_origin(tp) is list else tuple(items)
+
+
+def _build_dict(doc: Document, value_tp: Any, node: Node | None, where: str) -> Any:
+    items = mapping_items(doc, node, where) if node is not None else None
+    if items is None:
+        if node is None:
+            doc.report(node, where, "expected a mapping, got nothing")
+        return INVALID
+    built = {k: _build(doc, value_tp, v, join_path(where, k)) for k, v in items.items()}
+    return INVALID if any(v is INVALID for v in built.values()) else built
+
+
+def _build_dataclass(doc: Document, cls: type, node: Node | None, where: str) -> Any:
+    if node is None or (isinstance(node, yaml.ScalarNode) and doc.scalar(node) is None):
+        items: dict[str, Node] | None = {}
+    else:
+        items = mapping_items(doc, node, where)
+    if items is None:
+        return INVALID
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    ok = True
+    for key, value_node in items.items():
+        if key not in fields:
+            accepted = ", ".join(fields) or "(none)"
+            doc.report(
+                value_node,
+                join_path(where, key),
+                f"unknown key '{key}'{suggestion(key, fields)} Accepted: {accepted}.",
+            )
+            ok = False
+    kwargs: dict[str, Any] = {}
+    for name, field in fields.items():
+        if name in items:
+            value = _build(doc, hints[name], items[name], join_path(where, name))
+            if value is INVALID:
+                ok = False
+            else:
+                kwargs[name] = value
+        elif (
+            field.default is dataclasses.MISSING
+            and field.default_factory is dataclasses.MISSING
+        ):
+            doc.report(
+                node,
+                join_path(where, name),
+                f"missing required key '{name}' ({type_name(hints[name])})",
+            )
+            ok = False
+    if not ok:
+        return INVALID
+    try:
+        return cls(**kwargs)
+    except ConfigError as exc:
+        key_node = items.get(exc.location.split(".")[0]) if exc.location else None
+        doc.report(key_node or node, join_path(where, exc.location), exc.message)
+        return INVALID
+
+
+def load_file(cls: type[T], path: str | Path) -> T:
+    """Load a whole YAML file into the dataclass ``cls``, or raise ScenarioError."""
+    doc = Document.from_file(path)
+    value = doc.build(cls, doc.root, "")
+    doc.raise_if_problems()
+    return typing.cast(T, value)
+
+
+def to_plain(value: Any) -> Any:
+    """Turn a dataclass (or nested containers of them) back into YAML-ready data."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {
+            f.name: to_plain(getattr(value, f.name))
+            for f in dataclasses.fields(value)
+            if f.init
+        }
+    if isinstance(value, tuple | list):
+        return [to_plain(v) for v in value]
+    if isinstance(value, Mapping):
+        return {k: to_plain(v) for k, v in value.items()}
+    return value
+
+
+def from_plain(cls: type[T], data: Mapping[str, Any], where: str = "") -> T:
+    """Build ``cls`` from plain Python data with the same strict rules as YAML.
+
+    Raises:
+        ScenarioError: listing every problem, located by path.
+    """
+    text = yaml.safe_dump(dict(data), sort_keys=False)
+    doc = Document(text, where or f"<{cls.__name__}>")
+    value = doc.build(cls, doc.root, "")
+    doc.raise_if_problems()
+    return typing.cast(T, value)
+
+
+ValueCheck = Callable[[Any], str | None]

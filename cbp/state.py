@@ -1,0 +1,91 @@
+# SPDX-License-Identifier: Apache-2.0
+"""RobotState: a configuration with its forward kinematics, computed once per step."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.robot import FloatArray, RobotModel
+
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+class RobotState:
+    """A configuration ``q`` and its kinematics, shared read-only by every plugin.
+
+    :meth:`update` runs forward kinematics and the joint Jacobians once; frame
+    placements and frame Jacobians are then read from pinocchio's data, and each frame
+    Jacobian is computed at most once per update, however many plugins ask for it.
+
+    All Jacobians are in the LOCAL_WORLD_ALIGNED frame: linear rows give the velocity
+    of the frame's origin in world coordinates, angular rows the angular velocity in
+    world coordinates, both per unit of tangent-space velocity (nv columns).
+
+    Attributes:
+        robot: the model.
+        q: the configuration (nq), read-only.
+        data: pinocchio data holding the kinematics of ``q``.
+    """
+
+    def __init__(self, robot: RobotModel, q: FloatArray | None = None) -> None:
+        """Create the state, at ``q`` if given (else at the robot's neutral)."""
+        self.robot = robot
+        self.data = robot.model.createData()
+        self._jacobians: dict[int, FloatArray] = {}
+        self.q: FloatArray = np.empty(0)
+        self.update(robot.neutral() if q is None else q)
+
+    def update(self, q: FloatArray) -> None:
+        """Move to ``q`` (copied) and recompute the kinematics."""
+        q = np.array(q, dtype=float)
+        q.flags.writeable = False
+        self.q = q
+        model = self.robot.model
+        pin.computeJointJacobians(model, self.data, q)
+        pin.updateFramePlacements(model, self.data)
+        self._jacobians.clear()
+
+    def frame_position(self, frame_id: int) -> FloatArray:
+        """Position of the frame's origin in the world [m], shape (3,)."""
+        return np.asarray(self.data.oMf[frame_id].translation)
+
+    def frame_rotation(self, frame_id: int) -> FloatArray:
+        """Rotation matrix from the frame to the world, shape (3, 3)."""
+        return np.asarray(self.data.oMf[frame_id].rotation)
+
+    def frame_placement(self, frame_id: int) -> pin.SE3:
+        """Placement of the frame in the world (a pinocchio SE3; do not modify)."""
+        return self.data.oMf[frame_id]
+
+    def frame_jacobian(self, frame_id: int) -> FloatArray:
+        """Jacobian of the frame, LOCAL_WORLD_ALIGNED, shape (6, nv): linear first.
+
+        The returned array is shared by every caller in this step: do not modify it.
+        """
+        J = self._jacobians.get(frame_id)
+        if J is None:
+            J = pin.getFrameJacobian(self.robot.model, self.data, frame_id, _LWA)
+            J.flags.writeable = False
+            self._jacobians[frame_id] = J
+        return J
+
+    def point_jacobian(self, frame_id: int, point: FloatArray) -> FloatArray:
+        """Linear Jacobian (3, nv) of a point fixed on the frame's body.
+
+        Args:
+            frame_id: a frame of the body that carries the point.
+            point: the point's current position in the world [m], shape (3,).
+
+        The velocity of a point p of a body with origin o is v_o + ω × (p - o), so
+        its Jacobian is J_lin - [p - o]_x J_ang, all world-aligned.
+        """
+        J = self.frame_jacobian(frame_id)
+        offset = point - self.data.oMf[frame_id].translation
+        return np.asarray(J[:3] - pin.skew(offset).dot(J[3:]))
+
+    def __repr__(self) -> str:
+        """Robot name and configuration."""
+        return (
+            f"RobotState({self.robot.name!r}, q={np.array2string(self.q, precision=3)})"
+        )

@@ -1,0 +1,99 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Constraint ``joint_velocity``: bound each step by the joints' velocity limits."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from cbp.errors import ConfigError, TargetNotSetError, located
+from cbp.plugin import Constraint, FloatArray, PluginParams
+from cbp.robot import RobotModel, compact_rows, rows_count
+from cbp.state import RobotState
+
+
+@dataclass(frozen=True, kw_only=True)
+class JointVelocityParams(PluginParams):
+    """Parameters of :class:`JointVelocityConstraint`."""
+
+    scale: float = 1.0
+    """Fraction of the robot's velocity limits to allow, in (0, 1]."""
+    limits: dict[str, float] = field(default_factory=dict)
+    """Velocity limits by joint name that replace the robot's [rad/s or m/s]."""
+
+    def __post_init__(self) -> None:
+        """Scale in (0, 1], limits positive."""
+        if not 0 < self.scale <= 1:
+            raise ConfigError(f"must be in (0, 1], got {self.scale}", "scale")
+        for joint, value in self.limits.items():
+            if not value > 0:
+                raise ConfigError(f"must be > 0, got {value}", f"limits.{joint}")
+
+
+class JointVelocityConstraint(Constraint[JointVelocityParams]):
+    r"""Displacement over one step within the velocity limits.
+
+    .. math:: -s\,v_{max}\,\Delta t \le q \ominus q_0 \le s\,v_{max}\,\Delta t
+
+    where :math:`q_0` is the configuration at the start of the step (latched by
+    :meth:`prepare`, which also reads the step duration :math:`\Delta t`).
+    Dimension: the tangent coordinates with a finite velocity limit [rad or m].
+    With gain 1 (the default) the rows are :math:`|\Delta q_i| \le s\,v_i \Delta t`.
+    No singularity.
+    """
+
+    type_name: ClassVar[str] = "joint_velocity"
+    Params: ClassVar[type[PluginParams]] = JointVelocityParams
+    unit: ClassVar[str] = "rad"
+
+    def __init__(
+        self, params: JointVelocityParams, robot: RobotModel, name: str = ""
+    ) -> None:
+        """Gather the limits and keep the coordinates that have one."""
+        super().__init__(params, robot, name)
+        velocity = np.array(robot.velocity_limits)
+        for joint, value in params.limits.items():
+            velocity[located(robot.joint_v_slice, joint, f"limits.{joint}")] = value
+        finite = np.flatnonzero(np.isfinite(velocity))
+        self.rows = compact_rows(finite)
+        self._velocity = params.scale * velocity[finite]
+        self._reach = np.zeros(finite.size)
+        self._q0: FloatArray | None = None
+
+    @property
+    def dim(self) -> int:
+        """One row per limited tangent coordinate."""
+        return rows_count(self.rows, self.robot.nv)
+
+    def prepare(self, state: RobotState, dt: float) -> None:
+        """Latch the start configuration and the step duration [s]."""
+        self._q0 = state.q
+        self._reach = self._velocity * dt
+
+    def _anchor(self) -> FloatArray:
+        if self._q0 is None:
+            raise TargetNotSetError(
+                f"{self.name} ({self.type_name}): prepare() was not called"
+            )
+        return self._q0
+
+    def compute_value(self, state: RobotState) -> FloatArray:
+        """Selected rows of q ⊖ q0."""
+        return self.robot.difference(self._anchor(), state.q)[self.rows]
+
+    def compute_jacobian(self, state: RobotState) -> FloatArray:
+        """Selected rows of the Jacobian of q ⊖ q0."""
+        return self.robot.difference_jacobian(self._anchor(), state.q, self.rows)
+
+    def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
+        """±(scaled velocity limit) x (step duration)."""
+        return -self._reach, self._reach
+
+    def __repr__(self) -> str:
+        """Type, name and scale."""
+        return (
+            f"JointVelocityConstraint(name={self.name!r}, scale={self.params.scale}, "
+            f"limits={self.params.limits!r})"
+        )

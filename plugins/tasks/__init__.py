@@ -1,0 +1,16 @@
+# SPDX-License-Identifier: Apache-2.0
+"""In-tree task plugins: the explicit, sorted registry ``TASKS``."""
+
+from cbp.plugin import AnyTask, Task
+from cbp.registry import Registry
+
+from .goal_pose_task import GoalPoseTask
+from .joint_step_task import JointStepTask
+from .posture_task import PostureTask
+
+__all__ = ["TASKS", "GoalPoseTask", "JointStepTask", "PostureTask"]
+
+#: Keep sorted by type name (checked at import).
+TASKS: Registry[AnyTask] = Registry(
+    "task", Task, [GoalPoseTask, JointStepTask, PostureTask]
+)

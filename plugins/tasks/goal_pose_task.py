@@ -1,0 +1,141 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Task ``goal_pose``: move a frame toward a goal pose (CAT paper, eq. 1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from cbp.errors import ConfigError, TargetNotSetError, located
+from cbp.plugin import FloatArray, Linearization, PluginParams, Task
+from cbp.robot import RobotModel
+from cbp.spatial import Pose, checked_se3, clip_norm
+from cbp.state import RobotState
+
+
+@dataclass(frozen=True, kw_only=True)
+class GoalPoseParams(PluginParams):
+    """Parameters of :class:`GoalPoseTask`."""
+
+    frame: str
+    """Frame to move (a link or a frame of the URDF)."""
+    max_step_translation: float = 0.01
+    """Largest translation asked for in one step [m]."""
+    max_step_rotation: float = 0.05
+    """Largest rotation asked for in one step [rad]."""
+    target: Pose | None = None
+    """Initial goal; usually set every period by the goal stream."""
+
+    def __post_init__(self) -> None:
+        """Step limits must be positive."""
+        for name in ("max_step_translation", "max_step_rotation"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"must be > 0, got {getattr(self, name)}", name)
+
+
+class GoalPoseTask(Task[GoalPoseParams]):
+    r"""Pose error of a frame with respect to a goal pose, in the world frame.
+
+    .. math::
+
+        f(q) = \begin{bmatrix} p(q) - p_g \\ \log_3(R(q) R_g^T) \end{bmatrix}
+
+    Dimension 6: translation error [m], then rotation error [rad] as a rotation
+    vector, both in world coordinates. Jacobian: the frame's LOCAL_WORLD_ALIGNED
+    Jacobian, with the rotation rows mapped through :math:`J_{\log_3}(M) M^T`,
+    :math:`M = R R_g^T`. The rotation rows are singular when the rotation error
+    reaches π.
+
+    The engine asks for a change of :math:`-k f` per step; this task clips its
+    translation and rotation parts to ``max_step_translation`` and
+    ``max_step_rotation``, so a far goal is approached in bounded steps (CAT's
+    small steps, each checked for collisions).
+    """
+
+    type_name: ClassVar[str] = "goal_pose"
+    Params: ClassVar[type[PluginParams]] = GoalPoseParams
+    unit: ClassVar[str] = "m|rad"
+
+    def __init__(
+        self, params: GoalPoseParams, robot: RobotModel, name: str = ""
+    ) -> None:
+        """Resolve the frame; take the initial target when one is given."""
+        super().__init__(params, robot, name)
+        self.frame_id = located(robot.frame_id, params.frame, "frame")
+        self._target: pin.SE3 | None = None
+        if params.target is not None:
+            self._target = params.target.to_se3()
+
+    @property
+    def dim(self) -> int:
+        """Six rows: translation then rotation."""
+        return 6
+
+    def set_target(self, position: npt.ArrayLike, rotation: npt.ArrayLike) -> None:
+        """Set the goal: position (3,) [m] and rotation matrix (3, 3), world frame.
+
+        Raises:
+            InvalidTargetError: wrong shape, NaN or not a rotation; the goal is kept.
+        """
+        self._target = checked_se3(position, rotation, f"{self.name} target")
+
+    @property
+    def target(self) -> pin.SE3:
+        """The current goal pose."""
+        if self._target is None:
+            raise TargetNotSetError(f"{self.name} ({self.type_name}): no target set")
+        return self._target
+
+    def compute_value(self, state: RobotState) -> FloatArray:
+        """Translation error then rotation vector, world frame."""
+        goal = self.target
+        placement = state.frame_placement(self.frame_id)
+        value = np.empty(6)
+        value[:3] = placement.translation - goal.translation
+        value[3:] = pin.log3(placement.rotation.dot(goal.rotation.T))
+        return value
+
+    def compute_jacobian(self, state: RobotState) -> FloatArray:
+        """World-aligned frame Jacobian with the log map's Jacobian on rotation rows."""
+        goal = self.target
+        J_frame = state.frame_jacobian(self.frame_id)
+        M = state.frame_rotation(self.frame_id).dot(goal.rotation.T)
+        J = np.empty_like(J_frame)
+        J[:3] = J_frame[:3]
+        J[3:] = pin.Jlog3(M).dot(M.T).dot(J_frame[3:])
+        return J
+
+    def linearize(self, state: RobotState) -> Linearization:
+        """Value and Jacobian sharing the rotation error matrix."""
+        goal = self.target
+        placement = state.frame_placement(self.frame_id)
+        M = placement.rotation.dot(goal.rotation.T)
+        value = np.empty(6)
+        value[:3] = placement.translation - goal.translation
+        value[3:] = pin.log3(M)
+        J_frame = state.frame_jacobian(self.frame_id)
+        J = np.empty_like(J_frame)
+        J[:3] = J_frame[:3]
+        J[3:] = pin.Jlog3(M).dot(M.T).dot(J_frame[3:])
+        return Linearization(value, J)
+
+    def limit_step(self, desired: FloatArray) -> FloatArray:
+        """Clip the translation and rotation asked for in one step."""
+        params = self.params
+        out = np.empty(6)
+        out[:3] = clip_norm(desired[:3], params.max_step_translation)
+        out[3:] = clip_norm(desired[3:], params.max_step_rotation)
+        return out
+
+    def __repr__(self) -> str:
+        """Type, name, frame and step limits."""
+        p = self.params
+        return (
+            f"GoalPoseTask(name={self.name!r}, frame={p.frame!r}, "
+            f"max_step_translation={p.max_step_translation}, "
+            f"max_step_rotation={p.max_step_rotation})"
+        )
