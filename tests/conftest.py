@@ -1,0 +1,24 @@
+"""Session-scoped robots and a seeded random generator."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cbp.robot import RobotModel
+
+
+@pytest.fixture(scope="session")
+def robots() -> dict[str, RobotModel]:
+    """The Panda on a fixed, a planar (nq != nv) and a floating (quaternion) base."""
+    return {
+        "panda": RobotModel.load("franka_panda"),
+        "panda_planar": RobotModel.load("franka_panda", base="planar"),
+        "panda_floating": RobotModel.load("franka_panda", base="floating"),
+    }
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    """A generator with a fixed seed."""
+    return np.random.default_rng(20261122)

@@ -1,0 +1,82 @@
+"""One valid example per registered plugin, for the generic tests.
+
+Every type name in the task and constraint registries must have a case here:
+``tests/test_registry.py`` checks that the two sets are equal, so a new plugin
+cannot skip the Jacobian and contract checks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.plugin import Plugin
+from cbp.robot import FloatArray, RobotModel
+from cbp.state import RobotState
+from plugins.constraints.joint_limits_constraint import (
+    JointLimitsConstraint,
+    JointLimitsParams,
+)
+from plugins.constraints.joint_velocity_constraint import (
+    JointVelocityConstraint,
+    JointVelocityParams,
+)
+from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+from plugins.tasks.joint_step_task import JointStepParams, JointStepTask
+from plugins.tasks.posture_task import PostureParams, PostureTask
+
+#: Robots every case runs on: a fixed arm, and bases where nq != nv.
+ALL_ROBOTS = ("panda", "panda_planar", "panda_floating")
+
+GOAL = pin.SE3(pin.rpy.rpyToMatrix(np.pi, 0.0, 0.3), np.array([0.4, 0.1, 0.5]))
+
+
+@dataclass
+class PluginCase:
+    """How to build one plugin for the generic tests.
+
+    Attributes:
+        type_name: the registry name the case covers.
+        build: makes the plugin for a robot.
+        robots: the fixtures it runs on.
+        accept: filter on sampled configurations (to avoid a singularity).
+        atol: absolute tolerance of the finite-difference check.
+    """
+
+    type_name: str
+    build: Callable[[RobotModel], Plugin[Any]]
+    robots: tuple[str, ...] = ALL_ROBOTS
+    accept: Callable[[RobotModel, FloatArray], bool] | None = None
+    atol: float = 1e-6
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+def _goal_pose(robot: RobotModel) -> GoalPoseTask:
+    task = GoalPoseTask(GoalPoseParams(frame="panda_hand"), robot)
+    task.set_target(GOAL.translation, GOAL.rotation)
+    return task
+
+
+def _away_from_pi(robot: RobotModel, q: FloatArray) -> bool:
+    # log3 is singular at a rotation angle of pi: keep the hand's rotation error
+    # below 2.8 rad so the finite differences do not straddle the branch cut.
+    state = RobotState(robot, q)
+    R = state.frame_rotation(robot.frame_id("panda_hand"))
+    return bool(np.linalg.norm(pin.log3(R.dot(GOAL.rotation.T))) < 2.8)
+
+
+PLUGIN_CASES: list[PluginCase] = [
+    PluginCase("goal_pose", _goal_pose, accept=_away_from_pi),
+    PluginCase("joint_limits", lambda r: JointLimitsConstraint(JointLimitsParams(), r)),
+    PluginCase(
+        "joint_step", lambda r: JointStepTask(JointStepParams(), r)
+    ),
+    PluginCase(
+        "joint_velocity", lambda r: JointVelocityConstraint(JointVelocityParams(), r)
+    ),
+    PluginCase("posture", lambda r: PostureTask(PostureParams(), r)),
+]

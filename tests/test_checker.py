@@ -1,0 +1,61 @@
+"""The Jacobian checker catches wrong Jacobians and reports where."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cbp.errors import JacobianMismatchError
+from cbp.plugin import FloatArray
+from cbp.state import RobotState
+from cbp.testing import check_jacobian, sample_configurations
+from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+from plugins.tasks.posture_task import PostureParams, PostureTask
+
+
+class _TransposedRotation(GoalPoseTask):
+    """Goal pose with a classic bug: the rotation rows miss the log map's Jacobian."""
+
+    def linearize(self, state: RobotState):  # type: ignore[no-untyped-def]
+        return super(GoalPoseTask, self).linearize(state)
+
+    def compute_jacobian(self, state: RobotState) -> FloatArray:
+        J = np.array(state.frame_jacobian(self.frame_id))
+        return J
+
+
+class _SignFlip(PostureTask):
+    def compute_jacobian(self, state: RobotState) -> FloatArray:
+        return -super().compute_jacobian(state)
+
+
+def test_wrong_rotation_jacobian_fails(robots, rng) -> None:
+    """Using the frame Jacobian for log3 rows is caught, with the worst entries."""
+    robot = robots["panda"]
+    task = _TransposedRotation(GoalPoseParams(frame="panda_hand"), robot)
+    task.set_target([0.4, 0.0, 0.5], np.diag([1.0, -1.0, -1.0]))
+    q = sample_configurations(robot, rng, n=1)[0]
+    with pytest.raises(JacobianMismatchError, match=r"goal_pose\): max \|analytic - numeric\|") as info:
+        check_jacobian(task, robot, q)
+    assert "J[3," in str(info.value) or "J[4," in str(info.value) or "J[5," in str(info.value)
+
+
+def test_sign_error_fails_on_a_floating_base(robots, rng) -> None:
+    """A sign error is caught on a robot where nq != nv."""
+    robot = robots["panda_floating"]
+    task = _SignFlip(PostureParams(), robot)
+    q = sample_configurations(robot, rng, n=1)[0]
+    with pytest.raises(JacobianMismatchError):
+        check_jacobian(task, robot, q)
+
+
+def test_wrong_shape_fails(robots) -> None:
+    """A Jacobian of the wrong shape is reported as such."""
+    robot = robots["panda"]
+
+    class _Short(PostureTask):
+        def compute_jacobian(self, state: RobotState) -> FloatArray:
+            return super().compute_jacobian(state)[:, :3]
+
+    with pytest.raises(JacobianMismatchError, match=r"shape \(7, 3\), expected \(7, 7\)"):
+        check_jacobian(_Short(PostureParams(), robot), robot, robot.home())
