@@ -152,56 +152,51 @@ class CvxpySolver(QPSolver):
 
     name = "cvxpy"
 
-    def __init__(self, solver: str = "CLARABEL", eps: float = 1e-10) -> None:
+    def __init__(self, solver: str = "CLARABEL", eps: float = 1e-9) -> None:
         """Keep the settings; problems are compiled lazily per shape."""
         import cvxpy
 
         self._cp = cvxpy
         self.solver = solver
         self.eps = eps
-        self._cache: dict[tuple[int, int, int], tuple[Any, ...]] = {}
+        self._cache: dict[tuple[int, ...], tuple[Any, ...]] = {}
 
-    def _compiled(self, n: int, m_eq: int, m_in: int) -> tuple[Any, ...]:
-        key = (n, m_eq, m_in)
+    def _compiled(self, n: int, m_eq: int, m_lo: int, m_up: int) -> tuple[Any, ...]:
+        key = (n, m_eq, m_lo, m_up)
         if key not in self._cache:
             cp = self._cp
             x = cp.Variable(n)
             L = cp.Parameter((n, n))
             g = cp.Parameter(n)
             A_eq, b_eq = cp.Parameter((m_eq, n)), cp.Parameter(m_eq)
-            G, lo, up = cp.Parameter((m_in, n)), cp.Parameter(m_in), cp.Parameter(m_in)
+            G_lo, lo = cp.Parameter((m_lo, n)), cp.Parameter(m_lo)
+            G_up, up = cp.Parameter((m_up, n)), cp.Parameter(m_up)
             constraints = []
             if m_eq:
                 constraints.append(A_eq @ x == b_eq)
-            if m_in:
-                constraints += [G @ x >= lo, G @ x <= up]
+            if m_lo:
+                constraints.append(G_lo @ x >= lo)
+            if m_up:
+                constraints.append(G_up @ x <= up)
             objective = cp.Minimize(0.5 * cp.sum_squares(L @ x) + g @ x)
-            self._cache[key] = (
-                cp.Problem(objective, constraints),
-                x,
-                L,
-                g,
-                A_eq,
-                b_eq,
-                G,
-                lo,
-                up,
-            )
+            problem = cp.Problem(objective, constraints)
+            self._cache[key] = (problem, x, L, g, A_eq, b_eq, G_lo, lo, G_up, up)
         return self._cache[key]
 
     def solve(self, problem: QPProblem) -> FloatArray:
-        """Factor H = L^T L and solve the compiled problem."""
+        """Factor H = L^T L and solve the compiled problem (finite bounds only)."""
         eq = problem.equality
-        # A large finite stand-in for infinite bounds keeps the problem one shape.
-        lower = np.maximum(problem.lower[~eq], -1e9)
-        upper = np.minimum(problem.upper[~eq], 1e9)
-        prob, x, L, g, A_eq, b_eq, G, lo, up = self._compiled(
-            problem.n, int(eq.sum()), int((~eq).sum())
+        has_lo = ~eq & np.isfinite(problem.lower)
+        has_up = ~eq & np.isfinite(problem.upper)
+        compiled = self._compiled(
+            problem.n, int(eq.sum()), int(has_lo.sum()), int(has_up.sum())
         )
+        prob, x, L, g, A_eq, b_eq, G_lo, lo, G_up, up = compiled
         L.value = np.linalg.cholesky(problem.H).T
         g.value = problem.g
         A_eq.value, b_eq.value = problem.A[eq], problem.lower[eq]
-        G.value, lo.value, up.value = problem.A[~eq], lower, upper
+        G_lo.value, lo.value = problem.A[has_lo], problem.lower[has_lo]
+        G_up.value, up.value = problem.A[has_up], problem.upper[has_up]
         try:
             prob.solve(
                 solver=self.solver,
@@ -212,7 +207,7 @@ class CvxpySolver(QPSolver):
         except self._cp.error.SolverError as exc:
             raise self._fail(problem, str(exc), infeasible=False) from exc
         status = str(prob.status)
-        if status not in ("optimal", "optimal_inaccurate"):
+        if status != "optimal":
             raise self._fail(problem, status, infeasible="infeasible" in status)
         return np.asarray(x.value, dtype=np.float64)
 

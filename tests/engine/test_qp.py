@@ -1,0 +1,167 @@
+"""QP assembly and the solver backends."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cbp.engine import Engine
+from cbp.errors import ConfigError, PluginOutputError, SolveError
+from cbp.qp import Entry
+from cbp.solvers import SOLVERS, make_solver
+from cbp.state import RobotState
+from cbp.testing import sample_configurations
+from plugins.constraints.joint_limits_constraint import (
+    JointLimitsConstraint,
+    JointLimitsParams,
+)
+from plugins.constraints.joint_velocity_constraint import (
+    JointVelocityConstraint,
+    JointVelocityParams,
+)
+from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+from plugins.tasks.joint_step_task import JointStepParams, JointStepTask
+from plugins.tasks.posture_task import PostureParams, PostureTask
+
+
+def _entries(robot, rng, *, goal_priority="soft", velocity_priority="hard"):
+    goal = GoalPoseTask(GoalPoseParams(frame="panda_hand", max_step_translation=0.05), robot)
+    position = rng.uniform([0.3, -0.4, 0.1], [0.7, 0.4, 0.7])
+    goal.set_target(position, np.diag([1.0, -1.0, -1.0]))
+    return [
+        Entry.make(goal, priority=goal_priority, weight=[1, 1, 1, 0.3, 0.3, 0.3]),
+        Entry.make(JointStepTask(JointStepParams(), robot), weight=1e-3),
+        Entry.make(PostureTask(PostureParams(), robot), weight=1e-4, gain=0.1),
+        Entry.make(JointLimitsConstraint(JointLimitsParams(margin=0.02), robot)),
+        Entry.make(
+            JointVelocityConstraint(JointVelocityParams(scale=0.5), robot),
+            priority=velocity_priority,
+            weight=10.0,
+        ),
+    ]
+
+
+@pytest.mark.parametrize("velocity_priority", ["hard", "soft"])
+def test_backends_agree_on_engine_built_problems(robots, rng, velocity_priority) -> None:
+    """daqp, piqp and cvxpy find the same step on random engine-built QPs."""
+    robot = robots["panda"]
+    for q in sample_configurations(robot, rng, n=6, margin=0.05):
+        entries = _entries(robot, rng, velocity_priority=velocity_priority)
+        engine = Engine(robot, entries, solver="daqp")
+        reference = engine.step(q, 0.01)
+        problem = engine.problem
+        assert problem is not None
+        for name in SOLVERS:
+            x = make_solver(name).solve(problem)
+            np.testing.assert_allclose(x[: robot.nv], reference, atol=2e-6, err_msg=name)
+            assert problem.violation(x) < 1e-6
+
+
+def test_hard_task_is_met_exactly(robots, rng) -> None:
+    """A hard goal_pose becomes six equalities J dq = -k f (clipped)."""
+    robot = robots["panda"]
+    entries = _entries(robot, rng, goal_priority="hard")
+    q = robot.home()
+    engine = Engine(robot, entries)
+    dq = engine.step(q, 0.1)
+    goal = entries[0].plugin
+    state = RobotState(robot, q)
+    value, J = goal.linearize(state)
+    np.testing.assert_allclose(J.dot(dq), goal.limit_step(-value), atol=1e-9)
+
+
+def test_joint_limit_rows_reproduce_cat_eq4(robots) -> None:
+    """With gain 1, q + dq stays within the limits even when the goal pulls out."""
+    robot = robots["panda"]
+    q = robot.home()
+    q[3] = robot.lower_limits[3] + 0.01
+    posture = PostureTask(PostureParams(target={"panda_joint4": -4.0}), robot)
+    limits = JointLimitsConstraint(JointLimitsParams(), robot)
+    engine = Engine(robot, [Entry.make(posture, gain=1.0), Entry.make(limits)])
+    dq = engine.step(q, 0.01)
+    assert q[3] + dq[3] == pytest.approx(robot.lower_limits[3], abs=1e-9)
+
+
+def test_infeasible_problem_names_the_conflicting_entries(robots) -> None:
+    """Hard entries that cannot all hold give a SolveError naming them."""
+    robot = robots["panda"]
+    q = robot.home()
+    posture = PostureTask(PostureParams(target={"panda_joint1": 2.0}), robot, "reach")
+    velocity = JointVelocityConstraint(JointVelocityParams(scale=0.1), robot, "slow")
+    step = JointStepTask(JointStepParams(), robot, "small")
+    engine = Engine(
+        robot,
+        [
+            Entry.make(posture, priority="hard", gain=1.0),
+            Entry.make(velocity),
+            Entry.make(step, weight=1e-3),
+        ],
+    )
+    for name in SOLVERS:
+        engine.solver = make_solver(name)
+        with pytest.raises(SolveError, match=r"cannot all be met: reach, slow") as info:
+            engine.step(q, 0.01)
+        assert info.value.conflicting == ["reach", "slow"]
+        assert info.value.problem is not None
+
+
+def test_zero_gain_keeps_infinite_bounds_inactive(robots) -> None:
+    """k = 0 makes finite bounds 0 (contact form) and leaves infinite ones open."""
+    robot = robots["panda"]
+    q = robot.home()
+    limits = JointLimitsConstraint(JointLimitsParams(), robot)
+    step = JointStepTask(JointStepParams(), robot)
+    posture = PostureTask(PostureParams(target={"panda_joint1": 1.0}), robot)
+    engine = Engine(
+        robot,
+        [Entry.make(limits, gain=0.0), Entry.make(step, weight=1e-3), Entry.make(posture)],
+    )
+    engine.step(q, 0.01)
+    problem = engine.problem
+    assert problem is not None
+    np.testing.assert_array_equal(problem.lower[:7], np.zeros(7))
+    np.testing.assert_array_equal(problem.upper[:7], np.zeros(7))
+
+
+def test_nan_output_is_named(robots) -> None:
+    """A plugin returning NaN raises PluginOutputError naming it; nothing moves."""
+    robot = robots["panda"]
+
+    class Broken(PostureTask):
+        def compute_value(self, state):  # type: ignore[no-untyped-def]
+            return np.full(self.dim, np.nan)
+
+    engine = Engine(
+        robot,
+        [
+            Entry.make(Broken(PostureParams(), robot, "broken")),
+            Entry.make(JointStepTask(JointStepParams(), robot), weight=1e-3),
+        ],
+    )
+    with pytest.raises(PluginOutputError, match=r"broken \(posture\): value or Jacobian is not finite"):
+        engine.step(robot.home(), 0.01)
+
+
+def test_wrong_shape_output_is_named(robots) -> None:
+    """A plugin returning the wrong shape is named with expected shapes."""
+    robot = robots["panda"]
+
+    class Short(PostureTask):
+        def compute_value(self, state):  # type: ignore[no-untyped-def]
+            return super().compute_value(state)[:3]
+
+    engine = Engine(robot, [Entry.make(Short(PostureParams(), robot, "short"))])
+    with pytest.raises(PluginOutputError, match=r"short \(posture\): value has shape \(3,\)"):
+        engine.step(robot.home(), 0.01)
+
+
+def test_entry_settings_are_checked(robots) -> None:
+    """Weight length, gain range and priority name are validated with locations."""
+    robot = robots["panda"]
+    goal = GoalPoseTask(GoalPoseParams(frame="panda_hand"), robot)
+    with pytest.raises(ConfigError, match=r"weight has 4 entries, expected 1 or 6 \(dim of goal_pose\)"):
+        Entry.make(goal, weight=[1, 1, 1, 1])
+    with pytest.raises(ConfigError, match=r"gain 2.0 is outside \[0, 1\]"):
+        Entry.make(goal, gain=2.0)
+    with pytest.raises(ConfigError, match="unknown solver 'daq'; did you mean 'daqp'"):
+        make_solver("daq")
