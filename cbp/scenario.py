@@ -216,14 +216,18 @@ def load_scenario(
     doc = Document.from_file(path)
     root = doc.root
     spec = doc.build(ScenarioSpec, root, "")
-    if spec is INVALID or root is None:
+    if root is None:
         doc.raise_if_problems()
-        raise AssertionError("unreachable: an invalid document records a problem")
+        raise AssertionError("unreachable: an empty document records a problem")
+    # Entries are bound even when another section is wrong, so that one pass
+    # reports every problem of the file.
+    robot_spec = spec.robot if spec is not INVALID else _quietly(doc, RobotSpec, root)
     robot: RobotModel | None = None
-    try:
-        robot = RobotModel.load(spec.robot.name, base=spec.robot.base)
-    except CbpError as exc:
-        doc.report(_key_node(root, "robot"), "robot.name", str(exc))
+    if robot_spec is not INVALID and robot_spec is not None:
+        try:
+            robot = RobotModel.load(robot_spec.name, base=robot_spec.base)
+        except CbpError as exc:
+            doc.report(_key_node(root, "robot", "name"), "robot.name", str(exc))
     entries: list[Entry] = []
     q0 = np.zeros(0)
     if robot is not None:
@@ -234,8 +238,9 @@ def load_scenario(
                 entries += _bind_entries(
                     doc, node, section, registry, robot, path.parent
                 )
-        q0 = _initial_configuration(doc, spec, robot, root)
-        _check_goal(doc, spec, entries, root)
+        q0 = _initial_configuration(doc, robot_spec, robot, root)
+        if spec is not INVALID:
+            _check_goal(doc, spec, entries, root)
         names = [e.name for e in entries]
         for name in sorted({n for n in names if names.count(n) > 1}):
             doc.report(
@@ -246,6 +251,15 @@ def load_scenario(
     doc.raise_if_problems()
     assert robot is not None
     return Scenario(path=path, spec=spec, robot=robot, entries=entries, q0=q0)
+
+
+def _quietly(doc: Document, cls: type, root: yaml.Node) -> Any:
+    """Build a section whose problems were already reported; INVALID if it fails."""
+    node = _key_node(root, "robot")
+    saved = len(doc.problems)
+    value = doc.build(cls, node, "robot") if node is not None else INVALID
+    del doc.problems[saved:]
+    return value
 
 
 def _key_node(root: yaml.Node, *keys: str) -> yaml.Node | None:
@@ -348,10 +362,10 @@ def _bind_entry(
 
 
 def _initial_configuration(
-    doc: Document, spec: ScenarioSpec, robot: RobotModel, root: yaml.Node
+    doc: Document, spec: RobotSpec, robot: RobotModel, root: yaml.Node
 ) -> FloatArray:
     q0 = robot.home()
-    for joint, value in spec.robot.initial.items():
+    for joint, value in spec.initial.items():
         try:
             q0[robot.joint_q_slice(joint)] = value
         except ConfigError as exc:

@@ -72,9 +72,7 @@ def _away_from_pi(robot: RobotModel, q: FloatArray) -> bool:
 PLUGIN_CASES: list[PluginCase] = [
     PluginCase("goal_pose", _goal_pose, accept=_away_from_pi),
     PluginCase("joint_limits", lambda r: JointLimitsConstraint(JointLimitsParams(), r)),
-    PluginCase(
-        "joint_step", lambda r: JointStepTask(JointStepParams(), r)
-    ),
+    PluginCase("joint_step", lambda r: JointStepTask(JointStepParams(), r)),
     PluginCase(
         "joint_velocity", lambda r: JointVelocityConstraint(JointVelocityParams(), r)
     ),

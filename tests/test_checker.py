@@ -35,9 +35,15 @@ def test_wrong_rotation_jacobian_fails(robots, rng) -> None:
     task = _TransposedRotation(GoalPoseParams(frame="panda_hand"), robot)
     task.set_target([0.4, 0.0, 0.5], np.diag([1.0, -1.0, -1.0]))
     q = sample_configurations(robot, rng, n=1)[0]
-    with pytest.raises(JacobianMismatchError, match=r"goal_pose\): max \|analytic - numeric\|") as info:
+    with pytest.raises(
+        JacobianMismatchError, match=r"goal_pose\): max \|analytic - numeric\|"
+    ) as info:
         check_jacobian(task, robot, q)
-    assert "J[3," in str(info.value) or "J[4," in str(info.value) or "J[5," in str(info.value)
+    assert (
+        "J[3," in str(info.value)
+        or "J[4," in str(info.value)
+        or "J[5," in str(info.value)
+    )
 
 
 def test_sign_error_fails_on_a_floating_base(robots, rng) -> None:
@@ -57,5 +63,7 @@ def test_wrong_shape_fails(robots) -> None:
         def compute_jacobian(self, state: RobotState) -> FloatArray:
             return super().compute_jacobian(state)[:, :3]
 
-    with pytest.raises(JacobianMismatchError, match=r"shape \(7, 3\), expected \(7, 7\)"):
+    with pytest.raises(
+        JacobianMismatchError, match=r"shape \(7, 3\), expected \(7, 7\)"
+    ):
         check_jacobian(_Short(PostureParams(), robot), robot, robot.home())

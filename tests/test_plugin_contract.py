@@ -48,7 +48,7 @@ def test_outputs_have_the_declared_shapes_and_are_pure(
 
 @pytest.mark.parametrize("case", PLUGIN_CASES, ids=lambda c: c.type_name)
 def test_params_round_trip_and_reject_unknown_keys(case: PluginCase, robots) -> None:
-    """dict -> Params -> dict is the identity; an unknown key is named."""
+    """Dict -> Params -> dict is the identity; an unknown key is named."""
     params_cls = type(case.build(robots["panda"]).params)
     params = case.build(robots["panda"]).params
     plain = to_plain(params)
@@ -56,7 +56,10 @@ def test_params_round_trip_and_reject_unknown_keys(case: PluginCase, robots) -> 
     with pytest.raises(ScenarioError, match="unknown key 'bogus'"):
         from_plain(params_cls, {**plain, "bogus": 1.0})
     for f in dataclasses.fields(params_cls):
-        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+        if (
+            f.default is dataclasses.MISSING
+            and f.default_factory is dataclasses.MISSING
+        ):
             reduced = {k: v for k, v in plain.items() if k != f.name}
             with pytest.raises(ScenarioError, match=f"missing required key '{f.name}'"):
                 from_plain(params_cls, reduced)

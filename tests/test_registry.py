@@ -23,7 +23,9 @@ def test_every_registered_plugin_has_a_case() -> None:
     )
 
 
-@pytest.mark.parametrize(("kind", "registry"), [("task", TASKS), ("constraint", CONSTRAINTS)])
+@pytest.mark.parametrize(
+    ("kind", "registry"), [("task", TASKS), ("constraint", CONSTRAINTS)]
+)
 def test_every_module_is_registered_under_its_file_name(kind: str, registry) -> None:
     """Each plugins/<kind>s/<thing>_<kind>.py holds the registered type <thing>."""
     stems = sorted(p.stem for p in (PLUGINS_DIR / f"{kind}s").glob(f"*_{kind}.py"))
@@ -34,7 +36,10 @@ def test_every_module_is_registered_under_its_file_name(kind: str, registry) -> 
 
 def test_unknown_type_lists_names_and_nearest() -> None:
     """An unknown name suggests the nearest and lists every available one."""
-    with pytest.raises(UnknownPluginError, match=r"unknown task type 'postur'; did you mean 'posture'\? Available: goal_pose, joint_step, posture"):
+    with pytest.raises(
+        UnknownPluginError,
+        match=r"unknown task type 'postur'; did you mean 'posture'\? Available: goal_pose, joint_step, posture",
+    ):
         TASKS.get("postur")
 
 
@@ -52,7 +57,9 @@ def test_dotted_path_loads_a_plugin_file_beside_the_scenario(tmp_path: Path) -> 
     )
     cls = TASKS.get("my_plugins:MyPosture", search_dirs=[tmp_path])
     assert cls.type_name == "my_posture"
-    with pytest.raises(ConfigError, match="has no 'MyPostur'; did you mean 'MyPosture'"):
+    with pytest.raises(
+        ConfigError, match="has no 'MyPostur'; did you mean 'MyPosture'"
+    ):
         TASKS.get("my_plugins:MyPostur", search_dirs=[tmp_path])
 
 
@@ -77,7 +84,9 @@ def test_entry_point_of_an_installed_distribution(tmp_path: Path, monkeypatch) -
     )
     dist = tmp_path / "extra_plugins-1.0.dist-info"
     dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: extra-plugins\nVersion: 1.0\n")
+    (dist / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: extra-plugins\nVersion: 1.0\n"
+    )
     (dist / "entry_points.txt").write_text(
         "[cbp.constraints]\nwide_limits = extra_plugins:WideLimits\n"
     )

@@ -25,7 +25,9 @@ from plugins.tasks.posture_task import PostureParams, PostureTask
 
 
 def _entries(robot, rng, *, goal_priority="soft", velocity_priority="hard"):
-    goal = GoalPoseTask(GoalPoseParams(frame="panda_hand", max_step_translation=0.05), robot)
+    goal = GoalPoseTask(
+        GoalPoseParams(frame="panda_hand", max_step_translation=0.05), robot
+    )
     position = rng.uniform([0.3, -0.4, 0.1], [0.7, 0.4, 0.7])
     goal.set_target(position, np.diag([1.0, -1.0, -1.0]))
     return [
@@ -42,7 +44,9 @@ def _entries(robot, rng, *, goal_priority="soft", velocity_priority="hard"):
 
 
 @pytest.mark.parametrize("velocity_priority", ["hard", "soft"])
-def test_backends_agree_on_engine_built_problems(robots, rng, velocity_priority) -> None:
+def test_backends_agree_on_engine_built_problems(
+    robots, rng, velocity_priority
+) -> None:
     """daqp, piqp and cvxpy find the same step on random engine-built QPs."""
     robot = robots["panda"]
     for q in sample_configurations(robot, rng, n=6, margin=0.05):
@@ -53,7 +57,9 @@ def test_backends_agree_on_engine_built_problems(robots, rng, velocity_priority)
         assert problem is not None
         for name in SOLVERS:
             x = make_solver(name).solve(problem)
-            np.testing.assert_allclose(x[: robot.nv], reference, atol=2e-6, err_msg=name)
+            np.testing.assert_allclose(
+                x[: robot.nv], reference, atol=2e-6, err_msg=name
+            )
             assert problem.violation(x) < 1e-6
 
 
@@ -106,7 +112,7 @@ def test_infeasible_problem_names_the_conflicting_entries(robots) -> None:
 
 
 def test_zero_gain_keeps_infinite_bounds_inactive(robots) -> None:
-    """k = 0 makes finite bounds 0 (contact form) and leaves infinite ones open."""
+    """K = 0 makes finite bounds 0 (contact form) and leaves infinite ones open."""
     robot = robots["panda"]
     q = robot.home()
     limits = JointLimitsConstraint(JointLimitsParams(), robot)
@@ -114,7 +120,11 @@ def test_zero_gain_keeps_infinite_bounds_inactive(robots) -> None:
     posture = PostureTask(PostureParams(target={"panda_joint1": 1.0}), robot)
     engine = Engine(
         robot,
-        [Entry.make(limits, gain=0.0), Entry.make(step, weight=1e-3), Entry.make(posture)],
+        [
+            Entry.make(limits, gain=0.0),
+            Entry.make(step, weight=1e-3),
+            Entry.make(posture),
+        ],
     )
     engine.step(q, 0.01)
     problem = engine.problem
@@ -138,7 +148,9 @@ def test_nan_output_is_named(robots) -> None:
             Entry.make(JointStepTask(JointStepParams(), robot), weight=1e-3),
         ],
     )
-    with pytest.raises(PluginOutputError, match=r"broken \(posture\): value or Jacobian is not finite"):
+    with pytest.raises(
+        PluginOutputError, match=r"broken \(posture\): value or Jacobian is not finite"
+    ):
         engine.step(robot.home(), 0.01)
 
 
@@ -151,7 +163,9 @@ def test_wrong_shape_output_is_named(robots) -> None:
             return super().compute_value(state)[:3]
 
     engine = Engine(robot, [Entry.make(Short(PostureParams(), robot, "short"))])
-    with pytest.raises(PluginOutputError, match=r"short \(posture\): value has shape \(3,\)"):
+    with pytest.raises(
+        PluginOutputError, match=r"short \(posture\): value has shape \(3,\)"
+    ):
         engine.step(robot.home(), 0.01)
 
 
@@ -159,7 +173,9 @@ def test_entry_settings_are_checked(robots) -> None:
     """Weight length, gain range and priority name are validated with locations."""
     robot = robots["panda"]
     goal = GoalPoseTask(GoalPoseParams(frame="panda_hand"), robot)
-    with pytest.raises(ConfigError, match=r"weight has 4 entries, expected 1 or 6 \(dim of goal_pose\)"):
+    with pytest.raises(
+        ConfigError, match=r"weight has 4 entries, expected 1 or 6 \(dim of goal_pose\)"
+    ):
         Entry.make(goal, weight=[1, 1, 1, 1])
     with pytest.raises(ConfigError, match=r"gain 2.0 is outside \[0, 1\]"):
         Entry.make(goal, gain=2.0)

@@ -1,0 +1,79 @@
+"""The kinematic executor: tracking, and safe holds on bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.executors.kinematic import run_kinematic
+from cbp.scenario import load_scenario
+
+REACH = Path(__file__).resolve().parents[2] / "scenarios" / "panda_reach.yaml"
+
+
+def test_panda_reach_tracks_the_goal_within_limits() -> None:
+    """The hand ends on the last keyframe; joints never leave their limits."""
+    scenario = load_scenario(REACH)
+    trace = run_kinematic(scenario)
+    robot = scenario.robot
+    assert trace.position_error[-1] < 1e-3
+    assert trace.rotation_error[-1] < np.deg2rad(0.5)
+    bq = robot.bounded_q
+    assert np.all(trace.q[:, bq] >= robot.lower_limits[bq] - 1e-9)
+    assert np.all(trace.q[:, bq] <= robot.upper_limits[bq] + 1e-9)
+    steps = np.diff(trace.q, axis=0) / scenario.spec.method.dt
+    assert np.all(np.abs(steps) <= 0.5 * robot.velocity_limits + 1e-9)
+    assert trace.events == []
+
+
+def test_nan_goal_is_ignored_and_the_loop_goes_on(monkeypatch) -> None:
+    """A NaN goal is rejected and recorded; the previous goal stays in force."""
+    scenario = load_scenario(REACH)
+    stream_cls = type(scenario.goal_stream())
+    original = stream_cls.pose
+
+    def pose(self, t):  # type: ignore[no-untyped-def]
+        if 1.0 <= t < 1.2:
+            return pin.SE3(np.eye(3), np.array([np.nan, 0.0, 0.0]))
+        return original(self, t)
+
+    monkeypatch.setattr(stream_cls, "pose", pose)
+    trace = run_kinematic(scenario)
+    assert any("goal rejected" in message for _, message in trace.events)
+    assert np.all(np.isfinite(trace.q))
+    assert trace.position_error[-1] < 1e-3
+
+
+def test_unsolvable_step_holds_the_robot(tmp_path: Path) -> None:
+    """Conflicting hard entries: every step is held and reported, q never moves."""
+    text = REACH.read_text().replace(
+        "  - type: posture\n    weight: 1.0e-4\n    gain: 0.1\n",
+        "  - type: posture\n    priority: hard\n    gain: 1.0\n"
+        "    params: {target: {panda_joint1: 2.5}}\n",
+    )
+    path = tmp_path / "conflict.yaml"
+    path.write_text(text)
+    scenario = load_scenario(path)
+    trace = run_kinematic(scenario)
+    assert len(trace.events) == trace.t.size
+    assert "step not solved, robot held" in trace.events[0][1]
+    np.testing.assert_array_equal(trace.q, np.repeat(trace.q[:1], trace.t.size, axis=0))
+
+
+def test_cbp_run_writes_its_outputs(tmp_path: Path) -> None:
+    """Cbp run writes report, metrics, trace and plot."""
+    result = subprocess.run(
+        [sys.executable, "-m", "cbp", "run", str(REACH), "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, result.stderr
+    for name in ("report.md", "metrics.json", "trace.csv", "tracking.png"):
+        assert (tmp_path / name).is_file()
+    metrics = json.loads((tmp_path / "metrics.json").read_text())["metrics"]
+    assert metrics["goal_reached"] is True

@@ -1,0 +1,140 @@
+"""Scenario files: every problem reported at once, located, with suggestions."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from cbp.errors import ScenarioError
+from cbp.scenario import load_scenario
+
+SCENARIOS = sorted((Path(__file__).resolve().parents[2] / "scenarios").glob("*.yaml"))
+
+HEADER = """\
+name: t
+robot: {name: franka_panda}
+duration: 1.0
+"""
+
+
+def _load(tmp_path: Path, body: str) -> ScenarioError:
+    path = tmp_path / "s.yaml"
+    path.write_text(HEADER + textwrap.dedent(body))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert str(path) in str(info.value)
+    return info.value
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_shipped_scenarios_validate(path: Path) -> None:
+    """Every scenario in scenarios/ loads."""
+    load_scenario(path)
+
+
+def test_unknown_plugin(tmp_path: Path) -> None:
+    """Unknown type: location, line, nearest name and the list."""
+    error = _load(tmp_path, "tasks:\n  - type: postur\n")
+    assert error.problems == [
+        "line 5: tasks[0].type: unknown task type 'postur'; did you mean 'posture'? "
+        "Available: goal_pose, joint_step, posture (or a 'module:Class' path)."
+    ]
+
+
+def test_unknown_parameter(tmp_path: Path) -> None:
+    """Unknown params key names the accepted ones."""
+    error = _load(
+        tmp_path, "constraints:\n  - type: joint_limits\n    params: {marginn: 0.1}\n"
+    )
+    assert error.problems == [
+        "line 6: constraints[0].params.marginn: unknown key 'marginn'; did you mean "
+        "'margin'? Accepted: margin, joints."
+    ]
+
+
+def test_bad_frame_name(tmp_path: Path) -> None:
+    """A frame that does not exist lists close matches, at the params key."""
+    error = _load(
+        tmp_path,
+        "tasks:\n  - type: goal_pose\n    name: ee\n    params:\n      frame: panda_hnd\n",
+    )
+    assert error.problems == [
+        "line 8: tasks[0].params.frame: tasks[0] 'ee' (goal_pose): no frame "
+        "'panda_hnd' in robot 'franka_panda'; close matches: panda_hand, "
+        "panda_hand_joint, panda_link8"
+    ]
+
+
+def test_wrong_weight_length(tmp_path: Path) -> None:
+    """Weight length is checked against the plugin's dimension."""
+    error = _load(
+        tmp_path,
+        "tasks:\n  - type: goal_pose\n    name: ee\n    weight: [1, 1, 1, 1]\n"
+        "    params: {frame: panda_hand}\n",
+    )
+    assert error.problems == [
+        "line 7: tasks[0].weight: tasks[0] 'ee' (goal_pose): weight has 4 entries, "
+        "expected 1 or 6 (dim of goal_pose)"
+    ]
+
+
+def test_malformed_yaml(tmp_path: Path) -> None:
+    """A syntax error names the file and line."""
+    error = _load(tmp_path, "tasks: [\n")
+    assert len(error.problems) == 1
+    assert error.problems[0].startswith("line 5: malformed YAML")
+
+
+def test_all_problems_together(tmp_path: Path) -> None:
+    """Problems in several sections come out in one error, in file order."""
+    error = _load(
+        tmp_path,
+        """\
+        method: {name: kinematc}
+        tasks:
+          - type: posture
+            wieght: 1.0
+        constraints:
+          - type: joint_limits
+            params: {margin: yes}
+        """,
+    )
+    assert [p.split(": ")[1] for p in error.problems] == [
+        "method.name",
+        "tasks[0].wieght",
+        "constraints[0].params.margin",
+    ]
+    assert "did you mean 'kinematic'" in error.problems[0]
+    assert "expected a number, got bool True" in error.problems[2]
+
+
+def test_missing_and_unknown_top_level_keys(tmp_path: Path) -> None:
+    """A missing required key and a misspelt one are both reported."""
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nrobot: {name: franka_panda}\ndurration: 1.0\n")
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    text = str(info.value)
+    assert "durration: unknown key 'durration'; did you mean 'duration'?" in text
+    assert "duration: missing required key 'duration' (a number)" in text
+
+
+def test_cbp_check_exit_codes(tmp_path: Path) -> None:
+    """Cbp check: 0 for a good file, 2 with the errors on stderr for a bad one."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(HEADER + "tasks:\n  - type: postur\n")
+    good = subprocess.run(
+        [sys.executable, "-m", "cbp", "check", str(SCENARIOS[0])],
+        capture_output=True,
+        text=True,
+    )
+    assert good.returncode == 0, good.stderr
+    result = subprocess.run(
+        [sys.executable, "-m", "cbp", "check", str(bad)], capture_output=True, text=True
+    )
+    assert result.returncode == 2
+    assert "did you mean 'posture'" in result.stderr
