@@ -363,12 +363,15 @@ class _Block:
                     f"{plugin.name} ({plugin.type_name}): bounds have shapes "
                     f"{np.shape(lo)} and {np.shape(up)}, expected ({plugin.dim},)"
                 ) from None
-        with np.errstate(invalid="ignore"):
-            np.subtract(given_lower, self.f, out=lower)
+        np.subtract(given_lower, self.f, out=lower)
+        np.subtract(given_upper, self.f, out=upper)
+        if not self.has_zero_gain:
             lower *= self.gains
-            np.subtract(given_upper, self.f, out=upper)
             upper *= self.gains
-        if self.has_zero_gain:  # 0 * inf is NaN: an infinite bound stays infinite
+        else:  # 0 * inf is NaN: an infinite bound must stay infinite
+            with np.errstate(invalid="ignore"):
+                lower *= self.gains
+                upper *= self.gains
             np.copyto(lower, given_lower, where=self.zero_gain)
             np.copyto(upper, given_upper, where=self.zero_gain)
             finite = self.zero_gain & np.isfinite(given_lower)
