@@ -39,9 +39,6 @@ import abc
 import dataclasses
 from typing import Any, ClassVar, Generic, NamedTuple, TypeVar
 
-import numpy as np
-import numpy.typing as npt
-
 from cbp.errors import ConfigError
 from cbp.robot import FloatArray, RobotModel
 from cbp.state import RobotState
@@ -169,11 +166,6 @@ class Constraint(Plugin[ParamsT]):
     @abc.abstractmethod
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """Return (lower, upper), each (dim,); ±inf allowed; equal for equality."""
-
-
-def as_float_array(values: npt.ArrayLike) -> FloatArray:
-    """Return ``values`` as a 1-D float64 array (a copy)."""
-    return np.array(values, dtype=np.float64).reshape(-1)
 
 
 AnyTask = Task[Any]

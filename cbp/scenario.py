@@ -11,7 +11,6 @@ the nearest valid choice (:class:`~cbp.errors.ScenarioError`).
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -27,7 +26,6 @@ from cbp.qp import Entry
 from cbp.registry import Registry
 from cbp.robot import BaseType, FloatArray, RobotModel
 from cbp.schema import INVALID, Document, join_path, mapping_items
-from cbp.solvers import SOLVERS
 from cbp.spatial import Pose
 
 
@@ -394,13 +392,3 @@ def _check_goal(
                 f"{suggestion(goal.task, tasks)} Tasks: {', '.join(tasks) or '(none)'}."
             )
         doc.report(_key_node(root, "goal"), "goal.task", message)
-
-
-def solver_names() -> list[str]:
-    """Names of the QP backends, for help texts."""
-    return list(SOLVERS)
-
-
-def spec_fields(cls: type) -> list[dataclasses.Field[Any]]:
-    """The fields of a schema dataclass, for documentation tools."""
-    return list(dataclasses.fields(cls))

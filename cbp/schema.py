@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import types
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
@@ -89,7 +89,7 @@ class Document:
         if self.problems:
             raise ScenarioError(self.path, self.problems)
 
-    def scalar(self, node: ScalarNodeLike) -> Any:
+    def scalar(self, node: yaml.ScalarNode) -> Any:
         """Return the Python value of a scalar node, typed by YAML's safe rules."""
         return self._loader.construct_object(node, deep=True)
 
@@ -100,9 +100,6 @@ class Document:
     def build(self, tp: Any, node: Node | None, where: str) -> Any:
         """Build a value of annotation ``tp`` from ``node``; INVALID on a problem."""
         return _build(self, tp, node, where)
-
-
-ScalarNodeLike = yaml.ScalarNode
 
 
 def mapping_items(doc: Document, node: Node, where: str) -> dict[str, Node] | None:
@@ -355,6 +352,3 @@ def from_plain(cls: type[T], data: Mapping[str, Any], where: str = "") -> T:
     value = doc.build(cls, doc.root, "")
     doc.raise_if_problems()
     return typing.cast(T, value)
-
-
-ValueCheck = Callable[[Any], str | None]

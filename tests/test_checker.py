@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cbp.errors import JacobianMismatchError
-from cbp.plugin import FloatArray
+from cbp.plugin import FloatArray, Linearization
 from cbp.state import RobotState
 from cbp.testing import check_jacobian, sample_configurations
 from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
@@ -16,12 +16,9 @@ from plugins.tasks.posture_task import PostureParams, PostureTask
 class _TransposedRotation(GoalPoseTask):
     """Goal pose with a classic bug: the rotation rows miss the log map's Jacobian."""
 
-    def linearize(self, state: RobotState):  # type: ignore[no-untyped-def]
-        return super(GoalPoseTask, self).linearize(state)
-
-    def compute_jacobian(self, state: RobotState) -> FloatArray:
-        J = np.array(state.frame_jacobian(self.frame_id))
-        return J
+    def linearize(self, state: RobotState) -> Linearization:
+        value = super().linearize(state).value
+        return Linearization(value, np.array(state.frame_jacobian(self.frame_id)))
 
 
 class _SignFlip(PostureTask):

@@ -92,22 +92,11 @@ class GoalPoseTask(Task[GoalPoseParams]):
 
     def compute_value(self, state: RobotState) -> FloatArray:
         """Translation error then rotation vector, world frame."""
-        goal = self.target
-        placement = state.frame_placement(self.frame_id)
-        value = np.empty(6)
-        value[:3] = placement.translation - goal.translation
-        value[3:] = pin.log3(placement.rotation.dot(goal.rotation.T))
-        return value
+        return self.linearize(state).value
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """World-aligned frame Jacobian with the log map's Jacobian on rotation rows."""
-        goal = self.target
-        J_frame = state.frame_jacobian(self.frame_id)
-        M = state.frame_rotation(self.frame_id).dot(goal.rotation.T)
-        J = np.empty_like(J_frame)
-        J[:3] = J_frame[:3]
-        J[3:] = pin.Jlog3(M).dot(M.T).dot(J_frame[3:])
-        return J
+        return self.linearize(state).jacobian
 
     def linearize(self, state: RobotState) -> Linearization:
         """Value and Jacobian sharing the rotation error matrix."""
