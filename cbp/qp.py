@@ -372,12 +372,8 @@ class _Block:
             with np.errstate(invalid="ignore"):
                 lower *= self.gains
                 upper *= self.gains
-            np.copyto(lower, given_lower, where=self.zero_gain)
-            np.copyto(upper, given_upper, where=self.zero_gain)
-            finite = self.zero_gain & np.isfinite(given_lower)
-            lower[finite] = 0.0
-            finite = self.zero_gain & np.isfinite(given_upper)
-            upper[finite] = 0.0
+            np.copyto(lower, given_lower, where=self.zero_gain & np.isinf(given_lower))
+            np.copyto(upper, given_upper, where=self.zero_gain & np.isinf(given_upper))
         if self.has_tasks:
             desired = self.desired_change()
             rows = self.task_rows

@@ -219,7 +219,7 @@ def load_scenario(
         raise AssertionError("unreachable: an empty document records a problem")
     # Entries are bound even when another section is wrong, so that one pass
     # reports every problem of the file.
-    robot_spec = spec.robot if spec is not INVALID else _quietly(doc, RobotSpec, root)
+    robot_spec = spec.robot if spec is not INVALID else _robot_spec_quietly(doc, root)
     robot: RobotModel | None = None
     if robot_spec is not INVALID and robot_spec is not None:
         try:
@@ -251,11 +251,11 @@ def load_scenario(
     return Scenario(path=path, spec=spec, robot=robot, entries=entries, q0=q0)
 
 
-def _quietly(doc: Document, cls: type, root: yaml.Node) -> Any:
-    """Build a section whose problems were already reported; INVALID if it fails."""
+def _robot_spec_quietly(doc: Document, root: yaml.Node) -> Any:
+    """Build the robot section, whose problems were already reported; else INVALID."""
     node = _key_node(root, "robot")
     saved = len(doc.problems)
-    value = doc.build(cls, node, "robot") if node is not None else INVALID
+    value = doc.build(RobotSpec, node, "robot") if node is not None else INVALID
     del doc.problems[saved:]
     return value
 
