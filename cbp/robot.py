@@ -37,12 +37,35 @@ IndexRows = slice | IntArray
 
 BaseType = Literal["fixed", "planar", "floating"]
 
+#: How mesh collision elements are turned into convex shapes.
+Approximation = Literal["hull", "capsule"]
+
 #: Pinocchio marks an unbounded coordinate with the largest double; treat anything this
 #: large as no bound at all.
 _UNBOUNDED = 1e300
 
 #: Where robot description folders are looked up, after ``CBP_ROBOT_PATH``.
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "robots"
+
+
+@dataclass(frozen=True, kw_only=True)
+class CollisionDescription:
+    """The ``collision:`` section of ``robot.yaml``: how the links are checked."""
+
+    padding: float = 0.01
+    """Distance added around every link for collision checks [m]."""
+    ignore_pairs: list[tuple[str, str]] = field(default_factory=list)
+    """Link pairs never checked against each other (beyond adjacent links), e.g.
+    pairs that cannot collide; ``cbp robot-pairs NAME`` suggests them by sampling."""
+    ignore_links: list[str] = field(default_factory=list)
+    """Links left out of every collision check (e.g. fingers meant to touch)."""
+    approximation: Approximation = "hull"
+    """Mesh elements as their convex ``hull``, or the ``capsule`` around it."""
+
+    def __post_init__(self) -> None:
+        """Non-negative padding."""
+        if not self.padding >= 0:
+            raise ConfigError(f"must be >= 0, got {self.padding}", "padding")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -63,6 +86,8 @@ class RobotDescription:
     """Overrides of the URDF velocity limits, by joint name [rad/s or m/s]."""
     acceleration_limits: dict[str, float] = field(default_factory=dict)
     """Acceleration limits by joint name [rad/s^2 or m/s^2]; default 10 for all."""
+    collision: CollisionDescription = field(default_factory=CollisionDescription)
+    """Collision settings of the robot's links."""
 
 
 def find_robot_folder(name: str) -> Path:

@@ -18,9 +18,13 @@ from typing import Any, Literal
 import numpy as np
 import yaml
 
+from cbp.collision.environment import EnvironmentObject, PrimitiveEnvironment
+from cbp.collision.geometry import RobotGeometry
+from cbp.collision.world import CollisionSettings, CollisionWorld, UsesCollisionWorld
 from cbp.engine import Engine
-from cbp.errors import CbpError, ConfigError, suggestion
+from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
 from cbp.goals import GoalSpec, GoalStream
+from cbp.perception.spec import PerceptionSpec
 from cbp.plugin import AnyPlugin, Plugin, Task
 from cbp.qp import Entry
 from cbp.registry import Registry
@@ -75,19 +79,33 @@ class MethodSpec:
 
 @dataclass(frozen=True, kw_only=True)
 class ObjectSpec:
-    """One object of the world: a primitive at a pose."""
+    """One object of the world: a primitive or a mesh at a pose.
+
+    The collision world and the simulator both build their objects from this
+    declaration.
+    """
 
     name: str
     """Object name."""
-    shape: Literal["box", "sphere", "cylinder"]
-    """Primitive type."""
-    size: tuple[float, ...]
+    shape: Literal["box", "sphere", "cylinder", "mesh"]
+    """Primitive type, or ``mesh`` (a file)."""
+    size: tuple[float, ...] = ()
     """box: (x, y, z) edges; sphere: (radius,); cylinder: (radius, length) [m]."""
+    file: str = ""
+    """Mesh file (mesh only), relative to the scenario file."""
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """Mesh scale per axis (mesh only)."""
     pose: Pose
-    """Pose of the object's centre, world frame."""
+    """Pose of the object's frame (a primitive's centre), world frame."""
 
     def __post_init__(self) -> None:
-        """The size matches the shape and is positive."""
+        """The size matches the shape and is positive; meshes name a file."""
+        if self.shape == "mesh":
+            if not self.file:
+                raise ConfigError("a mesh needs 'file:'", "file")
+            if self.size:
+                raise ConfigError("a mesh takes 'scale', not 'size'", "size")
+            return
         expected = {"box": 3, "sphere": 1, "cylinder": 2}[self.shape]
         if len(self.size) != expected:
             raise ConfigError(
@@ -126,6 +144,10 @@ class ScenarioSpec:
     """The goal input, if any."""
     world: WorldSpec = field(default_factory=WorldSpec)
     """The objects around the robot."""
+    collision: CollisionSettings = field(default_factory=CollisionSettings)
+    """Contact queries and step validation."""
+    perception: PerceptionSpec = field(default_factory=PerceptionSpec)
+    """Where the collision world's environment comes from."""
     tasks: Any = None
     """Task entries (bound by :func:`load_scenario`)."""
     constraints: Any = None
@@ -157,6 +179,49 @@ class Scenario:
     robot: RobotModel
     entries: list[Entry]
     q0: FloatArray
+    _world: CollisionWorld | None = field(default=None, repr=False)
+
+    @property
+    def needs_collision_world(self) -> bool:
+        """Whether some entry reads contacts."""
+        return any(isinstance(e.plugin, UsesCollisionWorld) for e in self.entries)
+
+    def environment_objects(self) -> list[EnvironmentObject]:
+        """The declared objects as collision objects (mesh files resolved)."""
+        objects = []
+        for obj in self.spec.world.objects:
+            placement = obj.pose.to_se3()
+            if obj.shape == "mesh":
+                objects.append(
+                    EnvironmentObject.mesh(
+                        obj.name,
+                        self.path.parent / obj.file,
+                        np.asarray(obj.scale),
+                        placement,
+                    )
+                )
+            else:
+                objects.append(
+                    EnvironmentObject.primitive(
+                        obj.name, obj.shape, obj.size, placement
+                    )
+                )
+        return objects
+
+    def collision_world(self) -> CollisionWorld:
+        """The scenario's collision world (built once), attached to its plugins.
+
+        Its environment is the declared objects; an executor with a depth camera
+        replaces it with occupancy-map snapshots as they come.
+        """
+        if self._world is None:
+            geometry = RobotGeometry(self.robot, padding=self.spec.collision.padding)
+            environment = PrimitiveEnvironment(self.environment_objects())
+            self._world = CollisionWorld(geometry, environment, self.spec.collision)
+            for entry in self.entries:
+                if isinstance(entry.plugin, UsesCollisionWorld):
+                    entry.plugin.attach_world(self._world)
+        return self._world
 
     def make_engine(self) -> Engine:
         """A fresh engine for these entries (plugins are shared, not copied)."""
@@ -248,7 +313,16 @@ def load_scenario(
             )
     doc.raise_if_problems()
     assert robot is not None
-    return Scenario(path=path, spec=spec, robot=robot, entries=entries, q0=q0)
+    scenario = Scenario(path=path, spec=spec, robot=robot, entries=entries, q0=q0)
+    if scenario.needs_collision_world:
+        try:
+            scenario.collision_world()
+        except ConfigError as exc:
+            where = f" ({exc.location})" if exc.location else ""
+            raise ScenarioError(
+                str(path), [f"collision world{where}: {exc.message}"]
+            ) from exc
+    return scenario
 
 
 def _robot_spec_quietly(doc: Document, root: yaml.Node) -> Any:

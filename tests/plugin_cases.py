@@ -14,9 +14,20 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from cbp.collision import (
+    CollisionSettings,
+    CollisionWorld,
+    EnvironmentObject,
+    PrimitiveEnvironment,
+    RobotGeometry,
+)
 from cbp.plugin import Plugin
 from cbp.robot import FloatArray, RobotModel
 from cbp.state import RobotState
+from plugins.constraints.contact_normals_constraint import (
+    ContactNormalsConstraint,
+    ContactParams,
+)
 from plugins.constraints.joint_limits_constraint import (
     JointLimitsConstraint,
     JointLimitsParams,
@@ -25,6 +36,7 @@ from plugins.constraints.joint_velocity_constraint import (
     JointVelocityConstraint,
     JointVelocityParams,
 )
+from plugins.constraints.self_collision_constraint import SelfCollisionConstraint
 from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
 from plugins.tasks.joint_step_task import JointStepParams, JointStepTask
 from plugins.tasks.posture_task import PostureParams, PostureTask
@@ -69,7 +81,61 @@ def _away_from_pi(robot: RobotModel, q: FloatArray) -> bool:
     return bool(np.linalg.norm(pin.log3(R.dot(GOAL.rotation.T))) < 2.8)
 
 
+_WORLDS: dict[int, CollisionWorld] = {}
+
+
+def collision_world(robot: RobotModel) -> CollisionWorld:
+    """A world per robot: obstacles around the Panda, a wide activation distance.
+
+    Random configurations then have contacts.
+    """
+    world = _WORLDS.get(id(robot))
+    if world is None:
+        objects = [
+            EnvironmentObject.primitive(
+                "box",
+                "box",
+                (0.3, 0.3, 0.3),
+                pin.SE3(np.eye(3), np.array([0.5, 0.0, 0.3])),
+            ),
+            EnvironmentObject.primitive(
+                "ball", "sphere", (0.15,), pin.SE3(np.eye(3), np.array([0.0, 0.5, 0.6]))
+            ),
+            EnvironmentObject.primitive(
+                "post",
+                "cylinder",
+                (0.1, 1.0),
+                pin.SE3(np.eye(3), np.array([-0.4, -0.3, 0.5])),
+            ),
+        ]
+        world = CollisionWorld(
+            RobotGeometry(robot),
+            PrimitiveEnvironment(objects),
+            CollisionSettings(activation_distance=0.4, contacts_per_link=2),
+        )
+        _WORLDS[id(robot)] = world
+    return world
+
+
+def _with_world(plugin: ContactNormalsConstraint) -> ContactNormalsConstraint:
+    plugin.attach_world(collision_world(plugin.robot))
+    return plugin
+
+
+def _has_contacts(self_pairs: bool) -> Callable[[RobotModel, FloatArray], bool]:
+    def accept(robot: RobotModel, q: FloatArray) -> bool:
+        contacts = collision_world(robot).contacts(RobotState(robot, q))
+        return int(np.count_nonzero(contacts.is_self == self_pairs)) >= 3
+
+    return accept
+
+
 PLUGIN_CASES: list[PluginCase] = [
+    PluginCase(
+        "contact_normals",
+        lambda r: _with_world(ContactNormalsConstraint(ContactParams(), r)),
+        accept=_has_contacts(False),
+    ),
     PluginCase("goal_pose", _goal_pose, accept=_away_from_pi),
     PluginCase("joint_limits", lambda r: JointLimitsConstraint(JointLimitsParams(), r)),
     PluginCase("joint_step", lambda r: JointStepTask(JointStepParams(), r)),
@@ -77,4 +143,9 @@ PLUGIN_CASES: list[PluginCase] = [
         "joint_velocity", lambda r: JointVelocityConstraint(JointVelocityParams(), r)
     ),
     PluginCase("posture", lambda r: PostureTask(PostureParams(), r)),
+    PluginCase(
+        "self_collision",
+        lambda r: _with_world(SelfCollisionConstraint(ContactParams(), r)),
+        accept=_has_contacts(True),
+    ),
 ]

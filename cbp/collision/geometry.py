@@ -1,0 +1,346 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The robot's collision geometry: one convex shape per URDF collision element.
+
+Each ``<collision>`` element of the URDF becomes a :class:`LinkShape`: a coal shape
+(URDF primitives as they are, meshes replaced by their convex hull, built with
+trimesh since the coal wheel has no qhull), its placement on a frame of the model,
+a bounding sphere for the broad phase, and the hull's half-spaces for filtering the
+robot out of depth images. Padding is not baked into the shapes: every query
+subtracts it from the distances, which is exactly the distance to the shape grown
+by a sphere of that radius.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+import trimesh
+from scipy.optimize import minimize
+
+from cbp.errors import ConfigError, suggestion
+from cbp.robot import Approximation, FloatArray, RobotModel
+from cbp.state import RobotState
+
+__all__ = ["LinkShape", "RobotGeometry", "find_ignorable_pairs", "fit_capsule"]
+
+
+@dataclass(frozen=True)
+class LinkShape:
+    """One convex collision shape fixed on a frame of the robot.
+
+    Attributes:
+        name: the geometry's name (``<link>_<index>``).
+        link: the link (frame) name that carries it.
+        frame_id: index of that frame in the model.
+        joint_id: the joint that moves the frame.
+        placement: the shape's pose in the frame.
+        shape: the coal shape.
+        centre: bounding-sphere centre in the frame [m], shape (3,).
+        radius: bounding-sphere radius [m].
+        planes: hull half-spaces in the frame, (F, 4): ``n . x <= d`` as (n, d).
+    """
+
+    name: str
+    link: str
+    frame_id: int
+    joint_id: int
+    placement: pin.SE3
+    shape: coal.ShapeBase
+    centre: FloatArray
+    radius: float
+    planes: FloatArray
+
+    def world_placement(self, state: RobotState) -> pin.SE3:
+        """The shape's placement in the world at ``state``."""
+        return state.data.oMf[self.frame_id] * self.placement
+
+
+def _hull_shape(path: Path, scale: FloatArray) -> tuple[coal.Convex, trimesh.Trimesh]:
+    mesh = trimesh.load(str(path), force="mesh")
+    mesh.apply_scale(scale)
+    hull = mesh.convex_hull
+    points = coal.StdVec_Vec3s()
+    for v in np.asarray(hull.vertices, dtype=float):
+        points.append(v)
+    triangles = coal.StdVec_Triangle()
+    for a, b, c in np.asarray(hull.faces):
+        triangles.append(coal.Triangle(int(a), int(b), int(c)))
+    return coal.Convex(points, triangles), hull
+
+
+def _segment_distances(points: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+    ab = b - a
+    t = np.clip((points - a).dot(ab) / max(float(ab.dot(ab)), 1e-12), 0.0, 1.0)
+    return np.asarray(np.linalg.norm(points - (a + t[:, None] * ab), axis=1))
+
+
+def fit_capsule(points: FloatArray) -> tuple[pin.SE3, float, float]:
+    """The capsule of least volume (found locally) that contains ``points`` (n, 3).
+
+    The axis starts on the points' principal axis; its ends and an offset of the
+    axis are optimised (Nelder-Mead), with the radius set to the farthest point.
+
+    Returns:
+        (placement of the capsule's centre with its axis along local z, radius,
+        full length of the axis segment).
+    """
+    centre = points.mean(axis=0)
+    axis = np.linalg.svd(points - centre)[2][0]
+    along = (points - centre).dot(axis)
+
+    def ends(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return centre + x[2:] + axis * x[0], centre + x[2:] + axis * x[1]
+
+    def volume(x: FloatArray) -> float:
+        a, b = ends(x)
+        r = float(_segment_distances(points, a, b).max())
+        return float(np.pi * r * r * np.linalg.norm(b - a) + 4.0 / 3.0 * np.pi * r**3)
+
+    x0 = np.array([0.7 * along.min(), 0.7 * along.max(), 0.0, 0.0, 0.0])
+    x = minimize(volume, x0, method="Nelder-Mead", options={"maxiter": 3000}).x
+    a, b = ends(x)
+    radius = float(_segment_distances(points, a, b).max())
+    length = float(np.linalg.norm(b - a))
+    z = (b - a) / length if length > 1e-9 else np.array([0.0, 0.0, 1.0])
+    rotation = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), z).matrix()
+    return pin.SE3(rotation, 0.5 * (a + b)), radius, length
+
+
+def _primitive_mesh(shape: coal.ShapeBase) -> trimesh.Trimesh:
+    if isinstance(shape, coal.Box):
+        return trimesh.creation.box(extents=2.0 * np.asarray(shape.halfSide))
+    if isinstance(shape, coal.Sphere):
+        return trimesh.creation.icosphere(subdivisions=2, radius=shape.radius)
+    if isinstance(shape, coal.Cylinder):
+        return trimesh.creation.cylinder(
+            radius=shape.radius, height=2.0 * shape.halfLength
+        )
+    if isinstance(shape, coal.Capsule):
+        return trimesh.creation.capsule(
+            radius=shape.radius, height=2.0 * shape.halfLength
+        )
+    raise ConfigError(f"unsupported collision primitive {type(shape).__name__}")
+
+
+def _planes(hull: trimesh.Trimesh) -> FloatArray:
+    normals = np.asarray(hull.face_normals, dtype=float)
+    offsets = np.einsum("ij,ij->i", normals, hull.triangles[:, 0, :])
+    planes = np.hstack([normals, offsets[:, None]])
+    # Coplanar triangles repeat a plane: keep one of each.
+    return np.unique(np.round(planes, 9), axis=0)
+
+
+class RobotGeometry:
+    """The collision shapes of a robot, and the pairs checked for self-collision.
+
+    Args:
+        robot: a model loaded from a robot folder (its URDF gives the geometry).
+        padding: distance added around every shape [m] (default: robot.yaml's).
+        approximation: ``hull`` (convex hull of each mesh) or ``capsule`` (the
+            least-volume capsule around the hull; faster against octrees, coarser);
+            default: robot.yaml's.
+
+    Attributes:
+        shapes: every checked shape, in URDF order.
+        self_pairs: index pairs into ``shapes`` checked against each other: all
+            pairs except shapes on one rigid body, on adjacent bodies, and the
+            ``ignore_pairs`` of robot.yaml.
+        padding: distance added around every shape [m].
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        padding: float | None = None,
+        approximation: Approximation | None = None,
+    ) -> None:
+        """Load the URDF's collision elements as convex shapes."""
+        if robot.urdf_path is None:
+            raise ConfigError(f"robot '{robot.name}' has no URDF to read geometry from")
+        description = robot.description
+        settings = description.collision if description is not None else None
+        self.robot = robot
+        self.padding = (
+            padding if padding is not None else (settings.padding if settings else 0.0)
+        )
+        self.approximation: Approximation = approximation or (
+            settings.approximation if settings else "hull"
+        )
+        folder = robot.folder or robot.urdf_path.parent
+        model = robot.model
+        geometry_model = pin.buildGeomFromUrdf(
+            model,
+            str(robot.urdf_path),
+            pin.GeometryType.COLLISION,
+            package_dirs=[str(folder)],
+        )
+        ignored_links = set(settings.ignore_links) if settings else set()
+        links = {f.name for f in model.frames}
+        for link in ignored_links - links:
+            raise ConfigError(
+                f"ignore_links: no link '{link}'{suggestion(link, links)}",
+                "collision.ignore_links",
+            )
+        self.shapes: list[LinkShape] = []
+        for obj in geometry_model.geometryObjects:
+            frame = model.frames[obj.parentFrame]
+            if frame.name in ignored_links:
+                continue
+            placement = frame.placement.inverse() * obj.placement
+            if obj.meshPath and isinstance(obj.geometry, coal.BVHModelBase):
+                shape, hull = _hull_shape(Path(obj.meshPath), np.asarray(obj.meshScale))
+                if self.approximation == "capsule":
+                    offset, radius, length = fit_capsule(np.asarray(hull.vertices))
+                    shape = coal.Capsule(radius, length)
+                    hull = _primitive_mesh(shape)
+                    placement = placement * offset
+            else:
+                shape = obj.geometry
+                hull = _primitive_mesh(shape)
+            vertices = np.asarray(hull.vertices)
+            lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+            centre_local = 0.5 * (lo + hi)
+            self.shapes.append(
+                LinkShape(
+                    name=obj.name,
+                    link=frame.name,
+                    frame_id=int(obj.parentFrame),
+                    joint_id=int(frame.parentJoint),
+                    placement=placement,
+                    shape=shape,
+                    centre=placement.act(centre_local),
+                    radius=float(np.linalg.norm(vertices - centre_local, axis=1).max()),
+                    planes=_transform_planes(_planes(hull), placement),
+                )
+            )
+        self._centres = np.array([s.centre for s in self.shapes]).reshape(-1, 3)
+        self._radii = np.array([s.radius for s in self.shapes])
+        self.self_pairs = self._self_pairs(settings.ignore_pairs if settings else [])
+        pairs = np.array(self.self_pairs, dtype=np.intp).reshape(-1, 2)
+        self._pair_a, self._pair_b = pairs[:, 0], pairs[:, 1]
+        self._pair_reach = self._radii[self._pair_a] + self._radii[self._pair_b]
+
+    def _self_pairs(self, ignore: list[tuple[str, str]]) -> list[tuple[int, int]]:
+        model = self.robot.model
+        link_names = {s.link for s in self.shapes}
+        ignored = set()
+        for a, b in ignore:
+            for link in (a, b):
+                if link not in link_names:
+                    raise ConfigError(
+                        f"ignore_pairs: no collision link '{link}'"
+                        f"{suggestion(link, link_names)}",
+                        "collision.ignore_pairs",
+                    )
+            ignored.add(frozenset((a, b)))
+        pairs = []
+        indexed = list(enumerate(self.shapes))
+        for (i, first), (j, second) in itertools.combinations(indexed, 2):
+            ja, jb = first.joint_id, second.joint_id
+            adjacent = ja == jb or model.parents[ja] == jb or model.parents[jb] == ja
+            if not adjacent and frozenset((first.link, second.link)) not in ignored:
+                pairs.append((i, j))
+        return pairs
+
+    def near_self_pairs(self, centres: FloatArray, margin: float) -> list[int]:
+        """Indices into :attr:`self_pairs` whose bounding spheres nearly touch.
+
+        The broad phase of self-collision: spheres closer than ``margin``.
+        """
+        diff = centres[self._pair_a] - centres[self._pair_b]
+        gap2 = np.einsum("ij,ij->i", diff, diff)
+        reach = self._pair_reach + margin
+        return [int(k) for k in np.flatnonzero(gap2 < reach * reach)]
+
+    def world_spheres(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
+        """Bounding-sphere centres (n, 3) in the world and radii (n,), unpadded."""
+        oMf = state.data.oMf
+        centres = np.array([oMf[s.frame_id].act(s.centre) for s in self.shapes])
+        return centres.reshape(-1, 3), self._radii
+
+    def contains(
+        self, state: RobotState, points: FloatArray, margin: float = 0.0
+    ) -> np.ndarray:
+        """Which points (n, 3) lie inside some shape grown by ``padding + margin``.
+
+        Points within that distance of a hull's faces count as inside: the test is
+        exact on faces and conservative (a little too large) near edges and corners.
+        Returns a boolean array of shape (n,).
+        """
+        grow = self.padding + margin
+        inside = np.zeros(len(points), dtype=bool)
+        centres, radii = self.world_spheres(state)
+        for shape, centre, radius in zip(self.shapes, centres, radii, strict=True):
+            near = np.flatnonzero(
+                np.sum((points - centre) ** 2, axis=1) <= (radius + grow) ** 2
+            )
+            if near.size == 0:
+                continue
+            M = state.data.oMf[shape.frame_id]
+            # World points in the frame: R^T (p - t); the planes are in the frame.
+            local = (points[near] - M.translation).dot(M.rotation)
+            excess = local.dot(shape.planes[:, :3].T) - shape.planes[:, 3]
+            inside[near[np.max(excess, axis=1) <= grow]] = True
+        return inside
+
+    def __len__(self) -> int:
+        """Number of shapes."""
+        return len(self.shapes)
+
+    def __repr__(self) -> str:
+        """Robot, shapes and pair count."""
+        return (
+            f"RobotGeometry({self.robot.name!r}, shapes={len(self.shapes)}, "
+            f"self_pairs={len(self.self_pairs)}, padding={self.padding})"
+        )
+
+
+def _transform_planes(planes: FloatArray, placement: pin.SE3) -> FloatArray:
+    """Half-spaces n.x <= d of a shape, moved from its own frame by ``placement``."""
+    normals = planes[:, :3].dot(placement.rotation.T)
+    offsets = planes[:, 3] + normals.dot(placement.translation)
+    return np.hstack([normals, offsets[:, None]])
+
+
+def find_ignorable_pairs(
+    geometry: RobotGeometry,
+    rng: np.random.Generator,
+    samples: int = 2000,
+) -> list[tuple[str, str]]:
+    """Link pairs that never collide (or always do) over random configurations.
+
+    The method of MoveIt's setup assistant: pairs that are in collision in no
+    sampled configuration cannot usefully constrain motion and are skipped, and
+    pairs in collision in every sample are a modelling artefact. Paste the result
+    under ``collision.ignore_pairs`` in robot.yaml; more samples, fewer misses.
+    """
+    robot = geometry.robot
+    state = RobotState(robot)
+    counts = dict.fromkeys(geometry.self_pairs, 0)
+    request = coal.CollisionRequest()
+    result = coal.CollisionResult()
+    for _ in range(samples):
+        state.update(robot.random_configuration(rng))
+        placements = [s.world_placement(state) for s in geometry.shapes]
+        for i, j in geometry.self_pairs:
+            result.clear()
+            if coal.collide(
+                geometry.shapes[i].shape,
+                placements[i],
+                geometry.shapes[j].shape,
+                placements[j],
+                request,
+                result,
+            ):
+                counts[(i, j)] += 1
+    pairs = {
+        tuple(sorted((geometry.shapes[i].link, geometry.shapes[j].link)))
+        for (i, j), n in counts.items()
+        if n in (0, samples)
+    }
+    return sorted((a, b) for a, b in pairs)

@@ -1,0 +1,332 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The collision world: the robot's shapes, the current environment, and contacts.
+
+One :class:`CollisionWorld` is shared by the contact constraints (which latch its
+contacts at the start of each step) and by the executor (which validates steps and
+swaps in new environment snapshots from the map). Contacts of a configuration are
+computed once and cached, so the check that validates a step also provides the
+constraints of the next one (CAT Sec. IV-C).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from cbp.collision.environment import Environment, Hits, PrimitiveEnvironment
+from cbp.collision.geometry import RobotGeometry
+from cbp.errors import ConfigError
+from cbp.robot import FloatArray, IntArray
+from cbp.state import RobotState
+
+__all__ = [
+    "CollisionSettings",
+    "CollisionWorld",
+    "ContactSet",
+    "StepCheck",
+    "UsesCollisionWorld",
+]
+
+
+@dataclass(frozen=True, kw_only=True)
+class CollisionSettings:
+    """The ``collision:`` section of a scenario."""
+
+    activation_distance: float = 0.05
+    """Obstacles closer than this (after padding) produce contacts [m]."""
+    contacts_per_link: int = 3
+    """Contacts kept per robot shape: the closest, spread over directions."""
+    self_collision: bool = True
+    """Also query the robot's own shape pairs."""
+    padding: float | None = None
+    """Distance added around the links [m]; default: robot.yaml's."""
+    penetration_tolerance: float = 0.005
+    """Step validation rejects a step that penetrates deeper than this [m]."""
+
+    def __post_init__(self) -> None:
+        """Positive distances and counts."""
+        if not self.activation_distance > 0:
+            raise ConfigError(
+                f"must be > 0, got {self.activation_distance}", "activation_distance"
+            )
+        if self.contacts_per_link < 1:
+            raise ConfigError(
+                f"must be >= 1, got {self.contacts_per_link}", "contacts_per_link"
+            )
+        if self.padding is not None and not self.padding >= 0:
+            raise ConfigError(f"must be >= 0, got {self.padding}", "padding")
+        if not self.penetration_tolerance >= 0:
+            raise ConfigError(
+                f"must be >= 0, got {self.penetration_tolerance}",
+                "penetration_tolerance",
+            )
+
+
+@dataclass
+class ContactSet:
+    """Contacts of one configuration, environment and self, in the world frame.
+
+    Distances are those of the padded shapes. The ``other`` side is an obstacle
+    (``other_shape == -1``) or a second robot shape (self-collision); the normal
+    points from the other side toward ``shape``, so moving ``shape``'s point along
+    it increases the distance.
+
+    Attributes:
+        shape: robot shape index, (K,).
+        other_shape: the second robot shape for self contacts, else -1, (K,).
+        point: witness point on ``shape`` (unpadded surface), (K, 3).
+        other_point: witness point on the other side, (K, 3).
+        normal: unit normal from the other side toward ``shape``, (K, 3).
+        distance: signed distance of the padded shapes [m], (K,).
+    """
+
+    shape: IntArray
+    other_shape: IntArray
+    point: FloatArray
+    other_point: FloatArray
+    normal: FloatArray
+    distance: FloatArray
+
+    @classmethod
+    def empty(cls) -> ContactSet:
+        """No contacts."""
+        z = np.zeros(0, dtype=np.intp)
+        return cls(
+            z, z, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+        )
+
+    @classmethod
+    def concatenate(cls, sets: list[ContactSet]) -> ContactSet:
+        """All contacts of several sets."""
+        sets = [s for s in sets if len(s)]
+        if not sets:
+            return cls.empty()
+        return cls(
+            *(
+                np.concatenate([getattr(s, f) for s in sets])
+                for f in (
+                    "shape",
+                    "other_shape",
+                    "point",
+                    "other_point",
+                    "normal",
+                    "distance",
+                )
+            )
+        )
+
+    def select(self, mask: np.ndarray) -> ContactSet:
+        """The contacts where ``mask`` is true (or at the given indices)."""
+        return ContactSet(
+            self.shape[mask],
+            self.other_shape[mask],
+            self.point[mask],
+            self.other_point[mask],
+            self.normal[mask],
+            self.distance[mask],
+        )
+
+    @property
+    def is_self(self) -> np.ndarray:
+        """Which contacts are between two robot shapes."""
+        return np.asarray(self.other_shape >= 0)
+
+    @property
+    def penetration(self) -> float:
+        """Deepest penetration of the padded shapes [m]; 0 when nothing overlaps."""
+        return float(max(0.0, -self.distance.min())) if len(self) else 0.0
+
+    def __len__(self) -> int:
+        """Number of contacts."""
+        return int(self.shape.size)
+
+
+@dataclass(frozen=True)
+class StepCheck:
+    """The outcome of validating a configuration (:meth:`CollisionWorld.check`).
+
+    Attributes:
+        accepted: the penetration is within the tolerance.
+        penetration: the deepest penetration of the padded shapes [m].
+        contacts: the contacts found there.
+    """
+
+    accepted: bool
+    penetration: float
+    contacts: ContactSet
+
+
+@runtime_checkable
+class UsesCollisionWorld(Protocol):
+    """A plugin that reads contacts: the scenario loader attaches the world to it."""
+
+    def attach_world(self, world: CollisionWorld) -> None:
+        """Use ``world`` for contact queries from now on."""
+
+
+@dataclass
+class _Cache:
+    key: bytes = b""
+    environment: Environment | None = None
+    contacts: ContactSet = field(default_factory=ContactSet.empty)
+
+
+class CollisionWorld:
+    """Robot geometry + environment snapshot: contact queries and step validation.
+
+    Args:
+        geometry: the robot's collision shapes.
+        environment: the obstacles (default: none).
+        settings: activation distance, contacts per shape, self-collision, ...
+
+    The environment can be replaced at any time, from any thread
+    (:meth:`set_environment`); a query uses the snapshot current when it starts.
+    """
+
+    def __init__(
+        self,
+        geometry: RobotGeometry,
+        environment: Environment | None = None,
+        settings: CollisionSettings | None = None,
+    ) -> None:
+        """Keep the parts; nothing is queried yet."""
+        self.geometry = geometry
+        self.settings = settings or CollisionSettings()
+        self.padding = (
+            self.settings.padding
+            if self.settings.padding is not None
+            else geometry.padding
+        )
+        self._environment: Environment = environment or PrimitiveEnvironment([])
+        self._lock = threading.Lock()
+        self._cache = _Cache()
+        self._carried = ContactSet.empty()
+        self._state = RobotState(geometry.robot)
+        self._request = coal.DistanceRequest()
+        self._result = coal.DistanceResult()
+        self.environment_version = 0
+
+    @property
+    def environment(self) -> Environment:
+        """The current environment snapshot."""
+        return self._environment
+
+    def set_environment(self, environment: Environment) -> None:
+        """Swap in a new snapshot (thread-safe; queries in flight keep the old one)."""
+        with self._lock:
+            self._environment = environment
+            self.environment_version += 1
+
+    def contacts(self, state: RobotState) -> ContactSet:
+        """Contacts at ``state`` (cached per configuration and environment).
+
+        Includes, once, the contacts carried over from a rejected step
+        (:meth:`carry_over`).
+        """
+        environment = self._environment
+        key = state.q.tobytes()
+        cache = self._cache
+        if key != cache.key or environment is not cache.environment:
+            cache.contacts = self._query(state, environment)
+            cache.key, cache.environment = key, environment
+        if len(self._carried):
+            carried, self._carried = self._carried, ContactSet.empty()
+            return ContactSet.concatenate([cache.contacts, carried])
+        return cache.contacts
+
+    def check(self, q: FloatArray) -> StepCheck:
+        """Validate configuration ``q``: its contacts and whether the step is kept."""
+        state = self._state
+        state.update(q)
+        contacts = self.contacts(state)
+        depth = contacts.penetration
+        return StepCheck(depth <= self.settings.penetration_tolerance, depth, contacts)
+
+    def carry_over(self, contacts: ContactSet) -> None:
+        """Add ``contacts`` (from a rejected configuration) to the next query.
+
+        Contacts are points fixed on robot links with a world normal, so the ones
+        found at a rejected configuration still constrain the step retried from the
+        previous one: it cannot move those points into the obstacle again.
+        """
+        self._carried = ContactSet.concatenate([self._carried, contacts])
+
+    def _query(self, state: RobotState, environment: Environment) -> ContactSet:
+        geometry = self.geometry
+        shapes = geometry.shapes
+        placements = [s.world_placement(state) for s in shapes]
+        centres, radii = geometry.world_spheres(state)
+        margin = self.settings.activation_distance + self.padding
+        per_shape = self.settings.contacts_per_link
+        hits = environment.query(shapes, placements, centres, radii, margin, per_shape)
+        parts = [self._from_hits(hits, self.padding)]
+        if self.settings.self_collision:
+            parts.append(self._self_contacts(placements, centres, radii))
+        return ContactSet.concatenate(parts)
+
+    @staticmethod
+    def _from_hits(hits: Hits, padding: float) -> ContactSet:
+        return ContactSet(
+            hits.shape,
+            np.full(len(hits), -1, dtype=np.intp),
+            hits.robot_point,
+            hits.obstacle_point,
+            hits.normal,
+            hits.distance - padding,
+        )
+
+    def _self_contacts(
+        self, placements: list[pin.SE3], centres: FloatArray, radii: FloatArray
+    ) -> ContactSet:
+        shapes = self.geometry.shapes
+        pad2 = 2.0 * self.padding
+        margin = self.settings.activation_distance + pad2
+        rows = []
+        request, result = self._request, self._result
+        pairs = self.geometry.self_pairs
+        for k in self.geometry.near_self_pairs(centres, margin):
+            i, j = pairs[k]
+            result.clear()
+            # Shape j first: the normal then points from j toward i.
+            d = coal.distance(
+                shapes[j].shape,
+                placements[j],
+                shapes[i].shape,
+                placements[i],
+                request,
+                result,
+            )
+            if d < margin:
+                rows.append(
+                    (
+                        i,
+                        j,
+                        np.array(result.getNearestPoint2()),
+                        np.array(result.getNearestPoint1()),
+                        np.array(result.normal),
+                        d - pad2,
+                    )
+                )
+        if not rows:
+            return ContactSet.empty()
+        first, second, point, other, normal, distance = zip(*rows, strict=True)
+        return ContactSet(
+            np.array(first, dtype=np.intp),
+            np.array(second, dtype=np.intp),
+            np.array(point),
+            np.array(other),
+            np.array(normal),
+            np.array(distance, dtype=float),
+        )
+
+    def __repr__(self) -> str:
+        """Geometry, environment and settings."""
+        return (
+            f"CollisionWorld({self.geometry!r}, environment="
+            f"{type(self._environment).__name__}, settings={self.settings!r})"
+        )
