@@ -417,8 +417,8 @@ def _keep_closest(
     """Keep up to ``per_shape`` contacts per shape, spread over directions.
 
     The closest first, then the next closest that differ from every kept one in
-    normal (by ``min_angle_deg``) or position (by ``min_spacing``): a few contacts that span the directions the
-    shape is blocked in, instead of one per voxel.
+    normal (by ``min_angle_deg``) or position (by ``min_spacing``): a few contacts
+    that span the directions the shape is blocked in, instead of one per voxel.
     """
     if len(hits) == 0:
         return hits
