@@ -1,0 +1,159 @@
+# SPDX-License-Identifier: Apache-2.0
+"""A PyBullet scene built from the same declarations as the collision world.
+
+The robot comes from its folder's URDF and the objects from the scenario's
+``world.objects``: one declaration, two consumers (the simulator and
+:meth:`cbp.scenario.Scenario.collision_world`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+
+from cbp.robot import FloatArray, RobotModel
+from cbp.scenario import ObjectSpec
+
+__all__ = ["PybulletScene"]
+
+
+class PybulletScene:
+    """A PyBullet client (DIRECT by default) holding the robot and the objects.
+
+    Args:
+        robot: the robot model (its URDF is loaded with a fixed base).
+        objects: the scenario's objects.
+        folder: where mesh files of objects are resolved from.
+        gui: open a window instead of running headless.
+
+    Attributes:
+        client: the PyBullet client id.
+        robot_id: the robot's body id.
+        object_ids: body id per object name.
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        objects: list[ObjectSpec],
+        folder: Path | None = None,
+        gui: bool = False,
+    ) -> None:
+        """Connect and load everything."""
+        if robot.urdf_path is None:
+            raise ValueError(f"robot '{robot.name}' has no URDF")
+        self.robot = robot
+        self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
+        self.robot_id = pb.loadURDF(
+            str(robot.urdf_path),
+            useFixedBase=True,
+            flags=pb.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS,
+            physicsClientId=self.client,
+        )
+        self._joint_index: dict[str, int] = {}
+        for j in range(pb.getNumJoints(self.robot_id, physicsClientId=self.client)):
+            info = pb.getJointInfo(self.robot_id, j, physicsClientId=self.client)
+            self._joint_index[info[1].decode()] = j
+        if robot.description is not None:
+            for joint, value in robot.description.locked_joints.items():
+                pb.resetJointState(
+                    self.robot_id,
+                    self._joint_index[joint],
+                    value,
+                    physicsClientId=self.client,
+                )
+        self.object_ids: dict[str, int] = {}
+        for obj in objects:
+            self.add_object(obj, folder or Path.cwd())
+
+    def add_object(self, obj: ObjectSpec, folder: Path) -> int:
+        """Create a static body for ``obj``; returns its id."""
+        c = self.client
+        if obj.shape == "box":
+            half = [0.5 * s for s in obj.size]
+            col = pb.createCollisionShape(
+                pb.GEOM_BOX, halfExtents=half, physicsClientId=c
+            )
+            vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
+        elif obj.shape == "sphere":
+            col = pb.createCollisionShape(
+                pb.GEOM_SPHERE, radius=obj.size[0], physicsClientId=c
+            )
+            vis = pb.createVisualShape(
+                pb.GEOM_SPHERE, radius=obj.size[0], physicsClientId=c
+            )
+        elif obj.shape == "cylinder":
+            r, length = obj.size
+            col = pb.createCollisionShape(
+                pb.GEOM_CYLINDER, radius=r, height=length, physicsClientId=c
+            )
+            vis = pb.createVisualShape(
+                pb.GEOM_CYLINDER, radius=r, length=length, physicsClientId=c
+            )
+        else:
+            path = str(folder / obj.file)
+            col = pb.createCollisionShape(
+                pb.GEOM_MESH,
+                fileName=path,
+                meshScale=list(obj.scale),
+                flags=pb.GEOM_FORCE_CONCAVE_TRIMESH,
+                physicsClientId=c,
+            )
+            vis = pb.createVisualShape(
+                pb.GEOM_MESH,
+                fileName=path,
+                meshScale=list(obj.scale),
+                physicsClientId=c,
+            )
+        M = obj.pose.to_se3()
+        quat = _xyzw(M.rotation)
+        body = pb.createMultiBody(
+            baseMass=0.0,
+            baseCollisionShapeIndex=col,
+            baseVisualShapeIndex=vis,
+            basePosition=M.translation.tolist(),
+            baseOrientation=quat,
+            physicsClientId=c,
+        )
+        self.object_ids[obj.name] = body
+        return int(body)
+
+    def remove_object(self, name: str) -> None:
+        """Remove an object from the simulation (it stays in the declarations)."""
+        pb.removeBody(self.object_ids.pop(name), physicsClientId=self.client)
+
+    def set_configuration(self, q: FloatArray) -> None:
+        """Teleport the robot's joints to ``q`` (fixed-base models)."""
+        model = self.robot.model
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            if joint.nq == 1:
+                name = model.names[j]
+                pb.resetJointState(
+                    self.robot_id,
+                    self._joint_index[name],
+                    float(q[joint.idx_q]),
+                    physicsClientId=self.client,
+                )
+
+    def close(self) -> None:
+        """Disconnect the client."""
+        if pb.isConnected(self.client):
+            pb.disconnect(self.client)
+
+    def __enter__(self) -> PybulletScene:
+        """Use as a context manager."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Disconnect."""
+        self.close()
+
+
+def _xyzw(rotation: FloatArray) -> list[float]:
+    import pinocchio as pin
+
+    q = pin.Quaternion(np.asarray(rotation))
+    return [float(q.x), float(q.y), float(q.z), float(q.w)]

@@ -1,0 +1,115 @@
+"""Depth camera to occupancy map in PyBullet: surfaces found, robot filtered, clearing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cbp.collision import (
+    CollisionWorld,
+    EnvironmentObject,
+    PrimitiveEnvironment,
+    RobotGeometry,
+)
+from cbp.perception.camera import DepthCamera
+from cbp.perception.mapper import MapUpdater
+from cbp.perception.occupancy import OccupancyGrid
+from cbp.perception.spec import CameraSpec, PerceptionSpec
+from cbp.scenario import ObjectSpec
+from cbp.sim import PybulletScene
+from cbp.spatial import Pose
+from cbp.state import RobotState
+
+TABLE = ObjectSpec(
+    name="table",
+    shape="box",
+    size=(0.6, 1.0, 0.04),
+    pose=Pose(position=(0.6, 0.0, 0.18)),
+)
+BOX = ObjectSpec(
+    name="box",
+    shape="box",
+    size=(0.12, 0.12, 0.12),
+    pose=Pose(position=(0.55, 0.2, 0.26), rpy_deg=(0.0, 0.0, 30.0)),
+)
+CAMERA = CameraSpec(position=(1.5, 0.0, 1.0), target=(0.5, 0.0, 0.2), far=3.0)
+SPEC = PerceptionSpec(
+    source="depth_camera",
+    camera=CAMERA,
+    cell_size=0.01,
+    bounds=((-0.3, -0.6, 0.0), (1.0, 0.6, 1.2)),
+    misses_to_clear=2,
+)
+
+
+@pytest.fixture
+def scene(robots):
+    robot = robots["panda"]
+    with PybulletScene(robot, [TABLE, BOX]) as scene:
+        scene.set_configuration(robot.home())
+        yield scene
+
+
+def _objects(specs):
+    return PrimitiveEnvironment(
+        [
+            EnvironmentObject.primitive(o.name, o.shape, o.size, o.pose.to_se3())
+            for o in specs
+        ]
+    )
+
+
+def test_cells_lie_on_the_box_and_table_and_none_on_the_robot(scene, robots) -> None:
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(SPEC, geometry)
+    state = RobotState(robot, robot.home())
+    grid.integrate(DepthCamera(scene.client, CAMERA).capture(), state)
+    centres = grid.centres()
+    assert len(centres) > 2000
+    # Every cell is within a cell diagonal of a true surface ...
+    clearance = _objects([TABLE, BOX]).clearance(centres)
+    near = np.mean(clearance <= np.sqrt(3) * grid.cell)
+    assert near > 0.98, near
+    # ... the box's visible faces are covered ...
+    on_box = _objects([BOX]).clearance(centres) <= grid.cell
+    assert on_box.sum() > 150
+    # ... and no cell lies inside the robot (the camera sees most of the arm).
+    assert grid.robot_points_removed > 1000
+    inside_robot = geometry.contains(state, centres, margin=-geometry.padding)
+    assert not inside_robot.any()
+
+
+def test_a_removed_box_clears_within_the_stated_frames(scene, robots) -> None:
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(SPEC, geometry)
+    world = CollisionWorld(geometry)
+    mapper = MapUpdater(grid, world)  # threaded, as in a run
+    camera = DepthCamera(scene.client, CAMERA)
+    q = robot.home()
+    try:
+        for _ in range(2):
+            mapper.submit(camera.capture(), q)
+            assert mapper.wait_idle()
+        box_env, table_env = _objects([BOX]), _objects([TABLE])
+
+        def box_cells() -> int:
+            # On the box, and not the table top that the box was standing on.
+            centres = grid.centres()
+            on_box = box_env.clearance(centres) <= grid.cell
+            return int(np.sum(on_box & (table_env.clearance(centres) > grid.cell)))
+
+        assert box_cells() > 150
+        scene.remove_object("box")
+        remaining = []
+        for _ in range(SPEC.misses_to_clear):
+            mapper.submit(camera.capture(), q)
+            assert mapper.wait_idle()
+            remaining.append(box_cells())
+        assert mapper.error is None
+        assert remaining[0] > 0, remaining  # one miss is not enough ...
+        assert remaining[-1] == 0, remaining  # ... two are
+        assert world.environment_version == mapper.updates == 2 + SPEC.misses_to_clear
+    finally:
+        mapper.close()
