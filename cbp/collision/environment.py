@@ -385,12 +385,13 @@ class OccupancyEnvironment(Environment):
             for c in result.getContacts():
                 normal = np.array(c.normal)
                 p1, p2 = np.array(c.getNearestPoint1()), np.array(c.getNearestPoint2())
+                depth = float(c.penetration_depth)
                 # Which witness lies on the obstacle is not consistent across coal's
-                # octree paths: the obstacle's is the one further back along the
-                # normal (the normal points from the obstacle toward the robot).
-                if normal.dot(p1 - p2) > 0:
+                # octree paths. The robot's is the one with (p_robot - p_obstacle)
+                # . normal = signed distance.
+                if (p2 - p1).dot(normal) * depth < 0:
                     p1, p2 = p2, p1
-                rows.append((int(i), p2, p1, normal, float(c.penetration_depth)))
+                rows.append((int(i), p2, p1, normal, depth))
         hits = _keep_closest(
             Hits.from_rows(rows),
             per_shape,
