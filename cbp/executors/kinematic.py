@@ -6,6 +6,11 @@ per control step of ``method.dt``. The goal stream is sampled at its own rate.
 A goal that is NaN or malformed is ignored (the previous goal stays); a QP that
 cannot be solved holds the robot still for that step. Both are recorded as events
 and the loop goes on.
+
+When the scenario has contact constraints, every step is validated (CAT Sec.
+IV-C): the new configuration is collision-checked, and a step that penetrates
+deeper than ``collision.penetration_tolerance`` is rejected. The robot stays, and
+the contacts found at the rejected configuration constrain the retried step.
 """
 
 from __future__ import annotations
@@ -39,6 +44,9 @@ class Trace:
         solve_time: engine step wall time (N,) [s].
         events: (time, message) for every goal rejected or step not solved.
         joint_names: names of the model's joints.
+        penetration: deepest penetration of the padded links at each step (N,)
+            [m]; empty without a collision world.
+        rejected_steps: steps rejected by step validation.
     """
 
     t: FloatArray
@@ -50,6 +58,8 @@ class Trace:
     solve_time: FloatArray
     events: list[tuple[float, str]] = field(default_factory=list)
     joint_names: list[str] = field(default_factory=list)
+    penetration: FloatArray = field(default_factory=lambda: np.zeros(0))
+    rejected_steps: int = 0
 
 
 def run_kinematic(scenario: Scenario) -> Trace:
@@ -69,6 +79,9 @@ def run_kinematic(scenario: Scenario) -> Trace:
         k: [] for k in ("t", "q", "ee", "goal", "perr", "rerr", "time")
     }
     events: list[tuple[float, str]] = []
+    world = scenario.collision_world() if scenario.needs_collision_world else None
+    depth: list[float] = []
+    rejected = 0
     goal: pin.SE3 | None = None
     next_goal_time = 0.0
     for k in range(steps):
@@ -106,7 +119,19 @@ def run_kinematic(scenario: Scenario) -> Trace:
             rows["goal"].append(np.full(3, np.nan))
             rows["perr"].append(np.nan)
             rows["rerr"].append(np.nan)
-        q = robot.integrate(q, dq)
+        q_next = robot.integrate(q, dq)
+        if world is not None:
+            check = world.check(q_next)
+            if not check.accepted:
+                depth.append(depth[-1] if depth else 0.0)  # the robot stays
+                rejected += 1
+                world.carry_over(check.contacts.select(check.contacts.distance < 0))
+                events.append(
+                    (t, f"step rejected: penetration {check.penetration * 1e3:.1f} mm")
+                )
+                continue
+            depth.append(check.penetration)
+        q = q_next
     return Trace(
         t=np.array(rows["t"], dtype=float),
         q=np.array(rows["q"], dtype=float),
@@ -117,4 +142,6 @@ def run_kinematic(scenario: Scenario) -> Trace:
         solve_time=np.array(rows["time"], dtype=float),
         events=events,
         joint_names=robot.joint_names,
+        penetration=np.array(depth, dtype=float),
+        rejected_steps=rejected,
     )

@@ -94,7 +94,8 @@ def test_self_collision_found_when_folded_not_at_home(geometry, robots) -> None:
         geometry, settings=CollisionSettings(activation_distance=0.02)
     )
     home = world.check(robot.home())
-    assert home.accepted and home.penetration == 0.0
+    assert home.accepted
+    assert home.penetration == 0.0
     # Shoulder forward, elbow fully bent, wrist folded: the hand meets the base.
     folded = robot.home()
     folded[1], folded[3], folded[4], folded[5] = 1.0, -3.05, -0.45, 3.2
@@ -127,4 +128,5 @@ def test_self_collision_found_when_folded_not_at_home(geometry, robots) -> None:
             linkIndexB=names["panda_hand"],
             physicsClientId=scene.client,
         )
-        assert points and min(p[8] for p in points) < -0.01
+        assert points
+        assert min(p[8] for p in points) < -0.01
