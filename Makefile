@@ -37,6 +37,7 @@ test-all: lint
 
 bench: $(DEV_STAMP)
 	$(BIN)/python benchmarks/engine_step.py --out benchmarks/RESULTS.md
+	$(BIN)/python benchmarks/collision.py --append benchmarks/RESULTS.md
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache

@@ -34,12 +34,13 @@ SURFACES = {
 
 
 def main() -> None:
+    """Measure every method on every surface; write the figure and the table."""
     rows = []
     fig, ax = plt.subplots(figsize=(9, 4))
     width = 0.25
     for m, (method, refiner) in enumerate(METHODS.items()):
         medians = []
-        for s, (surface, (cells, sample)) in enumerate(SURFACES.items()):
+        for surface, (cells, sample) in SURFACES.items():
             errors = angle_errors(cells, sample, refiner, probes=50)
             med, p90 = float(np.median(errors)), float(np.percentile(errors, 90))
             medians.append(med)
