@@ -32,6 +32,7 @@ __all__ = [
     "MetaballRefiner",
     "OccupancyEnvironment",
     "PrimitiveEnvironment",
+    "signed_distance",
 ]
 
 
@@ -70,9 +71,45 @@ class Hits:
             np.array(d, dtype=float),
         )
 
+    def select(self, index: IntArray) -> Hits:
+        """The contacts at ``index``."""
+        return Hits(
+            self.shape[index],
+            self.robot_point[index],
+            self.obstacle_point[index],
+            self.normal[index],
+            self.distance[index],
+        )
+
     def __len__(self) -> int:
         """Number of contacts."""
         return int(self.shape.size)
+
+
+def signed_distance(
+    other: coal.CollisionGeometry,
+    other_placement: pin.SE3,
+    shape: coal.CollisionGeometry,
+    placement: pin.SE3,
+    request: coal.DistanceRequest,
+    result: coal.DistanceResult,
+) -> tuple[float, FloatArray, FloatArray, FloatArray]:
+    """Signed distance from ``other`` to ``shape`` (coal's GJK/EPA), with witnesses.
+
+    ``other`` goes first, so coal's normal points from it toward ``shape``.
+
+    Returns:
+        (distance, point on ``shape``, point on ``other``, unit normal from
+        ``other`` toward ``shape``); the distance is negative when they overlap.
+    """
+    result.clear()
+    d = coal.distance(other, other_placement, shape, placement, request, result)
+    return (
+        float(d),
+        np.array(result.getNearestPoint2()),
+        np.array(result.getNearestPoint1()),
+        np.array(result.normal),
+    )
 
 
 class Environment(abc.ABC):
@@ -221,8 +258,7 @@ class PrimitiveEnvironment(Environment):
         request, result = self._request, self._result
         for i, j in zip(*np.nonzero(near), strict=True):
             obj = self.objects[j]
-            result.clear()
-            d = coal.distance(
+            d, point, other, normal = signed_distance(
                 obj.shape,
                 obj.placement,
                 shapes[i].shape,
@@ -231,15 +267,7 @@ class PrimitiveEnvironment(Environment):
                 result,
             )
             if d < margin:
-                rows.append(
-                    (
-                        int(i),
-                        np.array(result.getNearestPoint2()),
-                        np.array(result.getNearestPoint1()),
-                        np.array(result.normal),
-                        float(d),
-                    )
-                )
+                rows.append((int(i), point, other, normal, d))
         hits = Hits.from_rows(rows)
         return _keep_closest(hits, per_shape, min_angle_deg=0.0, min_spacing=0.0)
 
@@ -432,24 +460,13 @@ def _keep_closest(
         ]:
             if len(kept) >= per_shape:
                 break
-            similar = (
-                any(
-                    hits.normal[k].dot(hits.normal[m]) > cos_max
-                    and np.linalg.norm(hits.robot_point[k] - hits.robot_point[m])
-                    < min_spacing
-                    for m in kept
-                )
-                if kept and (min_angle_deg > 0 or min_spacing > 0)
-                else False
+            similar = any(
+                hits.normal[k].dot(hits.normal[m]) > cos_max
+                and np.linalg.norm(hits.robot_point[k] - hits.robot_point[m])
+                < min_spacing
+                for m in kept
             )
             if not similar:
                 kept.append(int(k))
         keep += kept
-    idx = np.array(keep, dtype=np.intp)
-    return Hits(
-        hits.shape[idx],
-        hits.robot_point[idx],
-        hits.obstacle_point[idx],
-        hits.normal[idx],
-        hits.distance[idx],
-    )
+    return hits.select(np.array(keep, dtype=np.intp))

@@ -218,7 +218,6 @@ class RobotGeometry:
                     planes=_transform_planes(_planes(hull), placement),
                 )
             )
-        self._centres = np.array([s.centre for s in self.shapes]).reshape(-1, 3)
         self._radii = np.array([s.radius for s in self.shapes])
         self.self_pairs = self._self_pairs(settings.ignore_pairs if settings else [])
         pairs = np.array(self.self_pairs, dtype=np.intp).reshape(-1, 2)

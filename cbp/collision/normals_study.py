@@ -11,6 +11,8 @@ refinements.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import coal
 import numpy as np
 import pinocchio as pin
@@ -23,13 +25,16 @@ __all__ = ["angle_errors", "tilted_plane", "yawed_box"]
 
 CELL = 0.01
 
+#: Draws a point on the true surface and the surface's outward normal there.
+Sampler = Callable[[np.random.Generator], tuple[FloatArray, FloatArray]]
+
 
 def _grid(lo: FloatArray, hi: FloatArray) -> FloatArray:
     axes = [np.arange(a + CELL / 2, b, CELL) for a, b in zip(lo, hi, strict=True)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
-def tilted_plane(tilt_deg: float) -> tuple[FloatArray, object]:
+def tilted_plane(tilt_deg: float) -> tuple[FloatArray, Sampler]:
     """Cells of a plane through the origin tilted about y; and a normal function."""
     t = np.radians(tilt_deg)
     n = np.array([-np.sin(t), 0.0, np.cos(t)])
@@ -45,7 +50,7 @@ def tilted_plane(tilt_deg: float) -> tuple[FloatArray, object]:
     return surface, sample
 
 
-def yawed_box(yaw_deg: float) -> tuple[FloatArray, object]:
+def yawed_box(yaw_deg: float) -> tuple[FloatArray, Sampler]:
     """Cells of a 40 cm box's side faces, yawed; and a sampler on the +x' face."""
     R = pin.rpy.rpyToMatrix(0.0, 0.0, np.radians(yaw_deg))
     cells = _grid(np.array([-0.35, -0.35, -0.25]), np.array([0.35, 0.35, 0.25]))
@@ -71,7 +76,7 @@ def yawed_box(yaw_deg: float) -> tuple[FloatArray, object]:
 
 def angle_errors(
     surface: FloatArray,
-    sample: object,
+    sample: Sampler,
     refiner: MetaballRefiner | None,
     probes: int,
     seed: int = 0,
@@ -93,7 +98,7 @@ def angle_errors(
     )
     errors = []
     for _ in range(probes):
-        point, normal = sample(rng)  # type: ignore[operator]
+        point, normal = sample(rng)
         # Capsule axis along the surface, its side sunk 5 mm.
         axis = np.cross(normal, rng.normal(size=3))
         axis /= np.linalg.norm(axis)

@@ -18,7 +18,12 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from cbp.collision.environment import Environment, Hits, PrimitiveEnvironment
+from cbp.collision.environment import (
+    Environment,
+    Hits,
+    PrimitiveEnvironment,
+    signed_distance,
+)
 from cbp.collision.geometry import RobotGeometry
 from cbp.errors import ConfigError
 from cbp.robot import FloatArray, IntArray
@@ -266,7 +271,7 @@ class CollisionWorld:
         hits = environment.query(shapes, placements, centres, radii, margin, per_shape)
         parts = [self._from_hits(hits, self.padding)]
         if self.settings.self_collision:
-            parts.append(self._self_contacts(placements, centres, radii))
+            parts.append(self._self_contacts(placements, centres))
         return ContactSet.concatenate(parts)
 
     @staticmethod
@@ -281,7 +286,7 @@ class CollisionWorld:
         )
 
     def _self_contacts(
-        self, placements: list[pin.SE3], centres: FloatArray, radii: FloatArray
+        self, placements: list[pin.SE3], centres: FloatArray
     ) -> ContactSet:
         shapes = self.geometry.shapes
         pad2 = 2.0 * self.padding
@@ -291,9 +296,8 @@ class CollisionWorld:
         pairs = self.geometry.self_pairs
         for k in self.geometry.near_self_pairs(centres, margin):
             i, j = pairs[k]
-            result.clear()
             # Shape j first: the normal then points from j toward i.
-            d = coal.distance(
+            d, point, other, normal = signed_distance(
                 shapes[j].shape,
                 placements[j],
                 shapes[i].shape,
@@ -302,26 +306,14 @@ class CollisionWorld:
                 result,
             )
             if d < margin:
-                rows.append(
-                    (
-                        i,
-                        j,
-                        np.array(result.getNearestPoint2()),
-                        np.array(result.getNearestPoint1()),
-                        np.array(result.normal),
-                        d - pad2,
-                    )
-                )
+                rows.append((i, j, point, other, normal, d - pad2))
         if not rows:
             return ContactSet.empty()
-        first, second, point, other, normal, distance = zip(*rows, strict=True)
+        columns = list(zip(*rows, strict=True))
         return ContactSet(
-            np.array(first, dtype=np.intp),
-            np.array(second, dtype=np.intp),
-            np.array(point),
-            np.array(other),
-            np.array(normal),
-            np.array(distance, dtype=float),
+            np.array(columns[0], dtype=np.intp),
+            np.array(columns[1], dtype=np.intp),
+            *(np.array(c, dtype=float) for c in columns[2:]),
         )
 
     def __repr__(self) -> str:

@@ -53,6 +53,7 @@ class MapUpdater:
         self._pending: tuple[DepthFrame, FloatArray] | None = None
         self._cond = threading.Condition()
         self._stop = False
+        self._busy = False
         self._thread: threading.Thread | None = None
         if not synchronous:
             self._thread = threading.Thread(
@@ -81,8 +82,6 @@ class MapUpdater:
                     return False
                 self._cond.wait(left)
         return True
-
-    _busy = False
 
     def _run(self) -> None:
         while True:

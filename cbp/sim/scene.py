@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pybullet as pb
 
 from cbp.robot import FloatArray, RobotModel
@@ -153,7 +154,5 @@ class PybulletScene:
 
 
 def _xyzw(rotation: FloatArray) -> list[float]:
-    import pinocchio as pin
-
     q = pin.Quaternion(np.asarray(rotation))
     return [float(q.x), float(q.y), float(q.z), float(q.w)]
