@@ -22,7 +22,7 @@ from cbp.perception.camera import DepthCamera
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, PerceptionSpec
 from cbp.scenario import load_scenario
-from cbp.sim import PybulletScene
+from cbp.sim.scene import PybulletScene
 from cbp.state import RobotState
 
 ROOT = Path(__file__).parents[1]

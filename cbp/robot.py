@@ -80,6 +80,9 @@ class RobotDescription:
     """Frame the default goal task controls."""
     home: dict[str, float]
     """Home posture, by joint name [rad or m]; joints left out take their neutral."""
+    wrist_link: str | None = None
+    """First link of the hand: contact forces on it and the links beyond it are
+    reported as the wrist force (a wrist force sensor's reading)."""
     locked_joints: dict[str, float] = field(default_factory=dict)
     """Joints removed from the model and held at these positions [rad or m]."""
     velocity_limits: dict[str, float] = field(default_factory=dict)

@@ -23,6 +23,7 @@ from cbp.collision.geometry import RobotGeometry
 from cbp.collision.world import CollisionSettings, CollisionWorld, UsesCollisionWorld
 from cbp.engine import Engine
 from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
+from cbp.executors.settings import CatSettings
 from cbp.goals import GoalSpec, GoalStream
 from cbp.perception.spec import PerceptionSpec
 from cbp.plugin import AnyPlugin, Plugin, Task
@@ -30,7 +31,21 @@ from cbp.qp import Entry
 from cbp.registry import Registry
 from cbp.robot import BaseType, FloatArray, RobotModel
 from cbp.schema import INVALID, Document, join_path, mapping_items
-from cbp.spatial import Pose
+from cbp.sim.settings import ObjectSpec, SimulationSettings
+
+__all__ = [
+    "MethodSpec",
+    "ObjectSpec",
+    "RobotSpec",
+    "Scenario",
+    "ScenarioSpec",
+    "SolverSpec",
+    "WorldSpec",
+    "load_scenario",
+]
+
+#: Executors ``cbp run --method`` accepts.
+MethodName = Literal["kinematic", "cat"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,54 +81,19 @@ class SolverSpec:
 class MethodSpec:
     """The ``method:`` section: which executor runs the scenario, and its timing."""
 
-    name: Literal["kinematic"] = "kinematic"
-    """``kinematic``: integrate each QP step exactly (no simulator)."""
+    name: MethodName = "kinematic"
+    """``kinematic``: integrate each QP step exactly (no simulator); ``cat``:
+    constraint-aware teleoperation in the simulator (many validated QP steps per
+    command period, spliced trajectories)."""
     dt: float = 0.01
-    """Duration of one control step [s]."""
+    """``kinematic``: duration of one control step [s]."""
+    cat: CatSettings = field(default_factory=CatSettings)
+    """Settings of the CAT executor."""
 
     def __post_init__(self) -> None:
         """Positive step."""
         if not self.dt > 0:
             raise ConfigError(f"must be > 0, got {self.dt}", "dt")
-
-
-@dataclass(frozen=True, kw_only=True)
-class ObjectSpec:
-    """One object of the world: a primitive or a mesh at a pose.
-
-    The collision world and the simulator both build their objects from this
-    declaration.
-    """
-
-    name: str
-    """Object name."""
-    shape: Literal["box", "sphere", "cylinder", "mesh"]
-    """Primitive type, or ``mesh`` (a file)."""
-    size: tuple[float, ...] = ()
-    """box: (x, y, z) edges; sphere: (radius,); cylinder: (radius, length) [m]."""
-    file: str = ""
-    """Mesh file (mesh only), relative to the scenario file."""
-    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    """Mesh scale per axis (mesh only)."""
-    pose: Pose
-    """Pose of the object's frame (a primitive's centre), world frame."""
-
-    def __post_init__(self) -> None:
-        """The size matches the shape and is positive; meshes name a file."""
-        if self.shape == "mesh":
-            if not self.file:
-                raise ConfigError("a mesh needs 'file:'", "file")
-            if self.size:
-                raise ConfigError("a mesh takes 'scale', not 'size'", "size")
-            return
-        expected = {"box": 3, "sphere": 1, "cylinder": 2}[self.shape]
-        if len(self.size) != expected:
-            raise ConfigError(
-                f"a {self.shape} takes {expected} size values, got {len(self.size)}",
-                "size",
-            )
-        if not all(s > 0 for s in self.size):
-            raise ConfigError(f"sizes must be > 0, got {list(self.size)}", "size")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -144,6 +124,8 @@ class ScenarioSpec:
     """The goal input, if any."""
     world: WorldSpec = field(default_factory=WorldSpec)
     """The objects around the robot."""
+    simulation: SimulationSettings = field(default_factory=SimulationSettings)
+    """Physics rate and the joint impedance of the simulated robot."""
     collision: CollisionSettings = field(default_factory=CollisionSettings)
     """Contact queries and step validation."""
     perception: PerceptionSpec = field(default_factory=PerceptionSpec)
@@ -234,7 +216,9 @@ class Scenario:
 
     def goal_stream(self) -> GoalStream | None:
         """The goal stream, if the scenario has one."""
-        return GoalStream(self.spec.goal) if self.spec.goal is not None else None
+        if self.spec.goal is None:
+            return None
+        return GoalStream(self.spec.goal, self.path.parent)
 
     def goal_task(self) -> Task[Any] | None:
         """The task entry that receives the goal (checked at load time)."""
@@ -277,6 +261,7 @@ def load_scenario(
     constraints = CONSTRAINTS if constraints is None else constraints
     path = Path(path)
     doc = Document.from_file(path)
+    doc.resolve_includes()
     root = doc.root
     spec = doc.build(ScenarioSpec, root, "")
     if root is None:
@@ -303,7 +288,7 @@ def load_scenario(
                 )
         q0 = _initial_configuration(doc, robot_spec, robot, root)
         if spec is not INVALID:
-            _check_goal(doc, spec, entries, root)
+            _check_goal(doc, spec, entries, root, path.parent)
         names = [e.name for e in entries]
         for name in sorted({n for n in names if names.count(n) > 1}):
             doc.report(
@@ -450,11 +435,20 @@ def _initial_configuration(
 
 
 def _check_goal(
-    doc: Document, spec: ScenarioSpec, entries: list[Entry], root: yaml.Node
+    doc: Document,
+    spec: ScenarioSpec,
+    entries: list[Entry],
+    root: yaml.Node,
+    folder: Path,
 ) -> None:
     goal = spec.goal
     if goal is None:
         return
+    if goal.type == "recorded":
+        try:
+            GoalStream(goal, folder)
+        except ConfigError as exc:
+            doc.report(_key_node(root, "goal", "file"), "goal.file", exc.message)
     receivers = [e for e in entries if _receives_goal(e.plugin, goal.task)]
     if not receivers or not hasattr(receivers[0].plugin, "set_target"):
         tasks = [e.name for e in entries if isinstance(e.plugin, Task)]

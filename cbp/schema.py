@@ -59,6 +59,7 @@ class Document:
         self.path = path
         self.problems: list[str] = []
         self._loader = yaml.SafeLoader(text)
+        self._loader.name = path  # marks (and so error lines) name the file
         try:
             self.root: Node | None = self._loader.get_single_node()
         except yaml.MarkedYAMLError as exc:
@@ -81,13 +82,72 @@ class Document:
 
     def report(self, node: Node | None, where: str, message: str) -> None:
         """Record a problem at ``where`` (a document path), with the node's line."""
-        line = f"line {node.start_mark.line + 1}: " if node is not None else ""
+        line = ""
+        if node is not None:
+            mark = node.start_mark
+            where_file = f"{mark.name}, " if mark.name != self.path else ""
+            line = f"{where_file}line {mark.line + 1}: "
         self.problems.append(f"{line}{where or '<document>'}: {message}")
 
     def raise_if_problems(self) -> None:
         """Raise one ScenarioError that lists every problem recorded."""
         if self.problems:
             raise ScenarioError(self.path, self.problems)
+
+    def resolve_includes(self, key: str = "include") -> list[Path]:
+        """Merge the top-level keys of the files named by ``key`` into the root.
+
+        ``include: other.yaml`` (or a list of files), relative to this file. A key
+        this file sets itself is kept as it is; the others are taken from the
+        included files, in order, and their problems are reported with the
+        included file's name and line. Included files may include others.
+
+        Returns:
+            The files merged in.
+        """
+        merged: list[Path] = []
+        self._merge_includes(self.root, Path(self.path), key, merged)
+        return merged
+
+    def _merge_includes(
+        self, root: Node | None, path: Path, key: str, merged: list[Path]
+    ) -> None:
+        if not isinstance(root, yaml.MappingNode):
+            return
+        entry = next(
+            (
+                (k, v)
+                for k, v in root.value
+                if isinstance(k, yaml.ScalarNode) and k.value == key
+            ),
+            None,
+        )
+        if entry is None:
+            return
+        root.value.remove(entry)
+        node = entry[1]
+        names = self.build(str | list[str], node, key)
+        if names is INVALID:
+            return
+        for name in [names] if isinstance(names, str) else names:
+            target = (path.parent / name).resolve()
+            if target in merged or target == Path(self.path).resolve():
+                self.report(node, key, f"'{name}' is included twice (a cycle?)")
+                continue
+            try:
+                included = Document.from_file(target)
+            except ScenarioError as exc:
+                self.report(node, key, "; ".join(exc.problems))
+                continue
+            merged.append(target)
+            self._merge_includes(included.root, target, key, merged)
+            if not isinstance(included.root, yaml.MappingNode):
+                self.report(node, key, f"'{name}' must hold a mapping of scenario keys")
+                continue
+            present = {k.value for k, _ in root.value if isinstance(k, yaml.ScalarNode)}
+            for k, v in included.root.value:
+                if isinstance(k, yaml.ScalarNode) and k.value not in present:
+                    root.value.append((k, v))
 
     def scalar(self, node: yaml.ScalarNode) -> Any:
         """Return the Python value of a scalar node, typed by YAML's safe rules."""

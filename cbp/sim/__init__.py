@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""PyBullet simulation: the scene built from a scenario's declarations."""
+"""PyBullet simulation: scene, simulated robot, joint trajectories.
 
-from cbp.sim.scene import PybulletScene
+The scene is built from a scenario's declarations (:mod:`cbp.sim.scene`); the
+simulated robot has a trajectory follower and a torque interface
+(:mod:`cbp.sim.simulation`); trajectories are quintic splines
+(:mod:`cbp.sim.trajectory`).
 
-__all__ = ["PybulletScene"]
+Submodules are imported on use, so that loading a scenario does not load PyBullet.
+"""

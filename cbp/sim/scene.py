@@ -15,7 +15,7 @@ import pinocchio as pin
 import pybullet as pb
 
 from cbp.robot import FloatArray, RobotModel
-from cbp.scenario import ObjectSpec
+from cbp.sim.settings import ObjectSpec
 
 __all__ = ["PybulletScene"]
 
@@ -50,7 +50,8 @@ class PybulletScene:
         self.robot_id = pb.loadURDF(
             str(robot.urdf_path),
             useFixedBase=True,
-            flags=pb.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS,
+            flags=pb.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS
+            | pb.URDF_USE_INERTIA_FROM_FILE,
             physicsClientId=self.client,
         )
         self._joint_index: dict[str, int] = {}
@@ -68,6 +69,13 @@ class PybulletScene:
         self.object_ids: dict[str, int] = {}
         for obj in objects:
             self.add_object(obj, folder or Path.cwd())
+
+    def joint_index(self, name: str) -> int:
+        """PyBullet index of the joint called ``name``."""
+        try:
+            return self._joint_index[name]
+        except KeyError:
+            raise ValueError(f"no joint '{name}' in the simulated robot") from None
 
     def add_object(self, obj: ObjectSpec, folder: Path) -> int:
         """Create a static body for ``obj``; returns its id."""

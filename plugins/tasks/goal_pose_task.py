@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +27,11 @@ class GoalPoseParams(PluginParams):
     """Largest translation asked for in one step [m]."""
     max_step_rotation: float = 0.05
     """Largest rotation asked for in one step [rad]."""
+    clip: Literal["uniform", "independent"] = "uniform"
+    """``uniform``: scale translation and rotation by one factor, so both reach
+    the goal together (straight-line motion in pose space); ``independent``:
+    clip each on its own (a small rotation then completes in one step and the
+    joint-space direction turns sharply whenever the goal rotates)."""
     target: Pose | None = None
     """Initial goal; usually set every period by the goal stream."""
 
@@ -50,10 +55,11 @@ class GoalPoseTask(Task[GoalPoseParams]):
     :math:`M = R R_g^T`. The rotation rows are singular when the rotation error
     reaches π.
 
-    The engine asks for a change of :math:`-k f` per step; this task clips its
-    translation and rotation parts to ``max_step_translation`` and
-    ``max_step_rotation``, so a far goal is approached in bounded steps (CAT's
-    small steps, each checked for collisions).
+    The engine asks for a change of :math:`-k f` per step; this task scales it
+    down so that its translation and rotation parts stay within
+    ``max_step_translation`` and ``max_step_rotation`` (by one common factor, or
+    each on its own with ``clip: independent``), so a far goal is approached in
+    bounded steps (CAT's small steps, each checked for collisions).
     """
 
     type_name: ClassVar[str] = "goal_pose"
@@ -113,8 +119,17 @@ class GoalPoseTask(Task[GoalPoseParams]):
         return Linearization(value, J)
 
     def limit_step(self, desired: FloatArray) -> FloatArray:
-        """Clip the translation and rotation asked for in one step."""
+        """Bound the translation and rotation asked for in one step."""
         params = self.params
+        if params.clip == "uniform":
+            translation = float(np.linalg.norm(desired[:3]))
+            rotation = float(np.linalg.norm(desired[3:]))
+            scale = 1.0
+            if translation > params.max_step_translation:
+                scale = params.max_step_translation / translation
+            if rotation * scale > params.max_step_rotation:
+                scale = params.max_step_rotation / rotation
+            return desired * scale if scale < 1.0 else desired
         out = np.empty(6)
         out[:3] = clip_norm(desired[:3], params.max_step_translation)
         out[3:] = clip_norm(desired[3:], params.max_step_rotation)

@@ -16,7 +16,7 @@ from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, PerceptionSpec
 from cbp.scenario import ObjectSpec
-from cbp.sim import PybulletScene
+from cbp.sim.scene import PybulletScene
 from cbp.spatial import Pose
 from cbp.state import RobotState
 

@@ -15,7 +15,7 @@ from cbp.collision import (
     PrimitiveEnvironment,
     RobotGeometry,
 )
-from cbp.sim import PybulletScene
+from cbp.sim.scene import PybulletScene
 from cbp.state import RobotState
 
 

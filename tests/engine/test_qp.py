@@ -55,11 +55,17 @@ def test_backends_agree_on_engine_built_problems(
         reference = engine.step(q, 0.01)
         problem = engine.problem
         assert problem is not None
+        full = make_solver("daqp").solve(problem)
         for name in SOLVERS:
             x = make_solver(name).solve(problem)
+            # The same optimum: equal cost and feasible. (Steps agree to ~1e-5;
+            # with soft bounds the cost is flat along some directions, so each
+            # solver's stopping tolerance shows in the step more than in the cost.)
             np.testing.assert_allclose(
-                x[: robot.nv], reference, atol=2e-6, err_msg=name
+                x[: robot.nv], reference, atol=5e-5, err_msg=name
             )
+            best = _cost(problem, full)
+            assert _cost(problem, x) <= best + 1e-5 * abs(best) + 1e-12, name
             assert problem.violation(x) < 1e-6
 
 
@@ -181,3 +187,7 @@ def test_entry_settings_are_checked(robots) -> None:
         Entry.make(goal, gain=2.0)
     with pytest.raises(ConfigError, match="unknown solver 'daq'; did you mean 'daqp'"):
         make_solver("daq")
+
+
+def _cost(problem, x):
+    return 0.5 * x.dot(problem.H).dot(x) + problem.g.dot(x)

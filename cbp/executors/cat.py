@@ -1,0 +1,99 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The CAT executor: many validated QP steps per command period (CAT Sec. IV).
+
+Each command period, from the starting point chosen by the trajectory loop
+(:mod:`cbp.executors.trajectory`), the engine takes QP steps toward the current
+goal until the period's time budget is spent, the motion has converged, or a
+step cannot be made. Every step is validated against the collision world (Sec.
+IV-C): a step that penetrates deeper than ``collision.penetration_tolerance`` is
+rejected and the contacts found there constrain the retry. The steps form the
+path that the loop times (stoppable at its end) and splices in.
+
+The objective and constraints are the scenario's task and constraint entries:
+CAT is a configuration (``scenarios/configs/cat.yaml``), not code here.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.errors import PluginOutputError, SolveError
+from cbp.executors.settings import CatSettings
+from cbp.executors.simulated import SimulatedRun
+from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.robot import FloatArray
+from cbp.scenario import Scenario
+from cbp.trace import RunTrace
+
+__all__ = ["CatPlanner", "run_cat"]
+
+
+class CatPlanner:
+    """Sequential QP with step validation, as many steps as the budget allows."""
+
+    def __init__(self, scenario: Scenario, settings: CatSettings) -> None:
+        """One engine for the run; the scenario's collision world if it has one."""
+        self.scenario = scenario
+        self.settings = settings
+        self.engine = scenario.make_engine()
+        self.robot = scenario.robot
+
+    def plan(
+        self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
+    ) -> Plan:
+        """QP steps from ``q`` until the budget is spent or the motion stops."""
+        s = self.settings
+        if goal is None:
+            return Plan(None, 0, "no goal yet")
+        world = run.world if self.scenario.needs_collision_world else None
+        engine, robot = self.engine, self.robot
+        path = [q]
+        steps = rejections = still = 0
+        note = "time budget spent"
+        deadline = time.perf_counter() + budget_s
+        while steps < s.max_steps:
+            if time.perf_counter() >= deadline:
+                break
+            steps += 1
+            try:
+                dq = engine.step(q, s.step_dt)
+            except (SolveError, PluginOutputError) as exc:
+                note = f"QP step failed, path ends here: {exc}"
+                run.event(run.sim.t, note)
+                break
+            q_next = robot.integrate(q, dq)
+            if world is not None:
+                check = world.check(q_next)
+                if not check.accepted:
+                    rejections += 1
+                    world.carry_over(check.contacts.select(check.contacts.distance < 0))
+                    if rejections >= s.max_rejections:
+                        note = (
+                            f"{rejections} steps rejected in a row "
+                            f"(penetration {check.penetration * 1e3:.1f} mm)"
+                        )
+                        break
+                    continue
+            rejections = 0
+            path.append(q_next)
+            q = q_next
+            if float(np.max(np.abs(dq))) < s.converged_step:
+                still += 1
+                if still >= 3:
+                    note = "converged"
+                    break
+            else:
+                still = 0
+        else:
+            note = "max_steps reached"
+        return Plan(np.array(path), steps, note)
+
+
+def run_cat(scenario: Scenario, gui: bool = False) -> RunTrace:
+    """Run ``scenario`` with the CAT executor; return the trace."""
+    settings = scenario.spec.method.cat
+    run = SimulatedRun(scenario, "cat", gui)
+    return run_trajectory_executor(run, CatPlanner(scenario, settings), settings.timing)

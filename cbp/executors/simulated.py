@@ -1,0 +1,257 @@
+# SPDX-License-Identifier: Apache-2.0
+"""What every simulated executor shares: the simulator, the goal input, the map.
+
+:class:`SimulatedRun` builds the PyBullet simulation from the scenario, samples
+the operator's goal at the command rate (rejecting malformed samples, keeping the
+previous goal, and saying so), runs the depth camera and the map thread when the
+scenario asks for them, and turns the simulator's recording into a
+:class:`~cbp.trace.RunTrace` with ground-truth clearances.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.collision.environment import PrimitiveEnvironment
+from cbp.collision.geometry import RobotGeometry
+from cbp.collision.world import CollisionSettings, CollisionWorld
+from cbp.errors import InvalidTargetError
+from cbp.perception.camera import DepthCamera
+from cbp.perception.mapper import MapUpdater
+from cbp.perception.occupancy import OccupancyGrid
+from cbp.plugin import Task
+from cbp.robot import FloatArray
+from cbp.scenario import Scenario
+from cbp.sim.simulation import Simulation
+from cbp.spatial import checked_se3
+from cbp.trace import PeriodRecord, RunTrace
+
+__all__ = ["SimulatedRun"]
+
+log = logging.getLogger(__name__)
+
+#: Ground-truth clearance is computed every this many seconds of the recording.
+CLEARANCE_PERIOD = 0.02
+#: Clearances beyond this are reported as this [m].
+CLEARANCE_RANGE = 0.3
+
+
+@dataclass
+class _Goal:
+    sample_t: float = -math.inf
+    pose: pin.SE3 | None = None
+    changes: list[tuple[float, pin.SE3]] = field(default_factory=list)
+
+
+class SimulatedRun:
+    """The simulation, goal input and perception of one run.
+
+    Args:
+        scenario: the loaded scenario.
+        method: executor name (recorded in the trace).
+        gui: show PyBullet's window.
+
+    Attributes:
+        sim: the simulation.
+        world: the scenario's collision world (None if no entry or executor needs
+            one and there is no depth camera).
+        events: (time, message) of everything that went wrong and was handled.
+        periods: command periods, filled in by trajectory executors.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        method: str,
+        gui: bool = False,
+        needs_world: bool = False,
+    ) -> None:
+        """Build the simulation; start the map if the scenario has a camera."""
+        spec = scenario.spec
+        self.scenario = scenario
+        self.method = method
+        self.robot = scenario.robot
+        self.sim = Simulation(
+            scenario.robot,
+            spec.world.objects,
+            scenario.q0,
+            spec.simulation,
+            scenario.path.parent,
+            gui,
+        )
+        self.stream = scenario.goal_stream()
+        self.goal_task: Task[Any] | None = scenario.goal_task()
+        self.events: list[tuple[float, str]] = []
+        self.periods: list[PeriodRecord] = []
+        self._goal = _Goal()
+        use_camera = spec.perception.source == "depth_camera"
+        self.world: CollisionWorld | None = None
+        if needs_world or scenario.needs_collision_world or use_camera:
+            self.world = scenario.collision_world()
+        self.mapper: MapUpdater | None = None
+        self.camera: DepthCamera | None = None
+        self._next_frame = 0.0
+        if use_camera:
+            assert self.world is not None
+            assert spec.perception.camera is not None
+            self.world.set_environment(PrimitiveEnvironment([]))
+            self.camera = DepthCamera(self.sim.client, spec.perception.camera)
+            grid = OccupancyGrid(spec.perception, self.world.geometry)
+            # The robot looks once before it moves; later frames go to the thread.
+            MapUpdater(grid, self.world, synchronous=True).submit(
+                self.camera.capture(), self.sim.q.copy()
+            )
+            self.mapper = MapUpdater(grid, self.world)
+            self._next_frame = 1.0 / spec.perception.camera.rate_hz
+
+    # ------------------------------------------------------------------ goal input
+
+    @property
+    def duration(self) -> float:
+        """Length of the run [s]."""
+        return self.scenario.spec.duration
+
+    def goal(self, t: float) -> pin.SE3 | None:
+        """The operator's goal at time ``t``: the latest valid sample of the stream.
+
+        Samples are taken at the command rate; a malformed one (NaN, not a
+        rotation) is rejected with an event and the previous goal stays.
+        """
+        stream = self.stream
+        if stream is None:
+            return None
+        sample_t = math.floor(t * stream.spec.rate_hz + 1e-9) / stream.spec.rate_hz
+        goal = self._goal
+        if sample_t > goal.sample_t:
+            goal.sample_t = sample_t
+            position, rotation = stream.sample(sample_t)
+            try:
+                pose = checked_se3(position, rotation, "goal")
+            except InvalidTargetError as exc:
+                self.event(t, f"goal rejected, previous goal kept: {exc}")
+            else:
+                if goal.pose is None or not pose.isApprox(goal.pose, 1e-9):
+                    goal.changes.append((sample_t, pose))
+                goal.pose = pose
+        return goal.pose
+
+    def send_goal(self, t: float) -> pin.SE3 | None:
+        """Sample the goal at ``t`` and hand it to the scenario's goal task."""
+        pose = self.goal(t)
+        if pose is not None and self.goal_task is not None:
+            self.goal_task.set_target(pose.translation, pose.rotation)  # type: ignore[attr-defined]
+        return pose
+
+    def event(self, t: float, message: str) -> None:
+        """Record (and log) something that went wrong and was handled."""
+        self.events.append((t, message))
+        log.info("%s t=%.3f s: %s", self.method, t, message)
+
+    # ------------------------------------------------------------------ perception
+
+    def perceive_until(self, t: float) -> None:
+        """Capture the camera frames due before ``t`` and hand them to the map."""
+        if self.camera is None or self.mapper is None:
+            return
+        assert self.scenario.spec.perception.camera is not None
+        period = 1.0 / self.scenario.spec.perception.camera.rate_hz
+        while self._next_frame <= t:
+            self.sim.run_until(self._next_frame)
+            self.mapper.submit(self.camera.capture(), self.sim.q.copy())
+            if self.mapper.error is not None:
+                error, self.mapper.error = self.mapper.error, None
+                self.event(self.sim.t, f"map update failed, previous map kept: {error}")
+            self._next_frame += period
+
+    def advance(self, t: float) -> None:
+        """Simulate (and perceive) until ``t``."""
+        self.perceive_until(t)
+        self.sim.run_until(t)
+
+    # ------------------------------------------------------------------ results
+
+    def finish(self) -> RunTrace:
+        """Stop the map and the simulator; return the trace."""
+        if self.mapper is not None:
+            self.mapper.close()
+        rec = self.sim.recording()
+        self.sim.close()
+        robot = self.robot
+        model, data = robot.model, robot.model.createData()
+        frame = robot.frame_id(self._ee_frame())
+        n = rec["t"].size
+        ee_p = np.empty((n, 3))
+        ee_R = np.empty((n, 3, 3))
+        for i in range(n):
+            pin.framesForwardKinematics(model, data, rec["q"][i])
+            M = data.oMf[frame]
+            ee_p[i] = M.translation
+            ee_R[i] = M.rotation
+        goal_p = np.full((n, 3), np.nan)
+        goal_R = np.full((n, 3, 3), np.nan)
+        changes = self._goal.changes
+        times = np.array([c[0] for c in changes])
+        for i, t in enumerate(rec["t"]):
+            k = int(np.searchsorted(times, t + 1e-9, side="right")) - 1
+            if k >= 0:
+                goal_p[i] = changes[k][1].translation
+                goal_R[i] = changes[k][1].rotation
+        change_time = float(times[1]) if times.size > 1 else None
+        return RunTrace(
+            method=self.method,
+            t=rec["t"],
+            q=rec["q"],
+            q_cmd=rec["q_cmd"],
+            ee_position=ee_p,
+            ee_rotation=ee_R,
+            goal_position=goal_p,
+            goal_rotation=goal_R,
+            contact_force=rec["contact_force"],
+            wrist_force=rec["wrist_force"],
+            penetration=rec["penetration"],
+            clearance=self._clearance(rec["t"], rec["q"]),
+            goal_change_time=change_time,
+            periods=self.periods,
+            events=self.events,
+        )
+
+    def _ee_frame(self) -> str:
+        task = self.goal_task
+        if (
+            task is not None
+            and hasattr(task, "params")
+            and hasattr(task.params, "frame")
+        ):
+            return str(task.params.frame)
+        description = self.robot.description
+        return description.end_effector if description else self.robot.frame_names[-1]
+
+    def _clearance(self, t: FloatArray, q: FloatArray) -> FloatArray:
+        """Unpadded links to declared objects, every CLEARANCE_PERIOD [m]."""
+        out = np.full(t.size, np.nan)
+        objects = self.scenario.environment_objects()
+        if not objects:
+            out[:] = np.inf
+            return out
+        geometry = RobotGeometry(self.robot, padding=0.0)
+        settings = CollisionSettings(
+            activation_distance=CLEARANCE_RANGE, self_collision=False, padding=0.0
+        )
+        world = CollisionWorld(geometry, PrimitiveEnvironment(objects), settings)
+        stride = max(
+            1, round(CLEARANCE_PERIOD / max(float(np.median(np.diff(t))), 1e-6))
+        )
+        for i in range(0, t.size, stride):
+            contacts = world.check(q[i]).contacts
+            out[i] = (
+                min(float(np.min(contacts.distance)), CLEARANCE_RANGE)
+                if len(contacts)
+                else CLEARANCE_RANGE
+            )
+        return out

@@ -1,0 +1,125 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Trajectory executors: plan each command period, time it, splice it in.
+
+The loop of CAT Sec. IV-D, shared by every method that sends joint trajectories
+to the low-level follower (CAT, and the IK and MP methods):
+
+1. At the start of a period (time t, length P) the operator's latest goal is
+   taken. The deadline is t_f = t + P.
+2. The planning starts from the first point of the current trajectory scheduled
+   after t_f (its position, velocity and acceleration), so the robot keeps
+   moving while the planner works.
+3. The planner returns a path of configurations within its wall-clock budget.
+4. The path is time-parameterized so that every joint can stop at its end
+   within the velocity and acceleration limits (no inevitable collision state),
+   and spliced in at that starting point with continuous position and velocity.
+   A result computed after the deadline is discarded; so is one that cannot stop
+   in time from the starting velocity (the current trajectory, which does stop,
+   goes on).
+5. The period adapts: longer after a miss, shorter when time was spare.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.executors.settings import ExecutorTiming
+from cbp.executors.simulated import SimulatedRun
+from cbp.robot import FloatArray
+from cbp.sim.trajectory import JointTrajectory, time_parameterize
+from cbp.trace import PeriodRecord, RunTrace
+
+__all__ = ["Plan", "Planner", "run_trajectory_executor"]
+
+
+@dataclass
+class Plan:
+    """A planner's answer for one period.
+
+    Attributes:
+        path: configurations from the start point on (the first is the start),
+            or None for no motion (keep the current trajectory).
+        steps: planning steps taken (QP steps, interpolation checks, ...).
+        note: what ended the computation or why there is no path.
+    """
+
+    path: FloatArray | None
+    steps: int = 0
+    note: str = ""
+
+
+class Planner(Protocol):
+    """Computes a path each command period (CAT, IK, MP)."""
+
+    def plan(
+        self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
+    ) -> Plan:
+        """Path from ``q`` toward ``goal`` within ``budget_s`` of wall time."""
+        ...
+
+
+def run_trajectory_executor(
+    run: SimulatedRun, planner: Planner, timing: ExecutorTiming
+) -> RunTrace:
+    """Run the scenario with ``planner`` each command period; return the trace."""
+    robot = run.robot
+    vmax = robot.velocity_limits * timing.velocity_scale
+    amax = robot.acceleration_limits * timing.acceleration_scale
+    lo, hi = timing.bounds()
+    period = timing.period
+    t = 0.0
+    sim = run.sim
+    try:
+        while t < run.duration - 1e-9:
+            goal = run.send_goal(t)
+            t_f = t + period
+            current = sim.trajectory
+            i = current.first_point_after(t_f)
+            if i is None:
+                t_s, q_s = t_f, current.positions[-1]
+                v_s = a_s = np.zeros_like(q_s)
+            else:
+                t_s, q_s, v_s, a_s = current.point(i)
+            start = time.perf_counter()
+            plan = planner.plan(q_s.copy(), goal, timing.time_budget * period, run)
+            new: JointTrajectory | None = None
+            note = plan.note
+            if plan.path is not None and len(plan.path) > 1:
+                new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)
+                if new is None:
+                    note = "path too short to stop on; current trajectory kept"
+            compute = time.perf_counter() - start
+            run.advance(t_f)  # the robot moves on while the result is computed
+            missed = compute > period
+            spliced = False
+            if missed:
+                run.event(
+                    t,
+                    f"deadline missed ({compute * 1e3:.1f} ms > "
+                    f"{period * 1e3:.1f} ms); result discarded",
+                )
+                next_period = min(period * timing.growth, hi)
+            else:
+                if new is not None:
+                    sim.follow(current.splice(new))
+                    spliced = True
+                elif note and plan.path is not None:
+                    run.event(t, note)
+                next_period = (
+                    max(period * timing.shrink, lo)
+                    if compute < 0.5 * period
+                    else period
+                )
+            run.periods.append(
+                PeriodRecord(t, period, plan.steps, compute, missed, spliced, note)
+            )
+            t, period = t_f, next_period
+        run.advance(run.duration)
+    finally:
+        trace = run.finish()
+    return trace

@@ -1,0 +1,321 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The simulated robot: 1 kHz physics, a joint trajectory follower, torque control.
+
+:class:`Simulation` steps PyBullet at a fixed rate (1 kHz by default) with the
+robot in torque mode. Each physics step runs one low-level controller:
+
+* **trajectory following** (:meth:`Simulation.follow`): the commanded trajectory's
+  position, velocity and acceleration at the step's time, through a joint
+  impedance (computed-torque PD) law
+  ``tau = M(q) (a_d + Kp (q_d - q) + Kd (v_d - v)) + h(q, v)`` with pinocchio's
+  RNEA on the same URDF, clipped to the joints' effort limits; a new trajectory
+  can be spliced in at any time (CAT Sec. III and IV-D);
+* **torque control** (:meth:`Simulation.set_torque_controller`): a user function
+  of (t, q, v) returning joint torques, called every physics step (the JT
+  executor).
+
+Every physics step also measures contact between the robot and the scene: the
+sum of PyBullet's contact normal forces and the deepest penetration, and the
+part of the force on the hand (the robot's ``wrist_link`` and the links beyond
+it), which is what a wrist force sensor would read from contacts.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pybullet as pb
+
+from cbp.robot import FloatArray, RobotModel
+from cbp.sim.scene import PybulletScene
+from cbp.sim.settings import ObjectSpec, SimulationSettings
+from cbp.sim.trajectory import JointTrajectory
+
+__all__ = ["ContactSample", "Simulation", "TorqueController"]
+
+log = logging.getLogger(__name__)
+
+#: ``(t, q, v) -> tau``: joint torques (nv) from time [s], positions and velocities.
+TorqueController = Callable[[float, FloatArray, FloatArray], FloatArray]
+
+
+@dataclass
+class ContactSample:
+    """What the contact monitor measured over the recorded interval.
+
+    Attributes:
+        force: largest sum of normal forces between the robot and the scene [N].
+        penetration: deepest penetration between robot and scene [m] (>= 0).
+        wrist_force: sum of normal forces on the hand (``wrist_link`` and beyond) [N].
+    """
+
+    force: float = 0.0
+    penetration: float = 0.0
+    wrist_force: float = 0.0
+
+
+@dataclass
+class _Recorder:
+    t: list[float] = field(default_factory=list)
+    q: list[FloatArray] = field(default_factory=list)
+    v: list[FloatArray] = field(default_factory=list)
+    q_cmd: list[FloatArray] = field(default_factory=list)
+    force: list[float] = field(default_factory=list)
+    penetration: list[float] = field(default_factory=list)
+    wrist: list[float] = field(default_factory=list)
+
+
+class Simulation:
+    """A PyBullet simulation of the robot among the scenario's objects.
+
+    Args:
+        robot: the robot model (the controlled joints are its joints).
+        objects: the scene's objects (the same declarations as the collision
+            world's).
+        q0: initial configuration.
+        settings: rate, gains, recording.
+        folder: where mesh files of objects are resolved from.
+        gui: open PyBullet's window.
+
+    Attributes:
+        scene: the PyBullet scene (client, body ids).
+        t: simulated time [s].
+        steps: physics steps taken.
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        objects: list[ObjectSpec],
+        q0: FloatArray,
+        settings: SimulationSettings | None = None,
+        folder: Path | None = None,
+        gui: bool = False,
+    ) -> None:
+        """Load the scene, set the robot at ``q0`` and switch it to torque mode."""
+        if robot.nq != robot.nv:
+            raise NotImplementedError(
+                "Simulation drives fixed-base robots with scalar joints; "
+                f"'{robot.name}' has nq={robot.nq}, nv={robot.nv}"
+            )
+        self.robot = robot
+        self.settings = settings or SimulationSettings()
+        self.scene = PybulletScene(robot, objects, folder, gui)
+        c = self.scene.client
+        self.client = c
+        self.dt = 1.0 / self.settings.rate_hz
+        pb.setTimeStep(self.dt, physicsClientId=c)
+        pb.setGravity(0.0, 0.0, -9.81, physicsClientId=c)
+        body = self.scene.robot_id
+        model = robot.model
+        self._indices = [
+            self.scene.joint_index(model.names[j])
+            for j in range(1, model.njoints)
+            if model.joints[j].nv == 1
+        ]
+        self._effort = np.array(
+            [pb.getJointInfo(body, j, physicsClientId=c)[10] for j in self._indices]
+        )
+        self._effort[self._effort <= 0] = np.inf
+        for link in range(-1, pb.getNumJoints(body, physicsClientId=c)):
+            pb.changeDynamics(
+                body,
+                link,
+                linearDamping=0.0,
+                angularDamping=0.0,
+                lateralFriction=self.settings.friction,
+                physicsClientId=c,
+            )
+        for obj in self.scene.object_ids.values():
+            pb.changeDynamics(
+                obj, -1, lateralFriction=self.settings.friction, physicsClientId=c
+            )
+        # Locked joints (fingers) are held by PyBullet's position motors; the
+        # controlled joints' velocity motors are switched off for torque control.
+        self.scene.set_configuration(q0)
+        pb.setJointMotorControlArray(
+            body,
+            self._indices,
+            pb.VELOCITY_CONTROL,
+            forces=[0.0] * len(self._indices),
+            physicsClientId=c,
+        )
+        locked = robot.description.locked_joints if robot.description else {}
+        for name, value in locked.items():
+            pb.setJointMotorControl2(
+                body,
+                self.scene.joint_index(name),
+                pb.POSITION_CONTROL,
+                targetPosition=value,
+                force=100.0,
+                physicsClientId=c,
+            )
+        self._hand_links = self._links_beyond_wrist()
+        self._data = model.createData()
+        self.t = 0.0
+        self.steps = 0
+        self._trajectory = JointTrajectory.hold(0.0, np.asarray(q0, dtype=float))
+        self._torque: TorqueController | None = None
+        self._last_command = np.asarray(q0, dtype=float).copy()
+        self._record = _Recorder()
+        self._q, self._v = self._read_state()
+        self._interval = ContactSample()
+
+    # ------------------------------------------------------------------ control
+
+    def follow(self, trajectory: JointTrajectory) -> None:
+        """Track ``trajectory`` with the joint impedance law from now on."""
+        self._trajectory = trajectory
+        self._torque = None
+
+    @property
+    def trajectory(self) -> JointTrajectory:
+        """The trajectory being followed."""
+        return self._trajectory
+
+    def set_torque_controller(self, controller: TorqueController) -> None:
+        """Drive the joints with ``controller`` every physics step from now on."""
+        self._torque = controller
+
+    def gravity(self, q: FloatArray) -> FloatArray:
+        """Gravity torques at ``q`` (pinocchio, same URDF as the simulated arm)."""
+        return np.asarray(
+            pin.computeGeneralizedGravity(self.robot.model, self._data, q)
+        ).copy()
+
+    # ------------------------------------------------------------------ stepping
+
+    def run_until(self, t_end: float) -> None:
+        """Step the physics until simulated time ``t_end`` [s]."""
+        while self.t + 0.5 * self.dt < t_end:
+            self.step()
+
+    def step(self) -> None:
+        """One physics step: control, simulate, measure, maybe record."""
+        c, body = self.client, self.scene.robot_id
+        q, v = self._q, self._v
+        if self._torque is not None:
+            tau = np.asarray(self._torque(self.t, q, v), dtype=float)
+            q_cmd = q
+        else:
+            q_cmd, v_cmd, a_cmd = self._trajectory.sample(self.t)
+            s = self.settings
+            a = a_cmd + s.stiffness * (q_cmd - q) + s.damping * (v_cmd - v)
+            tau = np.asarray(pin.rnea(self.robot.model, self._data, q, v, a))
+        tau = np.clip(tau, -self._effort, self._effort)
+        pb.setJointMotorControlArray(
+            body, self._indices, pb.TORQUE_CONTROL, forces=tau, physicsClientId=c
+        )
+        pb.stepSimulation(physicsClientId=c)
+        self.t = (self.steps + 1) * self.dt
+        self.steps += 1
+        self._q, self._v = self._read_state()
+        force, depth, wrist = self._contact()
+        interval = self._interval
+        interval.force = max(interval.force, force)
+        interval.penetration = max(interval.penetration, depth)
+        interval.wrist_force = max(interval.wrist_force, wrist)
+        if self.steps % self.settings.record_every == 0:
+            rec = self._record
+            rec.t.append(self.t)
+            rec.q.append(self._q.copy())
+            rec.v.append(self._v.copy())
+            rec.q_cmd.append(np.array(q_cmd, dtype=float))
+            rec.force.append(interval.force)
+            rec.penetration.append(interval.penetration)
+            rec.wrist.append(interval.wrist_force)
+            self._interval = ContactSample()
+
+    @property
+    def q(self) -> FloatArray:
+        """Measured joint positions."""
+        return self._q
+
+    @property
+    def v(self) -> FloatArray:
+        """Measured joint velocities."""
+        return self._v
+
+    def recording(self) -> dict[str, FloatArray]:
+        """Recorded samples: t, q, v, q_cmd, contact force, penetration, wrist force.
+
+        Force, penetration and wrist force are the largest values over the
+        physics steps since the previous sample.
+        """
+        rec = self._record
+        n = self.robot.nq
+        return {
+            "t": np.array(rec.t, dtype=float),
+            "q": np.array(rec.q, dtype=float).reshape(-1, n),
+            "v": np.array(rec.v, dtype=float).reshape(-1, n),
+            "q_cmd": np.array(rec.q_cmd, dtype=float).reshape(-1, n),
+            "contact_force": np.array(rec.force, dtype=float),
+            "penetration": np.array(rec.penetration, dtype=float),
+            "wrist_force": np.array(rec.wrist, dtype=float),
+        }
+
+    # ------------------------------------------------------------------ internals
+
+    def _read_state(self) -> tuple[FloatArray, FloatArray]:
+        states = pb.getJointStates(
+            self.scene.robot_id, self._indices, physicsClientId=self.client
+        )
+        q = np.fromiter((s[0] for s in states), float, len(states))
+        v = np.fromiter((s[1] for s in states), float, len(states))
+        return q, v
+
+    def _contact(self) -> tuple[float, float, float]:
+        """Sum of normal forces, deepest penetration, and the hand's share."""
+        robot = self.scene.robot_id
+        points = pb.getContactPoints(bodyA=robot, physicsClientId=self.client)
+        force = depth = hand = 0.0
+        for p in points:
+            if p[2] == robot:  # self-contact is not contact with the scene
+                continue
+            force += p[9]
+            depth = max(depth, -p[8])
+            if p[3] in self._hand_links:
+                hand += p[9]
+        return force, depth, hand
+
+    def _links_beyond_wrist(self) -> frozenset[int]:
+        description = self.robot.description
+        name = description.wrist_link if description is not None else None
+        if not name:
+            return frozenset()
+        c, body = self.client, self.scene.robot_id
+        parents = {}
+        wrist = None
+        for j in range(pb.getNumJoints(body, physicsClientId=c)):
+            info = pb.getJointInfo(body, j, physicsClientId=c)
+            parents[j] = info[16]
+            if info[12].decode() == name:
+                wrist = j
+        if wrist is None:
+            raise ValueError(f"wrist_link '{name}' is not a link of the URDF")
+        links = {wrist}
+        changed = True
+        while changed:
+            changed = False
+            for j, parent in parents.items():
+                if parent in links and j not in links:
+                    links.add(j)
+                    changed = True
+        return frozenset(links)
+
+    def close(self) -> None:
+        """Disconnect from PyBullet."""
+        self.scene.close()
+
+    def __enter__(self) -> Simulation:
+        """Use as a context manager."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Disconnect."""
+        self.close()

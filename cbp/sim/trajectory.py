@@ -1,0 +1,286 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Joint trajectories: quintic splines between points, splicing, time scaling.
+
+A :class:`JointTrajectory` is a list of points (time, position, velocity,
+acceleration). Between two points the motion is the quintic polynomial that
+matches all three at both ends, so a trajectory is continuous in position,
+velocity and acceleration (CAT Sec. III: "quintic splines between joint
+trajectory points"). After its last point it holds the last position.
+
+:func:`time_parameterize` turns a path of configurations (the QP steps of one
+command period) into a trajectory that starts with a given velocity, stays within
+velocity and acceleration limits, and stops at the path's end (CAT Sec. IV-D-1:
+every joint can stop by the end of the horizon, so no computed trajectory leads
+into an inevitable collision state).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cbp.robot import FloatArray
+
+__all__ = ["JointTrajectory", "SpliceError", "time_parameterize"]
+
+
+class SpliceError(ValueError):
+    """A trajectory cannot be spliced in: it is discontinuous or starts in the past."""
+
+
+@dataclass(frozen=True)
+class JointTrajectory:
+    """Points of a joint trajectory; quintic between points, held after the last.
+
+    Attributes:
+        times: point times, strictly increasing (N,) [s].
+        positions: (N, n) joint positions.
+        velocities: (N, n) joint velocities.
+        accelerations: (N, n) joint accelerations.
+    """
+
+    times: FloatArray
+    positions: FloatArray
+    velocities: FloatArray
+    accelerations: FloatArray
+
+    def __post_init__(self) -> None:
+        """Shapes agree and times increase."""
+        n = self.times.size
+        if n == 0:
+            raise ValueError("a trajectory needs at least one point")
+        for name in ("positions", "velocities", "accelerations"):
+            if getattr(self, name).shape != self.positions.shape or (
+                self.positions.shape[0] != n
+            ):
+                raise ValueError(f"{name}: shape {getattr(self, name).shape}")
+        if n > 1 and not np.all(np.diff(self.times) > 0):
+            raise ValueError("trajectory times must increase strictly")
+
+    @classmethod
+    def hold(cls, t: float, q: FloatArray) -> JointTrajectory:
+        """Stay at ``q`` from time ``t`` on."""
+        q = np.asarray(q, dtype=float)
+        zero = np.zeros((1, q.size))
+        return cls(np.array([t]), q[None, :].copy(), zero, zero.copy())
+
+    @property
+    def start_time(self) -> float:
+        """Time of the first point [s]."""
+        return float(self.times[0])
+
+    @property
+    def end_time(self) -> float:
+        """Time of the last point [s]: the robot is at rest from then on."""
+        return float(self.times[-1])
+
+    def __len__(self) -> int:
+        """Number of points."""
+        return int(self.times.size)
+
+    def sample(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Position, velocity and acceleration at time ``t``.
+
+        Before the first point: the first point's position, at rest; after the
+        last: the last position, at rest.
+        """
+        times = self.times
+        if t <= times[0]:
+            return (
+                self.positions[0],
+                np.zeros_like(self.positions[0]),
+                np.zeros_like(self.positions[0]),
+            )
+        if t >= times[-1]:
+            last = self.positions[-1]
+            return last, np.zeros_like(last), np.zeros_like(last)
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        T = times[i + 1] - times[i]
+        s = (t - times[i]) / T
+        c = self._coefficients(i, T)
+        s2, s3, s4 = s * s, s * s * s, s * s * s * s
+        q = c[0] + s * c[1] + s2 * c[2] + s3 * c[3] + s4 * c[4] + s4 * s * c[5]
+        dq = c[1] + 2 * s * c[2] + 3 * s2 * c[3] + 4 * s3 * c[4] + 5 * s4 * c[5]
+        ddq = 2 * c[2] + 6 * s * c[3] + 12 * s2 * c[4] + 20 * s3 * c[5]
+        return q, dq / T, ddq / (T * T)
+
+    def _coefficients(self, i: int, T: float) -> FloatArray:
+        """Quintic coefficients of segment i in the normalized time s in [0, 1]."""
+        p0, p1 = self.positions[i], self.positions[i + 1]
+        v0, v1 = self.velocities[i] * T, self.velocities[i + 1] * T
+        a0, a1 = self.accelerations[i] * T * T, self.accelerations[i + 1] * T * T
+        dp = p1 - p0
+        return np.array(
+            [
+                p0,
+                v0,
+                0.5 * a0,
+                10 * dp - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1,
+                -15 * dp + 8 * v0 + 7 * v1 + 1.5 * a0 - a1,
+                6 * dp - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1,
+            ]
+        )
+
+    def first_point_after(self, t: float) -> int | None:
+        """Index of the first point scheduled strictly after ``t``, or None."""
+        i = int(np.searchsorted(self.times, t, side="right"))
+        return i if i < self.times.size else None
+
+    def point(self, i: int) -> tuple[float, FloatArray, FloatArray, FloatArray]:
+        """Time, position, velocity and acceleration of point ``i``."""
+        return (
+            float(self.times[i]),
+            self.positions[i],
+            self.velocities[i],
+            self.accelerations[i],
+        )
+
+    def splice(self, new: JointTrajectory, tolerance: float = 1e-9) -> JointTrajectory:
+        """This trajectory up to ``new``'s first point, then ``new``.
+
+        ``new`` must start on this trajectory: its first position and velocity
+        equal this trajectory's at that time (within ``tolerance``), so the
+        commanded motion stays continuous (CAT Sec. IV-D-2).
+
+        Raises:
+            SpliceError: ``new`` does not start on this trajectory.
+        """
+        t0 = new.start_time
+        q, v, _ = self.sample(t0)
+        gap = max(
+            float(np.max(np.abs(q - new.positions[0]))),
+            float(np.max(np.abs(v - new.velocities[0]))),
+        )
+        if gap > tolerance:
+            raise SpliceError(
+                f"the new trajectory does not start on the current one at t={t0:.4f} s "
+                f"(largest position or velocity gap {gap:.3g})"
+            )
+        keep = self.times < t0 - 1e-12
+        return JointTrajectory(
+            np.concatenate([self.times[keep], new.times]),
+            np.concatenate([self.positions[keep], new.positions]),
+            np.concatenate([self.velocities[keep], new.velocities]),
+            np.concatenate([self.accelerations[keep], new.accelerations]),
+        )
+
+
+def time_parameterize(
+    path: FloatArray,
+    t0: float,
+    v0: FloatArray,
+    a0: FloatArray,
+    max_velocity: FloatArray,
+    max_acceleration: FloatArray,
+) -> JointTrajectory | None:
+    r"""Time a path of configurations so that it starts at ``v0`` and stops at its end.
+
+    The path's points are joined by straight segments; the speed along the path
+    is the largest profile that respects, joint by joint, ``max_velocity`` at
+    every point and ``max_acceleration`` on every segment, reaches zero at the
+    last point (a forward-backward pass over :math:`\dot s^2`), and starts at the
+    component of ``v0`` along the first segment. The first point keeps ``v0`` and
+    ``a0`` exactly (continuity with the trajectory it is spliced into); the first
+    segment is lengthened when needed so that the change from ``v0`` to the
+    second point's velocity respects ``max_acceleration``.
+
+    Args:
+        path: (N + 1, n) configurations; the first is the starting point.
+        t0: time of the first point [s].
+        v0: velocity at the first point (n,).
+        a0: acceleration at the first point (n,).
+        max_velocity: per-joint speed limit (n,) [rad/s].
+        max_acceleration: per-joint acceleration limit (n,) [rad/s^2].
+
+    Returns:
+        The trajectory, or None when the path is too short to stop on from
+        ``v0`` within the acceleration limits (the caller keeps its previous
+        trajectory, which does stop).
+    """
+    path = np.asarray(path, dtype=float)
+    v0 = np.asarray(v0, dtype=float)
+    # Drop repeated points (steps that did not move).
+    moved = np.concatenate([[True], np.any(np.abs(np.diff(path, axis=0)) > 1e-10, 1)])
+    path = path[moved]
+    if len(path) < 2:
+        if np.any(np.abs(v0) > 1e-9):
+            return None
+        return JointTrajectory.hold(t0, path[0])
+    delta = np.diff(path, axis=0)  # (N, n)
+    absd = np.abs(delta)
+    with np.errstate(divide="ignore"):
+        seg_vel = np.min(max_velocity / absd, axis=1)  # path-speed limit per segment
+        seg_acc = np.min(max_acceleration / absd, axis=1)
+    n_points = len(path)
+    limit = np.empty(n_points)
+    limit[0] = seg_vel[0]
+    limit[-1] = seg_vel[-1]
+    limit[1:-1] = np.minimum(seg_vel[:-1], seg_vel[1:])
+    # Backward: able to stop at the end.
+    speed2 = np.minimum(limit, 1e12) ** 2
+    speed2[-1] = 0.0
+    for i in range(n_points - 2, -1, -1):
+        speed2[i] = min(speed2[i], speed2[i + 1] + 2.0 * seg_acc[i])
+    start = _start_speed(v0, delta[0])
+    if start * start > speed2[0] * (1.0 + 1e-9) + 1e-12:
+        return None
+    # Forward: from the starting speed, within the acceleration limits.
+    speed2[0] = start * start
+    for i in range(n_points - 1):
+        speed2[i + 1] = min(speed2[i + 1], speed2[i] + 2.0 * seg_acc[i])
+    speed = np.sqrt(speed2)
+    # Segment durations: unit path length at the mean of the end speeds.
+    mean = 0.5 * (speed[:-1] + speed[1:])
+    durations = np.where(mean > 0, 1.0 / np.maximum(mean, 1e-12), np.inf)
+    if not np.all(np.isfinite(durations)):
+        # A zero-speed interior point (both neighbours at rest): accelerate from
+        # rest over the segment instead.
+        durations = np.where(
+            np.isfinite(durations), durations, np.sqrt(2.0 / np.maximum(seg_acc, 1e-12))
+        )
+    velocities = np.empty_like(path)
+    velocities[0] = v0
+    velocities[-1] = 0.0
+    if n_points > 2:
+        direction = 0.5 * (delta[:-1] + delta[1:])
+        velocities[1:-1] = direction * speed[1:-1, None]
+    change = np.abs(velocities[1] - v0)
+    durations[0] = max(durations[0], float(np.max(change / max_acceleration)))
+    times = t0 + np.concatenate([[0.0], np.cumsum(durations)])
+    accelerations = np.zeros_like(path)
+    accelerations[0] = a0
+    if n_points > 2:
+        accelerations[1:-1] = (velocities[2:] - velocities[:-2]) / (
+            times[2:] - times[:-2]
+        )[:, None]
+        np.clip(
+            accelerations[1:-1],
+            -max_acceleration,
+            max_acceleration,
+            out=accelerations[1:-1],
+        )
+    return JointTrajectory(times, path, velocities, accelerations)
+
+
+#: Directions within this cosine of the path's keep their full speed at a splice.
+ALIGNED_COS = 0.7
+
+
+def _start_speed(v0: FloatArray, d0: FloatArray) -> float:
+    """Path speed (segments per second) that continues ``v0`` along segment ``d0``.
+
+    The magnitude of ``v0`` is kept when it points within ~45 degrees of the path
+    (a goal that moved a little turns the path a little; projecting would brake
+    the robot at every splice), scaled down linearly to zero as it turns away
+    beyond that. The first segment's blend from ``v0`` to the path direction
+    deviates from the validated straight segment by about |dv| T / 8, a few
+    millimetres at the joints' acceleration limits, which the links' padding
+    covers.
+    """
+    speed = float(np.linalg.norm(v0))
+    norm = float(np.linalg.norm(d0))
+    if speed < 1e-12:
+        return 0.0
+    cos = float(v0.dot(d0)) / (speed * norm)
+    return speed / norm * min(1.0, max(0.0, cos) / ALIGNED_COS)
