@@ -11,7 +11,7 @@ import typing
 from collections.abc import Sequence
 from pathlib import Path
 
-from cbp.errors import CbpError, ScenarioError
+from cbp.errors import CbpError, ScenarioError, suggestion
 from cbp.registry import Registry
 from cbp.schema import type_name
 
@@ -28,20 +28,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument(
         "--out", type=Path, default=None, help="output folder (default out/<name>)"
     )
+    run.add_argument(
+        "--method",
+        default=None,
+        help="executor: kinematic or cat (default: the scenario's method.name)",
+    )
+    run.add_argument("--gui", action="store_true", help="show PyBullet's window")
     check = sub.add_parser("check", help="validate scenario files without running them")
     check.add_argument("scenarios", type=Path, nargs="+")
     sub.add_parser("plugins", help="list every plugin with its parameters")
     args = parser.parse_args(argv)
     if args.command == "run":
-        return _run(args.scenario, args.out)
+        return _run(args.scenario, args.out, args.method, args.gui)
     if args.command == "check":
         return _check(args.scenarios)
     return _plugins()
 
 
-def _run(path: Path, out: Path | None) -> int:
+def _run(path: Path, out: Path | None, method: str | None, gui: bool) -> int:
+    from cbp.executors import SIMULATED_METHODS, run_simulated
     from cbp.executors.kinematic import run_kinematic
-    from cbp.report import write_outputs
+    from cbp.report import write_outputs, write_runs
     from cbp.scenario import load_scenario
 
     try:
@@ -49,15 +56,38 @@ def _run(path: Path, out: Path | None) -> int:
     except ScenarioError as exc:
         print(exc, file=sys.stderr)
         return 2
+    method = method or scenario.spec.method.name
+    if method != "kinematic" and method not in SIMULATED_METHODS:
+        choices = ("kinematic", *SIMULATED_METHODS)
+        print(
+            f"unknown method '{method}'{suggestion(method, choices)} "
+            f"Methods: {', '.join(choices)}.",
+            file=sys.stderr,
+        )
+        return 2
     out = out or Path("out") / scenario.spec.name
-    trace = run_kinematic(scenario)
-    metrics = write_outputs(scenario, trace, out)
+    if method == "kinematic":
+        trace = run_kinematic(scenario)
+        metrics = write_outputs(scenario, trace, out)
+        print(
+            f"{scenario.spec.name}: {metrics['steps']} steps, final position error "
+            f"{metrics['final_position_error_m']} m, {metrics['events']} events"
+        )
+        print(f"wrote {out}/report.md, metrics.json, trace.csv, tracking.png")
+        return 0
+    run_trace = run_simulated(scenario, method, gui)
+    m = write_runs(scenario, {method: run_trace}, out)[method]
     print(
-        f"{scenario.spec.name}: {metrics['steps']} steps, final position error "
-        f"{metrics['final_position_error_m']} m, {metrics['events']} events"
+        f"{scenario.spec.name} ({method}): reached {m['reached']}, final error "
+        f"{_num(m['final_position_error_m'], 1e3)} mm, peak contact force "
+        f"{m['peak_contact_force_n']:.1f} N, {m['events']} events"
     )
-    print(f"wrote {out}/report.md, metrics.json, trace.csv, tracking.png")
+    print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
     return 0
+
+
+def _num(value: float | None, scale: float = 1.0) -> str:
+    return "n/a" if value is None else f"{value * scale:.1f}"
 
 
 def _check(paths: Sequence[Path]) -> int:

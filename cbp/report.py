@@ -1,17 +1,27 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Outputs of a run: trace.csv, metrics.json, plots and report.md."""
+"""Outputs of a run: trace.csv, metrics.json, plots and report.md.
+
+The kinematic executor's outputs (:func:`write_outputs`) and those of the
+simulated executors, one or several methods (:func:`write_runs`).
+"""
 
 from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from cbp.executors.kinematic import Trace
+from cbp.metrics import compute_metrics as compute_run_metrics
+from cbp.plots import plot_runs
+from cbp.robot import FloatArray
 from cbp.scenario import Scenario
+from cbp.trace import RunTrace
 
 #: A goal counts as reached within these tolerances.
 REACHED_POSITION = 0.01  # [m]
@@ -30,7 +40,8 @@ def compute_metrics(scenario: Scenario, trace: Trace) -> dict[str, Any]:
     within = (trace.position_error <= REACHED_POSITION) & (
         trace.rotation_error <= REACHED_ROTATION
     )
-    last_key = scenario.spec.goal.keyframes[-1].t if scenario.spec.goal else 0.0
+    stream = scenario.goal_stream()
+    last_key = stream.end_time if stream is not None else 0.0
     after = trace.t >= last_key
     reached_at = trace.t[after & within]
     step_us = trace.solve_time * 1e6
@@ -145,3 +156,92 @@ def _plot(trace: Trace, path: Path, title: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+# ---------------------------------------------------------------- simulated runs
+
+
+def write_runs(
+    scenario: Scenario, traces: Mapping[str, RunTrace], out: Path
+) -> dict[str, dict[str, Any]]:
+    """Write the outputs of simulated runs (one or several methods) into ``out``.
+
+    ``trace.csv`` (``trace_<method>.csv`` when there are several methods),
+    ``metrics.json`` (one object per method under its name, with its events),
+    ``tracking.png``, ``errors.png``, ``contact_force.png`` and ``report.md``.
+
+    Returns:
+        The metrics, by method.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    metrics = {name: compute_run_metrics(trace) for name, trace in traces.items()}
+    for name, trace in traces.items():
+        csv_name = "trace.csv" if len(traces) == 1 else f"trace_{name}.csv"
+        _write_run_csv(trace, out / csv_name)
+    document = {
+        name: {**metrics[name], "events": [{"t": t, "message": m} for t, m in tr.events]}
+        for name, tr in traces.items()
+    }
+    (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n")
+    figures = plot_runs(traces, out, scenario.spec.name)
+    keys = list(next(iter(metrics.values())))
+    lines = [
+        f"# {scenario.spec.name}: {', '.join(traces)}",
+        "",
+        scenario.spec.description.strip(),
+        "",
+        "| metric | " + " | ".join(traces) + " |",
+        "|---|" + "---|" * len(traces),
+        *(
+            f"| {key} | " + " | ".join(_fmt(metrics[m][key]) for m in traces) + " |"
+            for key in keys
+        ),
+        "",
+        *(f"![{f.stem}]({f.name})" for f in figures),
+        "",
+    ]
+    for name, trace in traces.items():
+        if trace.events:
+            lines += [f"## Events: {name}", ""]
+            lines += [f"- t = {t:.3f} s: {m}" for t, m in trace.events[:50]]
+            if len(trace.events) > 50:
+                lines.append(f"- ... {len(trace.events) - 50} more in metrics.json")
+            lines.append("")
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    return metrics
+
+
+def _write_run_csv(trace: RunTrace, path: Path) -> None:
+    n = trace.q.shape[1]
+    header = ["t"]
+    for who in ("goal", "ee"):
+        header += [f"{who}_{c}" for c in ("x", "y", "z", "qx", "qy", "qz", "qw")]
+    header += [f"q{i}" for i in range(n)]
+    header += ["contact_force", "wrist_force", "penetration", "clearance"]
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        for i in range(trace.t.size):
+            row = [f"{trace.t[i]:.4f}"]
+            for p, R in (
+                (trace.goal_position[i], trace.goal_rotation[i]),
+                (trace.ee_position[i], trace.ee_rotation[i]),
+            ):
+                row += [f"{v:.6f}" for v in p]
+                row += [f"{v:.6f}" for v in _quaternion(R)]
+            row += [f"{v:.6f}" for v in trace.q[i]]
+            row += [
+                f"{trace.contact_force[i]:.4f}",
+                f"{trace.wrist_force[i]:.4f}",
+                f"{trace.penetration[i]:.6f}",
+                f"{trace.clearance[i]:.6f}",
+            ]
+            writer.writerow(row)
+
+
+def _quaternion(R: FloatArray) -> FloatArray:
+    """(x, y, z, w) of a rotation matrix; NaN if it is not finite."""
+    if not np.all(np.isfinite(R)):
+        return np.full(4, np.nan)
+    q = pin.Quaternion(np.asarray(R))
+    return np.array([q.x, q.y, q.z, q.w])

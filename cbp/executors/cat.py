@@ -52,6 +52,9 @@ class CatPlanner:
         engine, robot = self.engine, self.robot
         path = [q]
         steps = rejections = still = 0
+        # A step is kept if it penetrates no deeper than the tolerance, or than
+        # where it started (so a robot that starts in collision can leave it).
+        depth = world.check(q).penetration if world is not None else 0.0
         note = "time budget spent"
         deadline = time.perf_counter() + budget_s
         while steps < s.max_steps:
@@ -67,7 +70,7 @@ class CatPlanner:
             q_next = robot.integrate(q, dq)
             if world is not None:
                 check = world.check(q_next)
-                if not check.accepted:
+                if not check.accepted and not check.penetration < depth:
                     rejections += 1
                     world.carry_over(check.contacts.select(check.contacts.distance < 0))
                     if rejections >= s.max_rejections:
@@ -77,6 +80,7 @@ class CatPlanner:
                         )
                         break
                     continue
+                depth = check.penetration
             rejections = 0
             path.append(q_next)
             q = q_next
