@@ -34,25 +34,53 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="executor: kinematic or cat (default: the scenario's method.name)",
     )
     run.add_argument("--gui", action="store_true", help="show PyBullet's window")
+    run.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario value, e.g. --set perception.source=depth_camera",
+    )
     check = sub.add_parser("check", help="validate scenario files without running them")
     check.add_argument("scenarios", type=Path, nargs="+")
     sub.add_parser("plugins", help="list every plugin with its parameters")
     args = parser.parse_args(argv)
     if args.command == "run":
-        return _run(args.scenario, args.out, args.method, args.gui)
+        overrides = _overrides(args.set)
+        if overrides is None:
+            return 2
+        return _run(args.scenario, args.out, args.method, args.gui, overrides)
     if args.command == "check":
         return _check(args.scenarios)
     return _plugins()
 
 
-def _run(path: Path, out: Path | None, method: str | None, gui: bool) -> int:
+def _overrides(items: Sequence[str]) -> dict[str, str] | None:
+    """``KEY=VALUE`` pairs from the command line; None (and a message) if malformed."""
+    overrides = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            print(f"--set expects KEY=VALUE, got {item!r}", file=sys.stderr)
+            return None
+        overrides[key.strip()] = value
+    return overrides
+
+
+def _run(
+    path: Path,
+    out: Path | None,
+    method: str | None,
+    gui: bool,
+    overrides: dict[str, str],
+) -> int:
     from cbp.executors import SIMULATED_METHODS, run_simulated
     from cbp.executors.kinematic import run_kinematic
     from cbp.report import write_outputs, write_runs
     from cbp.scenario import load_scenario
 
     try:
-        scenario = load_scenario(path)
+        scenario = load_scenario(path, overrides=overrides)
     except ScenarioError as exc:
         print(exc, file=sys.stderr)
         return 2

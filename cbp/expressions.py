@@ -97,13 +97,20 @@ def compile_time_function(text: str | float, where: str = "") -> TimeFunction:
             )
         if isinstance(node, ast.Name) and node.id not in names:
             raise ConfigError(
-                f"unknown name '{node.id}' in {text!r}{suggestion(node.id, names)}",
+                f"unknown name '{node.id}' in {text!r}{suggestion(node.id, names)}"
+                " Names: t, pi, e.",
                 where,
             )
         if isinstance(node, ast.Call) and not (
             isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS
         ):
-            raise ConfigError(f"only {', '.join(FUNCTIONS)} can be called", where)
+            called = node.func.id if isinstance(node.func, ast.Name) else "?"
+            raise ConfigError(
+                f"unknown function '{called}' in {text!r}"
+                f"{suggestion(called, list(FUNCTIONS))} Functions: "
+                f"{', '.join(FUNCTIONS)}.",
+                where,
+            )
         if isinstance(node, ast.Constant) and not isinstance(node.value, int | float):
             raise ConfigError(f"only numbers are allowed, got {node.value!r}", where)
     code = compile(tree, f"<{where or 'expression'}>", "eval")

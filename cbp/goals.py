@@ -43,6 +43,10 @@ __all__ = [
     "write_recorded",
 ]
 
+#: Times closer than this to a keyframe or sample are on it [s] (recordings are
+#: written with microsecond precision).
+TIME_TOLERANCE = 1e-6
+
 #: Header of a recorded goal file: time [s], position [m], quaternion (x, y, z, w).
 RECORDED_COLUMNS = ("t", "x", "y", "z", "qx", "qy", "qz", "qw")
 
@@ -187,6 +191,10 @@ class GoalStream:
         if i == len(self._times) or self.spec.type == "step":
             return self._positions[i - 1], self._rotations[i - 1]
         t0, t1 = self._times[i - 1], self._times[i]
+        if t - t0 < TIME_TOLERANCE:  # on a sample (within the file's precision)
+            return self._positions[i - 1], self._rotations[i - 1]
+        if t1 - t < TIME_TOLERANCE:
+            return self._positions[i], self._rotations[i]
         s = (t - t0) / (t1 - t0)
         p0, p1 = self._positions[i - 1], self._positions[i]
         R0, R1 = self._rotations[i - 1], self._rotations[i]

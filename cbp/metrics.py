@@ -9,6 +9,8 @@ measured the same way:
   there since ``total_time_s`` after the first goal change;
 * ``response_time_s``: from the first goal change until the end effector has
   moved :data:`MOVED` from where it started;
+* ``steps_per_full_period_median``: planning steps in the periods that used
+  their whole time budget (the others stopped early: converged, blocked);
 * contact: the sum of normal forces between robot and scene, its peak and the
   time it is above :data:`CONTACT_FORCE`; penetration and clearance are the
   ground truth (the unpadded link hulls against the declared objects).
@@ -20,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from cbp.trace import RunTrace
+from cbp.trace import FULL_PERIOD_NOTE, RunTrace
 
 __all__ = [
     "CONTACT_FORCE",
@@ -91,12 +93,18 @@ def compute_metrics(trace: RunTrace) -> dict[str, Any]:
         "steps_per_period_median": (
             float(np.median([p.steps for p in periods])) if periods else None
         ),
+        "steps_per_full_period_median": (
+            float(np.median(full)) if (full := _full_periods(trace)) else None
+        ),
         "compute_ms_per_period_median": (
-            float(np.median([p.compute_s for p in periods])) * 1e3
-            if periods
-            else None
+            float(np.median([p.compute_s for p in periods])) * 1e3 if periods else None
         ),
         "deadline_misses": sum(p.missed for p in periods),
         "periods": len(periods),
         "events": len(trace.events),
     }
+
+
+def _full_periods(trace: RunTrace) -> list[int]:
+    """Steps of the periods whose computation used the whole time budget."""
+    return [p.steps for p in trace.periods if p.note == FULL_PERIOD_NOTE]

@@ -56,9 +56,7 @@ def plot_runs(traces: Mapping[str, RunTrace], out: Path, title: str) -> list[Pat
     for name, trace in traces.items():
         color = METHOD_COLORS.get(name)
         axes[0].plot(trace.t, trace.position_error * 100, color=color, label=name)
-        axes[1].plot(
-            trace.t, np.rad2deg(trace.rotation_error), color=color, label=name
-        )
+        axes[1].plot(trace.t, np.rad2deg(trace.rotation_error), color=color, label=name)
     axes[0].set_ylabel("position error [cm]")
     axes[1].set_ylabel("orientation error [deg]")
     axes[1].set_xlabel("time [s]")

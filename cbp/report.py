@@ -179,7 +179,10 @@ def write_runs(
         csv_name = "trace.csv" if len(traces) == 1 else f"trace_{name}.csv"
         _write_run_csv(trace, out / csv_name)
     document = {
-        name: {**metrics[name], "events": [{"t": t, "message": m} for t, m in tr.events]}
+        name: {
+            **metrics[name],
+            "events": [{"t": t, "message": m} for t, m in tr.events],
+        }
         for name, tr in traces.items()
     }
     (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n")

@@ -11,6 +11,7 @@ the nearest valid choice (:class:`~cbp.errors.ScenarioError`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -243,11 +244,14 @@ def load_scenario(
     *,
     tasks: Registry[Any] | None = None,
     constraints: Registry[Any] | None = None,
+    overrides: Mapping[str, str] | None = None,
 ) -> Scenario:
     """Read, check and bind a scenario file.
 
     Args:
         path: the YAML file.
+        overrides: values that replace the file's, by dotted path
+            (``{"perception.source": "depth_camera"}``; values are YAML).
         tasks: task registry (default: the in-tree ``plugins.tasks.TASKS``).
         constraints: constraint registry (default ``plugins.constraints.CONSTRAINTS``).
 
@@ -262,6 +266,8 @@ def load_scenario(
     path = Path(path)
     doc = Document.from_file(path)
     doc.resolve_includes()
+    for dotted, text in (overrides or {}).items():
+        doc.override(dotted, text)
     root = doc.root
     spec = doc.build(ScenarioSpec, root, "")
     if root is None:

@@ -149,6 +149,55 @@ class Document:
                 if isinstance(k, yaml.ScalarNode) and k.value not in present:
                     root.value.append((k, v))
 
+    def override(self, dotted: str, text: str) -> None:
+        """Set ``dotted`` (``a.b.c``) to the YAML value ``text``, before building.
+
+        Missing mappings on the way are created. Problems with the value are
+        reported against ``--set a.b.c``.
+        """
+        label = f"--set {dotted}"
+        loader = yaml.SafeLoader(text)
+        loader.name = label
+        try:
+            value = loader.get_single_node()
+        except yaml.YAMLError as exc:
+            self.problems.append(f"{label}: malformed YAML value {text!r}: {exc}")
+            return
+        if value is None:
+            value = yaml.ScalarNode("tag:yaml.org,2002:null", "")
+        keys = dotted.split(".")
+        if self.root is None:
+            self.root = yaml.MappingNode("tag:yaml.org,2002:map", [])
+        node = self.root
+        for i, key in enumerate(keys):
+            if not isinstance(node, yaml.MappingNode):
+                where = ".".join(keys[:i])
+                self.problems.append(f"{label}: '{where}' is not a mapping")
+                return
+            entry = next(
+                (
+                    kv
+                    for kv in node.value
+                    if isinstance(kv[0], yaml.ScalarNode) and kv[0].value == key
+                ),
+                None,
+            )
+            if i == len(keys) - 1:
+                if entry is not None:
+                    node.value.remove(entry)
+                node.value.append(
+                    (yaml.ScalarNode("tag:yaml.org,2002:str", key), value)
+                )
+                return
+            if entry is None:
+                child = yaml.MappingNode("tag:yaml.org,2002:map", [])
+                node.value.append(
+                    (yaml.ScalarNode("tag:yaml.org,2002:str", key), child)
+                )
+                node = child
+            else:
+                node = entry[1]
+
     def scalar(self, node: yaml.ScalarNode) -> Any:
         """Return the Python value of a scalar node, typed by YAML's safe rules."""
         return self._loader.construct_object(node, deep=True)
@@ -286,6 +335,8 @@ def _build_union(
     ) and optional:
         return None
     members = [a for a in args if a is not type(None)]
+    if len(members) == 1:  # X | None: X's own problems are the useful ones
+        return _build(doc, members[0], node, where)
     # Try each member on a scratch document state; keep the first that builds.
     for member in members:
         saved = len(doc.problems)

@@ -13,7 +13,10 @@ import numpy as np
 
 from cbp.robot import FloatArray
 
-__all__ = ["PeriodRecord", "RunTrace"]
+__all__ = ["FULL_PERIOD_NOTE", "PeriodRecord", "RunTrace"]
+
+#: The note of a period whose planner used its whole time budget.
+FULL_PERIOD_NOTE = "time budget spent"
 
 
 @dataclass(frozen=True)

@@ -115,6 +115,11 @@ def signed_distance(
 class Environment(abc.ABC):
     """A static snapshot of the obstacles; replaced, never modified, when it changes."""
 
+    #: How far the represented surfaces may be from the real ones [m]: 0 for
+    #: declared objects, half a cell for an occupancy map. Step validation
+    #: tolerates this much more penetration (the links' padding covers it).
+    resolution: float = 0.0
+
     @abc.abstractmethod
     def query(
         self,
@@ -366,6 +371,7 @@ class OccupancyEnvironment(Environment):
         """Build the octree and the k-d tree of the centres."""
         self.centres = np.ascontiguousarray(centres, dtype=float).reshape(-1, 3)
         self.cell = float(cell)
+        self.resolution = 0.5 * self.cell
         self.refiner = refiner
         self.tree = cKDTree(self.centres)
         self.octree = (

@@ -51,7 +51,9 @@ class CollisionSettings:
     padding: float | None = None
     """Distance added around the links [m]; default: robot.yaml's."""
     penetration_tolerance: float = 0.005
-    """Step validation rejects a step that penetrates deeper than this [m]."""
+    """Step validation rejects a step that penetrates deeper than this [m]
+    (plus half a cell against an occupancy map, whose surfaces are only known
+    to that resolution)."""
 
     def __post_init__(self) -> None:
         """Positive distances and counts."""
@@ -250,7 +252,8 @@ class CollisionWorld:
         state.update(q)
         contacts = self.contacts(state)
         depth = contacts.penetration
-        return StepCheck(depth <= self.settings.penetration_tolerance, depth, contacts)
+        tolerance = self.settings.penetration_tolerance + self._environment.resolution
+        return StepCheck(depth <= tolerance, depth, contacts)
 
     def carry_over(self, contacts: ContactSet) -> None:
         """Add ``contacts`` (from a rejected configuration) to the next query.
@@ -266,10 +269,14 @@ class CollisionWorld:
         shapes = geometry.shapes
         placements = [s.world_placement(state) for s in shapes]
         centres, radii = geometry.world_spheres(state)
-        margin = self.settings.activation_distance + self.padding
+        margin = (
+            self.settings.activation_distance + self.padding + environment.resolution
+        )
         per_shape = self.settings.contacts_per_link
         hits = environment.query(shapes, placements, centres, radii, margin, per_shape)
-        parts = [self._from_hits(hits, self.padding)]
+        # Occupancy maps: the surface is uncertain by half a cell, so obstacles
+        # are inflated by that much (and step validation tolerates as much more).
+        parts = [self._from_hits(hits, self.padding + environment.resolution)]
         if self.settings.self_collision:
             parts.append(self._self_contacts(placements, centres))
         return ContactSet.concatenate(parts)

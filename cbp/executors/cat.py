@@ -26,7 +26,7 @@ from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
 from cbp.robot import FloatArray
 from cbp.scenario import Scenario
-from cbp.trace import RunTrace
+from cbp.trace import FULL_PERIOD_NOTE, RunTrace
 
 __all__ = ["CatPlanner", "run_cat"]
 
@@ -55,7 +55,7 @@ class CatPlanner:
         # A step is kept if it penetrates no deeper than the tolerance, or than
         # where it started (so a robot that starts in collision can leave it).
         depth = world.check(q).penetration if world is not None else 0.0
-        note = "time budget spent"
+        note = FULL_PERIOD_NOTE
         deadline = time.perf_counter() + budget_s
         while steps < s.max_steps:
             if time.perf_counter() >= deadline:

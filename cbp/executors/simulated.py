@@ -244,9 +244,8 @@ class SimulatedRun:
             activation_distance=CLEARANCE_RANGE, self_collision=False, padding=0.0
         )
         world = CollisionWorld(geometry, PrimitiveEnvironment(objects), settings)
-        stride = max(
-            1, round(CLEARANCE_PERIOD / max(float(np.median(np.diff(t))), 1e-6))
-        )
+        sample = float(np.median(np.diff(t))) if t.size > 1 else CLEARANCE_PERIOD
+        stride = max(1, round(CLEARANCE_PERIOD / max(sample, 1e-6)))
         for i in range(0, t.size, stride):
             contacts = world.check(q[i]).contacts
             out[i] = (

@@ -108,8 +108,6 @@ def run_trajectory_executor(
                 if new is not None:
                     sim.follow(current.splice(new))
                     spliced = True
-                elif note and plan.path is not None:
-                    run.event(t, note)
                 next_period = (
                     max(period * timing.shrink, lo)
                     if compute < 0.5 * period

@@ -86,7 +86,7 @@ class JointTrajectory:
         last: the last position, at rest.
         """
         times = self.times
-        if t <= times[0]:
+        if t < times[0]:
             return (
                 self.positions[0],
                 np.zeros_like(self.positions[0]),

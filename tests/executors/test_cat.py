@@ -1,0 +1,166 @@
+"""The CAT executor in the simulator: runs, bad input, failures, outputs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+
+from cbp.executors.cat import run_cat
+from cbp.goals import write_recorded
+from cbp.metrics import compute_metrics
+from cbp.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIOS = ROOT / "scenarios"
+DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+def test_free_space_step_reaches_the_goal_without_contact() -> None:
+    """A short free-space step: reached, in time, many QP steps per period."""
+    scenario = load_scenario(
+        SCENARIOS / "cat_free_step.yaml", overrides={"duration": "2.2"}
+    )
+    trace = run_cat(scenario)
+    m = compute_metrics(trace)
+    assert m["reached"], m
+    assert m["peak_contact_force_n"] == 0.0
+    assert m["response_time_s"] < 0.3
+    assert m["steps_per_period_median"] > 5
+    # Continuity: commanded positions never jump between samples.
+    assert np.max(np.abs(np.diff(trace.q_cmd, axis=0))) < 0.02
+    assert all(p.spliced or p.missed or p.note for p in trace.periods)
+
+
+def _scenario_with_goal_file(tmp_path: Path, goal: str, extra: str = "") -> Path:
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        textwrap.dedent(
+            f"""\
+            name: bad_goal
+            include: {SCENARIOS / "configs" / "cat.yaml"}
+            robot: {{name: franka_panda}}
+            duration: 2.0
+            goal: {{type: recorded, file: {goal}}}
+            """
+        )
+        + extra
+    )
+    return path
+
+
+def test_nan_goal_keeps_the_previous_goal_and_says_so(tmp_path: Path) -> None:
+    """A NaN sample in a recording is rejected; the run goes on to the next goal."""
+    times = np.arange(0.0, 1.01, 1 / 30)
+    positions = np.array([[0.307, 0.0, 0.59]] * len(times))
+    positions[times > 0.3] = [0.45, 0.15, 0.45]
+    positions[10:14] = np.nan  # a glitch of the input device
+    write_recorded(
+        tmp_path / "goal.csv", times, positions, np.array([DOWN] * len(times))
+    )
+    trace = run_cat(load_scenario(_scenario_with_goal_file(tmp_path, "goal.csv")))
+    rejected = [m for _, m in trace.events if m.startswith("goal rejected")]
+    assert len(rejected) == 4
+    assert np.all(np.isfinite(trace.q))
+    assert np.all(np.isfinite(trace.goal_position[10:]))
+    assert compute_metrics(trace)["reached"]
+
+
+def test_failed_qp_holds_the_last_safe_trajectory(tmp_path: Path) -> None:
+    """A hard goal that the velocity bounds cannot meet: the QP fails every step.
+
+    The arm stays where its last trajectory brought it (here: at rest at the
+    start), each failure is an event, and the loop keeps running.
+    """
+    times = np.array([0.0, 2.0])
+    write_recorded(
+        tmp_path / "goal.csv",
+        times,
+        np.array([[0.6, 0.2, 0.3]] * 2),
+        np.array([DOWN] * 2),
+    )
+    path = _scenario_with_goal_file(
+        tmp_path,
+        "goal.csv",
+        textwrap.dedent(
+            """\
+            tasks:
+              - type: goal_pose
+                priority: hard
+                params: {frame: panda_hand, max_step_translation: 0.05}
+            constraints:
+              - type: joint_velocity
+                params: {scale: 0.01}
+            """
+        ),
+    )
+    scenario = load_scenario(path)
+    trace = run_cat(scenario)
+    failures = [m for _, m in trace.events if m.startswith("QP step failed")]
+    assert len(failures) >= 50
+    np.testing.assert_allclose(trace.q[-1], scenario.q0, atol=1e-3)
+    assert len(trace.periods) >= 55
+
+
+def test_cbp_run_writes_trace_metrics_and_plots(tmp_path: Path) -> None:
+    """The command line: trace.csv, metrics.json (under the method's name), PNGs."""
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cbp",
+            "run",
+            str(SCENARIOS / "cat_free_step.yaml"),
+            "--method",
+            "cat",
+            "--set",
+            "duration=1.0",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    keys = {
+        "reached",
+        "response_time_s",
+        "total_time_s",
+        "final_position_error_m",
+        "final_orientation_error_rad",
+        "peak_contact_force_n",
+        "contact_duration_s",
+        "max_penetration_m",
+        "min_clearance_m",
+        "steps_per_period_median",
+        "compute_ms_per_period_median",
+        "deadline_misses",
+    }
+    assert keys <= set(metrics["cat"])
+    header = (out / "trace.csv").read_text().splitlines()[0].split(",")
+    assert {"t", "goal_x", "ee_x", "q0", "contact_force"} <= set(header)
+    for name in ("tracking.png", "errors.png", "contact_force.png", "report.md"):
+        assert (out / name).stat().st_size > 0
+    bad = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cbp",
+            "run",
+            str(SCENARIOS / "cat_free_step.yaml"),
+            "--method",
+            "catt",
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert bad.returncode == 2
+    assert "'cat'" in bad.stderr

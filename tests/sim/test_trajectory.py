@@ -1,0 +1,107 @@
+"""Quintic trajectories, splicing, and timing that stops at the path's end."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cbp.sim.trajectory import JointTrajectory, SpliceError, time_parameterize
+
+VMAX = np.array([1.0, 2.0])
+AMAX = np.array([4.0, 8.0])
+
+
+def _samples(traj: JointTrajectory, n: int = 2000) -> tuple[np.ndarray, ...]:
+    ts = np.linspace(traj.start_time, traj.end_time, n)
+    q, v, a = zip(*(traj.sample(t) for t in ts), strict=True)
+    return ts, np.array(q), np.array(v), np.array(a)
+
+
+def test_quintic_meets_every_point_and_is_smooth() -> None:
+    """Positions, velocities and accelerations match at the points; no jumps."""
+    rng = np.random.default_rng(1)
+    times = np.array([0.0, 0.3, 0.5, 1.1])
+    traj = JointTrajectory(
+        times, rng.normal(size=(4, 2)), rng.normal(size=(4, 2)), rng.normal(size=(4, 2))
+    )
+    for i, t in enumerate(times[:-1]):
+        q, v, a = traj.sample(float(t))
+        np.testing.assert_allclose(q, traj.positions[i], atol=1e-12)
+        np.testing.assert_allclose(v, traj.velocities[i], atol=1e-12)
+        np.testing.assert_allclose(a, traj.accelerations[i], atol=1e-10)
+    # Approaching each interior point from the left gives the same values.
+    for i in (1, 2):
+        q, v, a = traj.sample(float(times[i]) - 1e-9)
+        np.testing.assert_allclose(q, traj.positions[i], atol=1e-6)
+        np.testing.assert_allclose(v, traj.velocities[i], atol=1e-5)
+        np.testing.assert_allclose(a, traj.accelerations[i], atol=1e-3)
+    # After the end: at rest at the last point.
+    q, v, a = traj.sample(5.0)
+    np.testing.assert_array_equal(q, traj.positions[-1])
+    assert not v.any()
+    assert not a.any()
+
+
+def test_splice_keeps_the_prefix_and_refuses_a_jump() -> None:
+    """A new trajectory starting on the old one replaces it from there on."""
+    old = time_parameterize(
+        np.linspace([0.0, 0.0], [1.0, 0.5], 50),
+        0.0,
+        np.zeros(2),
+        np.zeros(2),
+        VMAX,
+        AMAX,
+    )
+    assert old is not None
+    i = old.first_point_after(0.3)
+    assert i is not None
+    t_s, q_s, v_s, a_s = old.point(i)
+    path = np.linspace(q_s, [0.2, 0.9], 40)
+    new = time_parameterize(path, t_s, v_s, a_s, VMAX, AMAX)
+    assert new is not None
+    spliced = old.splice(new)
+    np.testing.assert_allclose(spliced.sample(0.2)[0], old.sample(0.2)[0])
+    np.testing.assert_allclose(spliced.sample(t_s + 0.1)[0], new.sample(t_s + 0.1)[0])
+    np.testing.assert_allclose(spliced.positions[-1], [0.2, 0.9])
+    jump = JointTrajectory.hold(t_s, q_s + 0.01)
+    with pytest.raises(SpliceError, match="does not start on the current one"):
+        old.splice(jump)
+
+
+def test_time_parameterization_respects_limits_and_stops() -> None:
+    """From rest: within the velocity limits, at rest at the end, on the path."""
+    path = np.stack([np.linspace(0, 1.5, 80), np.linspace(0, -2.0, 80) ** 2 / 4], 1)
+    traj = time_parameterize(path, 1.0, np.zeros(2), np.zeros(2), VMAX, AMAX)
+    assert traj is not None
+    _, q, v, a = _samples(traj)
+    assert np.all(np.abs(v) <= VMAX * 1.02)
+    # Between points the quintic blends a bang-bang profile: allow its overshoot.
+    assert np.all(np.abs(a) <= AMAX * 1.5)
+    np.testing.assert_allclose(q[-1], path[-1])
+    np.testing.assert_allclose(v[-1], 0.0, atol=1e-9)
+    # Time-optimal within a few percent: rest-to-rest on joint 1 (the binding one).
+    bang = 2 * np.sqrt(1.5 / AMAX[0])
+    assert traj.end_time - 1.0 >= bang * 0.98
+
+
+def test_a_path_too_short_to_stop_on_is_refused() -> None:
+    """Moving at 1 rad/s, a 1 cm path cannot be stopped on at 4 rad/s^2."""
+    path = np.linspace([0.0, 0.0], [0.01, 0.0], 5)
+    assert (
+        time_parameterize(path, 0.0, np.array([1.0, 0.0]), np.zeros(2), VMAX, AMAX)
+        is None
+    )
+    # ... but 20 cm can: v^2 / (2 a) = 12.5 cm.
+    path = np.linspace([0.0, 0.0], [0.2, 0.0], 40)
+    traj = time_parameterize(path, 0.0, np.array([1.0, 0.0]), np.zeros(2), VMAX, AMAX)
+    assert traj is not None
+    np.testing.assert_allclose(traj.velocities[0], [1.0, 0.0])
+
+
+def test_a_still_path_holds() -> None:
+    """A path that does not move is a hold (at rest), refused if moving."""
+    path = np.zeros((3, 2))
+    traj = time_parameterize(path, 2.0, np.zeros(2), np.zeros(2), VMAX, AMAX)
+    assert traj is not None
+    assert len(traj) == 1
+    assert time_parameterize(path, 2.0, np.ones(2), np.zeros(2), VMAX, AMAX) is None
