@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DEV_STAMP := $(VENV)/.installed-dev
 OUT ?= out/demo
 
-.PHONY: demo test test-all lint bench clean
+.PHONY: demo test test-slow test-all lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -21,7 +21,7 @@ $(DEV_STAMP): pyproject.toml | $(BIN)/python
 	touch $@ $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/cbp run scenarios/panda_reach.yaml --out $(OUT)
+	$(BIN)/cbp run scenarios/cat_boards.yaml --method cat --out $(OUT)
 	@echo "Report: $(OUT)/report.md"
 
 lint: $(DEV_STAMP)
@@ -32,12 +32,16 @@ lint: $(DEV_STAMP)
 test: lint
 	$(BIN)/python -m pytest -m "not slow" -q
 
+test-slow: $(DEV_STAMP)
+	$(BIN)/python -m pytest -m slow -q
+
 test-all: lint
 	$(BIN)/python -m pytest -q
 
 bench: $(DEV_STAMP)
 	$(BIN)/python benchmarks/engine_step.py --out benchmarks/RESULTS.md
 	$(BIN)/python benchmarks/collision.py --append benchmarks/RESULTS.md
+	$(BIN)/python benchmarks/cat_periods.py --append benchmarks/RESULTS.md
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
