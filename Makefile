@@ -21,7 +21,7 @@ $(DEV_STAMP): pyproject.toml | $(BIN)/python
 	touch $@ $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/cbp run scenarios/cat_boards.yaml --method cat --out $(OUT)
+	$(BIN)/cbp compare scenarios/cat_boards.yaml --methods cat,ik,mp,jt --out $(OUT)
 	@echo "Report: $(OUT)/report.md"
 
 lint: $(DEV_STAMP)

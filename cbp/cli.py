@@ -31,7 +31,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument(
         "--method",
         default=None,
-        help="executor: kinematic or cat (default: the scenario's method.name)",
+        help="executor: kinematic, cat, ik, mp or jt (default: method.name)",
     )
     run.add_argument("--gui", action="store_true", help="show PyBullet's window")
     run.add_argument(
@@ -40,6 +40,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=[],
         metavar="KEY=VALUE",
         help="override a scenario value, e.g. --set perception.source=depth_camera",
+    )
+    compare = sub.add_parser(
+        "compare", help="run several methods on one recorded goal stream; one report"
+    )
+    compare.add_argument("scenario", type=Path)
+    compare.add_argument(
+        "--methods", default="cat,ik,mp,jt", help="comma-separated (default: all four)"
+    )
+    compare.add_argument(
+        "--out", type=Path, default=None, help="output folder (default out/<name>)"
+    )
+    compare.add_argument(
+        "--jobs", type=int, default=1, help="methods run in this many processes"
+    )
+    compare.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario value (as for run)",
     )
     check = sub.add_parser("check", help="validate scenario files without running them")
     check.add_argument("scenarios", type=Path, nargs="+")
@@ -50,6 +70,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if overrides is None:
             return 2
         return _run(args.scenario, args.out, args.method, args.gui, overrides)
+    if args.command == "compare":
+        overrides = _overrides(args.set)
+        if overrides is None:
+            return 2
+        return _compare(args.scenario, args.methods, args.out, args.jobs, overrides)
     if args.command == "check":
         return _check(args.scenarios)
     return _plugins()
@@ -111,6 +136,35 @@ def _run(
         f"{m['peak_contact_force_n']:.1f} N, {m['events']} events"
     )
     print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
+    return 0
+
+
+def _compare(
+    path: Path, methods: str, out: Path | None, jobs: int, overrides: dict[str, str]
+) -> int:
+    from cbp.compare import compare
+    from cbp.executors import SIMULATED_METHODS
+
+    names = [m.strip() for m in methods.split(",") if m.strip()]
+    for name in names:
+        if name not in SIMULATED_METHODS:
+            print(
+                f"unknown method '{name}'{suggestion(name, SIMULATED_METHODS)} "
+                f"Methods: {', '.join(SIMULATED_METHODS)}.",
+                file=sys.stderr,
+            )
+            return 2
+    try:
+        result = compare(path, names, out, jobs=jobs, overrides=overrides)
+    except ScenarioError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    for name, m in result.metrics.items():
+        print(
+            f"{name:>3}: reached {str(m['reached']):5}  total "
+            f"{_num(m['total_time_s'])} s  peak force {m['peak_contact_force_n']:.1f} N"
+        )
+    print(f"Report: {result.out / 'report.md'}")
     return 0
 
 

@@ -24,7 +24,7 @@ from cbp.collision.geometry import RobotGeometry
 from cbp.collision.world import CollisionSettings, CollisionWorld, UsesCollisionWorld
 from cbp.engine import Engine
 from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
-from cbp.executors.settings import CatSettings
+from cbp.executors.settings import CatSettings, IkSettings, JtSettings, MpSettings
 from cbp.goals import GoalSpec, GoalStream
 from cbp.perception.spec import PerceptionSpec
 from cbp.plugin import AnyPlugin, Plugin, Task
@@ -46,7 +46,7 @@ __all__ = [
 ]
 
 #: Executors ``cbp run --method`` accepts.
-MethodName = Literal["kinematic", "cat"]
+MethodName = Literal["kinematic", "cat", "ik", "mp", "jt"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -85,11 +85,19 @@ class MethodSpec:
     name: MethodName = "kinematic"
     """``kinematic``: integrate each QP step exactly (no simulator); ``cat``:
     constraint-aware teleoperation in the simulator (many validated QP steps per
-    command period, spliced trajectories)."""
+    command period, spliced trajectories); ``ik``, ``mp``, ``jt``: the CAT
+    paper's alternatives (collision-aware IK, motion planning, Jacobian
+    transpose)."""
     dt: float = 0.01
     """``kinematic``: duration of one control step [s]."""
     cat: CatSettings = field(default_factory=CatSettings)
     """Settings of the CAT executor."""
+    ik: IkSettings = field(default_factory=IkSettings)
+    """Settings of the collision-aware IK executor."""
+    mp: MpSettings = field(default_factory=MpSettings)
+    """Settings of the motion-planning executor."""
+    jt: JtSettings = field(default_factory=JtSettings)
+    """Settings of the Jacobian-transpose executor."""
 
     def __post_init__(self) -> None:
         """Positive step."""

@@ -7,7 +7,14 @@ from dataclasses import dataclass, field
 
 from cbp.errors import ConfigError
 
-__all__ = ["CatSettings", "ExecutorTiming"]
+__all__ = [
+    "CatSettings",
+    "ExecutorTiming",
+    "IkSearchSettings",
+    "IkSettings",
+    "JtSettings",
+    "MpSettings",
+]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -88,3 +95,127 @@ class CatSettings:
             raise ConfigError(
                 f"must be >= 1, got {self.max_rejections}", "max_rejections"
             )
+
+
+def _positive(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not value > 0:
+            raise ConfigError(f"must be > 0, got {value}", name)
+
+
+@dataclass(frozen=True, kw_only=True)
+class IkSearchSettings:
+    """How collision-free inverse kinematics is searched (IK and MP methods)."""
+
+    redundant_joint: str | None = None
+    """Joint swept when the nearest solution collides (the PR2's IK swept its
+    redundant joint); default: the third joint of the arm (the upper-arm roll on
+    a 7-DOF arm)."""
+    sweep_step: float = 0.2
+    """Spacing of the redundant joint's values, tried nearest first [rad]."""
+    max_iterations: int = 80
+    """Damped least-squares iterations per solve."""
+    position_tolerance: float = 1e-3
+    """A solution is within this of the goal position [m] ..."""
+    rotation_tolerance: float = 1e-2
+    """... and this rotation [rad]."""
+    limit_margin: float = 0.02
+    """Solutions keep this far inside the joint limits [rad]."""
+
+    def __post_init__(self) -> None:
+        """Positive values."""
+        _positive(
+            self,
+            "sweep_step",
+            "max_iterations",
+            "position_tolerance",
+            "rotation_tolerance",
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class IkSettings:
+    """The ``method.ik:`` section: collision-aware IK + joint interpolation."""
+
+    timing: ExecutorTiming = field(default_factory=ExecutorTiming)
+    """Command period (30 Hz, as CAT), budget and trajectory limits."""
+    search: IkSearchSettings = field(default_factory=IkSearchSettings)
+    """The IK search."""
+    interpolation_step: float = 0.02
+    """Largest joint change between two collision-checked configurations [rad]."""
+
+    def __post_init__(self) -> None:
+        """Positive step."""
+        _positive(self, "interpolation_step")
+
+
+@dataclass(frozen=True, kw_only=True)
+class MpSettings:
+    """The ``method.mp:`` section: OMPL RRT-Connect to the IK goal."""
+
+    timing: ExecutorTiming = field(
+        default_factory=lambda: ExecutorTiming(period=0.25, max_period=1.0)
+    )
+    """Command period (the paper: a nominal 4 Hz, adaptive), budget, limits."""
+    search: IkSearchSettings = field(default_factory=IkSearchSettings)
+    """The IK search for the goal configuration."""
+    simplify_fraction: float = 0.3
+    """Share of the planning budget left for path simplification."""
+    check_resolution: float = 0.005
+    """Motion validation: checked every this fraction of the joint space's
+    extent (OMPL's state validity checking resolution)."""
+    range: float = 0.0
+    """RRT-Connect's step length [rad] (0: OMPL's default)."""
+    waypoint_step: float = 0.05
+    """The simplified path is resampled to this joint spacing for timing [rad]."""
+
+    def __post_init__(self) -> None:
+        """Sensible fractions and steps."""
+        if not 0 <= self.simplify_fraction < 1:
+            raise ConfigError(
+                f"must be in [0, 1), got {self.simplify_fraction}", "simplify_fraction"
+            )
+        _positive(self, "check_resolution", "waypoint_step")
+        if not self.range >= 0:
+            raise ConfigError(f"must be >= 0, got {self.range}", "range")
+
+
+@dataclass(frozen=True, kw_only=True)
+class JtSettings:
+    """The ``method.jt:`` section: Jacobian-transpose torque control (eqs. 6-8)."""
+
+    stiffness_translation: float = 600.0
+    """Cartesian stiffness on the position error [N/m]."""
+    stiffness_rotation: float = 40.0
+    """Cartesian stiffness on the rotation error [N m/rad]."""
+    damping_translation: float = 60.0
+    """Cartesian damping on the hand's linear velocity [N s/m]."""
+    damping_rotation: float = 4.0
+    """Cartesian damping on the hand's angular velocity [N m s/rad]."""
+    max_force: float = 60.0
+    """Cap on the commanded force's magnitude [N] (the paper limited the wrench)."""
+    max_torque: float = 6.0
+    """Cap on the commanded moment's magnitude [N m]."""
+    nullspace_stiffness: float = 5.0
+    """k of eq. 7, toward the initial posture [N m/rad]."""
+    joint_damping: float = 1.0
+    """Joint damping [N m s/rad]."""
+
+    def __post_init__(self) -> None:
+        """Positive gains and caps."""
+        _positive(
+            self,
+            "stiffness_translation",
+            "stiffness_rotation",
+            "max_force",
+            "max_torque",
+        )
+        for name in (
+            "damping_translation",
+            "damping_rotation",
+            "nullspace_stiffness",
+            "joint_damping",
+        ):
+            if not getattr(self, name) >= 0:
+                raise ConfigError(f"must be >= 0, got {getattr(self, name)}", name)

@@ -184,7 +184,7 @@ class SimulatedRun:
         self.sim.close()
         robot = self.robot
         model, data = robot.model, robot.model.createData()
-        frame = robot.frame_id(self._ee_frame())
+        frame = robot.frame_id(self.ee_frame)
         n = rec["t"].size
         ee_p = np.empty((n, 3))
         ee_R = np.empty((n, 3, 3))
@@ -221,7 +221,9 @@ class SimulatedRun:
             events=self.events,
         )
 
-    def _ee_frame(self) -> str:
+    @property
+    def ee_frame(self) -> str:
+        """The frame that tracks the goal (the goal task's, else the robot's)."""
         task = self.goal_task
         if (
             task is not None

@@ -46,11 +46,14 @@ class Plan:
             or None for no motion (keep the current trajectory).
         steps: planning steps taken (QP steps, interpolation checks, ...).
         note: what ended the computation or why there is no path.
+        timed_out: the planner ran out of time before it had a result (a miss:
+            the period grows).
     """
 
     path: FloatArray | None
     steps: int = 0
     note: str = ""
+    timed_out: bool = False
 
 
 class Planner(Protocol):
@@ -95,13 +98,14 @@ def run_trajectory_executor(
                     note = "path too short to stop on; current trajectory kept"
             compute = time.perf_counter() - start
             run.advance(t_f)  # the robot moves on while the result is computed
-            missed = compute > period
+            missed = compute > period or plan.timed_out
             spliced = False
             if missed:
                 run.event(
                     t,
-                    f"deadline missed ({compute * 1e3:.1f} ms > "
-                    f"{period * 1e3:.1f} ms); result discarded",
+                    f"deadline missed ({compute * 1e3:.1f} ms for a "
+                    f"{period * 1e3:.1f} ms period): "
+                    + (plan.note if plan.timed_out else "result discarded"),
                 )
                 next_period = min(period * timing.growth, hi)
             else:

@@ -178,7 +178,8 @@ def time_parameterize(
 
     The path's points are joined by straight segments; the speed along the path
     is the largest profile that respects, joint by joint, ``max_velocity`` at
-    every point and ``max_acceleration`` on every segment, reaches zero at the
+    every point, ``max_acceleration`` on every segment and at every corner
+    (where the direction changes), reaches zero at the
     last point (a forward-backward pass over :math:`\dot s^2`), and starts at the
     component of ``v0`` along the first segment. The first point keeps ``v0`` and
     ``a0`` exactly (continuity with the trajectory it is spliced into); the first
@@ -217,6 +218,13 @@ def time_parameterize(
     limit[0] = seg_vel[0]
     limit[-1] = seg_vel[-1]
     limit[1:-1] = np.minimum(seg_vel[:-1], seg_vel[1:])
+    if n_points > 2:
+        # Corners: turning from one segment's direction to the next within about
+        # one segment's time needs |d_i - d_(i-1)| s'^2 <= a_max (per joint).
+        turn = np.abs(np.diff(delta, axis=0))
+        with np.errstate(divide="ignore"):
+            corner = np.sqrt(np.min(max_acceleration / turn, axis=1))
+        limit[1:-1] = np.minimum(limit[1:-1], corner)
     # Backward: able to stop at the end.
     speed2 = np.minimum(limit, 1e12) ** 2
     speed2[-1] = 0.0

@@ -1,0 +1,112 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Run several methods on one scenario and one recorded goal stream (CAT Sec. VI).
+
+As in the paper, the operator's goal is recorded once (``goal.csv`` in the
+output folder, sampled at the command rate) and replayed to every method; each
+method runs in the simulator from the same initial state. The outputs are those
+of :func:`cbp.report.write_runs`: one ``metrics.json`` with an object per method,
+a table in ``report.md``, and the figures with all methods together.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cbp.goals import write_recorded
+from cbp.scenario import Scenario, load_scenario
+from cbp.trace import RunTrace
+
+__all__ = ["ComparisonResult", "compare", "record_goal"]
+
+
+@dataclass
+class ComparisonResult:
+    """What :func:`compare` produced.
+
+    Attributes:
+        out: the output folder.
+        traces: by method.
+        metrics: by method.
+    """
+
+    out: Path
+    traces: dict[str, RunTrace]
+    metrics: dict[str, dict[str, Any]]
+
+
+def record_goal(scenario: Scenario, path: Path) -> bool:
+    """Write the scenario's goal stream, sampled at its rate, as a recording.
+
+    Returns:
+        False if the scenario has no goal (nothing written).
+    """
+    stream = scenario.goal_stream()
+    if stream is None:
+        return False
+    rate = stream.spec.rate_hz
+    times = np.arange(0.0, scenario.spec.duration + 0.5 / rate, 1.0 / rate)
+    samples = [stream.sample(float(t)) for t in times]
+    write_recorded(
+        path,
+        times.tolist(),
+        np.array([p for p, _ in samples]),
+        np.array([R for _, R in samples]),
+    )
+    return True
+
+
+def _run_one(path: Path, overrides: Mapping[str, str], method: str) -> RunTrace:
+    from cbp.executors import run_simulated
+
+    return run_simulated(load_scenario(path, overrides=overrides), method)
+
+
+def compare(
+    path: str | Path,
+    methods: Sequence[str],
+    out: Path | None = None,
+    *,
+    jobs: int = 1,
+    overrides: Mapping[str, str] | None = None,
+) -> ComparisonResult:
+    """Run ``methods`` on the scenario at ``path``; write and return the results.
+
+    Args:
+        path: the scenario file.
+        methods: simulated method names (``cat``, ``ik``, ``mp``, ``jt``).
+        out: output folder (default ``out/<scenario name>``).
+        jobs: methods run in this many processes at once. Timing-dependent
+            methods (CAT, IK, MP plan within wall-clock budgets) are slowed by
+            sharing the cores: compare with ``jobs=1`` for timing figures.
+        overrides: scenario values to replace (``--set``).
+    """
+    from cbp.report import write_runs
+
+    path = Path(path)
+    overrides = dict(overrides or {})
+    scenario = load_scenario(path, overrides=overrides)
+    out = out or Path("out") / scenario.spec.name
+    out.mkdir(parents=True, exist_ok=True)
+    goal = scenario.spec.goal
+    if goal is not None and record_goal(scenario, out / "goal.csv"):
+        task = f", task: {goal.task}" if goal.task else ""
+        overrides["goal"] = (
+            f"{{type: recorded, file: {(out / 'goal.csv').resolve()}, "
+            f"rate_hz: {goal.rate_hz}{task}}}"
+        )
+    traces: dict[str, RunTrace] = {}
+    if jobs <= 1:
+        for method in methods:
+            traces[method] = _run_one(path, overrides, method)
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = {m: pool.submit(_run_one, path, overrides, m) for m in methods}
+            traces = {m: f.result() for m, f in futures.items()}
+    metrics = write_runs(scenario, traces, out)
+    return ComparisonResult(out, traces, metrics)

@@ -1,0 +1,89 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The IK method: collision-aware inverse kinematics, joint interpolation (Sec. V-A).
+
+Each command period (30 Hz, like CAT) the goal pose is solved for collision-free
+joint angles near the current configuration (:class:`~cbp.executors.ik_search.
+IkSearch`). The arm then moves toward them along a straight line in joint space,
+every intermediate configuration collision-checked; the path ends before the
+first configuration in collision, and where the period's time runs out (a
+partial path, continued next period). With no collision-free solution the arm
+stops, as the paper reports.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.executors.ik_search import IkSearch
+from cbp.executors.settings import IkSettings
+from cbp.executors.simulated import SimulatedRun
+from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.robot import FloatArray
+from cbp.scenario import Scenario
+from cbp.trace import FULL_PERIOD_NOTE, RunTrace
+
+__all__ = ["IkPlanner", "run_ik"]
+
+
+class IkPlanner:
+    """IK for the goal (cached per goal), then a checked joint-space line to it."""
+
+    def __init__(self, scenario: Scenario, run: SimulatedRun, settings: IkSettings):
+        """Set up the IK search on the scenario's collision world."""
+        self.settings = settings
+        self.search = IkSearch(scenario.robot, run.ee_frame, run.world, settings.search)
+        self._goal: pin.SE3 | None = None
+        self._target: FloatArray | None = None
+
+    def plan(
+        self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
+    ) -> Plan:
+        """Solve (if the goal changed), then interpolate toward the solution."""
+        if goal is None:
+            return Plan(None, 0, "no goal yet")
+        deadline = time.perf_counter() + budget_s
+        if self._goal is None or not goal.isApprox(self._goal, 1e-9):
+            self._goal = goal
+            self._target = self.search.solve(goal, q, deadline)
+        target = self._target
+        if target is None:
+            return Plan(None, 0, "no collision-free IK solution: the arm stops")
+        return interpolate_checked(
+            q, target, self.settings.interpolation_step, self.search, deadline
+        )
+
+
+def interpolate_checked(
+    q: FloatArray,
+    target: FloatArray,
+    step: float,
+    search: IkSearch,
+    deadline: float,
+) -> Plan:
+    """A joint-space line from ``q`` toward ``target``, checked at every point.
+
+    Ends before the first configuration in collision, or where time runs out.
+    """
+    delta = target - q
+    n = max(1, int(np.ceil(np.max(np.abs(delta)) / step)))
+    path = [q]
+    for k in range(1, n + 1):
+        if time.perf_counter() > deadline:
+            return Plan(np.array(path), k - 1, FULL_PERIOD_NOTE)
+        candidate = q + delta * (k / n)
+        if not search.collision_free(candidate):
+            return Plan(np.array(path), k, "collision ahead: the arm stops before it")
+        path.append(candidate)
+    return Plan(np.array(path), n, "at the IK solution")
+
+
+def run_ik(scenario: Scenario, gui: bool = False) -> RunTrace:
+    """Run ``scenario`` with the IK method; return the trace."""
+    settings = scenario.spec.method.ik
+    run = SimulatedRun(scenario, "ik", gui, needs_world=True)
+    return run_trajectory_executor(
+        run, IkPlanner(scenario, run, settings), settings.timing
+    )

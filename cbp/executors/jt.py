@@ -1,0 +1,83 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The JT method: Jacobian-transpose torque control (CAT Sec. V-C, eqs. 6-8).
+
+At every physics step (1 kHz) the hand's pose error to the latest goal (sampled
+at the command rate) becomes a wrench through a Cartesian stiffness and damping,
+capped in magnitude, and the joint torques are
+
+    tau = J^T f + (I - J^+ J) k (q_d - q) + g(q) - D v
+
+(eq. 6 pose tracking, eq. 7 null-space posture toward the initial posture,
+gravity compensation and joint damping). No collision avoidance, as in the paper.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.executors.simulated import SimulatedRun
+from cbp.robot import FloatArray
+from cbp.scenario import Scenario
+from cbp.trace import RunTrace
+
+__all__ = ["JacobianTransposeController", "run_jt"]
+
+
+class JacobianTransposeController:
+    """The torque law of eqs. 6-8, called by the simulator every physics step."""
+
+    def __init__(self, scenario: Scenario, run: SimulatedRun) -> None:
+        """Resolve the frame; the posture target is the initial configuration."""
+        self.settings = scenario.spec.method.jt
+        self.robot = scenario.robot
+        self.run = run
+        self.frame_id = scenario.robot.frame_id(run.ee_frame)
+        self.posture = scenario.q0.copy()
+        self._data = scenario.robot.model.createData()
+        self._eye = np.eye(scenario.robot.nv)
+
+    def __call__(self, t: float, q: FloatArray, v: FloatArray) -> FloatArray:
+        """Joint torques at time ``t`` for positions ``q`` and velocities ``v``."""
+        s = self.settings
+        model, data = self.robot.model, self._data
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        J = pin.getFrameJacobian(
+            model, data, self.frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        )
+        tau = np.asarray(pin.computeGeneralizedGravity(model, data, q)).copy()
+        tau -= s.joint_damping * v
+        goal = self.run.goal(t)
+        if goal is not None:
+            M = data.oMf[self.frame_id]
+            twist = J.dot(v)
+            force = s.stiffness_translation * (goal.translation - M.translation)
+            force -= s.damping_translation * twist[:3]
+            moment = s.stiffness_rotation * pin.log3(goal.rotation.dot(M.rotation.T))
+            moment -= s.damping_rotation * twist[3:]
+            wrench = np.concatenate(
+                [_cap(force, s.max_force), _cap(moment, s.max_torque)]
+            )
+            tau += J.T.dot(wrench)
+        J_pinv = np.linalg.pinv(J, rcond=1e-3)
+        tau += (self._eye - J_pinv.dot(J)).dot(
+            s.nullspace_stiffness * (self.posture - q)
+        )
+        return tau
+
+
+def _cap(vector: FloatArray, limit: float) -> FloatArray:
+    norm = float(np.linalg.norm(vector))
+    return vector * (limit / norm) if norm > limit else vector
+
+
+def run_jt(scenario: Scenario, gui: bool = False) -> RunTrace:
+    """Run ``scenario`` with the JT method; return the trace."""
+    run = SimulatedRun(scenario, "jt", gui)
+    try:
+        run.sim.set_torque_controller(JacobianTransposeController(scenario, run))
+        run.advance(run.duration)
+    finally:
+        trace = run.finish()
+    return trace

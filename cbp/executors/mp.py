@@ -1,0 +1,139 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The MP method: global motion planning with OMPL's RRT-Connect (CAT Sec. V-B).
+
+Each command period (a nominal 4 Hz, adaptive) the goal pose is solved for a
+collision-free configuration (:class:`~cbp.executors.ik_search.IkSearch`), and
+RRT-Connect plans a joint-space path to it from the point of the current
+trajectory after the deadline. States are valid when no padded link penetrates
+an obstacle or another link (the scenario's collision world); motions are
+checked at OMPL's resolution. The path is shortened and smoothed by OMPL's
+simplifier, resampled, timed to stop at its end and spliced in by the shared
+trajectory loop. A plan that does not finish in the budget counts as a miss, so
+the period grows.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.executors.ik_search import IkSearch
+from cbp.executors.settings import MpSettings
+from cbp.executors.simulated import SimulatedRun
+from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.robot import FloatArray
+from cbp.scenario import Scenario
+from cbp.trace import RunTrace
+
+__all__ = ["MpPlanner", "run_mp"]
+
+
+class MpPlanner:
+    """RRT-Connect from the start point to the IK goal, then simplification."""
+
+    def __init__(self, scenario: Scenario, run: SimulatedRun, settings: MpSettings):
+        """Build the state space over the joint limits and the validity checker."""
+        import ompl.base as ob
+        import ompl.geometric as og
+        import ompl.util as ou
+
+        ou.setLogLevel(ou.LogLevel.LOG_WARN)
+        self.settings = settings
+        robot = scenario.robot
+        self.search = IkSearch(robot, run.ee_frame, run.world, settings.search)
+        n = robot.nv
+        self._space = ob.RealVectorStateSpace(n)
+        bounds = ob.RealVectorBounds(n)
+        for i in range(n):
+            bounds.setLow(i, float(robot.lower_limits[i]))
+            bounds.setHigh(i, float(robot.upper_limits[i]))
+        self._space.setBounds(bounds)
+        self._si = ob.SpaceInformation(self._space)
+        self._q = np.zeros(n)
+        self.checks = 0
+
+        def valid(state: object) -> bool:
+            q = self._q
+            for i in range(n):
+                q[i] = state[i]  # type: ignore[index]
+            self.checks += 1
+            return self.search.collision_free(q)
+
+        self._valid = valid  # kept alive: OMPL holds only a reference
+        self._si.setStateValidityChecker(valid)
+        self._si.setStateValidityCheckingResolution(settings.check_resolution)
+        self._si.setup()
+        self._og = og
+        self._start = self._space.allocState()
+        self._goal_state = self._space.allocState()
+        self._goal: pin.SE3 | None = None
+        self._target: FloatArray | None = None
+
+    def plan(
+        self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
+    ) -> Plan:
+        """IK for the goal, then plan and simplify within the budget."""
+        if goal is None:
+            return Plan(None, 0, "no goal yet")
+        s = self.settings
+        start = time.perf_counter()
+        deadline = start + budget_s
+        if self._goal is None or not goal.isApprox(self._goal, 1e-9):
+            self._goal = goal
+            self._target = self.search.solve(goal, q, deadline)
+        target = self._target
+        if target is None:
+            return Plan(None, 0, "no collision-free IK solution: the arm stops")
+        if np.max(np.abs(target - q)) < 1e-4:
+            return Plan(None, 0, "at the goal")
+        if not self.search.collision_free(q):
+            return Plan(None, 0, "start in collision: no plan")
+        og = self._og
+        setup = og.SimpleSetup(self._si)
+        for i in range(q.size):
+            self._start[i] = float(q[i])
+            self._goal_state[i] = float(target[i])
+        setup.setStartAndGoalStates(self._start, self._goal_state)
+        planner = og.RRTConnect(self._si)
+        if s.range > 0:
+            planner.setRange(s.range)
+        setup.setPlanner(planner)
+        checks = self.checks
+        left = deadline - time.perf_counter()
+        solved = left > 0 and bool(setup.solve(left * (1.0 - s.simplify_fraction)))
+        if not solved or not setup.haveExactSolutionPath():
+            return Plan(None, self.checks - checks, "no plan in time", timed_out=True)
+        left = deadline - time.perf_counter()
+        if left > 0:
+            setup.simplifySolution(left)
+        path = setup.getSolutionPath()
+        vertices = np.array(
+            [
+                [path.getState(k)[i] for i in range(q.size)]
+                for k in range(path.getStateCount())
+            ]
+        )
+        vertices[0] = q  # exactly the start point, for continuity
+        return Plan(
+            _resample(vertices, s.waypoint_step), self.checks - checks, "planned"
+        )
+
+
+def _resample(vertices: FloatArray, step: float) -> FloatArray:
+    """Points along the polyline at most ``step`` apart per joint (vertices kept)."""
+    points = [vertices[0]]
+    for a, b in zip(vertices[:-1], vertices[1:], strict=True):
+        n = max(1, int(np.ceil(np.max(np.abs(b - a)) / step)))
+        points.extend(a + (b - a) * (k / n) for k in range(1, n + 1))
+    return np.array(points)
+
+
+def run_mp(scenario: Scenario, gui: bool = False) -> RunTrace:
+    """Run ``scenario`` with the MP method; return the trace."""
+    settings = scenario.spec.method.mp
+    run = SimulatedRun(scenario, "mp", gui, needs_world=True)
+    return run_trajectory_executor(
+        run, MpPlanner(scenario, run, settings), settings.timing
+    )
