@@ -161,7 +161,7 @@ def _compare(
         return 2
     for name, m in result.metrics.items():
         print(
-            f"{name:>3}: reached {str(m['reached']):5}  total "
+            f"{name:>3}: reached {m['reached']!s:5}  total "
             f"{_num(m['total_time_s'])} s  peak force {m['peak_contact_force_n']:.1f} N"
         )
     print(f"Report: {result.out / 'report.md'}")

@@ -14,6 +14,7 @@ the period grows.
 
 from __future__ import annotations
 
+import itertools
 import time
 
 import numpy as np
@@ -124,7 +125,7 @@ class MpPlanner:
 def _resample(vertices: FloatArray, step: float) -> FloatArray:
     """Points along the polyline at most ``step`` apart per joint (vertices kept)."""
     points = [vertices[0]]
-    for a, b in zip(vertices[:-1], vertices[1:], strict=True):
+    for a, b in itertools.pairwise(vertices):
         n = max(1, int(np.ceil(np.max(np.abs(b - a)) / step)))
         points.extend(a + (b - a) * (k / n) for k in range(1, n + 1))
     return np.array(points)
