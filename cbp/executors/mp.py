@@ -8,8 +8,9 @@ trajectory after the deadline. States are valid when no padded link penetrates
 an obstacle or another link (the scenario's collision world); motions are
 checked at OMPL's resolution. The path is shortened and smoothed by OMPL's
 simplifier, resampled, timed to stop at its end and spliced in by the shared
-trajectory loop. A plan that does not finish in the budget counts as a miss, so
-the period grows.
+trajectory loop; while the goal stays the same the plan is followed, not
+replaced. A plan that does not finish in the budget counts as a miss, so the
+period grows.
 """
 
 from __future__ import annotations
@@ -89,6 +90,10 @@ class MpPlanner:
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         if np.max(np.abs(target - q)) < 1e-4:
             return Plan(None, 0, "at the goal")
+        if np.max(np.abs(run.sim.trajectory.positions[-1] - target)) < 1e-9:
+            # The trajectory being followed already ends at this goal: replanning
+            # would only swap one random path for another.
+            return Plan(None, 0, "following the plan to this goal")
         if not self.search.collision_free(q):
             return Plan(None, 0, "start in collision: no plan")
         og = self._og

@@ -155,7 +155,7 @@ class MpSettings:
     """The ``method.mp:`` section: OMPL RRT-Connect to the IK goal."""
 
     timing: ExecutorTiming = field(
-        default_factory=lambda: ExecutorTiming(period=0.25, max_period=1.0)
+        default_factory=lambda: ExecutorTiming(period=0.25, max_period=4.0)
     )
     """Command period (the paper: a nominal 4 Hz, adaptive), budget, limits."""
     search: IkSearchSettings = field(default_factory=IkSearchSettings)
@@ -185,17 +185,17 @@ class MpSettings:
 class JtSettings:
     """The ``method.jt:`` section: Jacobian-transpose torque control (eqs. 6-8)."""
 
-    stiffness_translation: float = 600.0
+    stiffness_translation: float = 1500.0
     """Cartesian stiffness on the position error [N/m]."""
-    stiffness_rotation: float = 40.0
+    stiffness_rotation: float = 80.0
     """Cartesian stiffness on the rotation error [N m/rad]."""
-    damping_translation: float = 60.0
+    damping_translation: float = 100.0
     """Cartesian damping on the hand's linear velocity [N s/m]."""
-    damping_rotation: float = 4.0
+    damping_rotation: float = 5.0
     """Cartesian damping on the hand's angular velocity [N m s/rad]."""
-    max_force: float = 60.0
+    max_force: float = 100.0
     """Cap on the commanded force's magnitude [N] (the paper limited the wrench)."""
-    max_torque: float = 6.0
+    max_torque: float = 10.0
     """Cap on the commanded moment's magnitude [N m]."""
     nullspace_stiffness: float = 5.0
     """k of eq. 7, toward the initial posture [N m/rad]."""

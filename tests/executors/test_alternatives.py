@@ -1,0 +1,152 @@
+"""The IK, MP and JT methods and cbp compare (fast cases)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from cbp.executors.ik import interpolate_checked
+from cbp.executors.ik_search import IkSearch
+from cbp.executors.jt import run_jt
+from cbp.executors.mp import MpPlanner
+from cbp.executors.settings import IkSearchSettings
+from cbp.executors.simulated import SimulatedRun
+from cbp.metrics import compute_metrics
+from cbp.scenario import Scenario, load_scenario
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+@pytest.fixture(scope="module")
+def boards() -> Scenario:
+    return load_scenario(SCENARIOS / "cat_boards.yaml")
+
+
+def _search(scenario: Scenario) -> IkSearch:
+    return IkSearch(
+        scenario.robot, "panda_hand", scenario.collision_world(), IkSearchSettings()
+    )
+
+
+def test_ik_search_finds_a_near_collision_free_solution(boards: Scenario) -> None:
+    search = _search(boards)
+    goal = pin.SE3(
+        pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.35, 0.2])
+    )
+    q = search.solve(goal, boards.q0, time.perf_counter() + 1.0)
+    assert q is not None
+    data = boards.robot.model.createData()
+    pin.framesForwardKinematics(boards.robot.model, data, q)
+    M = data.oMf[search.frame_id]
+    assert np.linalg.norm(M.translation - goal.translation) < 2e-3
+    assert search.collision_free(q)
+    assert np.max(np.abs(q - boards.q0)) < 0.5  # near the start, not another branch
+
+
+def test_ik_search_refuses_unreachable_and_colliding_goals(boards: Scenario) -> None:
+    search = _search(boards)
+    far = pin.SE3(DOWN, np.array([1.5, 0.0, 0.3]))
+    assert search.solve(far, boards.q0, time.perf_counter() + 2.0) is None
+    # The hand inside the middle board.
+    inside = pin.SE3(
+        pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, 0.0, 0.12])
+    )
+    assert search.solve(inside, boards.q0, time.perf_counter() + 2.0) is None
+
+
+def test_interpolation_stops_before_a_collision(boards: Scenario) -> None:
+    """Straight across the first board in joint space: the path ends before it."""
+    search = _search(boards)
+    beyond = pin.SE3(
+        pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.12, 0.15])
+    )
+    target = search.solve(beyond, boards.q0, time.perf_counter() + 2.0)
+    assert target is not None
+    plan = interpolate_checked(
+        boards.q0, target, 0.02, search, time.perf_counter() + 1.0
+    )
+    assert plan.path is not None
+    assert plan.note.startswith("collision ahead")
+    assert all(search.collision_free(q) for q in plan.path)
+    assert np.max(np.abs(plan.path[-1] - target)) > 0.02
+
+
+def test_mp_plans_over_the_board(boards: Scenario) -> None:
+    """RRT-Connect + simplification: a valid path to the far side of a board."""
+    run = SimulatedRun(boards, "mp", needs_world=True)
+    try:
+        planner = MpPlanner(boards, run, boards.spec.method.mp)
+        goal = pin.SE3(
+            pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.12, 0.15])
+        )
+        plan = planner.plan(boards.q0.copy(), goal, 2.0, run)
+    finally:
+        run.finish()
+    assert plan.path is not None, plan.note
+    np.testing.assert_allclose(plan.path[0], boards.q0)
+    assert np.max(np.abs(np.diff(plan.path, axis=0))) <= 0.05 + 1e-9
+    assert all(planner.search.collision_free(q) for q in plan.path)
+
+
+def test_jt_tracks_a_free_space_step() -> None:
+    scenario = load_scenario(
+        SCENARIOS / "cat_free_step.yaml", overrides={"duration": "2.0"}
+    )
+    trace = run_jt(scenario)
+    m = compute_metrics(trace)
+    assert m["reached"], m
+    assert m["response_time_s"] < 0.1
+    assert trace.periods == []  # torque control: no command periods
+
+
+def test_cbp_compare_writes_one_report(tmp_path: Path) -> None:
+    out = tmp_path / "cmp"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cbp",
+            "compare",
+            str(SCENARIOS / "cat_free_step.yaml"),
+            "--methods",
+            "jt,ik",
+            "--set",
+            "duration=1.0",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert set(metrics) == {"jt", "ik"}
+    report = (out / "report.md").read_text()
+    assert "| metric | jt | ik |" in report
+    assert (out / "goal.csv").read_text().startswith("t,x,y,z,qx,qy,qz,qw")
+    assert (out / "trace_jt.csv").exists() and (out / "trace_ik.csv").exists()
+    bad = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cbp",
+            "compare",
+            str(SCENARIOS / "cat_free_step.yaml"),
+            "--methods",
+            "cat,jtt",
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert bad.returncode == 2
+    assert "'jt'" in bad.stderr
