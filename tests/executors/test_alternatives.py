@@ -133,7 +133,8 @@ def test_cbp_compare_writes_one_report(tmp_path: Path) -> None:
     report = (out / "report.md").read_text()
     assert "| metric | jt | ik |" in report
     assert (out / "goal.csv").read_text().startswith("t,x,y,z,qx,qy,qz,qw")
-    assert (out / "trace_jt.csv").exists() and (out / "trace_ik.csv").exists()
+    assert (out / "trace_jt.csv").exists()
+    assert (out / "trace_ik.csv").exists()
     bad = subprocess.run(
         [
             sys.executable,
