@@ -50,6 +50,7 @@ class IkPlanner:
             self._target = self.search.solve(goal, q, deadline)
         target = self._target
         if target is None:
+            self._goal = None  # search again next period, from where the arm is
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         return interpolate_checked(
             q, target, self.settings.interpolation_step, self.search, deadline

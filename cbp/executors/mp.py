@@ -87,6 +87,7 @@ class MpPlanner:
             self._target = self.search.solve(goal, q, deadline)
         target = self._target
         if target is None:
+            self._goal = None  # search again next period, from where the arm is
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         if np.max(np.abs(target - q)) < 1e-4:
             return Plan(None, 0, "at the goal")
