@@ -54,16 +54,20 @@ def test_boards(results: Any) -> None:
     r = results("boards")
     reached = _metric(r, "reached")
     force = _metric(r, "peak_contact_force_n")
-    assert not reached["jt"] and force["jt"] > 0
-    assert not reached["ik"] and force["ik"] == 0
-    assert reached["mp"] and reached["cat"]
+    assert not reached["jt"]
+    assert force["jt"] > 0
+    assert not reached["ik"]
+    assert force["ik"] == 0
+    assert reached["mp"]
+    assert reached["cat"]
     assert force["cat"] == 0
 
 
 def test_local_minimum(results: Any) -> None:
     """The local methods stay in front of the wall; the planner goes around."""
     reached = _metric(results("local_minimum"), "reached")
-    assert not reached["cat"] and not reached["jt"]
+    assert not reached["cat"]
+    assert not reached["jt"]
     assert reached["mp"]
 
 
@@ -71,7 +75,8 @@ def test_wrist_limit(results: Any) -> None:
     """JT stays stuck at the limit; IK and MP turn the hand over (CAT: see xfail)."""
     reached = _metric(results("wrist_limit"), "reached")
     assert not reached["jt"]
-    assert reached["ik"] and reached["mp"]
+    assert reached["ik"]
+    assert reached["mp"]
 
 
 def test_unreachable_goal(results: Any) -> None:
@@ -99,6 +104,7 @@ def test_shelf_retreat(results: Any) -> None:
     reached = _metric(r, "reached")
     force = _metric(r, "peak_contact_force_n")
     assert force["jt"] > 0
-    assert reached["cat"] and force["cat"] == 0
+    assert reached["cat"]
+    assert force["cat"] == 0
     assert not reached["ik"]
     assert reached["mp"]
