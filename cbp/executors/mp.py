@@ -73,6 +73,15 @@ class MpPlanner:
         self._goal: pin.SE3 | None = None
         self._target: FloatArray | None = None
 
+    def close(self) -> None:
+        """Release the validity checker (it refers back to this planner).
+
+        OMPL's space information holds the Python checker, which holds this
+        planner: a cycle through C++ that Python's collector cannot break.
+        """
+        self._si.setStateValidityChecker(_always_valid)
+        self._valid = _always_valid
+
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
     ) -> Plan:
@@ -137,10 +146,16 @@ def _resample(vertices: FloatArray, step: float) -> FloatArray:
     return np.array(points)
 
 
+def _always_valid(state: object) -> bool:
+    return True
+
+
 def run_mp(scenario: Scenario, gui: bool = False) -> RunTrace:
     """Run ``scenario`` with the MP method; return the trace."""
     settings = scenario.spec.method.mp
     run = SimulatedRun(scenario, "mp", gui, needs_world=True)
-    return run_trajectory_executor(
-        run, MpPlanner(scenario, run, settings), settings.timing
-    )
+    planner = MpPlanner(scenario, run, settings)
+    try:
+        return run_trajectory_executor(run, planner, settings.timing)
+    finally:
+        planner.close()

@@ -88,6 +88,7 @@ def test_mp_plans_over_the_board(boards: Scenario) -> None:
             pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.12, 0.15])
         )
         plan = planner.plan(boards.q0.copy(), goal, 2.0, run)
+        planner.close()
     finally:
         run.finish()
     assert plan.path is not None, plan.note
