@@ -41,6 +41,24 @@ class ConfigError(CbpError, ValueError):
         super().__init__(f"{location}: {message}" if location else message)
 
 
+def require(obj: object, condition: str, *names: str) -> None:
+    """Check fields of a settings object; a located ConfigError for the first bad one.
+
+    ``condition`` is one of ``> 0``, ``>= 0``, ``>= 1`` and ``in (0, 1]``.
+    """
+    tests: dict[str, Callable[[float], bool]] = {
+        "> 0": lambda v: v > 0,
+        ">= 0": lambda v: v >= 0,
+        ">= 1": lambda v: v >= 1,
+        "in (0, 1]": lambda v: 0 < v <= 1,
+    }
+    test = tests[condition]
+    for name in names:
+        value = getattr(obj, name)
+        if not test(value):
+            raise ConfigError(f"must be {condition}, got {value}", name)
+
+
 def located(lookup: Callable[[A], T], name: A, location: str) -> T:
     """Call ``lookup(name)``; a ConfigError it raises gets ``location`` attached.
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -22,3 +25,13 @@ def robots() -> dict[str, RobotModel]:
 def rng() -> np.random.Generator:
     """A generator with a fixed seed."""
     return np.random.default_rng(20261122)
+
+
+def run_cbp(*args: str) -> subprocess.CompletedProcess[str]:
+    """Run the ``cbp`` command line in a subprocess; output captured as text."""
+    return subprocess.run(
+        [sys.executable, "-m", "cbp", *args],
+        capture_output=True,
+        text=True,
+        check=False,
+    )

@@ -35,8 +35,6 @@ class IkPlanner:
         """Set up the IK search on the scenario's collision world."""
         self.settings = settings
         self.search = IkSearch(scenario.robot, run.ee_frame, run.world, settings.search)
-        self._goal: pin.SE3 | None = None
-        self._target: FloatArray | None = None
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
@@ -45,12 +43,8 @@ class IkPlanner:
         if goal is None:
             return Plan(None, 0, "no goal yet")
         deadline = time.perf_counter() + budget_s
-        if self._goal is None or not goal.isApprox(self._goal, 1e-9):
-            self._goal = goal
-            self._target = self.search.solve(goal, q, deadline)
-        target = self._target
+        target = self.search.solution_for(goal, q, deadline)
         if target is None:
-            self._goal = None  # search again next period, from where the arm is
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         return interpolate_checked(
             q, target, self.settings.interpolation_step, self.search, deadline

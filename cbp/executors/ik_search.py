@@ -53,6 +53,23 @@ class IkSearch:
         self._lower = robot.lower_limits + margin
         self._upper = robot.upper_limits - margin
         self.solves = 0
+        self._goal: pin.SE3 | None = None
+        self._solution: FloatArray | None = None
+
+    def solution_for(
+        self, goal: pin.SE3, q_near: FloatArray, deadline: float
+    ) -> FloatArray | None:
+        """:meth:`solve`, remembered while the goal stays the same.
+
+        The executors ask every command period; the search runs again only
+        for a new goal, or after a failure (from where the arm is then).
+        """
+        if self._goal is None or not goal.isApprox(self._goal, 1e-9):
+            self._goal = goal
+            self._solution = self.solve(goal, q_near, deadline)
+            if self._solution is None:
+                self._goal = None
+        return self._solution
 
     def solve(
         self, goal: pin.SE3, q_near: FloatArray, deadline: float

@@ -70,8 +70,6 @@ class MpPlanner:
         self._og = og
         self._start = self._space.allocState()
         self._goal_state = self._space.allocState()
-        self._goal: pin.SE3 | None = None
-        self._target: FloatArray | None = None
 
     def close(self) -> None:
         """Release the validity checker (it refers back to this planner).
@@ -91,12 +89,8 @@ class MpPlanner:
         s = self.settings
         start = time.perf_counter()
         deadline = start + budget_s
-        if self._goal is None or not goal.isApprox(self._goal, 1e-9):
-            self._goal = goal
-            self._target = self.search.solve(goal, q, deadline)
-        target = self._target
+        target = self.search.solution_for(goal, q, deadline)
         if target is None:
-            self._goal = None  # search again next period, from where the arm is
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         if np.max(np.abs(target - q)) < 1e-4:
             return Plan(None, 0, "at the goal")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from cbp.errors import ConfigError
+from cbp.errors import ConfigError, require
 
 __all__ = [
     "CatSettings",
@@ -40,8 +40,7 @@ class ExecutorTiming:
 
     def __post_init__(self) -> None:
         """Positive times, sensible factors."""
-        if not self.period > 0:
-            raise ConfigError(f"must be > 0, got {self.period}", "period")
+        require(self, "> 0", "period")
         lo, hi = self.bounds()
         if not 0 < lo <= self.period <= hi:
             raise ConfigError(
@@ -83,25 +82,9 @@ class CatSettings:
 
     def __post_init__(self) -> None:
         """Positive values."""
-        if not self.step_dt > 0:
-            raise ConfigError(f"must be > 0, got {self.step_dt}", "step_dt")
-        if self.max_steps < 1:
-            raise ConfigError(f"must be >= 1, got {self.max_steps}", "max_steps")
-        if not self.converged_step >= 0:
-            raise ConfigError(
-                f"must be >= 0, got {self.converged_step}", "converged_step"
-            )
-        if self.max_rejections < 1:
-            raise ConfigError(
-                f"must be >= 1, got {self.max_rejections}", "max_rejections"
-            )
-
-
-def _positive(obj: object, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        if not value > 0:
-            raise ConfigError(f"must be > 0, got {value}", name)
+        require(self, "> 0", "step_dt")
+        require(self, ">= 1", "max_steps", "max_rejections")
+        require(self, ">= 0", "converged_step")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -125,8 +108,9 @@ class IkSearchSettings:
 
     def __post_init__(self) -> None:
         """Positive values."""
-        _positive(
+        require(
             self,
+            "> 0",
             "sweep_step",
             "max_iterations",
             "position_tolerance",
@@ -147,7 +131,7 @@ class IkSettings:
 
     def __post_init__(self) -> None:
         """Positive step."""
-        _positive(self, "interpolation_step")
+        require(self, "> 0", "interpolation_step")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -176,9 +160,8 @@ class MpSettings:
             raise ConfigError(
                 f"must be in [0, 1), got {self.simplify_fraction}", "simplify_fraction"
             )
-        _positive(self, "check_resolution", "waypoint_step")
-        if not self.range >= 0:
-            raise ConfigError(f"must be >= 0, got {self.range}", "range")
+        require(self, "> 0", "check_resolution", "waypoint_step")
+        require(self, ">= 0", "range")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -204,18 +187,19 @@ class JtSettings:
 
     def __post_init__(self) -> None:
         """Positive gains and caps."""
-        _positive(
+        require(
             self,
+            "> 0",
             "stiffness_translation",
             "stiffness_rotation",
             "max_force",
             "max_torque",
         )
-        for name in (
+        require(
+            self,
+            ">= 0",
             "damping_translation",
             "damping_rotation",
             "nullspace_stiffness",
             "joint_damping",
-        ):
-            if not getattr(self, name) >= 0:
-                raise ConfigError(f"must be >= 0, got {getattr(self, name)}", name)
+        )

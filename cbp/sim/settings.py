@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from cbp.errors import ConfigError
+from cbp.errors import ConfigError, require
 from cbp.spatial import Pose
 
 __all__ = ["ObjectSpec", "SimulationSettings"]
@@ -69,10 +69,6 @@ class SimulationSettings:
 
     def __post_init__(self) -> None:
         """Positive rate, gains and recording stride."""
-        for name in ("rate_hz", "stiffness", "damping"):
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"must be > 0, got {getattr(self, name)}", name)
-        if self.record_every < 1:
-            raise ConfigError(f"must be >= 1, got {self.record_every}", "record_every")
-        if not self.friction >= 0:
-            raise ConfigError(f"must be >= 0, got {self.friction}", "friction")
+        require(self, "> 0", "rate_hz", "stiffness", "damping")
+        require(self, ">= 1", "record_every")
+        require(self, ">= 0", "friction")

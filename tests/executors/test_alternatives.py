@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -20,6 +18,7 @@ from cbp.executors.settings import IkSearchSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.metrics import compute_metrics
 from cbp.scenario import Scenario, load_scenario
+from tests.conftest import run_cbp
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 DOWN = np.diag([1.0, -1.0, -1.0])
@@ -110,23 +109,15 @@ def test_jt_tracks_a_free_space_step() -> None:
 
 def test_cbp_compare_writes_one_report(tmp_path: Path) -> None:
     out = tmp_path / "cmp"
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cbp",
-            "compare",
-            str(SCENARIOS / "cat_free_step.yaml"),
-            "--methods",
-            "jt,ik",
-            "--set",
-            "duration=1.0",
-            "--out",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
+    result = run_cbp(
+        "compare",
+        str(SCENARIOS / "cat_free_step.yaml"),
+        "--methods",
+        "jt,ik",
+        "--set",
+        "duration=1.0",
+        "--out",
+        str(out),
     )
     assert result.returncode == 0, result.stderr
     metrics = json.loads((out / "metrics.json").read_text())
@@ -136,19 +127,8 @@ def test_cbp_compare_writes_one_report(tmp_path: Path) -> None:
     assert (out / "goal.csv").read_text().startswith("t,x,y,z,qx,qy,qz,qw")
     assert (out / "trace_jt.csv").exists()
     assert (out / "trace_ik.csv").exists()
-    bad = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cbp",
-            "compare",
-            str(SCENARIOS / "cat_free_step.yaml"),
-            "--methods",
-            "cat,jtt",
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
+    bad = run_cbp(
+        "compare", str(SCENARIOS / "cat_free_step.yaml"), "--methods", "cat,jtt"
     )
     assert bad.returncode == 2
     assert "'jt'" in bad.stderr

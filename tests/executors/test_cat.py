@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
@@ -14,6 +12,7 @@ from cbp.executors.cat import run_cat
 from cbp.goals import write_recorded
 from cbp.metrics import compute_metrics
 from cbp.scenario import load_scenario
+from tests.conftest import run_cbp
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "scenarios"
@@ -109,23 +108,15 @@ def test_failed_qp_holds_the_last_safe_trajectory(tmp_path: Path) -> None:
 def test_cbp_run_writes_trace_metrics_and_plots(tmp_path: Path) -> None:
     """The command line: trace.csv, metrics.json (under the method's name), PNGs."""
     out = tmp_path / "out"
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cbp",
-            "run",
-            str(SCENARIOS / "cat_free_step.yaml"),
-            "--method",
-            "cat",
-            "--set",
-            "duration=1.0",
-            "--out",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
+    result = run_cbp(
+        "run",
+        str(SCENARIOS / "cat_free_step.yaml"),
+        "--method",
+        "cat",
+        "--set",
+        "duration=1.0",
+        "--out",
+        str(out),
     )
     assert result.returncode == 0, result.stderr
     metrics = json.loads((out / "metrics.json").read_text())
@@ -148,19 +139,6 @@ def test_cbp_run_writes_trace_metrics_and_plots(tmp_path: Path) -> None:
     assert {"t", "goal_x", "ee_x", "q0", "contact_force"} <= set(header)
     for name in ("tracking.png", "errors.png", "contact_force.png", "report.md"):
         assert (out / name).stat().st_size > 0
-    bad = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cbp",
-            "run",
-            str(SCENARIOS / "cat_free_step.yaml"),
-            "--method",
-            "catt",
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    bad = run_cbp("run", str(SCENARIOS / "cat_free_step.yaml"), "--method", "catt")
     assert bad.returncode == 2
     assert "'cat'" in bad.stderr
