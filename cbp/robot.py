@@ -80,6 +80,9 @@ class RobotDescription:
     """Frame the default goal task controls."""
     home: dict[str, float]
     """Home posture, by joint name [rad or m]; joints left out take their neutral."""
+    base: BaseType = "fixed"
+    """The base the robot is built for: ``fixed`` (an arm on a table),
+    ``planar`` (an omnidirectional base) or ``floating``."""
     wrist_link: str | None = None
     """First link of the hand: contact forces on it and the links beyond it are
     reported as the wrist force (a wrist force sensor's reading)."""
@@ -246,13 +249,16 @@ class RobotModel:
         return cls(model, name=name, description=description, urdf_path=path, base=base)
 
     @classmethod
-    def load(cls, name: str, *, base: BaseType = "fixed") -> RobotModel:
-        """Load the robot folder ``name`` (see :func:`find_robot_folder`)."""
+    def load(cls, name: str, *, base: BaseType | None = None) -> RobotModel:
+        """Load the robot folder ``name`` (see :func:`find_robot_folder`).
+
+        ``base`` defaults to the one robot.yaml names (``fixed`` if none).
+        """
         folder = find_robot_folder(name)
         description = load_file(RobotDescription, folder / "robot.yaml")
         robot = cls.from_urdf(
             folder / description.urdf,
-            base=base,
+            base=base or description.base,
             locked_joints=description.locked_joints,
             name=description.name,
             description=description,

@@ -55,8 +55,9 @@ class RobotSpec:
 
     name: str
     """Robot folder under ``robots/`` (or a path to one)."""
-    base: BaseType = "fixed"
-    """``fixed``, ``planar`` (x, y, yaw) or ``floating``."""
+    base: BaseType | None = None
+    """``fixed``, ``planar`` (x, y, yaw) or ``floating``; default: the robot's
+    own (robot.yaml's ``base``)."""
     initial: dict[str, float] = field(default_factory=dict)
     """Initial joint positions by name [rad or m]; others start at home."""
 

@@ -13,11 +13,12 @@ from cbp.robot import RobotModel
 
 @pytest.fixture(scope="session")
 def robots() -> dict[str, RobotModel]:
-    """The Panda on a fixed, a planar (nq != nv) and a floating (quaternion) base."""
+    """The Panda on fixed, planar and floating bases; the youBot on its planar base."""
     return {
         "panda": RobotModel.load("franka_panda"),
         "panda_planar": RobotModel.load("franka_panda", base="planar"),
         "panda_floating": RobotModel.load("franka_panda", base="floating"),
+        "youbot": RobotModel.load("kuka_youbot", base="planar"),
     }
 
 

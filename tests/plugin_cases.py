@@ -36,7 +36,25 @@ from plugins.constraints.joint_velocity_constraint import (
     JointVelocityConstraint,
     JointVelocityParams,
 )
+from plugins.constraints.min_altitude_constraint import (
+    MinAltitudeConstraint,
+    MinAltitudeParams,
+)
+from plugins.constraints.no_roll_constraint import NoRollConstraint, NoRollParams
+from plugins.constraints.obstacle_distance_constraint import (
+    ObstacleDistanceConstraint,
+    ObstacleDistanceParams,
+)
+from plugins.constraints.orbit_distance_constraint import (
+    OrbitDistanceConstraint,
+    OrbitDistanceParams,
+)
 from plugins.constraints.self_collision_constraint import SelfCollisionConstraint
+from plugins.constraints.view_direction_constraint import (
+    ViewDirectionConstraint,
+    ViewDirectionParams,
+)
+from plugins.tasks.camera_velocity_task import CameraVelocityParams, CameraVelocityTask
 from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
 from plugins.tasks.joint_step_task import JointStepParams, JointStepTask
 from plugins.tasks.posture_task import PostureParams, PostureTask
@@ -130,7 +148,47 @@ def _has_contacts(self_pairs: bool) -> Callable[[RobotModel, FloatArray], bool]:
     return accept
 
 
+#: The orbit plugins run on the youBot (planar base: arm and base joints).
+YOUBOT = ("youbot",)
+OBJECT = (1.0, 0.2, 0.1)
+
+
+def _camera_velocity(robot: RobotModel) -> CameraVelocityTask:
+    task = CameraVelocityTask(CameraVelocityParams(), robot)
+    task.set_input(np.array([0.1, -0.05]))
+    return task
+
+
 PLUGIN_CASES: list[PluginCase] = [
+    PluginCase("camera_velocity", _camera_velocity, robots=YOUBOT),
+    PluginCase(
+        "min_altitude",
+        lambda r: MinAltitudeConstraint(MinAltitudeParams(), r),
+        robots=YOUBOT,
+    ),
+    PluginCase("no_roll", lambda r: NoRollConstraint(NoRollParams(), r), robots=YOUBOT),
+    PluginCase(
+        "obstacle_distance",
+        lambda r: ObstacleDistanceConstraint(ObstacleDistanceParams(), r),
+        robots=YOUBOT,
+    ),
+    PluginCase(
+        "orbit_distance",
+        lambda r: OrbitDistanceConstraint(OrbitDistanceParams(object=OBJECT), r),
+        robots=YOUBOT,
+    ),
+    PluginCase(
+        "view_direction",
+        lambda r: ViewDirectionConstraint(ViewDirectionParams(object=OBJECT), r),
+        robots=YOUBOT,
+    ),
+    PluginCase(
+        "view_direction",
+        lambda r: ViewDirectionConstraint(
+            ViewDirectionParams(object=OBJECT, form="paper"), r
+        ),
+        robots=YOUBOT,
+    ),
     PluginCase(
         "contact_normals",
         lambda r: _with_world(ContactNormalsConstraint(ContactParams(), r)),

@@ -49,8 +49,9 @@ def test_outputs_have_the_declared_shapes_and_are_pure(
 @pytest.mark.parametrize("case", PLUGIN_CASES, ids=lambda c: c.type_name)
 def test_params_round_trip_and_reject_unknown_keys(case: PluginCase, robots) -> None:
     """Dict -> Params -> dict is the identity; an unknown key is named."""
-    params_cls = type(case.build(robots["panda"]).params)
-    params = case.build(robots["panda"]).params
+    robot = robots[case.robots[0]]
+    params_cls = type(case.build(robot).params)
+    params = case.build(robot).params
     plain = to_plain(params)
     assert to_plain(from_plain(params_cls, plain)) == plain
     with pytest.raises(ScenarioError, match="unknown key 'bogus'"):

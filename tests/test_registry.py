@@ -38,7 +38,7 @@ def test_unknown_type_lists_names_and_nearest() -> None:
     """An unknown name suggests the nearest and lists every available one."""
     with pytest.raises(
         UnknownPluginError,
-        match=r"unknown task type 'postur'; did you mean 'posture'\? Available: goal_pose, joint_step, posture",
+        match=r"unknown task type 'postur'; did you mean 'posture'\? Available: camera_velocity, goal_pose, joint_step, posture",
     ):
         TASKS.get("postur")
 

@@ -7,14 +7,24 @@ from cbp.registry import Registry
 from .contact_normals_constraint import ContactNormalsConstraint
 from .joint_limits_constraint import JointLimitsConstraint
 from .joint_velocity_constraint import JointVelocityConstraint
+from .min_altitude_constraint import MinAltitudeConstraint
+from .no_roll_constraint import NoRollConstraint
+from .obstacle_distance_constraint import ObstacleDistanceConstraint
+from .orbit_distance_constraint import OrbitDistanceConstraint
 from .self_collision_constraint import SelfCollisionConstraint
+from .view_direction_constraint import ViewDirectionConstraint
 
 __all__ = [
     "CONSTRAINTS",
     "ContactNormalsConstraint",
     "JointLimitsConstraint",
     "JointVelocityConstraint",
+    "MinAltitudeConstraint",
+    "NoRollConstraint",
+    "ObstacleDistanceConstraint",
+    "OrbitDistanceConstraint",
     "SelfCollisionConstraint",
+    "ViewDirectionConstraint",
 ]
 
 #: Keep sorted by type name (checked at import).
@@ -25,6 +35,11 @@ CONSTRAINTS: Registry[AnyConstraint] = Registry(
         ContactNormalsConstraint,
         JointLimitsConstraint,
         JointVelocityConstraint,
+        MinAltitudeConstraint,
+        NoRollConstraint,
+        ObstacleDistanceConstraint,
+        OrbitDistanceConstraint,
         SelfCollisionConstraint,
+        ViewDirectionConstraint,
     ],
 )

@@ -41,7 +41,7 @@ def test_unknown_plugin(tmp_path: Path) -> None:
     error = _load(tmp_path, "tasks:\n  - type: postur\n")
     assert error.problems == [
         "line 5: tasks[0].type: unknown task type 'postur'; did you mean 'posture'? "
-        "Available: goal_pose, joint_step, posture (or a 'module:Class' path)."
+        "Available: camera_velocity, goal_pose, joint_step, posture (or a 'module:Class' path)."
     ]
 
 

@@ -1,0 +1,83 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Constraint ``orbit_distance``: the camera stays at r_d from the object (eq. 7)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from cbp.errors import ConfigError
+from cbp.plugin import Constraint, FloatArray, PluginParams
+from cbp.robot import RobotModel
+from cbp.state import RobotState
+from plugins.constraints._orbit import CameraObjectParams, ObjectTarget, frame_of, unit
+
+
+@dataclass(frozen=True, kw_only=True)
+class OrbitDistanceParams(CameraObjectParams):
+    """Parameters of :class:`OrbitDistanceConstraint`."""
+
+    distance: float = 0.5
+    """Desired distance r_d [m]; the operator changes it at run time (input)."""
+
+    def __post_init__(self) -> None:
+        """Positive distance."""
+        super().__post_init__()
+        if not self.distance > 0:
+            raise ConfigError(f"must be > 0, got {self.distance}", "distance")
+
+
+class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
+    r"""Distance from the camera to the object's centre, equal to r_d.
+
+    .. math:: f_1 = \|p_o - p_e\| = r_d, \qquad
+              \frac{\partial f_1}{\partial q} = -\hat d^T J_t
+
+    with :math:`d = p_o - p_e`, :math:`\hat d = d / \|d\|` and :math:`J_t` the
+    camera frame's linear Jacobian (world-aligned, arm and base). Dimension 1
+    [m]. Singular when the camera is at the centre. Input: ``[r_d]``.
+    """
+
+    type_name: ClassVar[str] = "orbit_distance"
+    Params: ClassVar[type[PluginParams]] = OrbitDistanceParams
+    unit: ClassVar[str] = "m"
+    input_size: ClassVar[int] = 1
+
+    def __init__(
+        self, params: OrbitDistanceParams, robot: RobotModel, name: str = ""
+    ) -> None:
+        """Resolve the frame; r_d starts at ``distance``."""
+        super().__init__(params, robot, name)
+        self.frame_id = frame_of(robot, params.frame)
+        self.object = ObjectTarget(params.object)
+        self.distance = params.distance
+
+    @property
+    def dim(self) -> int:
+        """One row."""
+        return 1
+
+    def set_input(self, values: FloatArray) -> None:
+        """Set r_d [m] from the operator's input ``[r_d]``."""
+        r = float(values[0])
+        if not r > 0:
+            raise ValueError(f"r_d must be > 0, got {r}")
+        self.distance = r
+
+    def compute_value(self, state: RobotState) -> FloatArray:
+        """||p_o - p_e||."""
+        d = self.object.position - state.frame_position(self.frame_id)
+        return np.array([np.linalg.norm(d)])
+
+    def compute_jacobian(self, state: RobotState) -> FloatArray:
+        """-d̂^T J_t."""
+        d = self.object.position - state.frame_position(self.frame_id)
+        direction, _ = unit(d)
+        return -direction.dot(state.frame_jacobian(self.frame_id)[:3])[None, :]
+
+    def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
+        """r_d <= f <= r_d (an equality when hard)."""
+        r = np.array([self.distance])
+        return r, r.copy()
