@@ -71,7 +71,7 @@ class MinAltitudeConstraint(Constraint[MinAltitudeParams]):
         Je = state.frame_jacobian(self.frame_id)
         Jb = state.frame_jacobian(self.base_id)
         row = z_b.dot(Je[:3] - Jb[:3]) + np.cross(z_b, offset).dot(Jb[3:])
-        return row[None, :]
+        return np.asarray(row[None, :])
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """z_min <= f."""

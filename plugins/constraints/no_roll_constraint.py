@@ -63,7 +63,7 @@ class NoRollConstraint(Constraint[NoRollParams]):
         y_e = state.frame_rotation(self.frame_id)[:, 1]
         Jb = state.frame_jacobian(self.base_id)[3:]
         Je = state.frame_jacobian(self.frame_id)[3:]
-        return np.cross(z_b, y_e).dot(Jb - Je)[None, :]
+        return np.asarray(np.cross(z_b, y_e).dot(Jb - Je)[None, :])
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """Zero: an equality when hard."""

@@ -67,7 +67,9 @@ class ObstacleDistanceConstraint(Constraint[ObstacleDistanceParams]):
         return 1
 
     def _gap(self, state: RobotState) -> FloatArray:
-        return self._project.dot(state.frame_position(self.frame_id) - self.obstacle)
+        return np.asarray(
+            self._project.dot(state.frame_position(self.frame_id) - self.obstacle)
+        )
 
     def compute_value(self, state: RobotState) -> FloatArray:
         """||P (p_b - p_obs)||."""
@@ -77,7 +79,7 @@ class ObstacleDistanceConstraint(Constraint[ObstacleDistanceParams]):
         """ĝ^T P J_t,b."""
         direction, _ = unit(self._gap(state))
         J = state.frame_jacobian(self.frame_id)[:3]
-        return direction.dot(self._project).dot(J)[None, :]
+        return np.asarray(direction.dot(self._project).dot(J)[None, :])
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """r_r <= f."""

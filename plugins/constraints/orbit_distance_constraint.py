@@ -75,7 +75,9 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
         """-d̂^T J_t."""
         d = self.object.position - state.frame_position(self.frame_id)
         direction, _ = unit(d)
-        return -direction.dot(state.frame_jacobian(self.frame_id)[:3])[None, :]
+        return np.asarray(
+            -direction.dot(state.frame_jacobian(self.frame_id)[:3])[None, :]
+        )
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """r_d <= f <= r_d (an equality when hard)."""

@@ -86,7 +86,7 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
         if self.params.form == "paper":
             x = R[:, 0]
             row = -x.dot(Jt) + np.cross(x, d).dot(Jw) + direction.dot(Jt)
-            return row[None, :]
+            return np.asarray(row[None, :])
         projector = (np.eye(3) - np.outer(direction, direction)) / norm
         rows = np.empty((2, J.shape[1]))
         for i, axis in enumerate((R[:, 1], R[:, 2])):
