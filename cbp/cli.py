@@ -31,7 +31,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument(
         "--method",
         default=None,
-        help="executor: kinematic, cat, ik, mp or jt (default: method.name)",
+        help="executor: kinematic, cat, ik, mp, jt or velocity (default: method.name)",
     )
     run.add_argument("--gui", action="store_true", help="show PyBullet's window")
     run.add_argument(
@@ -110,8 +110,8 @@ def _run(
         print(exc, file=sys.stderr)
         return 2
     method = method or scenario.spec.method.name
-    if method != "kinematic" and method not in SIMULATED_METHODS:
-        choices = ("kinematic", *SIMULATED_METHODS)
+    choices = ("kinematic", "velocity", *SIMULATED_METHODS)
+    if method not in choices:
         print(
             f"unknown method '{method}'{suggestion(method, choices)} "
             f"Methods: {', '.join(choices)}.",
@@ -127,6 +127,18 @@ def _run(
             f"{metrics['final_position_error_m']} m, {metrics['events']} events"
         )
         print(f"wrote {out}/report.md, metrics.json, trace.csv, tracking.png")
+        return 0
+    if method == "velocity":
+        from cbp.executors.velocity import run_velocity
+        from cbp.report import write_velocity_run
+
+        v = write_velocity_run(scenario, run_velocity(scenario, gui), out)
+        print(
+            f"{scenario.spec.name} (velocity): after {v['transient_s']} s, distance "
+            f"error <= {_num(v['distance_error_max_m'], 1e3)} mm, view error <= "
+            f"{_num(v['view_error_max_deg'])} deg, {v['events']:.0f} events"
+        )
+        print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
         return 0
     run_trace = run_simulated(scenario, method, gui)
     m = write_runs(scenario, {method: run_trace}, out)[method]

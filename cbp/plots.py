@@ -1,10 +1,15 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Plots in the style of the CAT paper's figures, one or several methods each.
+"""Plots in the style of the papers' figures.
+
+CAT paper, one or several methods each (:func:`plot_runs`):
 
 * ``tracking.png``: distance from the start pose over time, for the goal and
   for each method's end effector (Figs. 4-6);
 * ``errors.png``: position and orientation error to the goal over time;
 * ``contact_force.png``: sum of contact normal forces over time.
+
+Orbit paper, one run (:func:`plot_orbit`): distance, view error, roll,
+altitude, obstacle distance and velocities over time.
 """
 
 from __future__ import annotations
@@ -14,9 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
+from cbp.robot import FloatArray
 from cbp.trace import RunTrace
 
-__all__ = ["METHOD_COLORS", "plot_runs"]
+__all__ = ["METHOD_COLORS", "plot_orbit", "plot_runs"]
 
 #: One color per method across every figure (as in the paper).
 METHOD_COLORS = {
@@ -85,3 +91,62 @@ def _save(fig: object, path: Path) -> Path:
     fig.savefig(path, dpi=100)  # type: ignore[attr-defined]
     plt.close(fig)  # type: ignore[arg-type]
     return path
+
+
+def plot_orbit(
+    t: FloatArray,
+    signals: Mapping[str, FloatArray],
+    u: FloatArray,
+    joint_labels: list[str],
+    out: Path,
+    title: str,
+) -> list[Path]:
+    """The orbit paper's figures (Figs. 7-18) for one run, as far as it has them.
+
+    ``distance.png`` (r(t) and r_d), ``orientation.png`` (view error),
+    ``roll.png``, ``altitude.png`` (h(t) and z_min), ``obstacle.png`` (g(t) and
+    r_r) and ``velocities.png`` (base and joint velocities).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [
+        ("distance.png", "distance", "distance_desired", "r(t)", "r_d", "[m]"),
+        ("orientation.png", "view_error_deg", None, "view error", None, "[deg]"),
+        ("roll.png", "roll_deg", None, "roll about the line of sight", None, "[deg]"),
+        ("altitude.png", "altitude", "min_altitude", "h(t)", "z_min", "[m]"),
+        (
+            "obstacle.png",
+            "obstacle_distance",
+            "min_obstacle_distance",
+            "g(t)",
+            "r_r",
+            "[m]",
+        ),
+    ]
+    paths = []
+    for name, key, bound, label, bound_label, unit in panels:
+        if key not in signals:
+            continue
+        fig, ax = plt.subplots(figsize=(8, 3))
+        ax.plot(t, signals[key], label=label)
+        if bound is not None and bound in signals:
+            ax.plot(t, signals[bound], "k--", label=bound_label)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(f"{label} {unit}")
+        ax.set_title(f"{title}: {label}")
+        ax.legend()
+        ax.grid(alpha=0.3)
+        paths.append(_save(fig, out / name))
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for i, label in enumerate(joint_labels):
+        ax.plot(t, u[:, i], label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("velocity [m/s or rad/s]")
+    ax.set_title(f"{title}: base and joint velocities")
+    ax.legend(ncol=4, fontsize=7)
+    ax.grid(alpha=0.3)
+    paths.append(_save(fig, out / "velocities.png"))
+    return paths

@@ -17,8 +17,9 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.executors.kinematic import Trace
+from cbp.executors.velocity import VelocityTrace
 from cbp.metrics import compute_metrics as compute_run_metrics
-from cbp.plots import plot_runs
+from cbp.plots import plot_orbit, plot_runs
 from cbp.robot import FloatArray
 from cbp.scenario import Scenario
 from cbp.trace import RunTrace
@@ -248,3 +249,54 @@ def _quaternion(R: FloatArray) -> FloatArray:
         return np.full(4, np.nan)
     q = pin.Quaternion(np.asarray(R))
     return np.array([q.x, q.y, q.z, q.w])
+
+
+# ---------------------------------------------------------------- velocity runs
+
+
+def write_velocity_run(
+    scenario: Scenario, trace: VelocityTrace, out: Path, method: str = "velocity"
+) -> dict[str, Any]:
+    """Write a velocity-executor run: trace.csv, metrics.json, the orbit figures."""
+    from cbp.executors.velocity import orbit_metrics
+
+    out.mkdir(parents=True, exist_ok=True)
+    metrics = orbit_metrics(scenario, trace)
+    robot = scenario.robot
+    v_labels = ["base_vx", "base_vy", "base_wz", *robot.joint_names[1:]]
+    q_labels = ["base_x", "base_y", "base_cos", "base_sin", *robot.joint_names[1:]]
+    signals = trace.signals
+    with open(out / "trace.csv", "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["t", *q_labels, *(f"u_{n}" for n in v_labels), *signals])
+        for i in range(trace.t.size):
+            writer.writerow(
+                [f"{trace.t[i]:.4f}"]
+                + [f"{v:.6f}" for v in trace.q[i]]
+                + [f"{v:.6f}" for v in trace.u[i]]
+                + [f"{signals[k][i]:.6f}" for k in signals]
+            )
+    document = {
+        method: {
+            **metrics,
+            "events": [{"t": t, "message": m} for t, m in trace.events],
+        }
+    }
+    (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n")
+    figures = plot_orbit(trace.t, signals, trace.u, v_labels, out, scenario.spec.name)
+    lines = [
+        f"# {scenario.spec.name}: {method}",
+        "",
+        scenario.spec.description.strip(),
+        "",
+        "| metric | value |",
+        "|---|---|",
+        *(f"| {k} | {_fmt(v)} |" for k, v in metrics.items()),
+        "",
+        *(f"![{p.stem}]({p.name})" for p in figures),
+        "",
+    ]
+    if trace.events:
+        lines += ["## Events", ""] + [f"- t = {t:.3f} s: {m}" for t, m in trace.events]
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    return metrics

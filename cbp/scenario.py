@@ -24,7 +24,14 @@ from cbp.collision.geometry import RobotGeometry
 from cbp.collision.world import CollisionSettings, CollisionWorld, UsesCollisionWorld
 from cbp.engine import Engine
 from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
-from cbp.executors.settings import CatSettings, IkSettings, JtSettings, MpSettings
+from cbp.executors.settings import (
+    CatSettings,
+    IkSettings,
+    JtSettings,
+    MpSettings,
+    VelocitySettings,
+)
+from cbp.expressions import TimeFunction, compile_time_function
 from cbp.goals import GoalSpec, GoalStream
 from cbp.perception.spec import PerceptionSpec
 from cbp.plugin import AnyPlugin, Plugin, Task
@@ -46,7 +53,7 @@ __all__ = [
 ]
 
 #: Executors ``cbp run --method`` accepts.
-MethodName = Literal["kinematic", "cat", "ik", "mp", "jt"]
+MethodName = Literal["kinematic", "cat", "ik", "mp", "jt", "velocity"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -88,7 +95,8 @@ class MethodSpec:
     constraint-aware teleoperation in the simulator (many validated QP steps per
     command period, spliced trajectories); ``ik``, ``mp``, ``jt``: the CAT
     paper's alternatives (collision-aware IK, motion planning, Jacobian
-    transpose)."""
+    transpose); ``velocity``: one QP per control tick, velocities sent to a
+    mobile manipulator (orbit object, pan object)."""
     dt: float = 0.01
     """``kinematic``: duration of one control step [s]."""
     cat: CatSettings = field(default_factory=CatSettings)
@@ -99,11 +107,28 @@ class MethodSpec:
     """Settings of the motion-planning executor."""
     jt: JtSettings = field(default_factory=JtSettings)
     """Settings of the Jacobian-transpose executor."""
+    velocity: VelocitySettings = field(default_factory=VelocitySettings)
+    """Settings of the velocity executor (mobile manipulators, orbit object)."""
 
     def __post_init__(self) -> None:
         """Positive step."""
         if not self.dt > 0:
             raise ConfigError(f"must be > 0, got {self.dt}", "dt")
+
+
+@dataclass(frozen=True, kw_only=True)
+class InputSpec:
+    """One live operator input: values for an entry's ``set_input``, as functions of t.
+
+    The orbit's user velocity and desired distance are inputs; so is anything a
+    plugin exposes through ``set_input``.
+    """
+
+    entry: str
+    """Name of the task or constraint entry that takes the input."""
+    values: list[str | float]
+    """One number or expression of ``t`` per input value (see
+    :mod:`cbp.expressions`)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -140,6 +165,8 @@ class ScenarioSpec:
     """Contact queries and step validation."""
     perception: PerceptionSpec = field(default_factory=PerceptionSpec)
     """Where the collision world's environment comes from."""
+    inputs: list[InputSpec] = field(default_factory=list)
+    """Live operator inputs to entries (velocity executor), functions of time."""
     tasks: Any = None
     """Task entries (bound by :func:`load_scenario`)."""
     constraints: Any = None
@@ -230,6 +257,20 @@ class Scenario:
             return None
         return GoalStream(self.spec.goal, self.path.parent)
 
+    def inputs(self) -> list[tuple[AnyPlugin, list[TimeFunction]]]:
+        """Each input's plugin and its compiled functions of time."""
+        by_name = {e.name: e.plugin for e in self.entries}
+        return [
+            (
+                by_name[spec.entry],
+                [
+                    compile_time_function(v, f"inputs[{i}].values[{k}]")
+                    for k, v in enumerate(spec.values)
+                ],
+            )
+            for i, spec in enumerate(self.spec.inputs)
+        ]
+
     def goal_task(self) -> Task[Any] | None:
         """The task entry that receives the goal (checked at load time)."""
         goal = self.spec.goal
@@ -304,6 +345,7 @@ def load_scenario(
         q0 = _initial_configuration(doc, robot_spec, robot, root)
         if spec is not INVALID:
             _check_goal(doc, spec, entries, root, path.parent)
+            _check_inputs(doc, spec, entries, root)
         names = [e.name for e in entries]
         for name in sorted({n for n in names if names.count(n) > 1}):
             doc.report(
@@ -475,3 +517,36 @@ def _check_goal(
                 f"{suggestion(goal.task, tasks)} Tasks: {', '.join(tasks) or '(none)'}."
             )
         doc.report(_key_node(root, "goal"), "goal.task", message)
+
+
+def _check_inputs(
+    doc: Document, spec: ScenarioSpec, entries: list[Entry], root: yaml.Node
+) -> None:
+    by_name = {e.name: e.plugin for e in entries}
+    node = _key_node(root, "inputs")
+    for i, item in enumerate(spec.inputs):
+        where = f"inputs[{i}]"
+        plugin = by_name.get(item.entry)
+        if plugin is None or not hasattr(plugin, "set_input"):
+            takers = [n for n, p in by_name.items() if hasattr(p, "set_input")]
+            doc.report(
+                node,
+                f"{where}.entry",
+                f"no entry named '{item.entry}' takes an input"
+                f"{suggestion(item.entry, takers)} Entries with inputs: "
+                f"{', '.join(takers) or '(none)'}.",
+            )
+            continue
+        size = int(getattr(plugin, "input_size", 0))
+        if len(item.values) != size:
+            doc.report(
+                node,
+                f"{where}.values",
+                f"'{item.entry}' ({plugin.type_name}) takes {size} input value(s), "
+                f"got {len(item.values)}",
+            )
+        for k, value in enumerate(item.values):
+            try:
+                compile_time_function(value, f"{where}.values[{k}]")
+            except ConfigError as exc:
+                doc.report(node, exc.location, exc.message)

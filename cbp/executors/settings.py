@@ -14,6 +14,7 @@ __all__ = [
     "IkSettings",
     "JtSettings",
     "MpSettings",
+    "VelocitySettings",
 ]
 
 
@@ -203,3 +204,19 @@ class JtSettings:
             "nullspace_stiffness",
             "joint_damping",
         )
+
+
+@dataclass(frozen=True, kw_only=True)
+class VelocitySettings:
+    """The ``method.velocity:`` section: one QP per control tick, velocities out."""
+
+    dt: float = 0.02
+    """Control tick [s]; entry gains are per tick (k [1/s] times dt)."""
+    transient_s: float = 5.0
+    """Metrics of the orbit skip this first part of the run [s] (the initial
+    convergence onto the constraints)."""
+
+    def __post_init__(self) -> None:
+        """Positive tick, non-negative transient."""
+        require(self, "> 0", "dt")
+        require(self, ">= 0", "transient_s")
