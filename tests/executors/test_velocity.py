@@ -1,0 +1,162 @@
+"""The velocity executor: orbit object (the orbit paper's two cases), pan object."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from cbp.errors import ScenarioError
+from cbp.executors.velocity import VelocityTrace, orbit_metrics, run_velocity
+from cbp.scenario import Scenario, load_scenario
+from cbp.state import RobotState
+from tests.conftest import run_cbp
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+
+
+@cache
+def _run(name: str) -> tuple[Scenario, VelocityTrace, dict[str, Any]]:
+    scenario = load_scenario(SCENARIOS / f"{name}.yaml")
+    trace = run_velocity(scenario)
+    return scenario, trace, orbit_metrics(scenario, trace)
+
+
+@pytest.mark.parametrize("case", ["youbot_orbit_case1", "youbot_orbit_case2"])
+def test_orbit_keeps_every_constraint(case: str) -> None:
+    """The issue's checks, from the trace: lag, view, roll, bounds, both move."""
+    _, trace, m = _run(case)
+    assert trace.events == []
+    assert m["distance_error_max_m"] < 0.02
+    assert m["view_error_max_deg"] < 5.0
+    assert m["roll_max_deg"] < 1.0
+    s = trace.signals
+    assert np.all(s["altitude"] >= s["min_altitude"])  # every sample, transient too
+    assert np.all(s["obstacle_distance"] >= s["min_obstacle_distance"])
+    assert m["base_travel_m"] > 0.3
+    assert m["arm_travel_rad"] > 1.0
+    # The view error decays from the start's ~30 deg.
+    assert s["view_error_deg"][0] > 20.0
+    assert np.all(s["view_error_deg"][trace.t >= m["transient_s"]] < 5.0)
+
+
+def test_orbit_follows_the_desired_distance() -> None:
+    """Case 1 changes r_d; the distance follows it up and back."""
+    _, trace, _ = _run("youbot_orbit_case1")
+    s = trace.signals
+    at = {t: int(np.searchsorted(trace.t, t)) for t in (15.0, 32.0, 55.0)}
+    assert s["distance"][at[15.0]] == pytest.approx(0.6, abs=5e-3)
+    assert s["distance"][at[32.0]] == pytest.approx(0.75, abs=5e-3)
+    assert s["distance"][at[55.0]] == pytest.approx(0.6, abs=5e-3)
+
+
+def test_pan_translates_the_camera_along_its_own_axes() -> None:
+    """Pan object: forward 0.5 m, then sideways 0.5 m, then up, without roll."""
+    scenario, trace, m = _run("youbot_pan")
+    robot = scenario.robot
+    state = RobotState(robot)
+    frame = robot.frame_id("camera_link")
+
+    def pose(t: float) -> tuple[np.ndarray, np.ndarray]:
+        state.update(trace.q[int(np.searchsorted(trace.t, t))])
+        return state.frame_position(frame).copy(), state.frame_rotation(frame).copy()
+
+    p0, R0 = pose(0.5)
+    p1, _ = pose(7.0)
+    p2, _ = pose(13.5)
+    forward = R0.T.dot(p1 - p0)
+    sideways = R0.T.dot(p2 - p1)
+    assert forward[0] == pytest.approx(0.5, abs=0.05)
+    assert abs(forward[1]) < 0.05
+    assert sideways[1] == pytest.approx(0.5, abs=0.05)
+    assert m["roll_max_deg"] < 1.0
+
+
+def test_refused_input_keeps_the_previous_value(tmp_path: Path) -> None:
+    """A desired distance that turns negative is refused, with an event."""
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        textwrap.dedent(
+            f"""\
+            name: bad_input
+            include: {SCENARIOS / "configs" / "orbit.yaml"}
+            duration: 2.0
+            inputs:
+              - entry: distance
+                values: ["where(t > 1, -1, 0.6)"]
+            """
+        )
+    )
+    trace = run_velocity(load_scenario(path))
+    refused = [msg for _, msg in trace.events if "refused" in msg]
+    assert len(refused) == 49  # every tick after 1 s (1.02 s to 1.98 s)
+    assert np.all(trace.signals["distance_desired"][trace.t > 1.0] == -1)
+    assert np.all(np.isfinite(trace.q))
+
+
+def test_input_errors_are_located(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        textwrap.dedent(
+            f"""\
+            name: bad
+            include: {SCENARIOS / "configs" / "orbit.yaml"}
+            duration: 2.0
+            inputs:
+              - entry: distanse
+                values: [0.6]
+              - entry: user_velocity
+                values: [0.1]
+              - entry: distance
+                values: ["sin(tt)"]
+            """
+        )
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    text = str(info.value)
+    assert "inputs[0].entry: no entry named 'distanse' takes an input" in text
+    assert "'distance'" in text
+    assert "takes 2 input value(s), got 1" in text
+    assert "inputs[2].values[0]" in text
+    assert "unknown name 'tt'" in text
+
+
+def test_cbp_run_writes_the_orbit_outputs(tmp_path: Path) -> None:
+    out = tmp_path / "orbit"
+    result = run_cbp(
+        "run",
+        str(SCENARIOS / "youbot_orbit_case2.yaml"),
+        "--set",
+        "duration=6",
+        "--out",
+        str(out),
+    )
+    assert result.returncode == 0, result.stderr
+    metrics = json.loads((out / "metrics.json").read_text())["velocity"]
+    for key in (
+        "transient_s",
+        "distance_error_max_m",
+        "view_error_max_deg",
+        "roll_max_deg",
+        "altitude_margin_min_m",
+        "obstacle_margin_min_m",
+        "base_travel_m",
+        "arm_travel_rad",
+        "compute_ms_per_tick_median",
+    ):
+        assert key in metrics
+    for name in (
+        "distance",
+        "orientation",
+        "roll",
+        "altitude",
+        "obstacle",
+        "velocities",
+    ):
+        assert (out / f"{name}.png").stat().st_size > 0
