@@ -39,7 +39,7 @@ test-all: lint
 	$(BIN)/python -m pytest -q
 
 bench: $(DEV_STAMP)
-	$(BIN)/python benchmarks/engine_step.py --out benchmarks/RESULTS.md
+	$(BIN)/cbp bench --results benchmarks/RESULTS.md --out benchmarks/results.json
 	$(BIN)/python benchmarks/collision.py --append benchmarks/RESULTS.md
 	$(BIN)/python benchmarks/cat_periods.py --append benchmarks/RESULTS.md
 

@@ -61,6 +61,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="KEY=VALUE",
         help="override a scenario value (as for run)",
     )
+    bench = sub.add_parser("bench", help="time the engine, CAT, MP, orbit and map rows")
+    bench.add_argument("--quick", action="store_true", help="fewer repetitions")
+    bench.add_argument("--out", type=Path, default=None, help="write the rows as JSON")
+    bench.add_argument(
+        "--results", type=Path, default=None, help="write a RESULTS.md table there"
+    )
     check = sub.add_parser("check", help="validate scenario files without running them")
     check.add_argument("scenarios", type=Path, nargs="+")
     sub.add_parser("plugins", help="list every plugin with its parameters")
@@ -75,6 +81,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if overrides is None:
             return 2
         return _compare(args.scenario, args.methods, args.out, args.jobs, overrides)
+    if args.command == "bench":
+        return _bench(args.quick, args.out, args.results)
     if args.command == "check":
         return _check(args.scenarios)
     return _plugins()
@@ -177,6 +185,22 @@ def _compare(
             f"{_num(m['total_time_s'])} s  peak force {m['peak_contact_force_n']:.1f} N"
         )
     print(f"Report: {result.out / 'report.md'}")
+    return 0
+
+
+def _bench(quick: bool, out: Path | None, results: Path | None) -> int:
+    from cbp.bench import BenchConfig, dump, format_row, run_bench, write_results
+
+    config = BenchConfig.quick() if quick else BenchConfig()
+    result = run_bench(config, progress=lambda row: print(format_row(row), flush=True))
+    print("profile of the CAT step (own time per step):")
+    for name, us in result["profile_cat_step"]:
+        print(f"  {name}: {us:.1f} us")
+    if out is not None:
+        dump(result, out)
+    if results is not None:
+        flags = " --quick" if quick else ""
+        write_results(result, results, f"cbp bench{flags} --results {results}")
     return 0
 
 

@@ -1,0 +1,755 @@
+# SPDX-License-Identifier: Apache-2.0
+"""``cbp bench``: where the time goes, against peers and against the limit.
+
+Every row runs in this process, one after the other, so that the ratios between
+rows hold on a noisy machine; absolute times differ between machines. Each row
+is the median and 95th percentile of many repetitions after a warm-up. Rows:
+
+1. one engine step of the Panda's reaching task (goal pose, posture, joint step,
+   joint position and velocity limits), daqp, piqp and cvxpy backends;
+2. the same task on peers: pink (``solve_ik``, daqp), placo
+   (``KinematicsSolver``) and a hand-written pinocchio + numpy + daqp step;
+3. one CAT step with collisions (kinematics, contact query, contact rows, QP,
+   step validation) on the boards scene and against an octree of the shelf;
+4. scaling with contact rows and with the size of the scene and of the map;
+5. MP planning in the shelf, one orbit tick, one map update.
+
+Peers (pink) are bench extras: ``pip install -e ".[bench]"``.
+"""
+
+from __future__ import annotations
+
+import cProfile
+import gc
+import io
+import json
+import platform
+import pstats
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+__all__ = ["BenchConfig", "Row", "run_bench", "write_results"]
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "scenarios"
+DT = 0.01
+WEIGHTS = np.array([1.0, 1.0, 1.0, 0.3, 0.3, 0.3])
+GOALS = [
+    pin.SE3(pin.rpy.rpyToMatrix(np.pi, 0.0, yaw), np.array(p))
+    for yaw, p in [
+        (0.0, [0.5, 0.2, 0.4]),
+        (0.5, [0.4, -0.3, 0.5]),
+        (-0.4, [0.6, 0.0, 0.2]),
+    ]
+]
+PERIOD = 1.0 / 30.0
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """How many repetitions; ``quick`` runs in under two minutes."""
+
+    repetitions: int = 3000
+    """Repetitions of a fast row (slower rows use fewer)."""
+    warmup: int = 200
+    """Calls before timing."""
+    mp_seeds: int = 20
+    """Planning runs for the MP row (one seed for the process, fresh samples
+    per run)."""
+
+    @classmethod
+    def quick(cls) -> BenchConfig:
+        """Fewer repetitions: every row, in under two minutes."""
+        return cls(repetitions=400, warmup=50, mp_seeds=5)
+
+    @classmethod
+    def tiny(cls) -> BenchConfig:
+        """A handful of repetitions, to keep the benchmark working in tests."""
+        return cls(repetitions=5, warmup=2, mp_seeds=1)
+
+
+@dataclass
+class Row:
+    """One measured case.
+
+    Attributes:
+        group: the table it belongs to.
+        case: what was timed.
+        median_us: median wall time per call [us].
+        p95_us: 95th percentile [us].
+        n: repetitions.
+        ratio_to: the row the ratio is taken against (same group), if any.
+        ratio: median / that row's median.
+        note: what the row includes.
+    """
+
+    group: str
+    case: str
+    median_us: float
+    p95_us: float
+    n: int
+    ratio_to: str = ""
+    ratio: float | None = None
+    note: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def per_period(self) -> float:
+        """Calls that fit in a 33 ms command period."""
+        return PERIOD * 1e6 / self.median_us if self.median_us > 0 else float("inf")
+
+
+def measure(fn: Callable[[int], object], n: int, warmup: int) -> tuple[float, float]:
+    """Median and 95th percentile [us] of ``fn(i)`` over ``n`` calls after a warm-up."""
+    for i in range(warmup):
+        fn(i)
+    samples = np.empty(n)
+    gc.disable()
+    try:
+        for i in range(n):
+            start = time.perf_counter()
+            fn(i)
+            samples[i] = time.perf_counter() - start
+    finally:
+        gc.enable()
+    return float(np.median(samples) * 1e6), float(np.percentile(samples, 95) * 1e6)
+
+
+# ---------------------------------------------------------------- 1-2: reaching
+
+
+def _engine(robot: Any, solver: str) -> tuple[Any, Any]:
+    from cbp.engine import Engine
+    from cbp.qp import Entry
+    from plugins.constraints.joint_limits_constraint import (
+        JointLimitsConstraint,
+        JointLimitsParams,
+    )
+    from plugins.constraints.joint_velocity_constraint import (
+        JointVelocityConstraint,
+        JointVelocityParams,
+    )
+    from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+    from plugins.tasks.joint_step_task import JointStepParams, JointStepTask
+    from plugins.tasks.posture_task import PostureParams, PostureTask
+
+    goal = GoalPoseTask(GoalPoseParams(frame="panda_hand", clip="independent"), robot)
+    entries = [
+        Entry.make(goal, weight=WEIGHTS),
+        Entry.make(JointStepTask(JointStepParams(), robot), weight=1e-3),
+        Entry.make(PostureTask(PostureParams(), robot), weight=1e-4, gain=0.1),
+        Entry.make(JointLimitsConstraint(JointLimitsParams(margin=0.02), robot)),
+        Entry.make(JointVelocityConstraint(JointVelocityParams(scale=0.5), robot)),
+    ]
+    return Engine(robot, entries, solver=solver), goal
+
+
+class HandWritten:
+    """The reaching step without a framework: pinocchio + numpy + daqp, with care."""
+
+    def __init__(self, robot: Any) -> None:
+        """Precompute everything that does not change between steps."""
+        self.model = robot.model
+        self.data = robot.model.createData()
+        self.frame = robot.frame_id("panda_hand")
+        self.lower = robot.lower_limits + 0.02
+        self.upper = robot.upper_limits - 0.02
+        self.middle = 0.5 * (robot.lower_limits + robot.upper_limits)
+        self.reach = 0.5 * robot.velocity_limits * DT
+        self.sqrt_w = np.sqrt(WEIGHTS)
+        self.H_const = (1e-3 + 1e-4 + 1e-9) * np.eye(robot.nv)
+        self.A = np.eye(robot.nv)
+        self.sense = np.zeros(robot.nv, dtype=np.int32)
+        self.goal = GOALS[0]
+
+    def step(self, q: np.ndarray) -> np.ndarray:
+        """Return dq for one step from q."""
+        import daqp
+
+        model, data, fid = self.model, self.data, self.frame
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        placement = data.oMf[fid]
+        J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+        M = placement.rotation.dot(self.goal.rotation.T)
+        e = np.empty(6)
+        e[:3] = placement.translation - self.goal.translation
+        e[3:] = pin.log3(M)
+        J[3:] = pin.Jlog3(M).dot(M.T).dot(J[3:])
+        desired = -e
+        n = np.linalg.norm(desired[:3])
+        if n > 0.01:
+            desired[:3] *= 0.01 / n
+        n = np.linalg.norm(desired[3:])
+        if n > 0.05:
+            desired[3:] *= 0.05 / n
+        Jw = J * self.sqrt_w[:, None]
+        H = Jw.T.dot(Jw) + self.H_const
+        g = -Jw.T.dot(desired * self.sqrt_w) + 1e-4 * 0.1 * (q - self.middle)
+        lower = np.maximum(self.lower - q, -self.reach)
+        upper = np.minimum(self.upper - q, self.reach)
+        x, _, _, _ = daqp.solve(H, g, self.A, upper, lower, self.sense)
+        return np.asarray(x)
+
+
+def _reaching_rows(cfg: BenchConfig) -> list[Row]:
+    from cbp.robot import RobotModel
+
+    robot = RobotModel.load("franka_panda")
+    q0 = robot.home()
+    n, w = cfg.repetitions, cfg.warmup
+    rows: list[Row] = []
+    hand = HandWritten(robot)
+    state = {"q": q0.copy()}
+
+    def hand_step(i: int) -> object:
+        hand.goal = GOALS[(i // 64) % len(GOALS)]
+        dq = hand.step(state["q"])
+        state["q"] = pin.integrate(robot.model, state["q"], dq)
+        return dq
+
+    base = "hand-written: pinocchio + numpy + daqp (no framework)"
+    rows.append(Row("reaching", base, *measure(hand_step, n, w), n))
+    for solver, reps in (("daqp", n), ("piqp", n), ("cvxpy", max(n // 20, 3))):
+        engine, goal = _engine(robot, solver)
+        state["q"] = q0.copy()
+
+        def engine_step(i: int, engine: Any = engine, goal: Any = goal) -> object:
+            target = GOALS[(i // 64) % len(GOALS)]
+            goal.set_target(target.translation, target.rotation)
+            dq = engine.step(state["q"], DT)
+            state["q"] = robot.integrate(state["q"], dq)
+            return dq
+
+        rows.append(
+            Row(
+                "reaching",
+                f"cbp Engine.step, solver={solver}",
+                *measure(engine_step, reps, min(w, reps)),
+                reps,
+            )
+        )
+    rows += _peer_rows(robot, q0, cfg)
+    daqp_row = rows[1]
+    for row in rows:
+        if row is not daqp_row:
+            row.ratio_to, row.ratio = daqp_row.case, row.median_us / daqp_row.median_us
+    rows[1].ratio_to, rows[1].ratio = base, rows[1].median_us / rows[0].median_us
+    return rows
+
+
+def _peer_rows(robot: Any, q0: np.ndarray, cfg: BenchConfig) -> list[Row]:
+    rows = []
+    n, w = cfg.repetitions, cfg.warmup
+    try:
+        import pink
+        from pink.limits import ConfigurationLimit, VelocityLimit
+        from pink.tasks import FrameTask, PostureTask
+    except ImportError:
+        rows.append(Row("reaching", "pink: not installed (bench extra)", 0.0, 0.0, 0))
+    else:
+        model = robot.model
+        configuration = pink.Configuration(model, model.createData(), q0.copy())
+        frame = FrameTask("panda_hand", position_cost=1.0, orientation_cost=0.3)
+        posture = PostureTask(cost=1e-2)
+        posture.set_target(0.5 * (robot.lower_limits + robot.upper_limits))
+        limits = [ConfigurationLimit(model), VelocityLimit(model)]
+
+        def pink_step(i: int) -> object:
+            frame.set_target(GOALS[(i // 64) % len(GOALS)])
+            v = pink.solve_ik(
+                configuration, [frame, posture], DT, solver="daqp", limits=limits
+            )
+            configuration.integrate_inplace(v, DT)
+            return v
+
+        rows.append(
+            Row(
+                "reaching",
+                "pink.solve_ik + integrate (daqp)",
+                *measure(pink_step, max(n // 2, 3), w),
+                max(n // 2, 3),
+                note="FrameTask, PostureTask, ConfigurationLimit, VelocityLimit",
+            )
+        )
+    import placo
+
+    wrapper = placo.RobotWrapper(str(robot.urdf_path), placo.Flags.ignore_collisions)
+    solver = placo.KinematicsSolver(wrapper)
+    solver.mask_fbase(True)
+    solver.enable_velocity_limits(True)
+    solver.dt = DT
+    for joint in ("panda_finger_joint1", "panda_finger_joint2"):
+        solver.mask_dof(joint)
+    for k, name in enumerate(robot.joint_names):
+        wrapper.set_joint(name, float(q0[k]))
+    wrapper.update_kinematics()
+    task = solver.add_frame_task("panda_hand", GOALS[0].homogeneous)
+    task.configure("hand", "soft", 1.0, 0.3)
+    joints = solver.add_joints_task()
+    joints.set_joints(
+        {n: float(v) for n, v in zip(robot.joint_names, robot.middle(), strict=True)}
+    )
+    joints.configure("posture", "soft", 1e-2)
+
+    def placo_step(i: int) -> object:
+        task.T_world_frame = GOALS[(i // 64) % len(GOALS)].homogeneous
+        solver.solve(True)
+        wrapper.update_kinematics()
+        return None
+
+    rows.append(
+        Row(
+            "reaching",
+            "placo KinematicsSolver.solve + update_kinematics",
+            *measure(placo_step, n, w),
+            n,
+            note="frame task, joints task, joint and velocity limits (C++)",
+        )
+    )
+    return rows
+
+
+# ---------------------------------------------------------------- 3-4: CAT steps
+
+
+def _cat_step(
+    scenario: Any, capacity: int | None = None
+) -> tuple[Callable[[int], object], Any]:
+    """One validated CAT step from a fixed configuration near the obstacles.
+
+    ``capacity`` replaces the contact constraint's row capacity (for scaling).
+    """
+    from cbp.engine import Engine
+    from cbp.qp import Entry
+    from plugins.constraints.contact_normals_constraint import (
+        ContactNormalsConstraint,
+        ContactParams,
+    )
+
+    world = scenario.collision_world()
+    entries = list(scenario.entries)
+    if capacity is not None:
+        for k, entry in enumerate(entries):
+            if entry.plugin.type_name == "contact_normals":
+                plugin = ContactNormalsConstraint(
+                    ContactParams(max_contacts=capacity), scenario.robot, entry.name
+                )
+                plugin.attach_world(world)
+                entries[k] = Entry.make(plugin, gain=entry.gain)
+    engine = Engine(scenario.robot, entries, solver=scenario.spec.solver.name)
+    goal_task = scenario.goal_task()
+    stream = scenario.goal_stream()
+    goal = stream.pose(stream.end_time)
+    goal_task.set_target(goal.translation, goal.rotation)
+    q = scenario.q0.copy()
+    robot = scenario.robot
+
+    def step(i: int) -> object:
+        dq = engine.step(q, 0.02)
+        world.check(robot.integrate(q, dq))
+        world.contacts(engine.state)  # the next step's contacts, cached
+        return dq
+
+    return step, world
+
+
+def _cat_rows(cfg: BenchConfig) -> list[Row]:
+    from cbp.collision.environment import OccupancyEnvironment
+    from cbp.scenario import load_scenario
+
+    n, w = max(cfg.repetitions // 4, 3), min(cfg.warmup, 50)
+    rows = []
+    boards = load_scenario(SCENARIOS / "cat_boards.yaml")
+    # Near the first board, where contacts are active.
+    boards.q0[:] = _near_board(boards)
+    step, world = _cat_step(boards)
+    median, p95 = measure(step, n, w)
+    contacts = len(world.contacts(world._state))
+    rows.append(
+        Row(
+            "cat step",
+            "boards, ground truth",
+            median,
+            p95,
+            n,
+            note=f"{contacts} contacts",
+        )
+    )
+    shelf = load_scenario(SCENARIOS / "cat_shelf_reach.yaml")
+    centres = _sample_objects(shelf, 0.01)
+    env = OccupancyEnvironment(centres, 0.01, None)
+    world = shelf.collision_world()
+    world.set_environment(env)
+    step, _ = _cat_step(shelf)
+    median, p95 = measure(step, max(n // 4, 3), min(w, 10))
+    rows.append(
+        Row(
+            "cat step",
+            f"shelf, octree ({len(centres)} cells)",
+            median,
+            p95,
+            max(n // 4, 3),
+        )
+    )
+    for row in rows:
+        row.extra["steps_per_period"] = row.per_period
+    return rows
+
+
+def _near_board(scenario: Any) -> np.ndarray:
+    """A configuration of the boards scene with the hand 2 cm above board 1."""
+    from cbp.executors.ik_search import IkSearch
+    from cbp.executors.settings import IkSearchSettings
+
+    search = IkSearch(scenario.robot, "panda_hand", None, IkSearchSettings())
+    goal = pin.SE3(
+        pin.rpy.rpyToMatrix(np.pi, 0.0, np.pi / 2), np.array([0.5, -0.24, 0.19])
+    )
+    q = search.solve(goal, scenario.q0, time.perf_counter() + 2.0)
+    return scenario.q0 if q is None else q
+
+
+def _sample_objects(scenario: Any, cell: float) -> np.ndarray:
+    """Centres of the cells occupied by the scenario's objects' surfaces."""
+    import trimesh
+
+    points = []
+    for obj in scenario.spec.world.objects:
+        if obj.shape != "box":
+            continue
+        mesh = trimesh.creation.box(
+            extents=obj.size, transform=obj.pose.to_se3().homogeneous
+        )
+        samples, _ = trimesh.sample.sample_surface_even(
+            mesh, int(mesh.area / cell**2 * 4)
+        )
+        points.append(samples)
+    cloud = np.concatenate(points)
+    idx = np.unique(np.floor(cloud / cell).astype(int), axis=0)
+    return np.asarray((idx + 0.5) * cell)
+
+
+def _scaling_rows(cfg: BenchConfig) -> list[Row]:
+    from cbp.collision.world import ContactSet
+    from cbp.scenario import load_scenario
+    from cbp.state import RobotState
+
+    n, w = max(cfg.repetitions // 8, 3), min(cfg.warmup, 20)
+    rows = []
+    base = None
+    for count in (0, 10, 50, 200):
+        # The contact constraint's rows are sized by its capacity: one engine
+        # per count, with room for exactly the rows it gets.
+        scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
+        scenario.q0[:] = _near_board(scenario)
+        probe = scenario.collision_world()
+        found = probe.contacts(RobotState(scenario.robot, scenario.q0))
+        if len(found) == 0:
+            break
+        step, world = _cat_step(scenario, capacity=len(found) + count)
+        pick = np.arange(count) % len(found)
+        extra = found.select(pick) if count else ContactSet.empty()
+
+        def with_rows(
+            i: int, extra: Any = extra, world: Any = world, step: Any = step
+        ) -> object:
+            world.carry_over(extra)
+            return step(i)
+
+        median, p95 = measure(with_rows, n, w)
+        row = Row(
+            "scaling", f"CAT step, {len(found)} + {count} contact rows", median, p95, n
+        )
+        base = base or row
+        row.ratio_to, row.ratio = base.case, median / base.median_us
+        rows.append(row)
+    return rows
+
+
+# ---------------------------------------------------------------- 5: MP, orbit, map
+
+
+def _mp_row(cfg: BenchConfig) -> list[Row]:
+    import ompl.util as ou
+
+    from cbp.executors.mp import MpPlanner
+    from cbp.executors.simulated import SimulatedRun
+    from cbp.scenario import load_scenario
+
+    ou.RNG.setSeed(1)  # once, before any sampling: the runs differ, reproducibly
+    scenario = load_scenario(SCENARIOS / "cat_shelf_reach.yaml")
+    run = SimulatedRun(scenario, "mp", needs_world=True)
+    samples = []
+    solved = 0
+    try:
+        planner = MpPlanner(scenario, run, scenario.spec.method.mp)
+        stream = scenario.goal_stream()
+        assert stream is not None
+        goal = stream.pose(stream.end_time)  # in the shelf
+        target = planner.search.solution_for(goal, scenario.q0, time.perf_counter() + 5)
+        for _ in range(cfg.mp_seeds):
+            start = time.perf_counter()
+            plan = planner.plan(scenario.q0.copy(), goal, 5.0, run)
+            samples.append(time.perf_counter() - start)
+            solved += plan.path is not None
+        checks = planner.checks
+        planner.close()
+    finally:
+        run.finish()
+    times = np.array(samples) * 1e6
+    return [
+        Row(
+            "planning",
+            "MP: IK + RRT-Connect + simplify, shelf reach",
+            float(np.median(times)),
+            float(np.percentile(times, 95)),
+            len(samples),
+            note=(
+                f"{solved} of {len(samples)} runs solved (5 s budget); "
+                f"{checks / max(len(samples), 1):.0f} validity checks per run; "
+                f"IK goal found: {target is not None}"
+            ),
+        )
+    ]
+
+
+def _orbit_row(cfg: BenchConfig) -> list[Row]:
+    from cbp.scenario import load_scenario
+
+    scenario = load_scenario(SCENARIOS / "youbot_orbit_case1.yaml")
+    engine = scenario.make_engine()
+    inputs = scenario.inputs()
+    q = scenario.q0.copy()
+
+    def tick(i: int) -> object:
+        for plugin, functions in inputs:
+            plugin.set_input(np.array([f(0.02 * i) for f in functions]))  # type: ignore[attr-defined]
+        return engine.step(q, 0.02)
+
+    n = cfg.repetitions
+    return [
+        Row(
+            "orbit",
+            "one velocity-executor tick (youBot, 8 DOF)",
+            *measure(tick, n, cfg.warmup),
+            n,
+        )
+    ]
+
+
+def _map_row(cfg: BenchConfig) -> list[Row]:
+    from cbp.perception.camera import DepthCamera
+    from cbp.perception.occupancy import OccupancyGrid
+    from cbp.scenario import load_scenario
+    from cbp.sim.scene import PybulletScene
+    from cbp.state import RobotState
+
+    scenario = load_scenario(SCENARIOS / "cat_shelf_reach.yaml")
+    spec = scenario.spec.perception
+    assert spec.camera is not None
+    with PybulletScene(scenario.robot, scenario.spec.world.objects, SCENARIOS) as scene:
+        scene.set_configuration(scenario.q0)
+        frame = DepthCamera(scene.client, spec.camera).capture()
+    grid = OccupancyGrid(spec, scenario.collision_world().geometry)
+    state = RobotState(scenario.robot, scenario.q0)
+
+    def update(i: int) -> object:
+        grid.integrate(frame, state)
+        return grid.environment()
+
+    n = max(cfg.repetitions // 40, 3)
+    median, p95 = measure(update, n, min(cfg.warmup, 3))
+    return [
+        Row(
+            "map",
+            f"one {spec.camera.width}x{spec.camera.height} frame: integrate + snapshot",
+            median,
+            p95,
+            n,
+            note=f"{len(grid.centres())} occupied cells; rendering excluded",
+        )
+    ]
+
+
+# ---------------------------------------------------------------- profile and output
+
+
+def _profile_cat_step(cfg: BenchConfig) -> list[tuple[str, float]]:
+    """The three largest costs (own time) of the CAT step on the boards."""
+    from cbp.scenario import load_scenario
+
+    scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
+    scenario.q0[:] = _near_board(scenario)
+    step, _ = _cat_step(scenario)
+    for i in range(20):
+        step(i)
+    profile = cProfile.Profile()
+    n = max(cfg.repetitions // 10, 5)
+    profile.enable()
+    for i in range(n):
+        step(i)
+    profile.disable()
+    stats = pstats.Stats(profile, stream=io.StringIO())
+    entries = sorted(
+        stats.stats.items(),  # type: ignore[attr-defined]
+        key=lambda kv: kv[1][2],
+        reverse=True,
+    )
+    top = []
+    for (filename, line, func), values in entries[:3]:
+        where = Path(filename).name if filename != "~" else "builtin"
+        top.append((f"{func} ({where}:{line})", values[2] / n * 1e6))
+    return top
+
+
+def run_bench(
+    cfg: BenchConfig, progress: Callable[[Row], None] | None = None
+) -> dict[str, Any]:
+    """Run every row; return rows, profile and the machine's description."""
+    rows: list[Row] = []
+    for group in (
+        _reaching_rows,
+        _cat_rows,
+        _scaling_rows,
+        _mp_row,
+        _orbit_row,
+        _map_row,
+    ):
+        for row in group(cfg):
+            rows.append(row)
+            if progress is not None:
+                progress(row)
+    return {
+        "machine": _machine(),
+        "rows": [asdict(r) | {"per_period": r.per_period} for r in rows],
+        "profile_cat_step": _profile_cat_step(cfg),
+    }
+
+
+def _machine() -> dict[str, str]:
+    out = {"python": platform.python_version(), "machine": platform.machine()}
+    for dist in (
+        "pin",
+        "numpy",
+        "daqp",
+        "piqp",
+        "cvxpy",
+        "coal",
+        "ompl",
+        "placo",
+        "pin-pink",
+    ):
+        try:
+            out[dist] = version(dist)
+        except PackageNotFoundError:
+            out[dist] = "not installed"
+    return out
+
+
+def format_row(row: Row) -> str:
+    """One line for the terminal."""
+    ratio = f"  {row.ratio:.2f}x {row.ratio_to}" if row.ratio is not None else ""
+    return (
+        f"[{row.group}] {row.case}: {row.median_us:.1f} us (p95 {row.p95_us:.1f}), "
+        f"{row.per_period:.0f} per 33 ms{ratio}"
+    )
+
+
+def write_results(result: dict[str, Any], path: Path, command: str) -> None:
+    """Write benchmarks/RESULTS.md (or ``path``) from a run's result."""
+    m = result["machine"]
+    versions = ", ".join(
+        f"{k} {v}" for k, v in m.items() if k not in ("python", "machine")
+    )
+    lines = [
+        "# Benchmarks",
+        "",
+        f"Generated by `{command}`. Every row ran in one process, one after the",
+        "other: only ratios between rows of one run are meaningful.",
+        f"Machine: {m['machine']}, Python {m['python']}; {versions}.",
+        "",
+    ]
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for row in result["rows"]:
+        groups.setdefault(row["group"], []).append(row)
+    for group, rows in groups.items():
+        lines += [
+            f"## {group}",
+            "",
+            "| case | median us | p95 us | per 33 ms | ratio | n | note |",
+            "|---|---:|---:|---:|---|---:|---|",
+        ]
+        for r in rows:
+            ratio = (
+                f"{r['ratio']:.2f}x {r['ratio_to']}" if r["ratio"] is not None else ""
+            )
+            lines.append(
+                f"| {r['case']} | {r['median_us']:.1f} | {r['p95_us']:.1f} | "
+                f"{r['per_period']:.0f} | {ratio} | {r['n']} | {r['note']} |"
+            )
+        lines.append("")
+    lines += _targets(result["rows"])
+    lines += ["## Profile of the CAT step (boards, own time per step)", ""]
+    lines += [f"1. {name}: {us:.1f} us" for name, us in result["profile_cat_step"]]
+    lines.append("")
+    path.write_text("\n".join(lines))
+
+
+#: The bench issue's targets: (row group, case prefix, limit, what the limit is on).
+TARGETS = [
+    ("cat step", "boards", 130.0, "us per CAT step with contacts (250 per period)"),
+    ("planning", "MP", 25_000.0, "us to plan and simplify in the shelf"),
+    ("orbit", "one", 200.0, "us per orbit tick"),
+    ("map", "one", 50_000.0, "us per map update"),
+]
+
+
+def _targets(rows: list[dict[str, Any]]) -> list[str]:
+    """A table of the targets: met, or missed by how much."""
+
+    def find(group: str, prefix: str) -> dict[str, Any] | None:
+        return next(
+            (r for r in rows if r["group"] == group and r["case"].startswith(prefix)),
+            None,
+        )
+
+    lines = [
+        "## Targets",
+        "",
+        "| target | measured | verdict |",
+        "|---|---:|---|",
+    ]
+    engine = find("reaching", "cbp Engine.step, solver=daqp")
+    hand = find("reaching", "hand-written")
+    pink = find("reaching", "pink")
+    if engine and hand:
+        ratio = engine["median_us"] / hand["median_us"]
+        verdict = "met" if ratio <= 1.15 else f"missed by {ratio / 1.15:.1f}x"
+        lines.append(
+            f"| engine step <= 1.15x hand-written | {ratio:.2f}x | {verdict} |"
+        )
+    if engine and pink and pink["median_us"] > 0:
+        ratio = engine["median_us"] / pink["median_us"]
+        verdict = "met" if ratio <= 1 / 3 else f"missed by {ratio * 3:.1f}x"
+        lines.append(f"| engine step <= 1/3 of pink | {ratio:.2f}x | {verdict} |")
+    for group, prefix, limit, what in TARGETS:
+        row = find(group, prefix)
+        if row is None:
+            continue
+        value = row["median_us"]
+        verdict = "met" if value <= limit else f"missed by {value / limit:.1f}x"
+        lines.append(f"| {what} <= {limit:g} | {value:.1f} | {verdict} |")
+    return [*lines, ""]
+
+
+def dump(result: dict[str, Any], path: Path) -> None:
+    """Write the result as JSON."""
+    path.write_text(json.dumps(result, indent=2) + "\n")
