@@ -108,8 +108,28 @@ def write_outputs(scenario: Scenario, trace: Trace, out: Path) -> dict[str, Any]
     }
     (out / "metrics.json").write_text(json.dumps(result, indent=2) + "\n")
     _plot(trace, out / "tracking.png", scenario.spec.name)
+    _write_report(
+        out,
+        scenario,
+        scenario.spec.method.name,
+        metrics,
+        [out / "tracking.png"],
+        trace.events,
+    )
+    return metrics
+
+
+def _write_report(
+    out: Path,
+    scenario: Scenario,
+    method: str,
+    metrics: Mapping[str, Any],
+    figures: list[Path],
+    events: list[tuple[float, str]],
+) -> None:
+    """report.md of one run: description, metrics table, figures, events."""
     lines = [
-        f"# {scenario.spec.name}: {scenario.spec.method.name}",
+        f"# {scenario.spec.name}: {method}",
         "",
         scenario.spec.description.strip(),
         "",
@@ -117,13 +137,12 @@ def write_outputs(scenario: Scenario, trace: Trace, out: Path) -> dict[str, Any]
         "|---|---|",
         *(f"| {k} | {_fmt(v)} |" for k, v in metrics.items()),
         "",
-        "![tracking](tracking.png)",
+        *(f"![{p.stem}]({p.name})" for p in figures),
         "",
     ]
-    if trace.events:
-        lines += ["## Events", ""] + [f"- t = {t:.3f} s: {m}" for t, m in trace.events]
+    if events:
+        lines += ["## Events", ""] + [f"- t = {t:.3f} s: {m}" for t, m in events]
     (out / "report.md").write_text("\n".join(lines) + "\n")
-    return metrics
 
 
 def _fmt(value: object) -> str:
@@ -284,19 +303,5 @@ def write_velocity_run(
     }
     (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n")
     figures = plot_orbit(trace.t, signals, trace.u, v_labels, out, scenario.spec.name)
-    lines = [
-        f"# {scenario.spec.name}: {method}",
-        "",
-        scenario.spec.description.strip(),
-        "",
-        "| metric | value |",
-        "|---|---|",
-        *(f"| {k} | {_fmt(v)} |" for k, v in metrics.items()),
-        "",
-        *(f"![{p.stem}]({p.name})" for p in figures),
-        "",
-    ]
-    if trace.events:
-        lines += ["## Events", ""] + [f"- t = {t:.3f} s: {m}" for t, m in trace.events]
-    (out / "report.md").write_text("\n".join(lines) + "\n")
+    _write_report(out, scenario, method, metrics, figures, trace.events)
     return metrics
