@@ -193,9 +193,9 @@ def _bench(quick: bool, out: Path | None, results: Path | None) -> int:
 
     config = BenchConfig.quick() if quick else BenchConfig()
     result = run_bench(config, progress=lambda row: print(format_row(row), flush=True))
-    print("profile of the CAT step (own time per step):")
-    for name, us in result["profile_cat_step"]:
-        print(f"  {name}: {us:.1f} us")
+    print("profile of the CAT step (largest own-time shares):")
+    for name, pct in result["profile_cat_step"]:
+        print(f"  {name}: {pct:.0f} %")
     if out is not None:
         dump(result, out)
     if results is not None:
