@@ -264,6 +264,15 @@ class CollisionWorld:
         """
         self._carried = ContactSet.concatenate([self._carried, contacts])
 
+    def reject(self, check: StepCheck) -> None:
+        """The checked step is not taken: its penetrating contacts constrain the retry.
+
+        The contacts with negative distance found at the rejected configuration
+        are carried over (:meth:`carry_over`) to the next query.
+        """
+        contacts = check.contacts
+        self.carry_over(contacts.select(contacts.distance < 0))
+
     def _query(self, state: RobotState, environment: Environment) -> ContactSet:
         geometry = self.geometry
         shapes = geometry.shapes

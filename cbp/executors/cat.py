@@ -72,7 +72,7 @@ class CatPlanner:
                 check = world.check(q_next)
                 if not check.accepted and not check.penetration < depth:
                     rejections += 1
-                    world.carry_over(check.contacts.select(check.contacts.distance < 0))
+                    world.reject(check)
                     if rejections >= s.max_rejections:
                         note = (
                             f"{rejections} steps rejected in a row "

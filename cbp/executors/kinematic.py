@@ -125,7 +125,7 @@ def run_kinematic(scenario: Scenario) -> Trace:
             if not check.accepted:
                 depth.append(depth[-1] if depth else 0.0)  # the robot stays
                 rejected += 1
-                world.carry_over(check.contacts.select(check.contacts.distance < 0))
+                world.reject(check)
                 events.append(
                     (t, f"step rejected: penetration {check.penetration * 1e3:.1f} mm")
                 )
