@@ -94,6 +94,11 @@ class Plugin(abc.ABC, Generic[ParamsT]):
     """Unit of f, e.g. ``"m"``, ``"rad"``, ``"m|rad"`` (translation then rotation)."""
     default_gain: ClassVar[float] = 1.0
     """Feedback gain per step used when the scenario entry gives none."""
+    constant_jacobian: bool = False
+    """The Jacobian is the same at every configuration, whatever ``prepare`` and
+    the plugin's targets latch (a joint-space term on a Euclidean model). The
+    engine then computes it once and folds a soft task's share of the Hessian into
+    a constant. :func:`cbp.testing.check_jacobian` verifies the claim."""
 
     def __init__(self, params: ParamsT, robot: RobotModel, name: str = "") -> None:
         """Bind the parameters to a robot; subclasses resolve names to indices here.

@@ -183,7 +183,14 @@ class QPAssembler:
         self.regularization = regularization
         self.entry_names = [e.name for e in self.entries]
         indexed = list(enumerate(self.entries))
-        self._soft = _Block([(i, e) for i, e in indexed if _is_soft_task(e)], nv)
+        soft = [(i, e) for i, e in indexed if _is_soft_task(e)]
+        # Soft tasks with a constant Jacobian: J^T W J joins H once, at the first
+        # assembly, and each step only needs their values.
+        constant = [(i, e) for i, e in soft if e.plugin.constant_jacobian]
+        varying = [(i, e) for i, e in soft if not e.plugin.constant_jacobian]
+        self._soft = _Block(varying, nv)
+        self._constant = _Block(constant, nv)
+        self._constant_JtW = np.zeros((0, 0))
         block = _Block([(i, e) for i, e in indexed if not _is_soft_task(e)], nv)
         self._rows = block
         soft_rows = np.concatenate(
@@ -227,12 +234,21 @@ class QPAssembler:
         """Linearize every entry at ``state`` and return the QP (shared buffers)."""
         nv = self.nv
         H, g = self._H, self._g
-        soft = self._soft
+        soft, constant = self._soft, self._constant
+        if constant.m:
+            if not self._constant_JtW.size:
+                self._fold_constant(state)
+            constant.fill(state)
+            g[:nv] = self._constant_JtW.dot(constant.desired_change())
         if soft.m:
             soft.fill(state)
             Jw = soft.J * soft.sqrt_weights[:, None]
             np.add(self._H_base[:nv, :nv], Jw.T.dot(Jw), out=H[:nv, :nv])
-            g[:nv] = Jw.T.dot(soft.desired_change() * soft.sqrt_weights)
+            if constant.m:
+                g[:nv] += Jw.T.dot(soft.desired_change() * soft.sqrt_weights)
+            else:
+                g[:nv] = Jw.T.dot(soft.desired_change() * soft.sqrt_weights)
+        if soft.m or constant.m:
             np.negative(g, out=g)
         block = self._rows
         m = block.m
@@ -257,9 +273,19 @@ class QPAssembler:
             ):
                 block.raise_non_finite()
                 block.raise_bad_bounds()
-        if soft.m and not math.isfinite(g.dot(g)):
+        if (soft.m or constant.m) and not math.isfinite(g.dot(g)):
             soft.raise_non_finite()
+            constant.raise_non_finite()
         return problem
+
+    def _fold_constant(self, state: RobotState) -> None:
+        """Add the constant soft tasks' J^T W J to H's base, keep J^T W for g."""
+        constant, nv = self._constant, self.nv
+        constant.fill(state)
+        JtW = (constant.J * constant.weights[:, None]).T.copy()
+        self._H_base[:nv, :nv] += JtW.dot(constant.J)
+        self._H[:nv, :nv] = self._H_base[:nv, :nv]
+        self._constant_JtW = JtW
 
 
 def _is_soft_task(entry: Entry) -> bool:
@@ -284,6 +310,11 @@ class _Block:
             (sl, e.plugin, ((d,), (d, nv)))
             for sl, e, d in zip(self.slices, self.entries, dims, strict=True)
         ]
+        # The first fill linearizes every entry; later ones only the entries
+        # whose Jacobian varies, and evaluate the others' values.
+        self._linearized = list(self.items)
+        self._constant_items = [it for it in self.items if it[1].constant_jacobian]
+        self._evaluated: list[tuple[slice, AnyPlugin, tuple[Any, Any]]] = []
         self.row_entry = np.concatenate(
             [np.full(d, i) for (i, _), d in zip(entries, dims, strict=True)]
             or [np.zeros(0)]
@@ -315,9 +346,13 @@ class _Block:
         ]
 
     def fill(self, state: RobotState) -> None:
-        """Linearize every entry into the stacked buffers, checking shapes."""
+        """Linearize every entry into the stacked buffers, checking shapes.
+
+        Entries that declare ``constant_jacobian`` are linearized at the first
+        call only; later calls evaluate their values and keep their Jacobian rows.
+        """
         f, J = self.f, self.J
-        for sl, plugin, shapes in self.items:
+        for sl, plugin, shapes in self._linearized:
             value, jac = plugin.linearize(state)
             if (getattr(value, "shape", None), getattr(jac, "shape", None)) != shapes:
                 raise PluginOutputError(
@@ -327,6 +362,17 @@ class _Block:
                 )
             f[sl] = value
             J[sl] = jac
+        for sl, plugin, shapes in self._evaluated:
+            value = plugin.compute_value(state)
+            if getattr(value, "shape", None) != shapes[0]:
+                raise PluginOutputError(
+                    f"{plugin.name} ({plugin.type_name}): value has shape "
+                    f"{np.shape(value)}, expected {shapes[0]}"
+                )
+            f[sl] = value
+        if self._evaluated is not self._constant_items:
+            self._linearized = [it for it in self.items if not it[1].constant_jacobian]
+            self._evaluated = self._constant_items
 
     def raise_non_finite(self) -> None:
         """Raise PluginOutputError naming the first entry with a NaN or inf output."""

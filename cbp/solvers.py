@@ -65,11 +65,15 @@ class DaqpSolver(QPSolver):
         import daqp
 
         self._solve = daqp.solve
+        self._sense = np.zeros(0, dtype=np.int32)  # row flags: 5 = equality
         self.settings = {"primal_tol": primal_tol, "iter_limit": iter_limit}
 
     def solve(self, problem: QPProblem) -> FloatArray:
         """Solve with equality rows flagged to daqp (sense 5)."""
-        sense = np.where(problem.equality, 5, 0).astype(np.int32)
+        sense = self._sense
+        if sense.shape != problem.equality.shape:
+            sense = self._sense = np.zeros(problem.equality.shape, dtype=np.int32)
+        np.multiply(problem.equality, 5, out=sense)
         # daqp factorizes H in its own copy; the engine's arrays stay untouched.
         x, _, exitflag, _ = self._solve(
             problem.H,

@@ -11,7 +11,6 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from cbp.errors import ConfigError, InvalidTargetError
-from cbp.robot import FloatArray
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,6 +39,10 @@ class Pose:
         return pin.SE3(rotation, np.array(self.position, dtype=float))
 
 
+_ORTHONORMAL_TOL = 1e-6
+"""How far R^T R may be from the identity, entry by entry."""
+
+
 def checked_se3(
     position: npt.ArrayLike, rotation: npt.ArrayLike, what: str = "target"
 ) -> pin.SE3:
@@ -55,14 +58,21 @@ def checked_se3(
             f"{what}: position must have shape (3,) and rotation (3, 3); got "
             f"{p.shape} and {R.shape}"
         )
-    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(R))):
+    # Scalar arithmetic: this runs on every goal update, where a dozen numpy
+    # calls on 3x3 arrays cost more than the whole check.
+    a, b, c, d, e, f, g, h, i = R.ravel().tolist()
+    if not all(map(math.isfinite, (*p.tolist(), a, b, c, d, e, f, g, h, i))):
         raise InvalidTargetError(f"{what}: not finite (position {p}, rotation {R})")
-    if not np.allclose(R.T.dot(R), np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+    # Columns orthonormal (R^T R = I) and det R = +1.
+    deviation = max(
+        abs(a * a + d * d + g * g - 1.0),
+        abs(b * b + e * e + h * h - 1.0),
+        abs(c * c + f * f + i * i - 1.0),
+        abs(a * b + d * e + g * h),
+        abs(a * c + d * f + g * i),
+        abs(b * c + e * f + h * i),
+    )
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if deviation > _ORTHONORMAL_TOL or det < 0.0:
         raise InvalidTargetError(f"{what}: rotation is not a rotation matrix: {R}")
     return pin.SE3(R, p)
-
-
-def clip_norm(vector: FloatArray, limit: float) -> FloatArray:
-    """Return ``vector`` scaled down to norm ``limit`` if it is longer."""
-    norm = math.sqrt(vector.dot(vector))
-    return vector * (limit / norm) if norm > limit else vector

@@ -128,6 +128,8 @@ def check_jacobian(
         (int(r), int(c), float(analytic[r, c]), float(numeric[r, c]))
         for r, c in zip(*np.unravel_index(order, error.shape), strict=True)
     ]
+    if plugin.constant_jacobian:
+        _check_constant(plugin, robot, state.q, analytic, dt, atol, label)
     report = JacobianReport(
         analytic=analytic,
         numeric=numeric,
@@ -142,6 +144,32 @@ def check_jacobian(
             + f"\n  tolerance: atol {atol:g} + rtol {rtol:g} * |numeric|"
         )
     return report
+
+
+def _check_constant(
+    plugin: AnyPlugin,
+    robot: RobotModel,
+    q: FloatArray,
+    analytic: FloatArray,
+    dt: float,
+    atol: float,
+    label: str,
+) -> None:
+    """A plugin declaring ``constant_jacobian`` has the same Jacobian elsewhere."""
+    # A fixed, generic tangent direction: every joint moves, by different amounts.
+    delta = 0.3 * np.cos(1.0 + 2.3 * np.arange(robot.nv))
+    other = RobotState(robot, robot.integrate(q, delta))
+    plugin.prepare(other, dt)
+    try:
+        moved = np.asarray(plugin.compute_jacobian(other), dtype=float)
+    finally:
+        plugin.prepare(RobotState(robot, q), dt)
+    if moved.shape != analytic.shape or not np.allclose(moved, analytic, atol=atol):
+        raise JacobianMismatchError(
+            f"{label}: declares constant_jacobian, but its Jacobian changes between "
+            f"q = {np.array2string(q, precision=4)} and "
+            f"q ⊕ {np.array2string(delta, precision=2)}"
+        )
 
 
 def sample_configurations(

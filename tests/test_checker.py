@@ -64,3 +64,28 @@ def test_wrong_shape_fails(robots) -> None:
         JacobianMismatchError, match=r"shape \(7, 3\), expected \(7, 7\)"
     ):
         check_jacobian(_Short(PostureParams(), robot), robot, robot.home())
+
+
+class _FalselyConstant(GoalPoseTask):
+    """Claims a constant Jacobian the engine would compute only once."""
+
+    constant_jacobian = True
+
+
+def test_false_constant_jacobian_claim_fails(robots, rng) -> None:
+    """A plugin declaring constant_jacobian whose Jacobian moves is caught."""
+    robot = robots["panda"]
+    task = _FalselyConstant(GoalPoseParams(frame="panda_hand"), robot)
+    task.set_target([0.4, 0.0, 0.5], np.diag([1.0, -1.0, -1.0]))
+    q = sample_configurations(robot, rng, n=1)[0]
+    with pytest.raises(JacobianMismatchError, match="declares constant_jacobian"):
+        check_jacobian(task, robot, q)
+
+
+def test_joint_space_terms_declare_constant_jacobians(robots, rng) -> None:
+    """Posture is constant on a fixed base (checked), not on a floating one."""
+    q = sample_configurations(robots["panda"], rng, n=1)[0]
+    fixed = PostureTask(PostureParams(), robots["panda"])
+    assert fixed.constant_jacobian
+    check_jacobian(fixed, robots["panda"], q)
+    assert not PostureTask(PostureParams(), robots["panda_floating"]).constant_jacobian

@@ -43,6 +43,7 @@ class JointLimitsConstraint(Constraint[JointLimitsParams]):
     type_name: ClassVar[str] = "joint_limits"
     Params: ClassVar[type[PluginParams]] = JointLimitsParams
     unit: ClassVar[str] = "rad"
+    constant_jacobian = True  # a selection of tangent coordinates
 
     def __init__(
         self, params: JointLimitsParams, robot: RobotModel, name: str = ""

@@ -53,6 +53,8 @@ class JointVelocityConstraint(Constraint[JointVelocityParams]):
     ) -> None:
         """Gather the limits and keep the coordinates that have one."""
         super().__init__(params, robot, name)
+        # q ⊖ q_ref has the identity as its Jacobian when nq == nv.
+        self.constant_jacobian = robot.is_euclidean
         velocity = np.array(robot.velocity_limits)
         for joint, value in params.limits.items():
             velocity[located(robot.joint_v_slice, joint, f"limits.{joint}")] = value

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
@@ -13,7 +14,7 @@ import pinocchio as pin
 from cbp.errors import ConfigError, TargetNotSetError, located
 from cbp.plugin import FloatArray, Linearization, PluginParams, Task
 from cbp.robot import RobotModel
-from cbp.spatial import Pose, checked_se3, clip_norm
+from cbp.spatial import Pose, checked_se3
 from cbp.state import RobotState
 
 
@@ -121,19 +122,22 @@ class GoalPoseTask(Task[GoalPoseParams]):
     def limit_step(self, desired: FloatArray) -> FloatArray:
         """Bound the translation and rotation asked for in one step."""
         params = self.params
+        # Plain floats: six numbers, where numpy's per-call cost would dominate.
+        x, y, z, rx, ry, rz = desired.tolist()
+        translation = math.sqrt(x * x + y * y + z * z)
+        rotation = math.sqrt(rx * rx + ry * ry + rz * rz)
+        st = sr = 1.0
+        if translation > params.max_step_translation:
+            st = params.max_step_translation / translation
         if params.clip == "uniform":
-            translation = float(np.linalg.norm(desired[:3]))
-            rotation = float(np.linalg.norm(desired[3:]))
-            scale = 1.0
-            if translation > params.max_step_translation:
-                scale = params.max_step_translation / translation
-            if rotation * scale > params.max_step_rotation:
-                scale = params.max_step_rotation / rotation
-            return desired * scale if scale < 1.0 else desired
-        out = np.empty(6)
-        out[:3] = clip_norm(desired[:3], params.max_step_translation)
-        out[3:] = clip_norm(desired[3:], params.max_step_rotation)
-        return out
+            if rotation * st > params.max_step_rotation:
+                st = params.max_step_rotation / rotation
+            sr = st
+        elif rotation > params.max_step_rotation:
+            sr = params.max_step_rotation / rotation
+        if st == 1.0 and sr == 1.0:
+            return desired
+        return np.array([x * st, y * st, z * st, rx * sr, ry * sr, rz * sr])
 
     def __repr__(self) -> str:
         """Type, name, frame and step limits."""

@@ -37,6 +37,8 @@ class JointStepTask(Task[JointStepParams]):
     ) -> None:
         """Nothing to resolve."""
         super().__init__(params, robot, name)
+        # q ⊖ q_ref has the identity as its Jacobian when nq == nv.
+        self.constant_jacobian = robot.is_euclidean
         self._q0: FloatArray | None = None
 
     @property

@@ -46,6 +46,8 @@ class PostureTask(Task[PostureParams]):
     ) -> None:
         """Resolve joint names and build the target configuration."""
         super().__init__(params, robot, name)
+        # q ⊖ q_ref has the identity as its Jacobian when nq == nv.
+        self.constant_jacobian = robot.is_euclidean
         if params.joints is None:
             self.rows: IndexRows = robot.articulated_v_indices()
         else:

@@ -191,3 +191,32 @@ def test_entry_settings_are_checked(robots) -> None:
 
 def _cost(problem, x):
     return 0.5 * x.dot(problem.H).dot(x) + problem.g.dot(x)
+
+
+@pytest.mark.parametrize("velocity_priority", ["hard", "soft"])
+def test_constant_jacobians_are_folded_without_changing_the_problem(
+    robots, rng, velocity_priority
+) -> None:
+    """Linearizing constant-Jacobian entries once builds the same QPs, step after step."""
+    robot = robots["panda"]
+    entries = _entries(robot, rng, velocity_priority=velocity_priority)
+    assert all(e.plugin.constant_jacobian for e in entries[1:])
+    plain = _entries(robot, rng, velocity_priority=velocity_priority)
+    plain[0].plugin.set_target(
+        entries[0].plugin.target.translation, entries[0].plugin.target.rotation
+    )
+    for entry in plain:
+        entry.plugin.constant_jacobian = False
+    folded_engine = Engine(robot, entries, solver="daqp")
+    plain_engine = Engine(robot, plain, solver="daqp")
+    for q in sample_configurations(robot, rng, n=5, margin=0.05):
+        np.testing.assert_allclose(
+            folded_engine.step(q, 0.01), plain_engine.step(q, 0.01), atol=1e-9
+        )
+        folded, reference = folded_engine.problem, plain_engine.problem
+        assert folded is not None
+        assert reference is not None
+        for name in ("H", "g", "A", "lower", "upper"):
+            np.testing.assert_allclose(
+                getattr(folded, name), getattr(reference, name), atol=1e-12
+            )
