@@ -143,6 +143,13 @@ class Environment(abc.ABC):
         """
 
     @abc.abstractmethod
+    def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
+        """The obstacles as coal geometries: (name, shape, world placement).
+
+        For yes-or-no checks (:class:`~cbp.collision.checker.FreeSpaceChecker`).
+        """
+
+    @abc.abstractmethod
     def clearance(self, points: FloatArray) -> FloatArray:
         """Distance from each point (n, 3) to the nearest obstacle [m].
 
@@ -276,6 +283,10 @@ class PrimitiveEnvironment(Environment):
         hits = Hits.from_rows(rows)
         return _keep_closest(hits, per_shape, min_angle_deg=0.0, min_spacing=0.0)
 
+    def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
+        """Every declared object."""
+        return [(o.name, o.shape, o.placement) for o in self.objects]
+
     def clearance(self, points: FloatArray) -> FloatArray:
         """Exact distance from each point to the nearest object."""
         probe = coal.Sphere(1e-9)
@@ -386,6 +397,12 @@ class OccupancyEnvironment(Environment):
     def __len__(self) -> int:
         """Number of occupied cells."""
         return len(self.centres)
+
+    def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
+        """The octree (none while the map is empty)."""
+        if self.octree is None:
+            return []
+        return [("octree", self.octree, self._identity)]
 
     def query(
         self,

@@ -18,6 +18,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from cbp.collision.checker import FreeSpaceChecker
 from cbp.collision.environment import (
     Environment,
     Hits,
@@ -217,6 +218,7 @@ class CollisionWorld:
         self._request = coal.DistanceRequest()
         self._result = coal.DistanceResult()
         self.environment_version = 0
+        self._free_space: FreeSpaceChecker | None = None
 
     @property
     def environment(self) -> Environment:
@@ -254,6 +256,23 @@ class CollisionWorld:
         depth = contacts.penetration
         tolerance = self.settings.penetration_tolerance + self._environment.resolution
         return StepCheck(depth <= tolerance, depth, contacts)
+
+    def is_free(self, q: FloatArray) -> bool:
+        """Whether ``q`` is collision-free, in one pinocchio call (planners, IK).
+
+        The same answer as ``check(q).penetration == 0``, without the contacts
+        (:class:`~cbp.collision.checker.FreeSpaceChecker`).
+        """
+        environment = self._environment
+        checker = self._free_space
+        if checker is None or checker.environment is not environment:
+            checker = self._free_space = FreeSpaceChecker(
+                self.geometry,
+                environment,
+                self.padding,
+                self.settings.self_collision,
+            )
+        return checker.is_free(q)
 
     def carry_over(self, contacts: ContactSet) -> None:
         """Add ``contacts`` (from a rejected configuration) to the next query.

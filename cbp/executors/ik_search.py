@@ -105,7 +105,7 @@ class IkSearch:
         """No padded link penetrates an obstacle or another link."""
         if self.world is None:
             return True
-        return self.world.check(q).penetration <= 0.0
+        return self.world.is_free(q)
 
     def _solve_from(
         self, goal: pin.SE3, q: FloatArray, fixed: int | None

@@ -71,6 +71,11 @@ class MpPlanner:
         self._start = self._space.allocState()
         self._goal_state = self._space.allocState()
 
+    @property
+    def check_step(self) -> float:
+        """Joint-space distance between the states OMPL checks along a motion [rad]."""
+        return float(self.settings.check_resolution * self._space.getMaximumExtent())
+
     def close(self) -> None:
         """Release the validity checker (it refers back to this planner).
 
@@ -119,16 +124,27 @@ class MpPlanner:
         if left > 0:
             setup.simplifySolution(left)
         path = setup.getSolutionPath()
-        vertices = np.array(
+        points = _resample(self._states(path, q), s.waypoint_step)
+        note = "planned"
+        # Resampled points fall between the states OMPL checked; where one of them
+        # touches, use OMPL's own interpolation instead: exactly the checked states.
+        if not all(map(self.search.collision_free, points[1:])):
+            path.interpolate()
+            points = self._states(path, q)
+            note = "planned (checked states only: a resampled point touched)"
+        return Plan(points, self.checks - checks, note)
+
+    @staticmethod
+    def _states(path: object, q: FloatArray) -> FloatArray:
+        """The path's states as rows, the first replaced by exactly ``q``."""
+        states = np.array(
             [
-                [path.getState(k)[i] for i in range(q.size)]
-                for k in range(path.getStateCount())
+                [path.getState(k)[i] for i in range(q.size)]  # type: ignore[attr-defined]
+                for k in range(path.getStateCount())  # type: ignore[attr-defined]
             ]
         )
-        vertices[0] = q  # exactly the start point, for continuity
-        return Plan(
-            _resample(vertices, s.waypoint_step), self.checks - checks, "planned"
-        )
+        states[0] = q  # exactly the start point, for continuity
+        return states
 
 
 def _resample(vertices: FloatArray, step: float) -> FloatArray:

@@ -150,8 +150,10 @@ class MpSettings:
     check_resolution: float = 0.005
     """Motion validation: checked every this fraction of the joint space's
     extent (OMPL's state validity checking resolution)."""
-    range: float = 0.0
-    """RRT-Connect's step length [rad] (0: OMPL's default)."""
+    range: float = 1.0
+    """RRT-Connect's step length [rad] (0: OMPL's default, a fifth of the joint
+    space's extent: 2.7 rad on the Panda). Measured in the shelf (``cbp bench``):
+    1 rad needs a fifth of the validity checks of OMPL's default."""
     waypoint_step: float = 0.05
     """The simplified path is resampled to this joint spacing for timing [rad]."""
 

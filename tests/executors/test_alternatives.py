@@ -92,7 +92,9 @@ def test_mp_plans_over_the_board(boards: Scenario) -> None:
         run.finish()
     assert plan.path is not None, plan.note
     np.testing.assert_allclose(plan.path[0], boards.q0)
-    assert np.max(np.abs(np.diff(plan.path, axis=0))) <= 0.05 + 1e-9
+    # Waypoints every 0.05 rad, or OMPL's checked states when one touched.
+    step = 0.05 if plan.note == "planned" else planner.check_step
+    assert np.max(np.abs(np.diff(plan.path, axis=0))) <= step + 1e-9
     assert all(planner.search.collision_free(q) for q in plan.path)
 
 
