@@ -320,10 +320,14 @@ def _peer_rows(robot: Any, q0: np.ndarray, cfg: BenchConfig) -> list[Row]:
 # ---------------------------------------------------------------- 3-4: CAT steps
 
 
+RESTART = 32
+"""CAT step rows: steps from the start configuration before going back to it."""
+
+
 def _cat_step(
     scenario: Any, capacity: int | None = None
 ) -> tuple[Callable[[int], object], Any]:
-    """One validated CAT step from a fixed configuration near the obstacles.
+    """Validated CAT steps from a configuration near the obstacles, toward the goal.
 
     ``capacity`` replaces the contact constraint's row capacity (for scaling).
     """
@@ -349,13 +353,23 @@ def _cat_step(
     stream = scenario.goal_stream()
     goal = stream.pose(stream.end_time)
     goal_task.set_target(goal.translation, goal.rotation)
-    q = scenario.q0.copy()
+    start = scenario.q0.copy()
     robot = scenario.robot
+    current = {"q": start}
 
     def step(i: int) -> object:
+        # As in the CAT loop: the check that validates a step finds the contacts
+        # that constrain the next one. Every RESTART steps the arm goes back to
+        # the start, so that it stays among the obstacles.
+        q = start if i % RESTART == 0 else current["q"]
         dq = engine.step(q, 0.02)
-        world.check(robot.integrate(q, dq))
-        world.contacts(engine.state)  # the next step's contacts, cached
+        q_new = robot.integrate(q, dq)
+        check = world.check(q_new)
+        if check.accepted:
+            current["q"] = q_new
+        else:
+            world.reject(check)
+            current["q"] = q
         return dq
 
     return step, world

@@ -51,21 +51,7 @@ class FreeSpaceChecker:
         robot = geometry.robot
         self._model = robot.model
         self._data = robot.model.createData()
-        geometry_model = pin.GeometryModel()
-        frames = robot.model.frames
-        for shape in geometry.shapes:
-            grown = shape.shape.clone()
-            if padding > 0:
-                grown.setSweptSphereRadius(grown.getSweptSphereRadius() + padding)
-            geometry_model.addGeometryObject(
-                pin.GeometryObject(
-                    shape.name,
-                    shape.joint_id,
-                    shape.frame_id,
-                    frames[shape.frame_id].placement * shape.placement,
-                    grown,
-                )
-            )
+        geometry_model = geometry.geometry_model(padding)
         n = len(geometry.shapes)
         obstacles = environment.collision_objects()
         for name, obstacle, placement in obstacles:

@@ -104,10 +104,12 @@ def signed_distance(
     """
     result.clear()
     d = coal.distance(other, other_placement, shape, placement, request, result)
+    # The nearest points come back as new arrays; the normal is a view into
+    # ``result``, which the next query overwrites.
     return (
         float(d),
-        np.array(result.getNearestPoint2()),
-        np.array(result.getNearestPoint1()),
+        result.getNearestPoint2(),
+        result.getNearestPoint1(),
         np.array(result.normal),
     )
 
@@ -472,8 +474,8 @@ def _keep_closest(
     normal (by ``min_angle_deg``) or position (by ``min_spacing``): a few contacts
     that span the directions the shape is blocked in, instead of one per voxel.
     """
-    if len(hits) == 0:
-        return hits
+    if len(hits) == 0 or np.bincount(hits.shape).max() <= per_shape:
+        return hits  # nothing to drop (the common case against declared objects)
     cos_max = np.cos(np.radians(min_angle_deg))
     keep: list[int] = []
     for i in np.unique(hits.shape):

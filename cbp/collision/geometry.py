@@ -151,6 +151,7 @@ class RobotGeometry:
             pairs except shapes on one rigid body, on adjacent bodies, and the
             ``ignore_pairs`` of robot.yaml.
         padding: distance added around every shape [m].
+        radii: the shapes' bounding-sphere radii [m], (n,).
     """
 
     def __init__(
@@ -218,11 +219,11 @@ class RobotGeometry:
                     planes=_transform_planes(_planes(hull), placement),
                 )
             )
-        self._radii = np.array([s.radius for s in self.shapes])
+        self.radii = np.array([s.radius for s in self.shapes])
         self.self_pairs = self._self_pairs(settings.ignore_pairs if settings else [])
         pairs = np.array(self.self_pairs, dtype=np.intp).reshape(-1, 2)
         self._pair_a, self._pair_b = pairs[:, 0], pairs[:, 1]
-        self._pair_reach = self._radii[self._pair_a] + self._radii[self._pair_b]
+        self._pair_reach = self.radii[self._pair_a] + self.radii[self._pair_b]
 
     def _self_pairs(self, ignore: list[tuple[str, str]]) -> list[tuple[int, int]]:
         model = self.robot.model
@@ -246,6 +247,31 @@ class RobotGeometry:
                 pairs.append((i, j))
         return pairs
 
+    def geometry_model(self, padding: float = 0.0) -> pin.GeometryModel:
+        """The shapes as a pinocchio geometry model (one object per shape, in order).
+
+        Args:
+            padding: grow every shape by this much [m] (coal's swept-sphere
+                radius, on copies: the shapes here are left as they are).
+        """
+        model = pin.GeometryModel()
+        frames = self.robot.model.frames
+        for shape in self.shapes:
+            geometry = shape.shape
+            if padding > 0:
+                geometry = geometry.clone()
+                geometry.setSweptSphereRadius(geometry.getSweptSphereRadius() + padding)
+            model.addGeometryObject(
+                pin.GeometryObject(
+                    shape.name,
+                    shape.joint_id,
+                    shape.frame_id,
+                    frames[shape.frame_id].placement * shape.placement,
+                    geometry,
+                )
+            )
+        return model
+
     def near_self_pairs(self, centres: FloatArray, margin: float) -> list[int]:
         """Indices into :attr:`self_pairs` whose bounding spheres nearly touch.
 
@@ -260,7 +286,7 @@ class RobotGeometry:
         """Bounding-sphere centres (n, 3) in the world and radii (n,), unpadded."""
         oMf = state.data.oMf
         centres = np.array([oMf[s.frame_id].act(s.centre) for s in self.shapes])
-        return centres.reshape(-1, 3), self._radii
+        return centres.reshape(-1, 3), self.radii
 
     def contains(
         self, state: RobotState, points: FloatArray, margin: float = 0.0

@@ -20,7 +20,7 @@ import numpy as np
 
 from cbp.collision.geometry import RobotGeometry
 from cbp.collision.world import ContactSet
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, IntArray
 from cbp.state import RobotState
 
 __all__ = ["LatchedContacts"]
@@ -32,6 +32,11 @@ class LatchedContacts:
     Args:
         geometry: the robot shapes the contact indices refer to.
         capacity: the number of rows (fixed).
+
+    The engine evaluates the rows at the configuration they were latched at,
+    where the points are the contacts' own witness points and the value is the
+    distance found; other configurations (the Jacobian checker's) move the
+    points with their links.
     """
 
     def __init__(self, geometry: RobotGeometry, capacity: int) -> None:
@@ -39,12 +44,16 @@ class LatchedContacts:
         self.geometry = geometry
         self.capacity = capacity
         self.contacts = ContactSet.empty()
+        self._frame_of_shape = np.array([s.frame_id for s in geometry.shapes])
+        self._q: FloatArray | None = None
+        # Every point that moves a row: the robot points of the n contacts, then
+        # the other side's points of the self contacts (rows ``_other_rows``),
+        # each with the normal signed so that its motion along it adds distance.
         self._frames: list[int] = []
-        self._other_frames: list[int] = []
-        self._local: FloatArray = np.zeros((0, 3))
-        self._other_local: FloatArray = np.zeros((0, 3))
-        self._start: FloatArray = np.zeros((0, 3))
-        self._other_start: FloatArray = np.zeros((0, 3))
+        self._other_rows: IntArray = np.zeros(0, dtype=np.intp)
+        self._points: FloatArray = np.zeros((0, 3))
+        self._normals: FloatArray = np.zeros((0, 3))
+        self._local: FloatArray | None = None
 
     @property
     def count(self) -> int:
@@ -56,69 +65,45 @@ class LatchedContacts:
         if len(contacts) > self.capacity:
             order = np.argsort(contacts.distance, kind="stable")[: self.capacity]
             contacts = contacts.select(order)
-        shapes = self.geometry.shapes
         self.contacts = contacts
-        self._frames = [shapes[i].frame_id for i in contacts.shape]
-        self._other_frames = [
-            shapes[j].frame_id if j >= 0 else -1 for j in contacts.other_shape
-        ]
-        self._start = contacts.point
-        self._other_start = contacts.other_point
-        self._local = self._to_local(state, self._frames, contacts.point)
-        self._other_local = self._to_local(
-            state, self._other_frames, contacts.other_point
-        )
+        self._q = state.q
+        self._local = None
+        other = np.flatnonzero(contacts.other_shape >= 0)
+        self._other_rows = other
+        self._frames = self._frame_of_shape[
+            np.concatenate([contacts.shape, contacts.other_shape[other]])
+        ].tolist()
+        self._points = np.concatenate([contacts.point, contacts.other_point[other]])
+        self._normals = np.concatenate([contacts.normal, -contacts.normal[other]])
 
-    @staticmethod
-    def _to_local(
-        state: RobotState, frames: list[int], points: FloatArray
-    ) -> FloatArray:
-        out = np.zeros_like(points)
-        for k, fid in enumerate(frames):
-            if fid >= 0:
-                M = state.data.oMf[fid]
-                out[k] = M.rotation.T.dot(points[k] - M.translation)
-        return out
+    def _at_latch(self, state: RobotState) -> bool:
+        return state.q is self._q
 
-    def _moved(
-        self,
-        state: RobotState,
-        frames: list[int],
-        local: FloatArray,
-        start: FloatArray,
-    ) -> FloatArray:
-        out = np.zeros_like(start)
-        for k, fid in enumerate(frames):
-            if fid >= 0:
-                out[k] = state.data.oMf[fid].act(local[k]) - start[k]
-        return out
+    def _add_rows(self, out: FloatArray, per_point: FloatArray) -> None:
+        """Sum per-point terms into the contact rows: robot side, then other side."""
+        n = self.count
+        out[:n] = per_point[:n]
+        if self._other_rows.size:
+            out[self._other_rows] += per_point[n:]
 
     def value(self, state: RobotState) -> FloatArray:
         """f(q) for the active rows, zeros after them, shape (capacity,)."""
         out = np.zeros(self.capacity)
         n = self.count
-        if n:
-            c = self.contacts
-            move = self._moved(state, self._frames, self._local, self._start)
-            move -= self._moved(
-                state, self._other_frames, self._other_local, self._other_start
-            )
-            out[:n] = c.distance + np.einsum("ij,ij->i", c.normal, move)
+        if n and not self._at_latch(state):
+            move = self._moved_points(state) - self._points
+            self._add_rows(out, np.einsum("ij,ij->i", self._normals, move))
+        out[:n] += self.contacts.distance
         return out
 
     def jacobian(self, state: RobotState) -> FloatArray:
         """n^T (J_p - J_p') for the active rows, zeros after, shape (capacity, nv)."""
         out = np.zeros((self.capacity, state.robot.nv))
-        c = self.contacts
-        for k in range(self.count):
-            fid = self._frames[k]
-            point = state.data.oMf[fid].act(self._local[k])
-            row = c.normal[k].dot(state.point_jacobian(fid, point))
-            other = self._other_frames[k]
-            if other >= 0:
-                point = state.data.oMf[other].act(self._other_local[k])
-                row -= c.normal[k].dot(state.point_jacobian(other, point))
-            out[k] = row
+        if self.count:
+            points = (
+                self._points if self._at_latch(state) else self._moved_points(state)
+            )
+            self._add_rows(out, self._normal_jacobians(state, points))
         return out
 
     def bounds(self, safety_distance: float) -> tuple[FloatArray, FloatArray]:
@@ -126,3 +111,43 @@ class LatchedContacts:
         lower = np.full(self.capacity, -np.inf)
         lower[: self.count] = safety_distance
         return lower, np.full(self.capacity, np.inf)
+
+    def _moved_points(self, state: RobotState) -> FloatArray:
+        """The latched points at ``state``, moved with their frames, (k, 3)."""
+        if self._local is None:
+            # In the frames at the latch configuration: R^T (p - o). Only needed
+            # away from it (the Jacobian checker), so computed on demand.
+            assert self._q is not None
+            oMf = RobotState(state.robot, self._q).data.oMf
+            self._local = np.array(
+                [
+                    oMf[f].rotation.T.dot(p - oMf[f].translation)
+                    for f, p in zip(self._frames, self._points, strict=True)
+                ]
+            ).reshape(-1, 3)
+        oMf = state.data.oMf
+        return np.array(
+            [oMf[f].act(p) for f, p in zip(self._frames, self._local, strict=True)]
+        ).reshape(-1, 3)
+
+    def _normal_jacobians(self, state: RobotState, points: FloatArray) -> FloatArray:
+        """n^T J_p for every point, (k, nv).
+
+        With the frame's world-aligned Jacobian J = [J_v; J_w] and r = p - o,
+        J_p = J_v - [r]_x J_w, so n^T J_p = [n; r x n]^T J. The six weights are
+        computed with floats: a handful per point, where numpy calls cost more.
+        """
+        oMf = state.data.oMf
+        weights = []
+        for f, (px, py, pz), (nx, ny, nz) in zip(
+            self._frames, points.tolist(), self._normals.tolist(), strict=True
+        ):
+            ox, oy, oz = oMf[f].translation.tolist()
+            rx, ry, rz = px - ox, py - oy, pz - oz
+            weights.append(
+                (nx, ny, nz, ry * nz - rz * ny, rz * nx - rx * nz, rx * ny - ry * nx)
+            )
+        stacked = np.array([state.frame_jacobian(f) for f in self._frames])
+        return np.einsum(  # type: ignore[no-any-return]
+            "ki,kij->kj", np.array(weights), stacked
+        )

@@ -219,6 +219,10 @@ class CollisionWorld:
         self._result = coal.DistanceResult()
         self.environment_version = 0
         self._free_space: FreeSpaceChecker | None = None
+        self._geometry_model = geometry.geometry_model()
+        self._geometry_data = pin.GeometryData(self._geometry_model)
+        # Bounding-sphere centres in the shapes' own frames.
+        self._centres = [s.placement.actInv(s.centre) for s in geometry.shapes]
 
     @property
     def environment(self) -> Environment:
@@ -295,8 +299,15 @@ class CollisionWorld:
     def _query(self, state: RobotState, environment: Environment) -> ContactSet:
         geometry = self.geometry
         shapes = geometry.shapes
-        placements = [s.world_placement(state) for s in shapes]
-        centres, radii = geometry.world_spheres(state)
+        # Every shape's placement in one pinocchio call, then the sphere centres.
+        pin.updateGeometryPlacements(
+            geometry.robot.model, state.data, self._geometry_model, self._geometry_data
+        )
+        placements = list(self._geometry_data.oMg)
+        centres = np.array(
+            [M.act(c) for M, c in zip(placements, self._centres, strict=True)]
+        ).reshape(-1, 3)
+        radii = geometry.radii
         margin = (
             self.settings.activation_distance + self.padding + environment.resolution
         )
