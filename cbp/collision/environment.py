@@ -360,18 +360,26 @@ class MetaballRefiner:
 
 
 class OccupancyEnvironment(Environment):
-    """An occupancy map: occupied cell centres, as a coal octree and a k-d tree.
+    """An occupancy map: occupied cell centres, in a k-d tree (and a coal octree).
 
-    Built once per map update (a few ms for tens of thousands of cells); queries
-    collide each robot shape with the octree, with coal's security margin so that
-    cells closer than the margin are reported before contact, then keep a few
-    representative contacts per shape and refine their normals.
+    Built once per map update (a few ms for tens of thousands of cells). A query
+    takes, for each robot shape, the cell centres near its bounding sphere from the
+    k-d tree, and measures them against the shape's hull faces in one matrix
+    product: a centre's largest excess over the face planes is its signed distance
+    to the hull where the nearest feature is a face (exact there, and a lower bound
+    near edges and corners, so never an overestimate). Cells are cubes: the
+    distance to a cell is its centre's less half a cell. A few representative
+    contacts per shape are kept, and their normals refined.
+
+    The coal octree serves the yes-or-no checks of planners
+    (:class:`~cbp.collision.checker.FreeSpaceChecker`). Coal's own octree contact
+    query was slower (every voxel within the margin is visited) and off by up to
+    4.5 mm and 14 deg on hulls (``benchmarks/RESULTS.md``, issue 3).
 
     Args:
         centres: occupied cell centres (N, 3) [m].
         cell: cell size [m].
-        refiner: normal refinement, or None to keep coal's raw normals.
-        max_raw_contacts: cap on the voxel contacts coal returns per shape.
+        refiner: normal refinement, or None to keep the hull faces' normals.
     """
 
     def __init__(
@@ -379,9 +387,8 @@ class OccupancyEnvironment(Environment):
         centres: FloatArray,
         cell: float,
         refiner: MetaballRefiner | None = None,
-        max_raw_contacts: int = 100,
     ) -> None:
-        """Build the octree and the k-d tree of the centres."""
+        """Build the k-d tree and the octree of the centres."""
         self.centres = np.ascontiguousarray(centres, dtype=float).reshape(-1, 3)
         self.cell = float(cell)
         self.resolution = 0.5 * self.cell
@@ -391,10 +398,6 @@ class OccupancyEnvironment(Environment):
             coal.makeOctree(self.centres, self.cell) if len(self.centres) else None
         )
         self._identity = pin.SE3.Identity()
-        self._request = coal.CollisionRequest(
-            coal.CollisionRequestFlag.CONTACT, max_raw_contacts
-        )
-        self._result = coal.CollisionResult()
 
     def __len__(self) -> int:
         """Number of occupied cells."""
@@ -415,47 +418,75 @@ class OccupancyEnvironment(Environment):
         margin: float,
         per_shape: int,
     ) -> Hits:
-        """Voxel contacts per shape, reduced to ``per_shape``, normals refined."""
-        if self.octree is None:
+        """Cell contacts per shape, reduced to ``per_shape``, normals refined."""
+        if not len(self.centres):
             return Hits()
+        half = 0.5 * self.cell
         # Broad phase: a shape whose bounding sphere has no cell centre within
-        # radius + margin + half a cell diagonal cannot touch the map.
-        reach = radii + margin + self.cell
+        # radius + margin + half a cell cannot be within the margin of a cell.
+        reach = radii + margin + half
         nearest, _ = self.tree.query(centres, distance_upper_bound=float(reach.max()))
-        request, result = self._request, self._result
-        request.security_margin = margin
-        rows: list[tuple[int, FloatArray, FloatArray, FloatArray, float]] = []
+        parts = []
         for i in np.flatnonzero(nearest <= reach):
-            result.clear()
-            coal.collide(
-                self.octree,
-                self._identity,
-                shapes[i].shape,
-                placements[i],
-                request,
-                result,
+            found = self.tree.query_ball_point(centres[i], reach[i])
+            part = self._shape_hits(
+                int(i), shapes[i], placements[i], self.centres[found], margin
             )
-            for c in result.getContacts():
-                normal = np.array(c.normal)
-                p1, p2 = np.array(c.getNearestPoint1()), np.array(c.getNearestPoint2())
-                depth = float(c.penetration_depth)
-                # Which witness lies on the obstacle is not consistent across coal's
-                # octree paths. The robot's is the one with (p_robot - p_obstacle)
-                # . normal = signed distance.
-                if (p2 - p1).dot(normal) * depth < 0:
-                    p1, p2 = p2, p1
-                rows.append((int(i), p2, p1, normal, depth))
+            if part is not None:
+                parts.append(part)
+        if not parts:
+            return Hits()
+        hits = Hits(*(np.concatenate(column) for column in zip(*parts, strict=True)))
         hits = _keep_closest(
-            Hits.from_rows(rows),
-            per_shape,
-            min_angle_deg=25.0,
-            min_spacing=2.0 * self.cell,
+            hits, per_shape, min_angle_deg=25.0, min_spacing=2.0 * self.cell
         )
         if self.refiner is not None and len(hits):
             hits.normal = self.refiner.refine(
                 self.tree, self.centres, self.cell, hits.obstacle_point, hits.normal
             )
         return hits
+
+    def _shape_hits(
+        self,
+        index: int,
+        shape: LinkShape,
+        placement: pin.SE3,
+        cells: FloatArray,
+        margin: float,
+    ) -> tuple[FloatArray, ...] | None:
+        """The closest cell on each hull face within ``margin`` of one shape."""
+        half = 0.5 * self.cell
+        frame = placement * shape.placement.inverse()  # planes are in the frame
+        R, t = frame.rotation, frame.translation
+        local = (cells - t).dot(R)  # R^T (c - t), row by row
+        # Cells outside the shape's box grown by the margin are too far.
+        grow = margin + half
+        inside = np.all((local > shape.lower - grow) & (local < shape.upper + grow), 1)
+        local = local[inside]
+        if not len(local):
+            return None
+        planes = shape.planes
+        excess = local.dot(planes[:, :3].T) - planes[:, 3]
+        face = excess.argmax(axis=1)
+        depth = excess[np.arange(len(face)), face]
+        near = depth - half < margin
+        if not near.any():
+            return None
+        face, depth, local = face[near], depth[near], local[near]
+        # The closest cell per face: few candidates, with the faces' directions.
+        order = np.argsort(depth, kind="stable")
+        _, first = np.unique(face[order], return_index=True)
+        pick = order[first]
+        face, depth, local = face[pick], depth[pick], local[pick]
+        outward = planes[face, :3].dot(R.T)  # face normals in the world
+        centre = local.dot(R.T) + t
+        return (
+            np.full(len(pick), index, dtype=np.intp),
+            centre - depth[:, None] * outward,  # on the face plane
+            centre - half * outward,  # on the cell, toward the shape
+            -outward,  # from the cell toward the shape
+            depth - half,
+        )
 
     def clearance(self, points: FloatArray) -> FloatArray:
         """Distance to the nearest occupied cell (centre distance - half a cell)."""

@@ -43,6 +43,8 @@ class LinkShape:
         centre: bounding-sphere centre in the frame [m], shape (3,).
         radius: bounding-sphere radius [m].
         planes: hull half-spaces in the frame, (F, 4): ``n . x <= d`` as (n, d).
+        lower: the hull's bounding-box corner, axes of the frame [m], shape (3,).
+        upper: the opposite corner [m], shape (3,).
     """
 
     name: str
@@ -54,6 +56,29 @@ class LinkShape:
     centre: FloatArray
     radius: float
     planes: FloatArray
+    lower: FloatArray
+    upper: FloatArray
+
+    @classmethod
+    def probe(cls, name: str, shape: coal.ShapeBase) -> LinkShape:
+        """A primitive on the world frame (frame 0), for studies and tests."""
+        mesh = _primitive_mesh(shape)
+        vertices = np.asarray(mesh.vertices)
+        lower, upper = vertices.min(axis=0), vertices.max(axis=0)
+        centre = 0.5 * (lower + upper)
+        return cls(
+            name=name,
+            link=name,
+            frame_id=0,
+            joint_id=0,
+            placement=pin.SE3.Identity(),
+            shape=shape,
+            centre=centre,
+            radius=float(np.linalg.norm(vertices - centre, axis=1).max()),
+            planes=_planes(mesh),
+            lower=lower,
+            upper=upper,
+        )
 
     def world_placement(self, state: RobotState) -> pin.SE3:
         """The shape's placement in the world at ``state``."""
@@ -206,6 +231,7 @@ class RobotGeometry:
             vertices = np.asarray(hull.vertices)
             lo, hi = vertices.min(axis=0), vertices.max(axis=0)
             centre_local = 0.5 * (lo + hi)
+            in_frame = vertices.dot(placement.rotation.T) + placement.translation
             self.shapes.append(
                 LinkShape(
                     name=obj.name,
@@ -217,6 +243,8 @@ class RobotGeometry:
                     centre=placement.act(centre_local),
                     radius=float(np.linalg.norm(vertices - centre_local, axis=1).max()),
                     planes=_transform_planes(_planes(hull), placement),
+                    lower=in_frame.min(axis=0),
+                    upper=in_frame.max(axis=0),
                 )
             )
         self.radii = np.array([s.radius for s in self.shapes])

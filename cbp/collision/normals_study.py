@@ -85,17 +85,7 @@ def angle_errors(
     rng = np.random.default_rng(seed)
     env = OccupancyEnvironment(surface, CELL, refiner)
     capsule = coal.Capsule(0.04, 0.06)
-    shape = LinkShape(
-        name="probe",
-        link="probe",
-        frame_id=0,
-        joint_id=0,
-        placement=pin.SE3.Identity(),
-        shape=capsule,
-        centre=np.zeros(3),
-        radius=0.07,
-        planes=np.zeros((0, 4)),
-    )
+    shape = LinkShape.probe("probe", capsule)
     errors = []
     for _ in range(probes):
         point, normal = sample(rng)
