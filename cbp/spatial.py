@@ -11,6 +11,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from cbp.errors import ConfigError, InvalidTargetError
+from cbp.robot import FloatArray
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,3 +77,10 @@ def checked_se3(
     if deviation > _ORTHONORMAL_TOL or det < 0.0:
         raise InvalidTargetError(f"{what}: rotation is not a rotation matrix: {R}")
     return pin.SE3(R, p)
+
+
+def cross3(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Cross product of two 3-vectors (``np.cross`` costs ~10x more on them)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,7 +51,7 @@ def frame_of(robot: RobotModel, name: str) -> int:
 
 def unit(v: FloatArray) -> tuple[FloatArray, float]:
     """(v / |v|, |v|); raises on a zero vector (the value is not differentiable)."""
-    n = float(np.linalg.norm(v))
+    n = math.sqrt(v.dot(v))
     if n < 1e-12:
         raise ZeroDivisionError("the camera is at the object's centre")
     return v / n, n

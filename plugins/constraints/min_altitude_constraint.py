@@ -10,6 +10,7 @@ import numpy as np
 
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel
+from cbp.spatial import cross3
 from cbp.state import RobotState
 from plugins.constraints._orbit import frame_of
 
@@ -70,7 +71,7 @@ class MinAltitudeConstraint(Constraint[MinAltitudeParams]):
         )
         Je = state.frame_jacobian(self.frame_id)
         Jb = state.frame_jacobian(self.base_id)
-        row = z_b.dot(Je[:3] - Jb[:3]) + np.cross(z_b, offset).dot(Jb[3:])
+        row = z_b.dot(Je[:3] - Jb[:3]) + cross3(z_b, offset).dot(Jb[3:])
         return np.asarray(row[None, :])
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:

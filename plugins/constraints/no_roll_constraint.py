@@ -10,6 +10,7 @@ import numpy as np
 
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel
+from cbp.spatial import cross3
 from cbp.state import RobotState
 from plugins.constraints._orbit import frame_of
 
@@ -63,7 +64,7 @@ class NoRollConstraint(Constraint[NoRollParams]):
         y_e = state.frame_rotation(self.frame_id)[:, 1]
         Jb = state.frame_jacobian(self.base_id)[3:]
         Je = state.frame_jacobian(self.frame_id)[3:]
-        return np.asarray(np.cross(z_b, y_e).dot(Jb - Je)[None, :])
+        return np.asarray(cross3(z_b, y_e).dot(Jb - Je)[None, :])
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """Zero: an equality when hard."""

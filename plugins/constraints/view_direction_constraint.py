@@ -11,6 +11,7 @@ import pinocchio as pin
 
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel
+from cbp.spatial import cross3
 from cbp.state import RobotState
 from plugins.constraints._orbit import CameraObjectParams, ObjectTarget, frame_of, unit
 
@@ -85,7 +86,7 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
         direction, norm = unit(d)
         if self.params.form == "paper":
             x = R[:, 0]
-            row = -x.dot(Jt) + np.cross(x, d).dot(Jw) + direction.dot(Jt)
+            row = -x.dot(Jt) + cross3(x, d).dot(Jw) + direction.dot(Jt)
             return np.asarray(row[None, :])
         projector = (np.eye(3) - np.outer(direction, direction)) / norm
         rows = np.empty((2, J.shape[1]))
