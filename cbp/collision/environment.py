@@ -422,18 +422,17 @@ class OccupancyEnvironment(Environment):
         if not len(self.centres):
             return Hits()
         half = 0.5 * self.cell
-        # Broad phase: a shape whose bounding sphere has no cell centre within
-        # radius + margin + half a cell cannot be within the margin of a cell.
+        # Broad phase: the cell centres within radius + margin + half a cell of
+        # each shape's bounding-sphere centre (one k-d tree call for all shapes).
         reach = radii + margin + half
-        nearest, _ = self.tree.query(centres, distance_upper_bound=float(reach.max()))
         parts = []
-        for i in np.flatnonzero(nearest <= reach):
-            found = self.tree.query_ball_point(centres[i], reach[i])
-            part = self._shape_hits(
-                int(i), shapes[i], placements[i], self.centres[found], margin
-            )
-            if part is not None:
-                parts.append(part)
+        near = self.tree.query_ball_point(centres, reach)
+        for i, found in enumerate(near):
+            if found:
+                cells = self.centres[np.array(found, dtype=np.intp)]
+                part = self._shape_hits(i, shapes[i], placements[i], cells, margin)
+                if part is not None:
+                    parts.append(part)
         if not parts:
             return Hits()
         hits = Hits(*(np.concatenate(column) for column in zip(*parts, strict=True)))
