@@ -418,6 +418,47 @@ def _cat_rows(cfg: BenchConfig) -> list[Row]:
     return rows
 
 
+def _query_rows(cfg: BenchConfig) -> list[Row]:
+    """The full-arm contact query alone: declared objects, and an octree."""
+    from cbp.collision.environment import MetaballRefiner, OccupancyEnvironment
+    from cbp.scenario import load_scenario
+
+    n, w = max(cfg.repetitions // 2, 3), min(cfg.warmup, 50)
+    boards = load_scenario(SCENARIOS / "cat_boards.yaml")
+    shelf = load_scenario(SCENARIOS / "cat_shelf_retreat.yaml")  # starts inside
+    cells = _sample_objects(shelf, 0.01)
+    octree_world = shelf.collision_world()
+    octree_world.set_environment(OccupancyEnvironment(cells, 0.01, MetaballRefiner()))
+    rows = []
+    for case, world, q in (
+        ("full arm vs declared objects (boards)", boards.collision_world(), None),
+        (
+            f"full arm vs octree inside the shelf ({len(cells)} cells, normals "
+            "refined)",
+            octree_world,
+            shelf.q0,
+        ),
+    ):
+        q = _near_board(boards) if q is None else q
+        # Two configurations 1 nrad apart, alternately: every check is a query.
+        pair = (q, q + 1e-9)
+
+        def query(i: int, world: Any = world, pair: Any = pair) -> object:
+            return world.check(pair[i % 2])
+
+        contacts = len(world.check(q).contacts)
+        rows.append(
+            Row(
+                "query",
+                case,
+                *measure(query, n, w),
+                n,
+                note=f"{contacts} contacts (environment and self); kinematics included",
+            )
+        )
+    return rows
+
+
 def _near_board(scenario: Any) -> np.ndarray:
     """A configuration of the boards scene with the hand 2 cm above board 1."""
     from cbp.executors.ik_search import IkSearch
@@ -723,6 +764,7 @@ def run_bench(
     for group in (
         _reaching_rows,
         _cat_rows,
+        _query_rows,
         _scaling_rows,
         _world_scaling_rows,
         _mp_row,
@@ -812,6 +854,7 @@ def write_results(result: dict[str, Any], path: Path, command: str) -> None:
 #: The bench issue's targets: (row group, case prefix, limit, what the limit is on).
 TARGETS = [
     ("cat step", "boards", 130.0, "us per CAT step with contacts (250 per period)"),
+    ("query", "full arm vs octree", 60.0, "us per octree contact query (arm)"),
     ("planning", "MP", 25_000.0, "us to plan and simplify in the shelf"),
     ("orbit", "one", 200.0, "us per orbit tick"),
     ("map", "one", 50_000.0, "us per map update"),
