@@ -236,6 +236,11 @@ class EnvironmentObject:
         return cls.make(name, model, placement)
 
 
+TREE_MIN_OBJECTS = 32
+"""Above this many declared objects, a k-d tree picks those near the robot first
+(below it, testing them all costs less than the tree query)."""
+
+
 class PrimitiveEnvironment(Environment):
     """Declared objects (ground truth), with a bounding-box broad phase.
 
@@ -248,6 +253,16 @@ class PrimitiveEnvironment(Environment):
         self.objects = list(objects)
         self._lower = np.array([o.lower for o in objects]).reshape(-1, 3)
         self._upper = np.array([o.upper for o in objects]).reshape(-1, 3)
+        # Objects far from the whole robot are skipped with one k-d tree query
+        # on their box centres, so the cost grows with the objects nearby.
+        self._box_centres = 0.5 * (self._lower + self._upper)
+        self._box_reach = (
+            float(np.linalg.norm(self._upper - self._lower, axis=1).max()) / 2
+            if objects
+            else 0.0
+        )
+        self._tree = cKDTree(self._box_centres)
+        self._all = np.arange(len(objects), dtype=np.intp)
         self._request = coal.DistanceRequest()
         self._result = coal.DistanceResult()
 
@@ -263,15 +278,19 @@ class PrimitiveEnvironment(Environment):
         """Exact distances of the candidate pairs; one contact per pair."""
         if not self.objects:
             return Hits()
+        candidates = self._near_robot(centres, radii, margin)
+        if not candidates.size:
+            return Hits()
+        lower, upper = self._lower[candidates], self._upper[candidates]
         # Distance from each sphere centre to each box, minus the radius: (n, m).
-        gap = np.maximum(self._lower[None] - centres[:, None], 0.0) + np.maximum(
-            centres[:, None] - self._upper[None], 0.0
+        gap = np.maximum(lower[None] - centres[:, None], 0.0) + np.maximum(
+            centres[:, None] - upper[None], 0.0
         )
         near = np.sqrt(np.einsum("nmk,nmk->nm", gap, gap)) - radii[:, None] < margin
         rows: list[tuple[int, FloatArray, FloatArray, FloatArray, float]] = []
         request, result = self._request, self._result
-        for i, j in zip(*np.nonzero(near), strict=True):
-            obj = self.objects[j]
+        for i, k in zip(*np.nonzero(near), strict=True):
+            obj = self.objects[candidates[k]]
             d, point, other, normal = signed_distance(
                 obj.shape,
                 obj.placement,
@@ -288,6 +307,20 @@ class PrimitiveEnvironment(Environment):
     def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
         """Every declared object."""
         return [(o.name, o.shape, o.placement) for o in self.objects]
+
+    def _near_robot(
+        self, centres: FloatArray, radii: FloatArray, margin: float
+    ) -> IntArray:
+        """Indices of the objects that may be within ``margin`` of the robot."""
+        if len(self.objects) <= TREE_MIN_OBJECTS:
+            return self._all
+        # The boxes whose centres are near the robot's bounding sphere (around
+        # the spheres of all its shapes).
+        middle = 0.5 * (centres.min(axis=0) + centres.max(axis=0))
+        offset = centres - middle
+        reach = float((np.sqrt(np.einsum("ij,ij->i", offset, offset)) + radii).max())
+        found = self._tree.query_ball_point(middle, reach + margin + self._box_reach)
+        return np.array(found, dtype=np.intp)
 
     def clearance(self, points: FloatArray) -> FloatArray:
         """Exact distance from each point to the nearest object."""

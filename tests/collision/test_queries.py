@@ -17,6 +17,7 @@ from cbp.collision import (
 )
 from cbp.sim.scene import PybulletScene
 from cbp.state import RobotState
+from cbp.testing import sample_configurations
 
 
 @pytest.fixture(scope="module")
@@ -130,3 +131,43 @@ def test_self_collision_found_when_folded_not_at_home(geometry, robots) -> None:
         )
         assert points
         assert min(p[8] for p in points) < -0.01
+
+
+def test_far_objects_change_nothing(geometry, robots, rng) -> None:
+    """With many objects (k-d tree broad phase), contacts are those of the near ones."""
+    from cbp.collision.environment import TREE_MIN_OBJECTS
+
+    robot = robots["panda"]
+    near = [
+        EnvironmentObject.primitive(
+            "table",
+            "box",
+            (0.8, 0.8, 0.05),
+            pin.SE3(np.eye(3), np.array([0.5, 0, 0.3])),
+        ),
+        EnvironmentObject.primitive(
+            "ball", "sphere", (0.1,), pin.SE3(np.eye(3), np.array([0.3, 0.3, 0.6]))
+        ),
+    ]
+    far = [
+        EnvironmentObject.primitive(
+            f"far_{k}",
+            "box",
+            (0.2, 0.2, 0.2),
+            pin.SE3(np.eye(3), np.array([4.0 + 0.5 * (k % 10), 0.5 * (k // 10), 0.1])),
+        )
+        for k in range(2 * TREE_MIN_OBJECTS)
+    ]
+    settings = CollisionSettings(activation_distance=0.1)
+    few = CollisionWorld(geometry, PrimitiveEnvironment(near), settings)
+    many = CollisionWorld(geometry, PrimitiveEnvironment(near + far), settings)
+    found = 0
+    for q in sample_configurations(robot, rng, n=40):
+        a, b = few.check(q).contacts, many.check(q).contacts
+        # The same contacts, maybe in another order.
+        a = a.select(np.lexsort((a.distance, a.shape)))
+        b = b.select(np.lexsort((b.distance, b.shape)))
+        np.testing.assert_array_equal(a.shape, b.shape)
+        np.testing.assert_allclose(a.distance, b.distance)
+        found += len(a)
+    assert found > 20
