@@ -70,6 +70,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     check = sub.add_parser("check", help="validate scenario files without running them")
     check.add_argument("scenarios", type=Path, nargs="+")
     sub.add_parser("plugins", help="list every plugin with its parameters")
+    pairs = sub.add_parser(
+        "robot-pairs",
+        help="suggest collision.ignore_pairs for robot.yaml by sampling (MoveIt's way)",
+    )
+    pairs.add_argument("robot", help="robot name (a folder under robots/)")
+    pairs.add_argument("--samples", type=int, default=20000)
+    pairs.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     if args.command == "run":
         overrides = _overrides(args.set)
@@ -85,7 +92,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _bench(args.quick, args.out, args.results)
     if args.command == "check":
         return _check(args.scenarios)
+    if args.command == "robot-pairs":
+        return _robot_pairs(args.robot, args.samples, args.seed)
     return _plugins()
+
+
+def _robot_pairs(name: str, samples: int, seed: int) -> int:
+    import numpy as np
+
+    from cbp.collision import RobotGeometry, find_ignorable_pairs
+    from cbp.robot import RobotModel
+
+    try:
+        robot = RobotModel.load(name)
+        geometry = RobotGeometry(robot)
+    except CbpError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    pairs = find_ignorable_pairs(geometry, np.random.default_rng(seed), samples)
+    print(
+        f"# {len(pairs)} of {len(geometry.self_pairs)} self-collision pairs never "
+        f"(or always) collide in {samples} random configurations (seed {seed}):"
+    )
+    print(f"# cbp robot-pairs {name} --samples {samples} --seed {seed}")
+    print("collision:")
+    print("  ignore_pairs:")
+    for a, b in pairs:
+        print(f"    - [{a}, {b}]")
+    return 0
 
 
 def _overrides(items: Sequence[str]) -> dict[str, str] | None:
