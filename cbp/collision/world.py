@@ -99,6 +99,9 @@ class ContactSet:
     other_point: FloatArray
     normal: FloatArray
     distance: FloatArray
+    _split: tuple[ContactSet, ContactSet] | None = field(
+        default=None, repr=False, compare=False
+    )
 
     @classmethod
     def empty(cls) -> ContactSet:
@@ -143,6 +146,22 @@ class ContactSet:
     def is_self(self) -> np.ndarray:
         """Which contacts are between two robot shapes."""
         return np.asarray(self.other_shape >= 0)
+
+    def environment_part(self) -> ContactSet:
+        """The contacts with obstacles (computed once per set)."""
+        return self._parts()[0]
+
+    def self_part(self) -> ContactSet:
+        """The contacts between two robot shapes (computed once per set)."""
+        return self._parts()[1]
+
+    def _parts(self) -> tuple[ContactSet, ContactSet]:
+        parts = self._split
+        if parts is None:
+            is_self = self.is_self
+            parts = (self.select(~is_self), self.select(is_self))
+            self._split = parts
+        return parts
 
     @property
     def penetration(self) -> float:
@@ -315,10 +334,15 @@ class CollisionWorld:
         hits = environment.query(shapes, placements, centres, radii, margin, per_shape)
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles
         # are inflated by that much (and step validation tolerates as much more).
-        parts = [self._from_hits(hits, self.padding + environment.resolution)]
-        if self.settings.self_collision:
-            parts.append(self._self_contacts(placements, centres))
-        return ContactSet.concatenate(parts)
+        obstacles = self._from_hits(hits, self.padding + environment.resolution)
+        own = (
+            self._self_contacts(placements, centres)
+            if self.settings.self_collision
+            else ContactSet.empty()
+        )
+        contacts = ContactSet.concatenate([obstacles, own])
+        contacts._split = (obstacles, own)  # the parts the constraints read
+        return contacts
 
     @staticmethod
     def _from_hits(hits: Hits, padding: float) -> ContactSet:
@@ -356,10 +380,14 @@ class CollisionWorld:
         if not rows:
             return ContactSet.empty()
         columns = list(zip(*rows, strict=True))
+        point, other, normal, distance = (np.array(c, dtype=float) for c in columns[2:])
         return ContactSet(
             np.array(columns[0], dtype=np.intp),
             np.array(columns[1], dtype=np.intp),
-            *(np.array(c, dtype=float) for c in columns[2:]),
+            point,
+            other,
+            normal,
+            distance,
         )
 
     def __repr__(self) -> str:

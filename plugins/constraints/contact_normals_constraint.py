@@ -83,7 +83,7 @@ class ContactNormalsConstraint(Constraint[ContactParams]):
         return self._latched().contacts
 
     def _select(self, contacts: ContactSet) -> ContactSet:
-        return contacts.select(~contacts.is_self)
+        return contacts.environment_part()
 
     def _latched(self) -> LatchedContacts:
         if self._rows is None:

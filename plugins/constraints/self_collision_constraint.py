@@ -35,4 +35,4 @@ class SelfCollisionConstraint(ContactNormalsConstraint):
         super().attach_world(world)
 
     def _select(self, contacts: ContactSet) -> ContactSet:
-        return contacts.select(contacts.is_self)
+        return contacts.self_part()
