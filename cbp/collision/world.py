@@ -117,6 +117,16 @@ class ContactSet:
         sets = [s for s in sets if len(s)]
         if not sets:
             return cls.empty()
+        if len(sets) == 1:  # the arrays are shared, never modified
+            one = sets[0]
+            return cls(
+                one.shape,
+                one.other_shape,
+                one.point,
+                one.other_point,
+                one.normal,
+                one.distance,
+            )
         return cls(
             *(
                 np.concatenate([getattr(s, f) for s in sets])
