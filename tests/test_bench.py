@@ -12,6 +12,7 @@ def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:
     groups = {row["group"] for row in result["rows"]}
     assert groups == {
         "reaching",
+        "parts",
         "cat step",
         "query",
         "scaling",
@@ -32,3 +33,4 @@ def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:
     assert "## cat step" in text
     assert "## Profile of the CAT step" in text
     assert "octree contact query" in text  # its target row
+    assert "## Where the time goes" in text
