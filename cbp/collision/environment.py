@@ -486,35 +486,54 @@ class OccupancyEnvironment(Environment):
         cells: FloatArray,
         margin: float,
     ) -> tuple[FloatArray, ...] | None:
-        """The closest cell on each hull face within ``margin`` of one shape."""
+        """The closest cell in each direction within ``margin`` of one shape.
+
+        Capsules are measured exactly against their axis; other shapes by the
+        largest excess over their hull's face planes, grouped by face.
+        """
         half = 0.5 * self.cell
-        frame = placement * shape.placement.inverse()  # planes are in the frame
+        geometry = shape.shape
+        if isinstance(geometry, coal.Capsule):
+            frame = placement  # the capsule's own frame: axis z, centred
+            lower = -np.array([geometry.radius, geometry.radius, 0.0])
+            lower[2] = -geometry.halfLength - geometry.radius
+            upper = -lower
+        else:
+            frame = placement * shape.placement.inverse()  # planes are in the frame
+            lower, upper = shape.lower, shape.upper
         R, t = frame.rotation, frame.translation
         local = (cells - t).dot(R)  # R^T (c - t), row by row
         # Cells outside the shape's box grown by the margin are too far.
         grow = margin + half
-        inside = np.all((local > shape.lower - grow) & (local < shape.upper + grow), 1)
-        local = local[inside]
+        local = local[np.all((local > lower - grow) & (local < upper + grow), 1)]
         if not len(local):
             return None
-        planes = shape.planes
-        excess = local.dot(planes[:, :3].T) - planes[:, 3]
-        face = excess.argmax(axis=1)
-        depth = excess[np.arange(len(face)), face]
+        if isinstance(geometry, coal.Capsule):
+            depth, outward, group = _capsule_distances(
+                local, geometry.radius, geometry.halfLength
+            )
+        else:
+            depth, outward, group = _hull_distances(local, shape.planes)
         near = depth - half < margin
         if not near.any():
             return None
-        face, depth, local = face[near], depth[near], local[near]
-        # The closest cell per face: few candidates, with the faces' directions.
+        depth, outward, group, local = (
+            depth[near],
+            outward[near],
+            group[near],
+            local[near],
+        )
+        # The closest cell per group (face, or direction): few candidates, with
+        # distinct directions.
         order = np.argsort(depth, kind="stable")
-        _, first = np.unique(face[order], return_index=True)
+        _, first = np.unique(group[order], return_index=True)
         pick = order[first]
-        face, depth, local = face[pick], depth[pick], local[pick]
-        outward = planes[face, :3].dot(R.T)  # face normals in the world
+        depth, local = depth[pick], local[pick]
+        outward = outward[pick].dot(R.T)  # in the world
         centre = local.dot(R.T) + t
         return (
             np.full(len(pick), index, dtype=np.intp),
-            centre - depth[:, None] * outward,  # on the face plane
+            centre - depth[:, None] * outward,  # on the shape's surface
             centre - half * outward,  # on the cell, toward the shape
             -outward,  # from the cell toward the shape
             depth - half,
@@ -526,6 +545,54 @@ class OccupancyEnvironment(Environment):
             return np.full(len(points), np.inf)
         d, _ = self.tree.query(points)
         return np.asarray(d, dtype=float) - 0.5 * self.cell
+
+
+def _hull_distances(
+    local: FloatArray, planes: FloatArray
+) -> tuple[FloatArray, FloatArray, IntArray]:
+    """Points' largest excess over a hull's face planes, that face's normal, the face.
+
+    The excess is the signed distance to the hull where the nearest feature is a
+    face, and a lower bound near edges and corners.
+    """
+    excess = local.dot(planes[:, :3].T) - planes[:, 3]
+    face = excess.argmax(axis=1)
+    depth = excess[np.arange(len(face)), face]
+    return depth, planes[face, :3], face
+
+
+#: Directions that group a capsule's contacts: the 26 of a 3x3x3 grid's cells.
+_DIRECTIONS = np.array(
+    [
+        (x, y, z)
+        for x in (-1, 0, 1)
+        for y in (-1, 0, 1)
+        for z in (-1, 0, 1)
+        if (x, y, z) != (0, 0, 0)
+    ],
+    dtype=float,
+)
+
+
+def _capsule_distances(
+    local: FloatArray, radius: float, half_length: float
+) -> tuple[FloatArray, FloatArray, IntArray]:
+    """Points' signed distance to a capsule, the normal out of it, a direction group.
+
+    The points are in the capsule's frame (axis z, centred); the normal is the
+    unit vector out of the capsule at the point nearest each point.
+    """
+    axis = np.zeros_like(local)
+    axis[:, 2] = np.clip(local[:, 2], -half_length, half_length)
+    offset = local - axis
+    length = np.sqrt(np.einsum("ij,ij->i", offset, offset))
+    # A point on the axis has no direction: take the axis' normal x.
+    on_axis = length < 1e-12
+    offset[on_axis] = (1.0, 0.0, 0.0)
+    length[on_axis] = 1.0
+    outward = offset / length[:, None]
+    group = outward.dot(_DIRECTIONS.T).argmax(axis=1)
+    return length - radius, outward, group
 
 
 def _keep_closest(

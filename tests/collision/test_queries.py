@@ -11,6 +11,7 @@ from cbp.collision import (
     CollisionSettings,
     CollisionWorld,
     EnvironmentObject,
+    MetaballRefiner,
     OccupancyEnvironment,
     PrimitiveEnvironment,
     RobotGeometry,
@@ -171,3 +172,47 @@ def test_far_objects_change_nothing(geometry, robots, rng) -> None:
         np.testing.assert_allclose(a.distance, b.distance)
         found += len(a)
     assert found > 20
+
+
+@pytest.mark.parametrize("gap", [0.03, -0.01])
+def test_capsule_links_are_measured_exactly_against_cells(robots, gap) -> None:
+    """With capsule links, cell contacts match coal's exact capsule-box distance."""
+    robot = robots["panda"]
+    capsules = RobotGeometry(robot, approximation="capsule")
+    state = RobotState(robot, robot.home())
+    hand = next(s for s in capsules.shapes if s.link == "panda_hand")
+    M = hand.world_placement(state)
+    cell = 0.01
+    # A layer of cells whose top face lies ``gap`` below the capsule's lowest point.
+    axis = M.rotation[:, 2] * hand.shape.halfLength
+    ends = np.array([M.translation + axis, M.translation - axis])
+    lowest = ends[np.argmin(ends[:, 2])] - [0.0, 0.0, hand.shape.radius]
+    top = lowest[2] - gap
+    xs = np.arange(-0.15 + cell / 2, 0.15, cell)
+    X, Y = np.meshgrid(xs + lowest[0], xs + lowest[1])
+    layer = OccupancyEnvironment(
+        np.c_[X.ravel(), Y.ravel(), np.full(X.size, top - cell / 2)],
+        cell,
+        MetaballRefiner(),  # the direction to the nearest centre tilts by steps
+    )
+    box = EnvironmentObject.primitive(
+        "box",
+        "box",
+        (0.3, 0.3, cell),
+        pin.SE3(np.eye(3), np.array([lowest[0], lowest[1], top - cell / 2])),
+    )
+    centres = np.array([M.act(np.zeros(3))])
+    radii = np.array([hand.radius])
+    exact = PrimitiveEnvironment([box]).query([hand], [M], centres, radii, 0.05, 1)
+    cells = layer.query([hand], [M], centres, radii, 0.05, 3)
+    k = int(np.argmin(cells.distance))
+    assert cells.distance[k] == pytest.approx(exact.distance[0], abs=1e-3)
+    assert cells.distance[k] == pytest.approx(gap, abs=1e-3)
+    assert np.degrees(np.arccos(np.clip(cells.normal[k][2], -1, 1))) < 2.0
+    # The robot witness lies on the capsule's surface.
+    p = cells.robot_point[k] - M.translation
+    along = np.clip(
+        p.dot(M.rotation[:, 2]), -hand.shape.halfLength, hand.shape.halfLength
+    )
+    radial = np.linalg.norm(p - along * M.rotation[:, 2])
+    assert radial == pytest.approx(hand.shape.radius, abs=1e-9)
