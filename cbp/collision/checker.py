@@ -77,11 +77,9 @@ class FreeSpaceChecker:
             self._model, geometry_model, self._geometry_data
         )
         self._has_pairs = len(geometry_model.collisionPairs) > 0
-        self.checks = 0
 
     def is_free(self, q: FloatArray) -> bool:
         """True when no checked pair of padded shapes overlaps at ``q``."""
-        self.checks += 1
         if not self._has_pairs:
             return True
         return not pin.computeCollisions(

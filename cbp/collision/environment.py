@@ -400,9 +400,10 @@ class OccupancyEnvironment(Environment):
     k-d tree, and measures them against the shape's hull faces in one matrix
     product: a centre's largest excess over the face planes is its signed distance
     to the hull where the nearest feature is a face (exact there, and a lower bound
-    near edges and corners, so never an overestimate). Cells are cubes: the
-    distance to a cell is its centre's less half a cell. A few representative
-    contacts per shape are kept, and their normals refined.
+    near edges and corners, so never an overestimate); capsules are measured
+    exactly, against their axis. Cells are cubes: the distance to a cell is its
+    centre's less half a cell. A few representative contacts per shape are kept,
+    and their normals refined.
 
     The coal octree serves the yes-or-no checks of planners
     (:class:`~cbp.collision.checker.FreeSpaceChecker`). Coal's own octree contact
