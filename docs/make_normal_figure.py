@@ -18,7 +18,7 @@ from cbp.collision.normals_study import angle_errors, tilted_plane, yawed_box
 
 HERE = Path(__file__).parent
 METHODS = {
-    "raw normal (the hull face's)": None,
+    "raw normal (the link's, toward the nearest cell)": None,
     "metaball R=1.5 cells at the witness (CAT paper)": MetaballRefiner(
         radius_cells=1.5, offset_cells=0.0
     ),

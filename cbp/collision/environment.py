@@ -379,16 +379,20 @@ class MetaballRefiner:
             return out
         radius = self.radius_cells * cell
         at = points + self.offset_cells * cell * normals
-        for k, neighbours in enumerate(tree.query_ball_point(at, radius)):
-            if not neighbours:
-                continue
-            diff = at[k] - centres[neighbours]
-            s = 1.0 - np.einsum("ij,ij->i", diff, diff) / radius**2
-            # dF/dx = sum -6 s^2 (x - c) / R^2; the normal is -grad F.
-            grad = -(6.0 / radius**2) * (s**2).dot(diff)
-            norm = float(np.linalg.norm(grad))
-            if norm > 1e-12:
-                out[k] = -grad / norm
+        # Every (evaluation point, neighbour) pair at once.
+        neighbours = tree.query_ball_point(at, radius)
+        counts = np.array([len(n) for n in neighbours])
+        if not counts.any():
+            return out
+        owner = np.repeat(np.arange(len(at)), counts)
+        diff = at[owner] - centres[np.concatenate(neighbours).astype(np.intp)]
+        s = 1.0 - np.einsum("ij,ij->i", diff, diff) / radius**2
+        # dF/dx = sum -6 s^2 (x - c) / R^2; the normal is -grad F.
+        grad = np.zeros_like(at)
+        np.add.at(grad, owner, -(6.0 / radius**2) * (s**2)[:, None] * diff)
+        norm = np.sqrt(np.einsum("ij,ij->i", grad, grad))
+        ok = norm > 1e-12
+        out[ok] = -grad[ok] / norm[ok, None]
         return out
 
 
