@@ -609,7 +609,9 @@ def _keep_closest(
     normal (by ``min_angle_deg``) or position (by ``min_spacing``): a few contacts
     that span the directions the shape is blocked in, instead of one per voxel.
     """
-    if len(hits) == 0 or np.bincount(hits.shape).max() <= per_shape:
+    if len(hits) == 0:
+        return hits
+    if min_spacing <= 0.0 and np.bincount(hits.shape).max() <= per_shape:
         return hits  # nothing to drop (the common case against declared objects)
     cos_max = np.cos(np.radians(min_angle_deg))
     keep: list[int] = []
