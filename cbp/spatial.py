@@ -40,8 +40,9 @@ class Pose:
         return pin.SE3(rotation, np.array(self.position, dtype=float))
 
 
-_ORTHONORMAL_TOL = 1e-6
-"""How far R^T R may be from the identity, entry by entry."""
+_ORTHONORMAL_ATOL = 1e-6
+_ORTHONORMAL_RTOL = 1e-5
+"""How far R^T R may be from the identity: |entry - I| <= atol + rtol |I|."""
 
 
 def checked_se3(
@@ -64,17 +65,24 @@ def checked_se3(
     a, b, c, d, e, f, g, h, i = R.ravel().tolist()
     if not all(map(math.isfinite, (*p.tolist(), a, b, c, d, e, f, g, h, i))):
         raise InvalidTargetError(f"{what}: not finite (position {p}, rotation {R})")
-    # Columns orthonormal (R^T R = I) and det R = +1.
-    deviation = max(
+    # Columns orthonormal (R^T R = I, as numpy's allclose(atol=1e-6) would judge
+    # it) and det R = +1.
+    unit = max(
         abs(a * a + d * d + g * g - 1.0),
         abs(b * b + e * e + h * h - 1.0),
         abs(c * c + f * f + i * i - 1.0),
+    )
+    orthogonal = max(
         abs(a * b + d * e + g * h),
         abs(a * c + d * f + g * i),
         abs(b * c + e * f + h * i),
     )
     det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    if deviation > _ORTHONORMAL_TOL or det < 0.0:
+    if (
+        unit > _ORTHONORMAL_ATOL + _ORTHONORMAL_RTOL
+        or orthogonal > _ORTHONORMAL_ATOL
+        or det < 0.0
+    ):
         raise InvalidTargetError(f"{what}: rotation is not a rotation matrix: {R}")
     return pin.SE3(R, p)
 
