@@ -6,11 +6,11 @@ collision-free configuration (:class:`~cbp.executors.ik_search.IkSearch`), and
 RRT-Connect plans a joint-space path to it from the point of the current
 trajectory after the deadline. States are valid when no padded link penetrates
 an obstacle or another link (the scenario's collision world); motions are
-checked at OMPL's resolution. The path is shortened and smoothed by OMPL's
-simplifier, resampled, timed to stop at its end and spliced in by the shared
-trajectory loop; while the goal stays the same the plan is followed, not
-replaced. A plan that does not finish in the budget counts as a miss, so the
-period grows.
+checked at OMPL's resolution. The path is shortened by OMPL's path simplifier
+(rope shortcut and vertex reduction, or its full simplification), resampled,
+timed to stop at its end and spliced in by the shared trajectory loop; while
+the goal stays the same the plan is followed, not replaced. A plan that does not
+finish in the budget counts as a miss, so the period grows.
 """
 
 from __future__ import annotations
@@ -68,6 +68,7 @@ class MpPlanner:
         self._si.setStateValidityCheckingResolution(settings.check_resolution)
         self._si.setup()
         self._og = og
+        self._simplifier = og.PathSimplifier(self._si)
         self._start = self._space.allocState()
         self._goal_state = self._space.allocState()
 
@@ -121,9 +122,14 @@ class MpPlanner:
         if not solved or not setup.haveExactSolutionPath():
             return Plan(None, self.checks - checks, "no plan in time", timed_out=True)
         left = deadline - time.perf_counter()
-        if left > 0:
-            setup.simplifySolution(left)
         path = setup.getSolutionPath()
+        if left > 0:
+            if s.simplify == "full":
+                setup.simplifySolution(left)
+                path = setup.getSolutionPath()
+            else:
+                self._simplifier.ropeShortcutPath(path)
+                self._simplifier.reduceVertices(path)
         points = _resample(self._states(path, q), s.waypoint_step)
         note = "planned"
         # Resampled points fall between the states OMPL checked; where one of them

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 from cbp.errors import ConfigError, require
 
@@ -147,6 +148,11 @@ class MpSettings:
     """The IK search for the goal configuration."""
     simplify_fraction: float = 0.3
     """Share of the planning budget left for path simplification."""
+    simplify: Literal["shortcut", "full"] = "shortcut"
+    """``shortcut``: OMPL's rope shortcut, then vertex reduction; ``full``:
+    ``SimpleSetup.simplifySolution`` (also B-spline smoothing, repeated until
+    nothing improves or the budget ends). Measured in the shelf: shortcut paths
+    are as short, at a twelfth of the validity checks."""
     check_resolution: float = 0.005
     """Motion validation: checked every this fraction of the joint space's
     extent (OMPL's state validity checking resolution)."""

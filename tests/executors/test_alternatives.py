@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -78,11 +79,13 @@ def test_interpolation_stops_before_a_collision(boards: Scenario) -> None:
     assert np.max(np.abs(plan.path[-1] - target)) > 0.02
 
 
-def test_mp_plans_over_the_board(boards: Scenario) -> None:
+@pytest.mark.parametrize("simplify", ["shortcut", "full"])
+def test_mp_plans_over_the_board(boards: Scenario, simplify: str) -> None:
     """RRT-Connect + simplification: a valid path to the far side of a board."""
     run = SimulatedRun(boards, "mp", needs_world=True)
     try:
-        planner = MpPlanner(boards, run, boards.spec.method.mp)
+        settings = dataclasses.replace(boards.spec.method.mp, simplify=simplify)
+        planner = MpPlanner(boards, run, settings)
         goal = pin.SE3(
             pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.12, 0.15])
         )
