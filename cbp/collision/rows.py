@@ -54,6 +54,8 @@ class LatchedContacts:
         self._points: FloatArray = np.zeros((0, 3))
         self._normals: FloatArray = np.zeros((0, 3))
         self._local: FloatArray | None = None
+        self._lower = np.full(capacity, -np.inf)
+        self._upper = np.full(capacity, np.inf)
 
     @property
     def count(self) -> int:
@@ -70,11 +72,14 @@ class LatchedContacts:
         self._local = None
         other = np.flatnonzero(contacts.other_shape >= 0)
         self._other_rows = other
-        self._frames = self._frame_of_shape[
-            np.concatenate([contacts.shape, contacts.other_shape[other]])
-        ].tolist()
-        self._points = np.concatenate([contacts.point, contacts.other_point[other]])
-        self._normals = np.concatenate([contacts.normal, -contacts.normal[other]])
+        if other.size:
+            shapes = np.concatenate([contacts.shape, contacts.other_shape[other]])
+            self._points = np.concatenate([contacts.point, contacts.other_point[other]])
+            self._normals = np.concatenate([contacts.normal, -contacts.normal[other]])
+        else:  # obstacle contacts: the robot points alone
+            shapes = contacts.shape
+            self._points, self._normals = contacts.point, contacts.normal
+        self._frames = self._frame_of_shape[shapes].tolist()
 
     def _at_latch(self, state: RobotState) -> bool:
         return state.q is self._q
@@ -107,10 +112,14 @@ class LatchedContacts:
         return out
 
     def bounds(self, safety_distance: float) -> tuple[FloatArray, FloatArray]:
-        """Active rows: [safety_distance, inf); inactive rows: (-inf, inf)."""
-        lower = np.full(self.capacity, -np.inf)
+        """Active rows: [safety_distance, inf); inactive rows: (-inf, inf).
+
+        The arrays are this object's own, rewritten by the next call.
+        """
+        lower = self._lower
         lower[: self.count] = safety_distance
-        return lower, np.full(self.capacity, np.inf)
+        lower[self.count :] = -np.inf
+        return lower, self._upper
 
     def _moved_points(self, state: RobotState) -> FloatArray:
         """The latched points at ``state``, moved with their frames, (k, 3)."""
