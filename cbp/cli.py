@@ -75,7 +75,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="suggest collision.ignore_pairs for robot.yaml by sampling (MoveIt's way)",
     )
     pairs.add_argument("robot", help="robot name (a folder under robots/)")
-    pairs.add_argument("--samples", type=int, default=20000)
+    pairs.add_argument(
+        "--samples", type=_positive_int, default=20000, help="random configurations"
+    )
     pairs.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     if args.command == "run":
@@ -97,6 +99,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _plugins()
 
 
+def _positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
 def _robot_pairs(name: str, samples: int, seed: int) -> int:
     import numpy as np
 
@@ -111,7 +121,8 @@ def _robot_pairs(name: str, samples: int, seed: int) -> int:
         return 2
     pairs = find_ignorable_pairs(geometry, np.random.default_rng(seed), samples)
     print(
-        f"# {len(pairs)} of {len(geometry.self_pairs)} self-collision pairs never "
+        f"# {len(pairs)} of {len(geometry.non_adjacent_pairs())} non-adjacent pairs "
+        "never "
         f"(or always) collide in {samples} random configurations (seed {seed}):"
     )
     print(f"# cbp robot-pairs {name} --samples {samples} --seed {seed}")

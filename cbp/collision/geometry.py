@@ -275,6 +275,10 @@ class RobotGeometry:
                 pairs.append((i, j))
         return pairs
 
+    def non_adjacent_pairs(self) -> list[tuple[int, int]]:
+        """Every pair of shapes on distinct, non-adjacent bodies (no ignore list)."""
+        return self._self_pairs([])
+
     def geometry_model(self, padding: float = 0.0) -> pin.GeometryModel:
         """The shapes as a pinocchio geometry model (one object per shape, in order).
 
@@ -369,18 +373,25 @@ def find_ignorable_pairs(
 
     The method of MoveIt's setup assistant: pairs that are in collision in no
     sampled configuration cannot usefully constrain motion and are skipped, and
-    pairs in collision in every sample are a modelling artefact. Paste the result
-    under ``collision.ignore_pairs`` in robot.yaml; more samples, fewer misses.
+    pairs in collision in every sample are a modelling artefact. Every
+    non-adjacent pair is sampled, including those robot.yaml already ignores, so
+    the result is the whole list: paste it under ``collision.ignore_pairs`` in
+    robot.yaml. More samples, fewer misses.
+
+    Raises:
+        ValueError: ``samples`` is below 1.
     """
+    if samples < 1:
+        raise ValueError(f"samples must be >= 1, got {samples}")
     robot = geometry.robot
     state = RobotState(robot)
-    counts = dict.fromkeys(geometry.self_pairs, 0)
+    counts = dict.fromkeys(geometry.non_adjacent_pairs(), 0)
     request = coal.CollisionRequest()
     result = coal.CollisionResult()
     for _ in range(samples):
         state.update(robot.random_configuration(rng))
         placements = [s.world_placement(state) for s in geometry.shapes]
-        for i, j in geometry.self_pairs:
+        for i, j in counts:
             result.clear()
             if coal.collide(
                 geometry.shapes[i].shape,
