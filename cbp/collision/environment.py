@@ -518,7 +518,7 @@ class OccupancyEnvironment(Environment):
                 local, geometry.radius, geometry.halfLength
             )
         else:
-            depth, outward, group = _hull_distances(local, shape.planes)
+            depth, outward, group = _hull_distances(local, shape)
         near = depth - half < margin
         if not near.any():
             return None
@@ -553,17 +553,18 @@ class OccupancyEnvironment(Environment):
 
 
 def _hull_distances(
-    local: FloatArray, planes: FloatArray
+    local: FloatArray, shape: LinkShape
 ) -> tuple[FloatArray, FloatArray, IntArray]:
     """Points' largest excess over a hull's face planes, that face's normal, the face.
 
     The excess is the signed distance to the hull where the nearest feature is a
     face, and a lower bound near edges and corners.
     """
-    excess = local.dot(planes[:, :3].T) - planes[:, 3]
+    excess = local.astype(np.float32).dot(shape.plane_normals_t)
+    excess -= shape.plane_offsets
     face = excess.argmax(axis=1)
-    depth = excess[np.arange(len(face)), face]
-    return depth, planes[face, :3], face
+    depth = excess[np.arange(len(face)), face].astype(float)
+    return depth, shape.planes[face, :3], face
 
 
 #: Directions that group a capsule's contacts: the 26 of a 3x3x3 grid's cells.

@@ -12,12 +12,14 @@ by a sphere of that radius.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
 import coal
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 import trimesh
 from scipy.optimize import minimize
@@ -79,6 +81,20 @@ class LinkShape:
             lower=lower,
             upper=upper,
         )
+
+    @functools.cached_property
+    def plane_normals_t(self) -> npt.NDArray[np.float32]:
+        """The face planes' normals as contiguous float32 columns, (3, F).
+
+        For matrix products with many points: a strided slice of ``planes`` makes
+        numpy skip BLAS (10x slower), and float32 is exact to 0.1 um here.
+        """
+        return np.ascontiguousarray(self.planes[:, :3].T, dtype=np.float32)
+
+    @functools.cached_property
+    def plane_offsets(self) -> npt.NDArray[np.float32]:
+        """The face planes' offsets d (n . x <= d), float32, (F,)."""
+        return np.ascontiguousarray(self.planes[:, 3], dtype=np.float32)
 
     def world_placement(self, state: RobotState) -> pin.SE3:
         """The shape's placement in the world at ``state``."""
