@@ -12,6 +12,7 @@ for shapes, and out of the occupied cell for octrees).
 from __future__ import annotations
 
 import abc
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -614,22 +615,31 @@ def _keep_closest(
         return hits
     if min_spacing <= 0.0 and np.bincount(hits.shape).max() <= per_shape:
         return hits  # nothing to drop (the common case against declared objects)
-    cos_max = np.cos(np.radians(min_angle_deg))
+    cos_max = math.cos(math.radians(min_angle_deg))
+    spacing2 = min_spacing * min_spacing
+    # One stable sort by (shape, distance); then plain floats, a few per test.
+    order = np.lexsort((hits.distance, hits.shape)).tolist()
+    shape = hits.shape.tolist()
+    normal = hits.normal.tolist()
+    point = hits.robot_point.tolist()
     keep: list[int] = []
-    for i in np.unique(hits.shape):
-        kept: list[int] = []
-        for k in np.flatnonzero(hits.shape == i)[
-            np.argsort(hits.distance[hits.shape == i], kind="stable")
-        ]:
-            if len(kept) >= per_shape:
-                break
-            similar = any(
-                hits.normal[k].dot(hits.normal[m]) > cos_max
-                and np.linalg.norm(hits.robot_point[k] - hits.robot_point[m])
-                < min_spacing
-                for m in kept
-            )
-            if not similar:
-                kept.append(int(k))
-        keep += kept
+    kept: list[int] = []
+    current = None
+    for k in order:
+        if shape[k] != current:
+            current, kept = shape[k], []
+        if len(kept) >= per_shape:
+            continue
+        nk, pk = normal[k], point[k]
+        similar = False
+        for m in kept:
+            nm, pm = normal[m], point[m]
+            if nk[0] * nm[0] + nk[1] * nm[1] + nk[2] * nm[2] > cos_max:
+                dx, dy, dz = pk[0] - pm[0], pk[1] - pm[1], pk[2] - pm[2]
+                if dx * dx + dy * dy + dz * dz < spacing2:
+                    similar = True
+                    break
+        if not similar:
+            kept.append(k)
+            keep.append(k)
     return hits.select(np.array(keep, dtype=np.intp))
