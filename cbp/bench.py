@@ -122,6 +122,36 @@ def measure(fn: Callable[[int], object], n: int, warmup: int) -> tuple[float, fl
     return float(np.median(samples) * 1e6), float(np.percentile(samples, 95) * 1e6)
 
 
+def measure_interleaved(
+    fns: list[Callable[[int], object]], n: int, warmup: int, rounds: int = 20
+) -> list[tuple[float, float]]:
+    """Like :func:`measure` for several functions, in alternating rounds.
+
+    Each function runs ``n // rounds`` calls per round, the functions taking
+    turns, so that a slow spell of the machine (another process, the CPU's
+    clock) falls on all of them alike and their ratios hold.
+    """
+    for fn in fns:
+        for i in range(warmup):
+            fn(i)
+    per_round = max(n // rounds, 1)
+    samples = [np.empty(per_round * rounds) for _ in fns]
+    gc.disable()
+    try:
+        for r in range(rounds):
+            for fn, out in zip(fns, samples, strict=True):
+                for j in range(per_round):
+                    i = r * per_round + j
+                    start = time.perf_counter()
+                    fn(i)
+                    out[i] = time.perf_counter() - start
+    finally:
+        gc.enable()
+    return [
+        (float(np.median(x) * 1e6), float(np.percentile(x, 95) * 1e6)) for x in samples
+    ]
+
+
 # ---------------------------------------------------------------- 1-2: reaching
 
 
@@ -199,50 +229,151 @@ class HandWritten:
         return np.asarray(x)
 
 
+#: A step to time: (case, function of the call index, note).
+Step = tuple[str, Callable[[int], object], str]
+
+
 def _reaching_rows(cfg: BenchConfig) -> list[Row]:
+    """The reaching step: ours on each backend, pink, placo, hand-written.
+
+    Every row but cvxpy's (a hundred times slower) is timed in alternating
+    rounds with the others, so that their ratios hold on a busy machine.
+    """
     from cbp.robot import RobotModel
 
     robot = RobotModel.load("franka_panda")
     q0 = robot.home()
     n, w = cfg.repetitions, cfg.warmup
-    rows: list[Row] = []
     hand = HandWritten(robot)
-    state = {"q": q0.copy()}
+    hand_q = {"q": q0.copy()}
 
     def hand_step(i: int) -> object:
         hand.goal = GOALS[(i // 64) % len(GOALS)]
-        dq = hand.step(state["q"])
-        state["q"] = pin.integrate(robot.model, state["q"], dq)
+        dq = hand.step(hand_q["q"])
+        hand_q["q"] = pin.integrate(robot.model, hand_q["q"], dq)
         return dq
 
     base = "hand-written: pinocchio + numpy + daqp (no framework)"
-    rows.append(Row("reaching", base, *measure(hand_step, n, w), n))
-    for solver, reps in (("daqp", n), ("piqp", n), ("cvxpy", max(n // 20, 3))):
-        engine, goal = _engine(robot, solver)
-        state["q"] = q0.copy()
-
-        def engine_step(i: int, engine: Any = engine, goal: Any = goal) -> object:
-            target = GOALS[(i // 64) % len(GOALS)]
-            goal.set_target(target.translation, target.rotation)
-            dq = engine.step(state["q"], DT)
-            state["q"] = robot.integrate(state["q"], dq)
-            return dq
-
-        rows.append(
-            Row(
-                "reaching",
-                f"cbp Engine.step, solver={solver}",
-                *measure(engine_step, reps, min(w, reps)),
-                reps,
-            )
-        )
-    rows += _peer_rows(robot, q0, cfg)
+    steps: list[Step] = [(base, hand_step, "")]
+    steps += [
+        (f"cbp Engine.step, solver={solver}", _engine_step(robot, solver), "")
+        for solver in ("daqp", "piqp")
+    ]
+    steps += _peer_steps(robot, q0)
+    timed = measure_interleaved([fn for _, fn, _ in steps], n, w)
+    rows = [
+        Row("reaching", case, median, p95, n, note=note)
+        for (case, _, note), (median, p95) in zip(steps, timed, strict=True)
+    ]
+    reps = max(n // 20, 3)
+    slow = _engine_step(robot, "cvxpy")
+    rows.insert(
+        3,
+        Row(
+            "reaching",
+            "cbp Engine.step, solver=cvxpy",
+            *measure(slow, reps, min(w, reps)),
+            reps,
+            note="timed on its own",
+        ),
+    )
+    if not _has_pink():
+        rows.append(Row("reaching", "pink: not installed (bench extra)", 0.0, 0.0, 0))
     daqp_row = rows[1]
     for row in rows:
-        if row is not daqp_row:
+        if row is not daqp_row and row.median_us > 0:
             row.ratio_to, row.ratio = daqp_row.case, row.median_us / daqp_row.median_us
     rows[1].ratio_to, rows[1].ratio = base, rows[1].median_us / rows[0].median_us
     return rows
+
+
+def _engine_step(robot: Any, solver: str) -> Callable[[int], object]:
+    """One engine step toward the cycling goals, from its own configuration."""
+    engine, goal = _engine(robot, solver)
+    current = {"q": robot.home()}
+
+    def step(i: int) -> object:
+        target = GOALS[(i // 64) % len(GOALS)]
+        goal.set_target(target.translation, target.rotation)
+        dq = engine.step(current["q"], DT)
+        current["q"] = robot.integrate(current["q"], dq)
+        return dq
+
+    return step
+
+
+def _has_pink() -> bool:
+    try:
+        import pink  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _peer_steps(robot: Any, q0: np.ndarray) -> list[Step]:
+    """The peers on the reaching task: pink (if installed) and placo."""
+    steps: list[Step] = []
+    if _has_pink():
+        import pink
+        from pink.limits import ConfigurationLimit, VelocityLimit
+        from pink.tasks import FrameTask, PostureTask
+
+        model = robot.model
+        configuration = pink.Configuration(model, model.createData(), q0.copy())
+        frame = FrameTask("panda_hand", position_cost=1.0, orientation_cost=0.3)
+        posture = PostureTask(cost=1e-2)
+        posture.set_target(0.5 * (robot.lower_limits + robot.upper_limits))
+        limits = [ConfigurationLimit(model), VelocityLimit(model)]
+
+        def pink_step(i: int) -> object:
+            frame.set_target(GOALS[(i // 64) % len(GOALS)])
+            v = pink.solve_ik(
+                configuration, [frame, posture], DT, solver="daqp", limits=limits
+            )
+            configuration.integrate_inplace(v, DT)
+            return v
+
+        steps.append(
+            (
+                "pink.solve_ik + integrate (daqp)",
+                pink_step,
+                "FrameTask, PostureTask, ConfigurationLimit, VelocityLimit",
+            )
+        )
+    import placo
+
+    wrapper = placo.RobotWrapper(str(robot.urdf_path), placo.Flags.ignore_collisions)
+    solver = placo.KinematicsSolver(wrapper)
+    solver.mask_fbase(True)
+    solver.enable_velocity_limits(True)
+    solver.dt = DT
+    for joint in ("panda_finger_joint1", "panda_finger_joint2"):
+        solver.mask_dof(joint)
+    for k, name in enumerate(robot.joint_names):
+        wrapper.set_joint(name, float(q0[k]))
+    wrapper.update_kinematics()
+    task = solver.add_frame_task("panda_hand", GOALS[0].homogeneous)
+    task.configure("hand", "soft", 1.0, 0.3)
+    joints = solver.add_joints_task()
+    joints.set_joints(
+        {n: float(v) for n, v in zip(robot.joint_names, robot.middle(), strict=True)}
+    )
+    joints.configure("posture", "soft", 1e-2)
+
+    def placo_step(i: int) -> object:
+        task.T_world_frame = GOALS[(i // 64) % len(GOALS)].homogeneous
+        solver.solve(True)
+        wrapper.update_kinematics()
+        return None
+
+    steps.append(
+        (
+            "placo KinematicsSolver.solve + update_kinematics",
+            placo_step,
+            "frame task, joints task, joint and velocity limits (C++)",
+        )
+    )
+    return steps
 
 
 def _parts_rows(cfg: BenchConfig) -> list[Row]:
@@ -309,78 +440,6 @@ def _parts_rows(cfg: BenchConfig) -> list[Row]:
     rows[5].ratio_to, rows[5].ratio = (
         rows[4].case,
         rows[5].median_us / rows[4].median_us,
-    )
-    return rows
-
-
-def _peer_rows(robot: Any, q0: np.ndarray, cfg: BenchConfig) -> list[Row]:
-    rows = []
-    n, w = cfg.repetitions, cfg.warmup
-    try:
-        import pink
-        from pink.limits import ConfigurationLimit, VelocityLimit
-        from pink.tasks import FrameTask, PostureTask
-    except ImportError:
-        rows.append(Row("reaching", "pink: not installed (bench extra)", 0.0, 0.0, 0))
-    else:
-        model = robot.model
-        configuration = pink.Configuration(model, model.createData(), q0.copy())
-        frame = FrameTask("panda_hand", position_cost=1.0, orientation_cost=0.3)
-        posture = PostureTask(cost=1e-2)
-        posture.set_target(0.5 * (robot.lower_limits + robot.upper_limits))
-        limits = [ConfigurationLimit(model), VelocityLimit(model)]
-
-        def pink_step(i: int) -> object:
-            frame.set_target(GOALS[(i // 64) % len(GOALS)])
-            v = pink.solve_ik(
-                configuration, [frame, posture], DT, solver="daqp", limits=limits
-            )
-            configuration.integrate_inplace(v, DT)
-            return v
-
-        rows.append(
-            Row(
-                "reaching",
-                "pink.solve_ik + integrate (daqp)",
-                *measure(pink_step, max(n // 2, 3), w),
-                max(n // 2, 3),
-                note="FrameTask, PostureTask, ConfigurationLimit, VelocityLimit",
-            )
-        )
-    import placo
-
-    wrapper = placo.RobotWrapper(str(robot.urdf_path), placo.Flags.ignore_collisions)
-    solver = placo.KinematicsSolver(wrapper)
-    solver.mask_fbase(True)
-    solver.enable_velocity_limits(True)
-    solver.dt = DT
-    for joint in ("panda_finger_joint1", "panda_finger_joint2"):
-        solver.mask_dof(joint)
-    for k, name in enumerate(robot.joint_names):
-        wrapper.set_joint(name, float(q0[k]))
-    wrapper.update_kinematics()
-    task = solver.add_frame_task("panda_hand", GOALS[0].homogeneous)
-    task.configure("hand", "soft", 1.0, 0.3)
-    joints = solver.add_joints_task()
-    joints.set_joints(
-        {n: float(v) for n, v in zip(robot.joint_names, robot.middle(), strict=True)}
-    )
-    joints.configure("posture", "soft", 1e-2)
-
-    def placo_step(i: int) -> object:
-        task.T_world_frame = GOALS[(i // 64) % len(GOALS)].homogeneous
-        solver.solve(True)
-        wrapper.update_kinematics()
-        return None
-
-    rows.append(
-        Row(
-            "reaching",
-            "placo KinematicsSolver.solve + update_kinematics",
-            *measure(placo_step, n, w),
-            n,
-            note="frame task, joints task, joint and velocity limits (C++)",
-        )
     )
     return rows
 
