@@ -414,10 +414,7 @@ def _parts_rows(cfg: BenchConfig) -> list[Row]:
     boards.q0[:] = _near_board(boards)
     world = boards.collision_world()
     cat = boards.make_engine()
-    task = boards.goal_task()
-    stream = boards.goal_stream()
-    final = stream.pose(stream.end_time)
-    task.set_target(final.translation, final.rotation)
+    _aim_at_final_goal(boards)
     near = boards.q0
     pair = (near, near + 1e-9)
     world.check(near)
@@ -451,6 +448,19 @@ RESTART = 32
 """CAT step rows: steps from the start configuration before going back to it."""
 
 
+def _final_goal(scenario: Any) -> pin.SE3:
+    """The last pose of the scenario's goal stream."""
+    stream = scenario.goal_stream()
+    assert stream is not None, f"{scenario.spec.name} has no goal"
+    return stream.pose(stream.end_time)
+
+
+def _aim_at_final_goal(scenario: Any) -> None:
+    """Give the scenario's goal task the stream's last pose."""
+    goal = _final_goal(scenario)
+    scenario.goal_task().set_target(goal.translation, goal.rotation)
+
+
 def _cat_step(
     scenario: Any, capacity: int | None = None
 ) -> tuple[Callable[[int], object], Any]:
@@ -476,10 +486,7 @@ def _cat_step(
                 plugin.attach_world(world)
                 entries[k] = Entry.make(plugin, gain=entry.gain)
     engine = Engine(scenario.robot, entries, solver=scenario.spec.solver.name)
-    goal_task = scenario.goal_task()
-    stream = scenario.goal_stream()
-    goal = stream.pose(stream.end_time)
-    goal_task.set_target(goal.translation, goal.rotation)
+    _aim_at_final_goal(scenario)
     start = scenario.q0.copy()
     robot = scenario.robot
     current = {"q": start}
@@ -742,9 +749,7 @@ def _mp_row(cfg: BenchConfig) -> list[Row]:
     solved = 0
     try:
         planner = MpPlanner(scenario, run, scenario.spec.method.mp)
-        stream = scenario.goal_stream()
-        assert stream is not None
-        goal = stream.pose(stream.end_time)  # in the shelf
+        goal = _final_goal(scenario)  # in the shelf
         target = planner.search.solution_for(goal, scenario.q0, time.perf_counter() + 5)
         for _ in range(cfg.mp_seeds):
             start = time.perf_counter()
