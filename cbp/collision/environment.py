@@ -12,6 +12,7 @@ for shapes, and out of the occupied cell for octrees).
 from __future__ import annotations
 
 import abc
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,13 @@ import pinocchio as pin
 import trimesh
 from scipy.spatial import cKDTree
 
+from cbp.collision.cells import (
+    CellIndex,
+    ShapeTable,
+    compile_kernels,
+    metaball_normals,
+    spread_contacts,
+)
 from cbp.collision.geometry import LinkShape
 from cbp.errors import ConfigError
 from cbp.robot import FloatArray, IntArray
@@ -144,6 +152,15 @@ class Environment(abc.ABC):
             per_shape: at most this many contacts per shape (the closest, spread
                 over distinct directions).
         """
+
+    def prepare(self, shapes: list[LinkShape], margin: float) -> None:
+        """Get ready for queries of ``shapes`` up to ``margin``: build, compile.
+
+        Called when a world takes this snapshot, in the thread that hands it over
+        (the map thread), so that the control loop's first query pays nothing
+        extra. Nothing to do by default.
+        """
+        del shapes, margin
 
     @abc.abstractmethod
     def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
@@ -367,48 +384,44 @@ class MetaballRefiner:
     """Evaluation point: obstacle witness point + offset x cell along the raw normal."""
 
     def refine(
-        self,
-        tree: cKDTree,
-        centres: FloatArray,
-        cell: float,
-        points: FloatArray,
-        normals: FloatArray,
+        self, index: CellIndex, points: FloatArray, normals: FloatArray
     ) -> FloatArray:
-        """Refined unit normals (k, 3); a raw normal is kept where F has no gradient."""
-        out = normals.copy()
-        if len(points) == 0:
+        """Refined unit normals (k, 3); a raw normal is kept where F has no gradient.
+
+        Args:
+            index: the occupied cells.
+            points: obstacle witness points (k, 3).
+            normals: their raw unit normals, out of the obstacle (k, 3).
+        """
+        out = np.array(normals, dtype=float, order="C").reshape(-1, 3)
+        if len(out) == 0 or len(index) == 0:
             return out
-        radius = self.radius_cells * cell
-        at = points + self.offset_cells * cell * normals
-        # Every (evaluation point, neighbour) pair at once.
-        neighbours = tree.query_ball_point(at, radius)
-        counts = np.array([len(n) for n in neighbours])
-        if not counts.any():
-            return out
-        owner = np.repeat(np.arange(len(at)), counts)
-        diff = at[owner] - centres[np.concatenate(neighbours).astype(np.intp)]
-        s = 1.0 - np.einsum("ij,ij->i", diff, diff) / radius**2
-        # dF/dx = sum -6 s^2 (x - c) / R^2; the normal is -grad F.
-        grad = np.zeros_like(at)
-        np.add.at(grad, owner, -(6.0 / radius**2) * (s**2)[:, None] * diff)
-        norm = np.sqrt(np.einsum("ij,ij->i", grad, grad))
-        ok = norm > 1e-12
-        out[ok] = -grad[ok] / norm[ok, None]
+        at = points + (self.offset_cells * index.cell) * out
+        metaball_normals(
+            index.centres,
+            index.start,
+            index.origin,
+            index.cell * index.brick,
+            index.dims,
+            np.ascontiguousarray(at),
+            self.radius_cells * index.cell,
+            out,
+        )
         return out
 
 
 class OccupancyEnvironment(Environment):
-    """An occupancy map: occupied cell centres, in a k-d tree (and a coal octree).
+    """An occupancy map: occupied cell centres, indexed by brick (and a coal octree).
 
     Built once per map update (a few ms for tens of thousands of cells). A query
-    takes, for each robot shape, the cell centres near its bounding sphere from the
-    k-d tree, and measures them against the shape's hull faces in one matrix
-    product: a centre's largest excess over the face planes is its signed distance
-    to the hull where the nearest feature is a face (exact there, and a lower bound
-    near edges and corners, so never an overestimate); capsules are measured
-    exactly, against their axis. Cells are cubes: the distance to a cell is its
-    centre's less half a cell. A few representative contacts per shape are kept,
-    and their normals refined.
+    measures the cells inside each robot shape's box, grown by the margin, in one
+    compiled pass (:mod:`cbp.collision.cells`): a cell's largest excess over a
+    hull's face planes is its signed distance to the hull where the nearest
+    feature is a face (exact there, and a lower bound near edges and corners, so
+    never an overestimate); capsules are measured exactly, against their axis.
+    Cells are cubes: the distance to a cell is its centre's less half a cell. The
+    closest cell per face (or direction) is a candidate; a few representative
+    contacts per shape are kept, and their normals refined.
 
     The coal octree serves the yes-or-no checks of planners
     (:class:`~cbp.collision.checker.FreeSpaceChecker`). Coal's own octree contact
@@ -427,12 +440,12 @@ class OccupancyEnvironment(Environment):
         cell: float,
         refiner: MetaballRefiner | None = None,
     ) -> None:
-        """Build the k-d tree and the octree of the centres."""
+        """Index the centres and build their octree."""
         self.centres = np.ascontiguousarray(centres, dtype=float).reshape(-1, 3)
         self.cell = float(cell)
         self.resolution = 0.5 * self.cell
         self.refiner = refiner
-        self.tree = cKDTree(self.centres)
+        self.index = CellIndex(self.centres, self.cell)
         self.octree = (
             coal.makeOctree(self.centres, self.cell) if len(self.centres) else None
         )
@@ -441,6 +454,16 @@ class OccupancyEnvironment(Environment):
     def __len__(self) -> int:
         """Number of occupied cells."""
         return len(self.centres)
+
+    def prepare(self, shapes: list[LinkShape], margin: float) -> None:
+        """Compile the query (once per process) and pack the shapes (once)."""
+        compile_kernels()
+        ShapeTable.for_shapes(shapes, margin + 0.5 * self.cell)
+
+    @functools.cached_property
+    def tree(self) -> cKDTree:
+        """A k-d tree of the cell centres (built on first use, for clearances)."""
+        return cKDTree(self.centres)
 
     def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
         """The octree (none while the map is empty)."""
@@ -461,89 +484,27 @@ class OccupancyEnvironment(Environment):
         if not len(self.centres):
             return Hits()
         half = 0.5 * self.cell
-        # Broad phase: the cell centres within radius + margin + half a cell of
-        # each shape's bounding-sphere centre (one k-d tree call for all shapes).
-        reach = radii + margin + half
-        parts = []
-        near = self.tree.query_ball_point(centres, reach)
-        for i, found in enumerate(near):
-            if found:
-                cells = self.centres[np.array(found, dtype=np.intp)]
-                part = self._shape_hits(i, shapes[i], placements[i], cells, margin)
-                if part is not None:
-                    parts.append(part)
-        if not parts:
+        table = ShapeTable.for_shapes(shapes, margin + half)
+        shape, centre, outward, distance = table.candidates(
+            self.index, placements, margin
+        )
+        if not len(shape):
             return Hits()
-        hits = Hits(*(np.concatenate(column) for column in zip(*parts, strict=True)))
+        hits = Hits(
+            shape,
+            centre - (distance + half)[:, None] * outward,  # on the shape's surface
+            centre - half * outward,  # on the cell, toward the shape
+            -outward,  # from the cell toward the shape
+            distance,
+        )
         hits = _keep_closest(
             hits, per_shape, min_angle_deg=25.0, min_spacing=2.0 * self.cell
         )
         if self.refiner is not None and len(hits):
             hits.normal = self.refiner.refine(
-                self.tree, self.centres, self.cell, hits.obstacle_point, hits.normal
+                self.index, hits.obstacle_point, hits.normal
             )
         return hits
-
-    def _shape_hits(
-        self,
-        index: int,
-        shape: LinkShape,
-        placement: pin.SE3,
-        cells: FloatArray,
-        margin: float,
-    ) -> tuple[FloatArray, ...] | None:
-        """The closest cell in each direction within ``margin`` of one shape.
-
-        Capsules are measured exactly against their axis; other shapes by the
-        largest excess over their hull's face planes, grouped by face.
-        """
-        half = 0.5 * self.cell
-        geometry = shape.shape
-        if isinstance(geometry, coal.Capsule):
-            frame = placement  # the capsule's own frame: axis z, centred
-            lower = -np.array([geometry.radius, geometry.radius, 0.0])
-            lower[2] = -geometry.halfLength - geometry.radius
-            upper = -lower
-        else:
-            frame = placement * shape.placement.inverse()  # planes are in the frame
-            lower, upper = shape.lower, shape.upper
-        R, t = frame.rotation, frame.translation
-        local = (cells - t).dot(R)  # R^T (c - t), row by row
-        # Cells outside the shape's box grown by the margin are too far.
-        grow = margin + half
-        local = local[np.all((local > lower - grow) & (local < upper + grow), 1)]
-        if not len(local):
-            return None
-        if isinstance(geometry, coal.Capsule):
-            depth, outward, group = _capsule_distances(
-                local, geometry.radius, geometry.halfLength
-            )
-        else:
-            depth, outward, group = _hull_distances(local, shape)
-        near = depth - half < margin
-        if not near.any():
-            return None
-        depth, outward, group, local = (
-            depth[near],
-            outward[near],
-            group[near],
-            local[near],
-        )
-        # The closest cell per group (face, or direction): few candidates, with
-        # distinct directions.
-        order = np.argsort(depth, kind="stable")
-        _, first = np.unique(group[order], return_index=True)
-        pick = order[first]
-        depth, local = depth[pick], local[pick]
-        outward = outward[pick].dot(R.T)  # in the world
-        centre = local.dot(R.T) + t
-        return (
-            np.full(len(pick), index, dtype=np.intp),
-            centre - depth[:, None] * outward,  # on the shape's surface
-            centre - half * outward,  # on the cell, toward the shape
-            -outward,  # from the cell toward the shape
-            depth - half,
-        )
 
     def clearance(self, points: FloatArray) -> FloatArray:
         """Distance to the nearest occupied cell (centre distance - half a cell)."""
@@ -551,55 +512,6 @@ class OccupancyEnvironment(Environment):
             return np.full(len(points), np.inf)
         d, _ = self.tree.query(points)
         return np.asarray(d, dtype=float) - 0.5 * self.cell
-
-
-def _hull_distances(
-    local: FloatArray, shape: LinkShape
-) -> tuple[FloatArray, FloatArray, IntArray]:
-    """Points' largest excess over a hull's face planes, that face's normal, the face.
-
-    The excess is the signed distance to the hull where the nearest feature is a
-    face, and a lower bound near edges and corners.
-    """
-    excess = local.astype(np.float32).dot(shape.plane_normals_t)
-    excess -= shape.plane_offsets
-    face = excess.argmax(axis=1)
-    depth = excess[np.arange(len(face)), face].astype(float)
-    return depth, shape.planes[face, :3], face
-
-
-#: Directions that group a capsule's contacts: the 26 of a 3x3x3 grid's cells.
-_DIRECTIONS = np.array(
-    [
-        (x, y, z)
-        for x in (-1, 0, 1)
-        for y in (-1, 0, 1)
-        for z in (-1, 0, 1)
-        if (x, y, z) != (0, 0, 0)
-    ],
-    dtype=float,
-)
-
-
-def _capsule_distances(
-    local: FloatArray, radius: float, half_length: float
-) -> tuple[FloatArray, FloatArray, IntArray]:
-    """Points' signed distance to a capsule, the normal out of it, a direction group.
-
-    The points are in the capsule's frame (axis z, centred); the normal is the
-    unit vector out of the capsule at the point nearest each point.
-    """
-    axis = np.zeros_like(local)
-    axis[:, 2] = np.clip(local[:, 2], -half_length, half_length)
-    offset = local - axis
-    length = np.sqrt(np.einsum("ij,ij->i", offset, offset))
-    # A point on the axis has no direction: take the axis' normal x.
-    on_axis = length < 1e-12
-    offset[on_axis] = (1.0, 0.0, 0.0)
-    length[on_axis] = 1.0
-    outward = offset / length[:, None]
-    group = outward.dot(_DIRECTIONS.T).argmax(axis=1)
-    return length - radius, outward, group
 
 
 def _keep_closest(
@@ -615,31 +527,16 @@ def _keep_closest(
         return hits
     if min_spacing <= 0.0 and np.bincount(hits.shape).max() <= per_shape:
         return hits  # nothing to drop (the common case against declared objects)
-    cos_max = math.cos(math.radians(min_angle_deg))
-    spacing2 = min_spacing * min_spacing
-    # One stable sort by (shape, distance); then plain floats, a few per test.
-    order = np.lexsort((hits.distance, hits.shape)).tolist()
-    shape = hits.shape.tolist()
-    normal = hits.normal.tolist()
-    point = hits.robot_point.tolist()
-    keep: list[int] = []
-    kept: list[int] = []
-    current = None
-    for k in order:
-        if shape[k] != current:
-            current, kept = shape[k], []
-        if len(kept) >= per_shape:
-            continue
-        nk, pk = normal[k], point[k]
-        similar = False
-        for m in kept:
-            nm, pm = normal[m], point[m]
-            if nk[0] * nm[0] + nk[1] * nm[1] + nk[2] * nm[2] > cos_max:
-                dx, dy, dz = pk[0] - pm[0], pk[1] - pm[1], pk[2] - pm[2]
-                if dx * dx + dy * dy + dz * dz < spacing2:
-                    similar = True
-                    break
-        if not similar:
-            kept.append(k)
-            keep.append(k)
-    return hits.select(np.array(keep, dtype=np.intp))
+    order = np.lexsort((hits.distance, hits.shape))
+    keep = np.empty(len(hits), dtype=np.intp)
+    count = spread_contacts(
+        order,
+        hits.shape,
+        hits.normal,
+        hits.robot_point,
+        per_shape,
+        math.cos(math.radians(min_angle_deg)),
+        min_spacing * min_spacing,
+        keep,
+    )
+    return hits.select(keep[:count])

@@ -252,6 +252,7 @@ class CollisionWorld:
         self._geometry_data = pin.GeometryData(self._geometry_model)
         # Bounding-sphere centres in the shapes' own frames.
         self._centres = [s.placement.actInv(s.centre) for s in geometry.shapes]
+        self._environment.prepare(geometry.shapes, self.margin(self._environment))
 
     @property
     def environment(self) -> Environment:
@@ -259,10 +260,23 @@ class CollisionWorld:
         return self._environment
 
     def set_environment(self, environment: Environment) -> None:
-        """Swap in a new snapshot (thread-safe; queries in flight keep the old one)."""
+        """Swap in a new snapshot (thread-safe; queries in flight keep the old one).
+
+        The snapshot is prepared for this world's queries first, in the caller's
+        thread (:meth:`Environment.prepare`).
+        """
+        environment.prepare(self.geometry.shapes, self.margin(environment))
         with self._lock:
             self._environment = environment
             self.environment_version += 1
+
+    def margin(self, environment: Environment) -> float:
+        """How far from the unpadded shapes obstacles are reported [m].
+
+        The activation distance, plus the padding, plus the environment's
+        resolution (an occupancy map's obstacles are inflated by half a cell).
+        """
+        return self.settings.activation_distance + self.padding + environment.resolution
 
     def contacts(self, state: RobotState) -> ContactSet:
         """Contacts at ``state`` (cached per configuration and environment).
@@ -337,9 +351,7 @@ class CollisionWorld:
             [M.act(c) for M, c in zip(placements, self._centres, strict=True)]
         ).reshape(-1, 3)
         radii = geometry.radii
-        margin = (
-            self.settings.activation_distance + self.padding + environment.resolution
-        )
+        margin = self.margin(environment)
         per_shape = self.settings.contacts_per_link
         hits = environment.query(shapes, placements, centres, radii, margin, per_shape)
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles

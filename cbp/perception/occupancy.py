@@ -110,7 +110,7 @@ class OccupancyGrid:
         self.misses[gone[:, 0], gone[:, 1], gone[:, 2]] = 0
 
     def environment(self) -> OccupancyEnvironment:
-        """A snapshot for the collision world (octree + k-d tree of the centres)."""
+        """A snapshot for the collision world (brick index + octree of the centres)."""
         s = self.spec
         refiner = (
             MetaballRefiner(

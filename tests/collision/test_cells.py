@@ -1,0 +1,234 @@
+"""The compiled cell queries against brute force: face grids, candidates, normals."""
+
+from __future__ import annotations
+
+import math
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from cbp.collision import MetaballRefiner, OccupancyEnvironment, RobotGeometry
+from cbp.collision.cells import (
+    DIRECTIONS,
+    CellIndex,
+    ShapeTable,
+    spread_contacts,
+)
+from cbp.collision.geometry import LinkShape
+from cbp.state import RobotState
+from cbp.testing import sample_configurations
+
+CELL = 0.01
+
+
+@pytest.fixture(scope="module")
+def geometry(robots) -> RobotGeometry:
+    return RobotGeometry(robots["panda"])
+
+
+def _shell(centre: np.ndarray, half: float, cell: float = CELL) -> np.ndarray:
+    """The cells on the surface of a cube (a map of a box seen from all sides)."""
+    n = round(2 * half / cell)
+    ijk = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    surface = ijk[((ijk == 0) | (ijk == n - 1)).any(axis=1)]
+    return centre - half + (surface + 0.5) * cell
+
+
+def _brute_force(
+    shapes: list[LinkShape],
+    placements: list[pin.SE3],
+    cells: np.ndarray,
+    margin: float,
+    half: float,
+) -> dict[tuple[int, int], float]:
+    """Closest distance per (shape, group), over all faces, in numpy."""
+    best: dict[tuple[int, int], float] = {}
+    for s, (shape, M) in enumerate(zip(shapes, placements, strict=True)):
+        if isinstance(shape.shape, coal.Capsule):
+            frame = M
+            r, h = shape.shape.radius, shape.shape.halfLength
+            lower, upper = np.array([-r, -r, -h - r]), np.array([r, r, h + r])
+        else:
+            frame = M * shape.placement.inverse()
+            lower, upper = shape.lower, shape.upper
+        local = (cells - frame.translation).dot(frame.rotation)
+        grow = margin + half
+        local = local[np.all((local > lower - grow) & (local < upper + grow), 1)]
+        if isinstance(shape.shape, coal.Capsule):
+            axis = np.zeros_like(local)
+            axis[:, 2] = np.clip(local[:, 2], -h, h)
+            offset = local - axis
+            length = np.linalg.norm(offset, axis=1)
+            depth = length - r
+            group = (offset / length[:, None]).dot(DIRECTIONS.T).argmax(axis=1)
+        else:
+            excess = local.dot(shape.planes[:, :3].T) - shape.planes[:, 3]
+            group = excess.argmax(axis=1)
+            depth = excess.max(axis=1)
+        for g, d in zip(group, depth - half, strict=True):
+            if d < margin:
+                best[s, int(g)] = min(best.get((s, int(g)), math.inf), float(d))
+    return best
+
+
+def test_face_grid_gives_the_largest_excess_within_a_bound(geometry) -> None:
+    """Points measured through the face grid against all of a hull's faces.
+
+    The grid picks the largest face exactly away from ridges between small faces;
+    near them it takes a neighbour's excess, a little smaller (never larger).
+    """
+    rng = np.random.default_rng(3)
+    table = ShapeTable.build(geometry.shapes, 0.07)
+    errors = []
+    for s, shape in enumerate(geometry.shapes):
+        if isinstance(shape.shape, coal.Capsule):
+            continue
+        points = rng.uniform(table.lower[s], table.upper[s], size=(20000, 3))
+        excess = points.dot(shape.planes[:, :3].T) - shape.planes[:, 3]
+        depth, face = table.hull_excess(s, points)
+        np.testing.assert_allclose(
+            depth, excess[np.arange(len(points)), face], atol=1e-12
+        )
+        errors.append(excess.max(axis=1) - depth)
+    error = np.concatenate(errors)
+    assert error.min() > -1e-12  # never more than the largest excess
+    assert np.mean(error < 1e-12) > 0.99  # exact almost everywhere
+    assert error.max() < 1e-3  # and within 1 mm near ridges
+
+
+def test_candidates_match_brute_force_on_the_panda(geometry, robots) -> None:
+    """Per shape and face (or direction), the closest cell within the margin."""
+    robot = robots["panda"]
+    shapes = geometry.shapes
+    margin, half = 0.06, 0.5 * CELL
+    cells = np.concatenate(
+        [
+            _shell(np.array([0.45, 0.0, 0.35]), 0.12),
+            _shell(np.array([0.3, 0.25, 0.6]), 0.08),
+        ]
+    )
+    index = CellIndex(cells, CELL)
+    table = ShapeTable.build(shapes, margin + half)
+    model = geometry.geometry_model()
+    data = pin.GeometryData(model)
+    found_any = 0
+    for q in sample_configurations(robot, np.random.default_rng(5), 12):
+        state = RobotState(robot, q)
+        pin.updateGeometryPlacements(robot.model, state.data, model, data)
+        placements = list(data.oMg)
+        shape, centre, outward, distance = table.candidates(index, placements, margin)
+        expected = _brute_force(shapes, placements, cells, margin, half)
+        got = {}
+        on_map = {tuple(c) for c in np.round(cells, 9)}
+        for s, c, n, d in zip(shape, centre, outward, distance, strict=True):
+            assert tuple(np.round(c, 9)) in on_map
+            assert abs(np.linalg.norm(n) - 1.0) < 1e-9
+            got.setdefault(int(s), []).append(float(d))
+        # The same shapes have cells near them, at the same closest distance.
+        exp_by_shape: dict[int, float] = {}
+        for (s, _), d in expected.items():
+            exp_by_shape[s] = min(exp_by_shape.get(s, math.inf), d)
+        assert set(got) == set(exp_by_shape)
+        for s, ds in got.items():
+            assert min(ds) == pytest.approx(exp_by_shape[s], abs=2e-3)
+            assert min(ds) <= exp_by_shape[s] + 1e-9  # never farther
+            assert max(ds) < margin
+        found_any += len(shape)
+    assert found_any > 20
+
+
+def test_far_cells_change_nothing(geometry, robots) -> None:
+    """A map that also holds cells far away (bigger bricks) gives the same contacts."""
+    robot = robots["panda"]
+    state = RobotState(robot, robot.home())
+    near = _shell(np.array([0.45, 0.0, 0.45]), 0.1)
+    far = np.stack(np.meshgrid(*[np.arange(200) * CELL] * 2), -1).reshape(-1, 2)
+    far = np.c_[far + 40.0, np.full(len(far), 0.005)]  # 40 m away, a 2 m floor
+    model = geometry.geometry_model()
+    data = pin.GeometryData(model)
+    pin.updateGeometryPlacements(robot.model, state.data, model, data)
+    placements = list(data.oMg)
+    table = ShapeTable.build(geometry.shapes, 0.065)
+    small, large = CellIndex(near, CELL), CellIndex(np.r_[far, near], CELL)
+    assert large.brick > small.brick  # the table had to grow its bricks
+    a = table.candidates(small, placements, 0.06)
+    b = table.candidates(large, placements, 0.06)
+    assert len(a[0]) > 0
+    # Cells tied in distance may be visited in another order: compare distances.
+    sa, sb = np.lexsort((a[3], a[0])), np.lexsort((b[3], b[0]))
+    np.testing.assert_array_equal(a[0][sa], b[0][sb])
+    np.testing.assert_allclose(a[3][sa], b[3][sb], atol=1e-12)
+
+
+def test_metaball_normals_match_the_formula() -> None:
+    """The compiled refinement against the field's gradient written out in numpy."""
+    rng = np.random.default_rng(1)
+    cells = _shell(np.zeros(3), 0.1)
+    index = CellIndex(cells, CELL)
+    refiner = MetaballRefiner()
+    points = cells[rng.choice(len(cells), 50)]
+    raw = points / np.linalg.norm(points, axis=1, keepdims=True)
+    refined = refiner.refine(index, points, raw)
+    radius = refiner.radius_cells * CELL
+    for p, n, r in zip(points, raw, refined, strict=True):
+        at = p + refiner.offset_cells * CELL * n
+        diff = at - cells
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        inside = d2 <= radius**2
+        s = 1.0 - d2[inside] / radius**2
+        grad = -(6.0 / radius**2) * ((s**2)[:, None] * diff[inside]).sum(axis=0)
+        np.testing.assert_allclose(r, -grad / np.linalg.norm(grad), atol=1e-12)
+
+
+def test_spread_contacts_keeps_distinct_directions() -> None:
+    """The closest per shape first; a near twin is dropped, a new direction kept."""
+    shape = np.array([0, 0, 0, 0, 1], dtype=np.intp)
+    distance = np.array([0.03, 0.01, 0.011, 0.02, 0.05])
+    normal = np.array(
+        [[1, 0, 0], [0, 0, 1], [0, 0, 1], [1, 0, 0], [0, 1, 0]], dtype=float
+    )
+    point = np.array([[0, 0, 0], [0, 0, 0], [0.005, 0, 0], [0.1, 0, 0], [0, 0, 0]])
+    keep = np.empty(5, dtype=np.intp)
+    order = np.lexsort((distance, shape))
+    n = spread_contacts(order, shape, normal, point, 2, math.cos(0.4), 1e-4, keep)
+    # Shape 0: 1 (closest); 2 is its twin (same normal, 5 mm away); 3 is kept
+    # (another direction); 0 would be a third. Shape 1: its only contact.
+    assert keep[:n].tolist() == [1, 3, 4]
+
+
+def test_occupancy_query_uses_every_shape_kind(robots) -> None:
+    """Capsule-approximated links find the same box as hulls, at the same distance."""
+    robot = robots["panda"]
+    state = RobotState(robot, robot.home())
+    for approximation in ("hull", "capsule"):
+        geometry = RobotGeometry(robot, approximation=approximation)
+        hand = max(
+            (s for s in geometry.shapes if s.link == "panda_hand"),
+            key=lambda s: s.radius,
+        )
+        M = hand.world_placement(state)
+        below = M.translation - [0.0, 0.0, hand.radius + 0.03]
+        cells = _shell(below - [0, 0, 0.1], 0.1)
+        env = OccupancyEnvironment(cells, CELL)
+        hits = env.query(
+            geometry.shapes,
+            [s.world_placement(state) for s in geometry.shapes],
+            np.array(
+                [
+                    s.world_placement(state).act(s.placement.actInv(s.centre))
+                    for s in geometry.shapes
+                ]
+            ),
+            geometry.radii,
+            0.08,
+            3,
+        )
+        assert len(hits) > 0
+        assert np.all(hits.distance < 0.08)
+        # Witness points are one distance apart, along the normal.
+        gap = hits.robot_point - hits.obstacle_point
+        np.testing.assert_allclose(
+            np.einsum("ij,ij->i", gap, hits.normal), hits.distance, atol=1e-9
+        )
