@@ -24,6 +24,7 @@ numpy can only batch at the cost of many temporary arrays); they release the GIL
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import coal
@@ -51,6 +52,8 @@ MAX_BRICKS = 1 << 22
 FACE_GRID_STEP = 0.0075
 
 _HULL, _CAPSULE = 0, 1
+#: Guards the module's caches of face grids and shape tables.
+_CACHE_LOCK = threading.Lock()
 
 #: Directions that group a capsule's contacts: the 26 of a 3x3x3 grid's cells.
 DIRECTIONS = np.array(
@@ -152,9 +155,10 @@ class ShapeTable:
         found = _TABLES.get(key)
         if found is None:
             found = (list(shapes), cls.build(shapes, reach))
-            if len(_TABLES) >= _TABLE_CACHE:
-                _TABLES.pop(next(iter(_TABLES)))
-            _TABLES[key] = found
+            with _CACHE_LOCK:  # the map thread and the control loop both look
+                if len(_TABLES) >= _TABLE_CACHE:
+                    _TABLES.pop(next(iter(_TABLES)))
+                _TABLES[key] = found
         return found[1]
 
     @classmethod
@@ -338,9 +342,10 @@ def _largest_faces(
             faces[i] = excess.argmax(axis=1)
             values[i] = excess[rows, faces[i]]
         found = faces.reshape(-1), values.reshape(-1)
-        if len(_FACE_GRIDS) >= _FACE_GRID_CACHE:
-            _FACE_GRIDS.pop(next(iter(_FACE_GRIDS)))
-        _FACE_GRIDS[key] = found
+        with _CACHE_LOCK:
+            if len(_FACE_GRIDS) >= _FACE_GRID_CACHE:
+                _FACE_GRIDS.pop(next(iter(_FACE_GRIDS)))
+            _FACE_GRIDS[key] = found
     return found
 
 

@@ -284,6 +284,11 @@ class PrimitiveEnvironment(Environment):
         self._request = coal.DistanceRequest()
         self._result = coal.DistanceResult()
 
+    def prepare(self, shapes: list[LinkShape], margin: float) -> None:
+        """Compile the contact reduction (once per process)."""
+        del shapes, margin
+        compile_kernels()
+
     def query(
         self,
         shapes: list[LinkShape],

@@ -232,3 +232,19 @@ def test_occupancy_query_uses_every_shape_kind(robots) -> None:
         np.testing.assert_allclose(
             np.einsum("ij,ij->i", gap, hits.normal), hits.distance, atol=1e-9
         )
+
+
+def test_a_world_prepares_the_snapshots_it_takes(robots) -> None:
+    """Packing and compiling happen in set_environment, not in the first query."""
+    from cbp.collision import CollisionWorld
+    from cbp.collision import cells as module
+
+    geometry = RobotGeometry(robots["panda"])  # new shapes: nothing cached yet
+    world = CollisionWorld(geometry)
+    env = OccupancyEnvironment(_shell(np.array([0.5, 0.0, 0.3]), 0.05), CELL)
+    key = (tuple(id(s) for s in geometry.shapes), world.margin(env) + 0.5 * CELL)
+    assert key not in module._TABLES
+    world.set_environment(env)
+    assert key in module._TABLES
+    assert module._COMPILED
+    assert module._candidates.signatures  # compiled, or loaded from the cache
