@@ -10,6 +10,7 @@ constraints of the next one (CAT Sec. IV-C).
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -296,7 +297,14 @@ class CollisionWorld:
         return cache.contacts
 
     def check(self, q: FloatArray) -> StepCheck:
-        """Validate configuration ``q``: its contacts and whether the step is kept."""
+        """Validate configuration ``q``: its contacts and whether the step is kept.
+
+        A configuration with a NaN or infinite entry is never kept: it is
+        rejected with an infinite penetration and no contacts.
+        """
+        q = np.asarray(q, dtype=float)
+        if not math.isfinite(q.dot(q)):
+            return StepCheck(False, math.inf, ContactSet.empty())
         state = self._state
         state.update(q)
         contacts = self.contacts(state)

@@ -216,3 +216,19 @@ def test_capsule_links_are_measured_exactly_against_cells(robots, gap) -> None:
     )
     radial = np.linalg.norm(p - along * M.rotation[:, 2])
     assert radial == pytest.approx(hand.shape.radius, abs=1e-9)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_non_finite_configuration_is_never_accepted(geometry, robots, bad) -> None:
+    """Step validation rejects NaN or infinite joints instead of finding no contact."""
+    robot = robots["panda"]
+    cells = np.stack(np.meshgrid(*[np.arange(10) * 0.01] * 2), -1).reshape(-1, 2)
+    octree = OccupancyEnvironment(np.c_[cells + 0.3, np.full(len(cells), 0.2)], 0.01)
+    for env in (octree, PrimitiveEnvironment([])):
+        world = CollisionWorld(geometry, env)
+        q = robot.home()
+        q[3] = bad
+        check = world.check(q)
+        assert not check.accepted
+        assert check.penetration == np.inf
+        assert world.check(robot.home()).accepted
