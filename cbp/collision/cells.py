@@ -102,6 +102,26 @@ class CellIndex:
         """Number of cells."""
         return len(self.centres)
 
+    def metaball_normals(
+        self, at: FloatArray, radius: float, normals: FloatArray
+    ) -> None:
+        """Point ``normals`` (k, 3) down a metaball field's gradient, in place.
+
+        The field over the cells within ``radius`` [m] of each point of ``at``
+        (:func:`metaball_normals`); a normal is kept where it has no gradient.
+        ``normals`` must be a C-contiguous float array.
+        """
+        metaball_normals(
+            self.centres,
+            self.start,
+            self.origin,
+            self.cell * self.brick,
+            self.dims,
+            np.ascontiguousarray(at, dtype=float),
+            float(radius),
+            normals,
+        )
+
 
 @dataclass(frozen=True)
 class ShapeTable:
@@ -185,6 +205,11 @@ class ShapeTable:
                 groups[s] = len(DIRECTIONS)
                 grid, value = np.zeros(1, dtype=np.int16), np.zeros(1, np.float32)
             else:
+                if len(shape.planes) > np.iinfo(np.int16).max:
+                    raise ValueError(
+                        f"{shape.name}: a hull of {len(shape.planes)} faces; the "
+                        f"face grids index at most {np.iinfo(np.int16).max}"
+                    )
                 to_frame[s] = shape.placement.inverse().homogeneous
                 lower[s], upper[s] = shape.lower, shape.upper
                 planes.append(shape.planes)
@@ -381,16 +406,7 @@ def compile_kernels() -> None:
     spread_contacts(
         np.lexsort((distance, shape)), shape, outward, centre, 1, 0.9, 1e-4, keep
     )
-    metaball_normals(
-        index.centres,
-        index.start,
-        index.origin,
-        index.cell * index.brick,
-        index.dims,
-        np.ascontiguousarray(centre),
-        0.03,
-        np.ascontiguousarray(outward),
-    )
+    index.metaball_normals(centre, 0.03, np.ascontiguousarray(outward))
     _COMPILED = True
 
 

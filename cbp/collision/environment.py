@@ -27,7 +27,6 @@ from cbp.collision.cells import (
     CellIndex,
     ShapeTable,
     compile_kernels,
-    metaball_normals,
     spread_contacts,
 )
 from cbp.collision.geometry import LinkShape
@@ -402,16 +401,7 @@ class MetaballRefiner:
         if len(out) == 0 or len(index) == 0:
             return out
         at = points + (self.offset_cells * index.cell) * out
-        metaball_normals(
-            index.centres,
-            index.start,
-            index.origin,
-            index.cell * index.brick,
-            index.dims,
-            np.ascontiguousarray(at),
-            self.radius_cells * index.cell,
-            out,
-        )
+        index.metaball_normals(at, self.radius_cells * index.cell, out)
         return out
 
 
