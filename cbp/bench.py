@@ -454,9 +454,7 @@ def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
     placements = list(world._geometry_data.oMg)  # at q, from the check
     shapes = world.geometry.shapes
     margin = world.margin(env)
-    centres = np.array(
-        [M.act(c) for M, c in zip(placements, world._centres, strict=True)]
-    )
+    centres, halves = world._bounds(placements)
     table = ShapeTable.for_shapes(shapes, margin + env.resolution)
     pair = (q, q + 1e-9)
     per_shape = world.settings.contacts_per_link
@@ -478,7 +476,7 @@ def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
         ),
         (
             "self pairs (coal distance calls from Python)",
-            lambda i: world._self_contacts(placements, centres),
+            lambda i: world._self_contacts(placements, centres, halves),
         ),
     ]
 

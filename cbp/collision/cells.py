@@ -33,6 +33,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
+from cbp.collision.broad import compile_broad_phase
 from cbp.collision.geometry import LinkShape
 from cbp.robot import FloatArray, IntArray
 
@@ -383,15 +384,17 @@ _FACE_GRID_CACHE = 64
 
 
 def compile_kernels() -> None:
-    """Compile every loop here, or load it from numba's cache, once per process.
+    """Compile the loops, or load them from numba's cache, once per process.
 
-    A first compilation takes seconds; it must not happen in a control loop's
-    first query, so environments call this when a world takes them
+    The loops here and in :mod:`cbp.collision.broad`. A first compilation takes
+    seconds; it must not happen in a control loop's first query, so environments
+    call this when a world takes them
     (:meth:`~cbp.collision.environment.Environment.prepare`).
     """
     global _COMPILED
     if _COMPILED:
         return
+    compile_broad_phase()
     probes = [
         LinkShape.probe("box", coal.Box(0.1, 0.1, 0.1)),
         LinkShape.probe("capsule", coal.Capsule(0.05, 0.1)),

@@ -23,6 +23,7 @@ import pinocchio as pin
 import trimesh
 from scipy.spatial import cKDTree
 
+from cbp.collision.broad import near_objects
 from cbp.collision.cells import (
     CellIndex,
     ShapeTable,
@@ -139,6 +140,7 @@ class Environment(abc.ABC):
         radii: FloatArray,
         margin: float,
         per_shape: int,
+        halves: FloatArray | None = None,
     ) -> Hits:
         """Contacts of each robot shape with obstacles closer than ``margin``.
 
@@ -150,6 +152,8 @@ class Environment(abc.ABC):
             margin: report obstacles whose distance to a shape is below this [m].
             per_shape: at most this many contacts per shape (the closest, spread
                 over distinct directions).
+            halves: half extents of world-aligned boxes around the shapes about
+                ``centres``, (n, 3), for a tighter broad phase (None: spheres).
         """
 
     def prepare(self, shapes: list[LinkShape], margin: float) -> None:
@@ -296,23 +300,40 @@ class PrimitiveEnvironment(Environment):
         radii: FloatArray,
         margin: float,
         per_shape: int,
+        halves: FloatArray | None = None,
     ) -> Hits:
-        """Exact distances of the candidate pairs; one contact per pair."""
+        """Exact distances of the candidate pairs; one contact per pair.
+
+        Candidates: the objects whose bounding box is within ``margin`` of a
+        shape's bounding sphere and (given ``halves``) of its box.
+        """
         if not self.objects:
             return Hits()
         candidates = self._near_robot(centres, radii, margin)
         if not candidates.size:
             return Hits()
-        lower, upper = self._lower[candidates], self._upper[candidates]
-        # Distance from each sphere centre to each box, minus the radius: (n, m).
-        gap = np.maximum(lower[None] - centres[:, None], 0.0) + np.maximum(
-            centres[:, None] - upper[None], 0.0
+        if halves is None:
+            halves = np.full_like(centres, np.inf)  # no box test: spheres only
+        capacity = len(centres) * len(candidates)
+        shape_index = np.empty(capacity, dtype=np.intp)
+        object_index = np.empty(capacity, dtype=np.intp)
+        count = near_objects(
+            centres,
+            halves,
+            radii,
+            self._lower,
+            self._upper,
+            candidates,
+            margin,
+            shape_index,
+            object_index,
         )
-        near = np.sqrt(np.einsum("nmk,nmk->nm", gap, gap)) - radii[:, None] < margin
         rows: list[tuple[int, FloatArray, FloatArray, FloatArray, float]] = []
         request, result = self._request, self._result
-        for i, k in zip(*np.nonzero(near), strict=True):
-            obj = self.objects[candidates[k]]
+        for i, k in zip(
+            shape_index[:count].tolist(), object_index[:count].tolist(), strict=True
+        ):
+            obj = self.objects[k]
             d, point, other, normal = signed_distance(
                 obj.shape,
                 obj.placement,
@@ -322,7 +343,7 @@ class PrimitiveEnvironment(Environment):
                 result,
             )
             if d < margin:
-                rows.append((int(i), point, other, normal, d))
+                rows.append((i, point, other, normal, d))
         hits = Hits.from_rows(rows)
         return _keep_closest(hits, per_shape, min_angle_deg=0.0, min_spacing=0.0)
 
@@ -474,8 +495,13 @@ class OccupancyEnvironment(Environment):
         radii: FloatArray,
         margin: float,
         per_shape: int,
+        halves: FloatArray | None = None,
     ) -> Hits:
-        """Cell contacts per shape, reduced to ``per_shape``, normals refined."""
+        """Cell contacts per shape, reduced to ``per_shape``, normals refined.
+
+        The shapes' own boxes bound the cells measured: ``centres``, ``radii``
+        and ``halves`` are not used.
+        """
         if not len(self.centres):
             return Hits()
         half = 0.5 * self.cell

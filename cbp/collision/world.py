@@ -19,6 +19,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from cbp.collision.broad import shape_bounds
 from cbp.collision.checker import FreeSpaceChecker
 from cbp.collision.environment import (
     Environment,
@@ -251,8 +252,10 @@ class CollisionWorld:
         self._free_space: FreeSpaceChecker | None = None
         self._geometry_model = geometry.geometry_model()
         self._geometry_data = pin.GeometryData(self._geometry_model)
-        # Bounding-sphere centres in the shapes' own frames.
-        self._centres = [s.placement.actInv(s.centre) for s in geometry.shapes]
+        # Bounding-sphere (and box) centres in the shapes' own frames, (n, 3).
+        self._centres = np.array(
+            [s.placement.actInv(s.centre) for s in geometry.shapes]
+        ).reshape(-1, 3)
         self._environment.prepare(geometry.shapes, self.margin(self._environment))
 
     @property
@@ -355,24 +358,35 @@ class CollisionWorld:
             geometry.robot.model, state.data, self._geometry_model, self._geometry_data
         )
         placements = list(self._geometry_data.oMg)
-        centres = np.array(
-            [M.act(c) for M, c in zip(placements, self._centres, strict=True)]
-        ).reshape(-1, 3)
+        centres, halves = self._bounds(placements)
         radii = geometry.radii
         margin = self.margin(environment)
         per_shape = self.settings.contacts_per_link
-        hits = environment.query(shapes, placements, centres, radii, margin, per_shape)
+        hits = environment.query(
+            shapes, placements, centres, radii, margin, per_shape, halves
+        )
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles
         # are inflated by that much (and step validation tolerates as much more).
         obstacles = self._from_hits(hits, self.padding + environment.resolution)
         own = (
-            self._self_contacts(placements, centres)
+            self._self_contacts(placements, centres, halves)
             if self.settings.self_collision
             else ContactSet.empty()
         )
         contacts = ContactSet.concatenate([obstacles, own])
         contacts._split = (obstacles, own)  # the parts the constraints read
         return contacts
+
+    def _bounds(self, placements: list[pin.SE3]) -> tuple[FloatArray, FloatArray]:
+        """The shapes' bounding-sphere centres and world box half extents, (n, 3).
+
+        The boxes are world-aligned boxes around the shapes' own bounding boxes,
+        about the same centres, for the broad phases (:mod:`cbp.collision.broad`).
+        """
+        frames = np.array([M.homogeneous for M in placements]).reshape(-1, 4, 4)
+        centres, halves = np.empty((len(frames), 3)), np.empty((len(frames), 3))
+        shape_bounds(frames, self._centres, self.geometry.box_halves, centres, halves)
+        return centres, halves
 
     @staticmethod
     def _from_hits(hits: Hits, padding: float) -> ContactSet:
@@ -386,7 +400,7 @@ class CollisionWorld:
         )
 
     def _self_contacts(
-        self, placements: list[pin.SE3], centres: FloatArray
+        self, placements: list[pin.SE3], centres: FloatArray, halves: FloatArray
     ) -> ContactSet:
         shapes = self.geometry.shapes
         pad2 = 2.0 * self.padding
@@ -394,7 +408,7 @@ class CollisionWorld:
         rows = []
         request, result = self._request, self._result
         pairs = self.geometry.self_pairs
-        for k in self.geometry.near_self_pairs(centres, margin):
+        for k in self.geometry.near_self_pairs(centres, margin, halves):
             i, j = pairs[k]
             # Shape j first: the normal then points from j toward i.
             d, point, other, normal = signed_distance(

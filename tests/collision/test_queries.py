@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import coal
 import numpy as np
 import pinocchio as pin
 import pybullet as pb
@@ -16,6 +17,7 @@ from cbp.collision import (
     PrimitiveEnvironment,
     RobotGeometry,
 )
+from cbp.collision.environment import signed_distance
 from cbp.sim.scene import PybulletScene
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
@@ -232,3 +234,55 @@ def test_a_non_finite_configuration_is_never_accepted(geometry, robots, bad) -> 
         assert not check.accepted
         assert check.penetration == np.inf
         assert world.check(robot.home()).accepted
+
+
+def test_box_broad_phase_loses_no_contact(geometry, robots, rng) -> None:
+    """Spheres and boxes select the same contacts as spheres alone, with fewer pairs.
+
+    Thin boards beside the arm: every pair within the margin must reach coal;
+    the boxes only drop pairs that are farther.
+    """
+    robot = robots["panda"]
+    boards = [
+        EnvironmentObject.primitive(
+            f"board_{k}",
+            "box",
+            (0.02, 0.6, 0.3),
+            pin.SE3(np.eye(3), np.array([0.3 + 0.15 * k, 0.0, 0.4])),
+        )
+        for k in range(4)
+    ]
+    env = PrimitiveEnvironment(boards)
+    world = CollisionWorld(geometry, env, CollisionSettings(activation_distance=0.08))
+    margin = world.margin(env)
+    found = dropped = 0
+    for q in sample_configurations(robot, rng, n=60):
+        state = RobotState(robot, q)
+        pin.updateGeometryPlacements(
+            robot.model, state.data, world._geometry_model, world._geometry_data
+        )
+        placements = list(world._geometry_data.oMg)
+        centres, halves = world._bounds(placements)
+        args = (geometry.shapes, placements, centres, geometry.radii, margin, 99)
+        spheres, boxes = env.query(*args), env.query(*args, halves)
+        np.testing.assert_array_equal(spheres.shape, boxes.shape)
+        np.testing.assert_allclose(spheres.distance, boxes.distance)
+        own_margin = world.settings.activation_distance + 2 * world.padding
+        near_spheres = geometry.near_self_pairs(centres, own_margin)
+        near_boxes = geometry.near_self_pairs(centres, own_margin, halves)
+        assert set(near_boxes) <= set(near_spheres)
+        for k in set(near_spheres) - set(near_boxes):  # dropped: truly farther
+            i, j = geometry.self_pairs[k]
+            d = signed_distance(
+                geometry.shapes[j].shape,
+                placements[j],
+                geometry.shapes[i].shape,
+                placements[i],
+                coal.DistanceRequest(),
+                coal.DistanceResult(),
+            )[0]
+            assert d >= own_margin
+            dropped += 1
+        found += len(boxes)
+    assert found > 30
+    assert dropped > 10
