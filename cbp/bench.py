@@ -1063,10 +1063,11 @@ def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
         f"- CAT step on the boards: the engine step with contact rows "
         f"{us('CAT: engine'):.0f} us, the contact query that validates the step "
         f"(and gives the next one its contacts) {us('CAT: contact'):.0f} us. The "
-        "query is about a dozen coal distance calls made from Python after a "
-        "bounding-sphere broad phase; the engine's cost over the reaching step is "
-        "the two contact constraints: latching their contacts and, per point, a "
-        "frame Jacobian and six weights.",
+        "query is four to five coal distance calls made from Python after a "
+        "compiled broad phase (bounding spheres and boxes); the engine's cost "
+        "over the reaching step is the two contact constraints (latching their "
+        "contacts, six weights per point and one product with the joint "
+        "Jacobians) and a QP with their 32 more rows.",
         f"- Octree query inside the shelf: {us('octree: contact'):.0f} us in all. "
         f"The environment query {us('octree: environment'):.0f} us, of which the "
         f"compiled pass over the cells in each shape's box "

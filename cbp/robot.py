@@ -189,6 +189,17 @@ class RobotModel:
         #: True when every joint has nq == nv (no rotations stored as cos/sin or
         #: quaternions): then q1 ⊖ q0 = q1 - q0 and its Jacobian is the identity.
         self.is_euclidean = model.nq == model.nv
+        #: ``support[j, v]`` is 1 where velocity coordinate v moves joint j's body
+        #: (v belongs to a joint on the path from the root to j), else 0:
+        #: (njoints, nv).
+        support = np.zeros((model.njoints, model.nv))
+        for j in range(model.njoints):
+            for k in model.supports[j]:
+                if k > 0:
+                    joint = model.joints[k]
+                    support[j, joint.idx_v : joint.idx_v + joint.nv] = 1.0
+        support.flags.writeable = False
+        self.support = support
         self._identity = np.eye(model.nv)
         self._selections: dict[object, FloatArray] = {}
         for arr in (

@@ -45,6 +45,21 @@ class RobotState:
         pin.computeJointJacobians(model, self.data, q)
         pin.updateFramePlacements(model, self.data)
         self._jacobians.clear()
+        self._joint_jacobians: FloatArray | None = None
+
+    def joint_jacobians(self) -> FloatArray:
+        """Every joint's motion in the WORLD frame, pinocchio's ``data.J``, (6, nv).
+
+        Column v is the spatial velocity, linear part first, at the world origin,
+        of velocity coordinate v; a point p on a body moved by joint j has the
+        linear Jacobian ``(J[:3] - [p]_x J[3:]) * robot.support[j]``. Computed by
+        :meth:`update`; shared, do not modify.
+        """
+        J = self._joint_jacobians
+        if J is None:
+            J = self._joint_jacobians = np.array(self.data.J)
+            J.flags.writeable = False
+        return J
 
     def frame_position(self, frame_id: int) -> FloatArray:
         """Position of the frame's origin in the world [m], shape (3,)."""
