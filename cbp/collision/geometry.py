@@ -273,7 +273,9 @@ class RobotGeometry:
         broad phase than the sphere on long links and thin objects."""
         self.self_pairs = self._self_pairs(settings.ignore_pairs if settings else [])
         pairs = np.array(self.self_pairs, dtype=np.intp).reshape(-1, 2)
-        self._pair_a, self._pair_b = pairs[:, 0], pairs[:, 1]
+        # Contiguous copies: the compiled broad phase is compiled for them.
+        self._pair_a = np.ascontiguousarray(pairs[:, 0])
+        self._pair_b = np.ascontiguousarray(pairs[:, 1])
         self._pair_reach = self.radii[self._pair_a] + self.radii[self._pair_b]
 
     def _self_pairs(self, ignore: list[tuple[str, str]]) -> list[tuple[int, int]]:

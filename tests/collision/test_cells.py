@@ -248,3 +248,36 @@ def test_a_world_prepares_the_snapshots_it_takes(robots) -> None:
     assert key in module._TABLES
     assert module._COMPILED
     assert module._candidates.signatures  # compiled, or loaded from the cache
+
+
+def test_queries_run_the_kernels_compiled_beforehand() -> None:
+    """After the warm-up, queries on both kinds of world compile nothing more.
+
+    In a fresh process: a kernel compiled for other array layouts than the ones
+    queries pass would be compiled again in the control loop's first query.
+    """
+    import subprocess
+    import sys
+
+    script = """
+from cbp.collision import broad, cells
+from cbp.bench import _cat_step, _near_board, _shelf_octree_world, SCENARIOS
+from cbp.scenario import load_scenario
+cells.compile_kernels()
+kernels = [cells._candidates, cells.metaball_normals, cells.spread_contacts,
+           broad.shape_bounds, broad.near_objects, broad.near_pairs]
+before = [len(k.signatures) for k in kernels]
+boards = load_scenario(SCENARIOS / "cat_boards.yaml")
+boards.q0[:] = _near_board(boards)
+step, world = _cat_step(boards)
+for i in range(40):
+    step(i)
+octree, q = _shelf_octree_world()
+assert len(octree.check(q).contacts) > 0
+after = [len(k.signatures) for k in kernels]
+assert before == after, (before, after)
+"""
+    run = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
