@@ -276,7 +276,6 @@ class RobotGeometry:
         # Contiguous copies: the compiled broad phase is compiled for them.
         self._pair_a = np.ascontiguousarray(pairs[:, 0])
         self._pair_b = np.ascontiguousarray(pairs[:, 1])
-        self._pair_reach = self.radii[self._pair_a] + self.radii[self._pair_b]
 
     def _self_pairs(self, ignore: list[tuple[str, str]]) -> list[tuple[int, int]]:
         model = self.robot.model
