@@ -548,6 +548,11 @@ def _candidates(
     out_outward: FloatArray,
     out_distance: FloatArray,
 ) -> int:
+    """The pass of :meth:`ShapeTable.candidates`, on the unpacked arrays.
+
+    Per shape: the bricks near its box, the cells inside its box, each cell's
+    distance and group, the closest cell per group; returns the number written.
+    """
     most = len(directions)
     for s in range(len(kind)):
         most = max(most, plane_start[s + 1] - plane_start[s])
