@@ -51,9 +51,10 @@ class LatchedContacts:
         # Every point that moves a row: the robot points of the n contacts, then
         # the other side's points of the self contacts (rows ``_other_rows``),
         # each with the normal signed so that its motion along it adds distance.
-        self._frames: list[int] = []
+        self._shapes: IntArray = np.zeros(0, dtype=np.intp)
+        self._frames: list[int] = []  # the points' frames, when first needed
         self._point_support: FloatArray = np.zeros((0, geometry.robot.nv))
-        self._other_rows: IntArray = np.zeros(0, dtype=np.intp)
+        self._other_rows: slice | IntArray | None = None
         self._points: FloatArray = np.zeros((0, 3))
         self._normals: FloatArray = np.zeros((0, 3))
         self._local: FloatArray | None = None
@@ -73,16 +74,22 @@ class LatchedContacts:
         self.contacts = contacts
         self._q = state.q
         self._local = None
-        other = np.flatnonzero(contacts.other_shape >= 0)
-        self._other_rows = other
-        if other.size:
+        is_self = contacts.other_shape >= 0
+        if not is_self.any():  # obstacle contacts: the robot points alone
+            self._other_rows = None
+            shapes = contacts.shape
+            self._points, self._normals = contacts.point, contacts.normal
+        else:
+            # Self contacts (the self-collision constraint's are all of them):
+            # whole arrays where every row has a second point, else its rows.
+            other: slice | IntArray = (
+                slice(0, len(contacts)) if is_self.all() else np.flatnonzero(is_self)
+            )
+            self._other_rows = other
             shapes = np.concatenate([contacts.shape, contacts.other_shape[other]])
             self._points = np.concatenate([contacts.point, contacts.other_point[other]])
             self._normals = np.concatenate([contacts.normal, -contacts.normal[other]])
-        else:  # obstacle contacts: the robot points alone
-            shapes = contacts.shape
-            self._points, self._normals = contacts.point, contacts.normal
-        self._frames = self._frame_of_shape[shapes].tolist()
+        self._shapes = shapes
         self._point_support = self._support[shapes]
 
     def _at_latch(self, state: RobotState) -> bool:
@@ -92,7 +99,7 @@ class LatchedContacts:
         """Sum per-point terms into the contact rows: robot side, then other side."""
         n = self.count
         out[:n] = per_point[:n]
-        if self._other_rows.size:
+        if self._other_rows is not None:
             out[self._other_rows] += per_point[n:]
 
     def value(self, state: RobotState) -> FloatArray:
@@ -132,6 +139,7 @@ class LatchedContacts:
             # away from it (the Jacobian checker), so computed on demand.
             assert self._q is not None
             oMf = RobotState(state.robot, self._q).data.oMf
+            self._frames = self._frame_of_shape[self._shapes].tolist()
             self._local = np.array(
                 [
                     oMf[f].rotation.T.dot(p - oMf[f].translation)
