@@ -43,7 +43,8 @@ class LatchedContacts:
         """Start with no contact."""
         self.geometry = geometry
         self.capacity = capacity
-        self.contacts = ContactSet.empty()
+        self._contacts = ContactSet.empty()
+        self._count = 0
         self._frame_of_shape = np.array([s.frame_id for s in geometry.shapes])
         joints = np.array([s.joint_id for s in geometry.shapes], dtype=np.intp)
         self._support = geometry.robot.support[joints]  # (shapes, nv)
@@ -62,16 +63,22 @@ class LatchedContacts:
         self._upper = np.full(capacity, np.inf)
 
     @property
+    def contacts(self) -> ContactSet:
+        """The latched contacts (set by :meth:`latch`)."""
+        return self._contacts
+
+    @property
     def count(self) -> int:
         """Number of active rows."""
-        return len(self.contacts)
+        return self._count
 
     def latch(self, contacts: ContactSet, state: RobotState) -> None:
         """Keep the ``capacity`` closest contacts, fixed on their links at ``state``."""
         if len(contacts) > self.capacity:
             order = np.argsort(contacts.distance, kind="stable")[: self.capacity]
             contacts = contacts.select(order)
-        self.contacts = contacts
+        self._contacts = contacts
+        self._count = len(contacts)
         self._q = state.q
         self._local = None
         is_self = contacts.other_shape >= 0
@@ -109,7 +116,7 @@ class LatchedContacts:
         if n and not self._at_latch(state):
             move = self._moved_points(state) - self._points
             self._add_rows(out, np.einsum("ij,ij->i", self._normals, move))
-        out[:n] += self.contacts.distance
+        out[:n] += self._contacts.distance
         return out
 
     def jacobian(self, state: RobotState) -> FloatArray:
