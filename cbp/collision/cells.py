@@ -404,7 +404,6 @@ def compile_kernels() -> None:
     shape, centre, outward, distance = table.candidates(
         index, [pin.SE3.Identity()] * 2, 0.01
     )
-    table.hull_excess(0, np.zeros((1, 3)))
     keep = np.empty(len(shape), dtype=np.intp)
     spread_contacts(
         np.lexsort((distance, shape)), shape, outward, centre, 1, 0.9, 1e-4, keep
