@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from cbp.errors import ConfigError, suggestion
-from cbp.plugin import AnyPlugin
+from cbp.plugin import AnyPlugin, Plugin
 from cbp.qp import Entry, QPAssembler, QPProblem
 from cbp.robot import FloatArray, RobotModel
 from cbp.solvers import QPSolver, make_solver
@@ -49,6 +49,10 @@ class Engine:
         self.state = RobotState(robot)
         self.problem: QPProblem | None = None
         self._by_name = {e.name: e for e in self.entries}
+        # Plugins that latch something at the start of a step (the others keep
+        # the base class's empty prepare and are not called for it).
+        plugins = [e.plugin for e in self.entries]
+        self._latching = [p for p in plugins if type(p).prepare is not Plugin.prepare]
 
     def plugin(self, name: str) -> AnyPlugin:
         """Return the plugin of the entry called ``name``."""
@@ -69,8 +73,8 @@ class Engine:
         """
         state = self.state
         state.update(q)
-        for entry in self.entries:
-            entry.plugin.prepare(state, dt)
+        for plugin in self._latching:
+            plugin.prepare(state, dt)
         problem = self.assembler.assemble(state)
         self.problem = problem
         x = self.solver.solve(problem)

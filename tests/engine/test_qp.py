@@ -220,3 +220,129 @@ def test_constant_jacobians_are_folded_without_changing_the_problem(
             np.testing.assert_allclose(
                 getattr(folded, name), getattr(reference, name), atol=1e-12
             )
+
+
+def _reference_problem(entries, state, nv, regularization):
+    """The QP of the assembler's docstring, written out with plain numpy."""
+    soft_tasks = [e for e in entries if e.priority == "soft" and _is_task(e)]
+    rows = [e for e in entries if e not in soft_tasks]
+    H = regularization * np.eye(nv)
+    g = np.zeros(nv)
+    for e in soft_tasks:
+        value, J = e.plugin.linearize(state)
+        desired = e.plugin.limit_step(-e.gain * value)
+        H += J.T @ np.diag(e.weight) @ J
+        g -= J.T @ (e.weight * desired)
+    A, lower, upper, soft = [], [], [], []
+    for e in rows:
+        value, J = e.plugin.linearize(state)
+        if _is_task(e):
+            lo = up = e.plugin.limit_step(-e.gain * value)
+        else:
+            lo, up = e.plugin.compute_bounds(state)
+            with np.errstate(invalid="ignore"):
+                lo = np.where(np.isinf(lo) & (e.gain == 0), lo, e.gain * (lo - value))
+                up = np.where(np.isinf(up) & (e.gain == 0), up, e.gain * (up - value))
+        A.append(J)
+        lower.append(lo)
+        upper.append(up)
+        soft.append(np.full(e.plugin.dim, e.priority == "soft"))
+    return (
+        H,
+        g,
+        np.vstack(A),
+        np.concatenate(lower),
+        np.concatenate(upper),
+        (np.concatenate(soft)),
+    )
+
+
+def _is_task(entry):
+    from cbp.plugin import Task
+
+    return isinstance(entry.plugin, Task)
+
+
+def test_assembled_problem_matches_its_definition(robots, rng) -> None:
+    """H, g, A and the bounds are the documented ones, slack rows included."""
+    robot = robots["panda"]
+    nv = robot.nv
+    for q in sample_configurations(robot, rng, n=4, margin=0.05):
+        entries = _entries(robot, rng, velocity_priority="soft")
+        entries[3] = Entry.make(entries[3].plugin, gain=0.5)
+        hard = PostureTask(PostureParams(target={"panda_joint2": 0.3}), robot, "hard")
+        open_limits = JointLimitsConstraint(JointLimitsParams(), robot, "open")
+        entries += [
+            Entry.make(hard, priority="hard", gain=0.2),
+            Entry.make(open_limits, gain=0.0),
+        ]
+        # Not solved: the zero-gain limits pin every joint against the hard task.
+        engine = Engine(robot, entries, regularization=1e-7)
+        state = RobotState(robot, q)
+        for e in entries:
+            e.plugin.prepare(state, 0.01)
+        for _ in range(2):  # the first assembly folds the constant Jacobians
+            problem = engine.assembler.assemble(state)
+        H, g, A, lower, upper, soft = _reference_problem(entries, state, nv, 1e-7)
+        m, ns = A.shape[0], int(soft.sum())
+        np.testing.assert_allclose(problem.H[:nv, :nv], H, atol=1e-12)
+        np.testing.assert_allclose(problem.g[:nv], g, atol=1e-12)
+        np.testing.assert_allclose(problem.A[:m, :nv], A, atol=1e-15)
+        np.testing.assert_allclose(problem.A[m : m + ns, :nv], A[soft], atol=1e-15)
+        np.testing.assert_allclose(problem.lower[:m], lower, atol=1e-15)
+        np.testing.assert_allclose(problem.upper[m : m + ns], upper[soft], atol=1e-15)
+        np.testing.assert_array_equal(problem.upper[:m][soft], np.inf)
+        np.testing.assert_allclose(problem.upper[:m][~soft], upper[~soft], atol=1e-15)
+        np.testing.assert_array_equal(problem.equality, problem.lower == problem.upper)
+        assert problem.equality[:m].sum() >= hard.dim
+
+
+@pytest.mark.parametrize("broken", ["value", "jacobian", "bound"])
+def test_non_finite_constraint_output_is_named(robots, broken) -> None:
+    """A constraint's NaN value, Jacobian or bound raises, naming the constraint."""
+    robot = robots["panda"]
+
+    class Broken(JointLimitsConstraint):
+        def compute_value(self, state):  # type: ignore[no-untyped-def]
+            value = super().compute_value(state).copy()
+            value[2] = np.nan if broken == "value" else value[2]
+            return value
+
+        def compute_jacobian(self, state):  # type: ignore[no-untyped-def]
+            J = super().compute_jacobian(state).copy()
+            J[1, 1] = np.inf if broken == "jacobian" else J[1, 1]
+            return J
+
+        def compute_bounds(self, state):  # type: ignore[no-untyped-def]
+            lower, upper = super().compute_bounds(state)
+            if broken == "bound":
+                upper = np.where(np.arange(self.dim) == 4, np.nan, upper)
+            return lower, upper
+
+    plugin = Broken(JointLimitsParams(), robot, "broken")
+    plugin.constant_jacobian = False
+    engine = Engine(
+        robot,
+        [Entry.make(plugin), Entry.make(JointStepTask(JointStepParams(), robot))],
+    )
+    expected = "bounds must" if broken == "bound" else "value or Jacobian is not"
+    with pytest.raises(
+        PluginOutputError, match=rf"broken \(joint_limits\): {expected}"
+    ):
+        engine.step(robot.home(), 0.01)
+
+
+def test_assembly_pass_compiles_once(robots, rng) -> None:
+    """Every layout of blocks (empty or not, slacks or not) shares one signature."""
+    from cbp.qp import _fill_qp
+
+    robot = robots["panda"]
+    q = robot.home()
+    for velocity_priority in ("hard", "soft"):
+        Engine(robot, _entries(robot, rng, velocity_priority=velocity_priority)).step(
+            q, 0.01
+        )
+    Engine(robot, [Entry.make(PostureTask(PostureParams(), robot))]).step(q, 0.01)
+    limits = JointLimitsConstraint(JointLimitsParams(), robot)
+    Engine(robot, [Entry.make(limits)]).step(q, 0.01)
+    assert len(_fill_qp.signatures) == 1
