@@ -16,7 +16,11 @@ inactive: zero, with infinite bounds, so the QP keeps one shape.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+import numba
 import numpy as np
+import pinocchio as pin
 
 from cbp.collision.geometry import RobotGeometry
 from cbp.collision.world import ContactSet
@@ -45,22 +49,29 @@ class LatchedContacts:
         self.capacity = capacity
         self._contacts = ContactSet.empty()
         self._count = 0
-        self._frame_of_shape = np.array([s.frame_id for s in geometry.shapes])
+        self._frame_of_shape = [s.frame_id for s in geometry.shapes]
         joints = np.array([s.joint_id for s in geometry.shapes], dtype=np.intp)
         self._support = geometry.robot.support[joints]  # (shapes, nv)
         self._q: FloatArray | None = None
-        # Every point that moves a row: the robot points of the n contacts, then
-        # the other side's points of the self contacts (rows ``_other_rows``),
-        # each with the normal signed so that its motion along it adds distance.
-        self._shapes: IntArray = np.zeros(0, dtype=np.intp)
-        self._frames: list[int] = []  # the points' frames, when first needed
-        self._point_support: FloatArray = np.zeros((0, geometry.robot.nv))
-        self._other_rows: slice | IntArray | None = None
-        self._points: FloatArray = np.zeros((0, 3))
-        self._normals: FloatArray = np.zeros((0, 3))
-        self._local: FloatArray | None = None
+        # Both sides' points in their frames at the latch configuration, when a
+        # configuration away from it is first evaluated.
+        self._local: tuple[FloatArray, FloatArray] | None = None
         self._lower = np.full(capacity, -np.inf)
         self._upper = np.full(capacity, np.inf)
+        # Compile the rows (or load them from numba's cache) here, not in the
+        # first control step: no contact, and arrays of the kinds a step passes.
+        empty = ContactSet.empty()
+        joint_jacobians = RobotState(geometry.robot).joint_jacobians()
+        contact_jacobian_rows(
+            empty.point,
+            empty.other_point,
+            empty.normal,
+            empty.shape,
+            empty.other_shape,
+            self._support,
+            joint_jacobians,
+            np.zeros((capacity, geometry.robot.nv)),
+        )
 
     @property
     def contacts(self) -> ContactSet:
@@ -81,52 +92,42 @@ class LatchedContacts:
         self._count = len(contacts)
         self._q = state.q
         self._local = None
-        is_self = contacts.other_shape >= 0
-        if not is_self.any():  # obstacle contacts: the robot points alone
-            self._other_rows = None
-            shapes = contacts.shape
-            self._points, self._normals = contacts.point, contacts.normal
-        else:
-            # Self contacts (the self-collision constraint's are all of them):
-            # whole arrays where every row has a second point, else its rows.
-            other: slice | IntArray = (
-                slice(0, len(contacts)) if is_self.all() else np.flatnonzero(is_self)
-            )
-            self._other_rows = other
-            shapes = np.concatenate([contacts.shape, contacts.other_shape[other]])
-            self._points = np.concatenate([contacts.point, contacts.other_point[other]])
-            self._normals = np.concatenate([contacts.normal, -contacts.normal[other]])
-        self._shapes = shapes
-        self._point_support = self._support[shapes]
 
     def _at_latch(self, state: RobotState) -> bool:
         return state.q is self._q
 
-    def _add_rows(self, out: FloatArray, per_point: FloatArray) -> None:
-        """Sum per-point terms into the contact rows: robot side, then other side."""
-        n = self.count
-        out[:n] = per_point[:n]
-        if self._other_rows is not None:
-            out[self._other_rows] += per_point[n:]
-
     def value(self, state: RobotState) -> FloatArray:
         """f(q) for the active rows, zeros after them, shape (capacity,)."""
         out = np.zeros(self.capacity)
-        n = self.count
+        n, c = self.count, self._contacts
+        out[:n] = c.distance
         if n and not self._at_latch(state):
-            move = self._moved_points(state) - self._points
-            self._add_rows(out, np.einsum("ij,ij->i", self._normals, move))
-        out[:n] += self._contacts.distance
+            point, other = self._moved_points(state)
+            # The other side's point is the latched one for an obstacle contact.
+            move = (point - c.point) - (other - c.other_point)
+            out[:n] += np.einsum("ij,ij->i", c.normal, move)
         return out
 
     def jacobian(self, state: RobotState) -> FloatArray:
         """n^T (J_p - J_p') for the active rows, zeros after, shape (capacity, nv)."""
         out = np.zeros((self.capacity, state.robot.nv))
         if self.count:
-            points = (
-                self._points if self._at_latch(state) else self._moved_points(state)
+            c = self._contacts
+            point, other = (
+                (c.point, c.other_point)
+                if self._at_latch(state)
+                else self._moved_points(state)
             )
-            self._add_rows(out, self._normal_jacobians(state, points))
+            contact_jacobian_rows(
+                point,
+                other,
+                c.normal,
+                c.shape,
+                c.other_shape,
+                self._support,
+                state.joint_jacobians(),
+                out,
+            )
         return out
 
     def bounds(self, safety_distance: float) -> tuple[FloatArray, FloatArray]:
@@ -139,42 +140,91 @@ class LatchedContacts:
         lower[self.count :] = -np.inf
         return lower, self._upper
 
-    def _moved_points(self, state: RobotState) -> FloatArray:
-        """The latched points at ``state``, moved with their frames, (k, 3)."""
-        if self._local is None:
-            # In the frames at the latch configuration: R^T (p - o). Only needed
-            # away from it (the Jacobian checker), so computed on demand.
-            assert self._q is not None
-            oMf = RobotState(state.robot, self._q).data.oMf
-            self._frames = self._frame_of_shape[self._shapes].tolist()
-            self._local = np.array(
-                [
-                    oMf[f].rotation.T.dot(p - oMf[f].translation)
-                    for f, p in zip(self._frames, self._points, strict=True)
-                ]
-            ).reshape(-1, 3)
-        oMf = state.data.oMf
-        return np.array(
-            [oMf[f].act(p) for f, p in zip(self._frames, self._local, strict=True)]
-        ).reshape(-1, 3)
+    def _moved_points(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
+        """Both sides' latched points at ``state``, moved with their frames, (n, 3).
 
-    def _normal_jacobians(self, state: RobotState, points: FloatArray) -> FloatArray:
-        """n^T J_p for every point, (k, nv), from the joints' world Jacobians.
-
-        With J = [J_v; J_w] the world-frame joint motions (velocities at the world
-        origin), a point p moves at J_v - [p]_x J_w, so n^T J_p = [n; p x n]^T J,
-        kept on the columns that move the point's body: one product for all.
+        An obstacle contact's other point stays where it was latched.
         """
-        # The six weights per point in floats: a handful of products each, where
-        # numpy calls (np.cross: 15 us) cost more.
-        weights = np.array(
-            [
-                (nx, ny, nz, py * nz - pz * ny, pz * nx - px * nz, px * ny - py * nx)
-                for (px, py, pz), (nx, ny, nz) in zip(
-                    points.tolist(), self._normals.tolist(), strict=True
-                )
-            ]
-        ).reshape(-1, 6)
-        rows = weights.dot(state.joint_jacobians())
-        rows *= self._point_support
-        return rows  # type: ignore[no-any-return]
+        c, frames = self._contacts, self._frame_of_shape
+        if self._local is None:
+            # In the frames at the latch configuration. Only needed away from it
+            # (the Jacobian checker), so computed on demand.
+            assert self._q is not None
+            latched = RobotState(state.robot, self._q).data.oMf
+            self._local = (
+                _in_frames(latched, frames, c.shape, c.point, inverse=True),
+                _in_frames(latched, frames, c.other_shape, c.other_point, inverse=True),
+            )
+        oMf = state.data.oMf
+        point, other = self._local
+        return (
+            _in_frames(oMf, frames, c.shape, point),
+            _in_frames(oMf, frames, c.other_shape, other),
+        )
+
+
+def _in_frames(
+    placements: Sequence[pin.SE3],
+    frames: list[int],
+    shapes: IntArray,
+    points: FloatArray,
+    *,
+    inverse: bool = False,
+) -> FloatArray:
+    """Points (n, 3) moved by the frames of their shapes.
+
+    From the frame to the world, or (``inverse``) from the world to the frame.
+    A point of shape -1 (an obstacle) is kept as it is.
+    """
+    moved = [
+        p
+        if s < 0
+        else (
+            placements[frames[s]].actInv(p) if inverse else placements[frames[s]].act(p)
+        )
+        for s, p in zip(shapes.tolist(), points, strict=True)
+    ]
+    return np.array(moved, dtype=float).reshape(-1, 3)
+
+
+@numba.njit(cache=True, nogil=True)
+def contact_jacobian_rows(
+    point: FloatArray,
+    other_point: FloatArray,
+    normal: FloatArray,
+    shape: IntArray,
+    other_shape: IntArray,
+    support: FloatArray,
+    J: FloatArray,
+    out: FloatArray,
+) -> None:
+    """Write n^T (J_p - J_p') of every contact into the rows of ``out``.
+
+    With J = [J_v; J_w] the joints' world motions (velocities at the world origin,
+    :meth:`RobotState.joint_jacobians`), a point p moves at J_v - [p]_x J_w, so
+    n^T J_p = [n; p x n]^T J, kept on the columns that move the point's body
+    (``support`` of its shape). The other side (a second robot shape, where
+    ``other_shape`` >= 0) moves the distance the other way.
+    """
+    nv = J.shape[1]
+    for r in range(shape.size):
+        nx, ny, nz = normal[r, 0], normal[r, 1], normal[r, 2]
+        for side in range(2):
+            if side == 0:
+                s, p, sign = shape[r], point[r], 1.0
+            else:
+                s, p, sign = other_shape[r], other_point[r], -1.0
+                if s < 0:
+                    break
+            px, py, pz = p[0], p[1], p[2]
+            wx, wy, wz = py * nz - pz * ny, pz * nx - px * nz, px * ny - py * nx
+            for c in range(nv):
+                if support[s, c] != 0.0:
+                    out[r, c] += sign * (
+                        nx * J[0, c]
+                        + ny * J[1, c]
+                        + nz * J[2, c]
+                        + wx * J[3, c]
+                        + wy * J[4, c]
+                        + wz * J[5, c]
+                    )

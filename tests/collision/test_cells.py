@@ -276,6 +276,19 @@ octree, q = _shelf_octree_world()
 assert len(octree.check(q).contacts) > 0
 after = [len(k.signatures) for k in kernels]
 assert before == after, (before, after)
+# Compiled when an engine and a contact constraint are built: one layout each,
+# whatever the environment the contacts come from.
+from cbp.collision.environment import OccupancyEnvironment
+from cbp.collision.rows import contact_jacobian_rows
+from cbp.qp import _fill_qp
+shelf = load_scenario(SCENARIOS / "cat_shelf_retreat.yaml")
+shelf.collision_world().set_environment(octree.environment)
+step, world = _cat_step(shelf)
+for i in range(10):
+    step(i)
+assert len(world.check(shelf.q0).contacts) > 0
+assert len(_fill_qp.signatures) == 1, _fill_qp.signatures
+assert len(contact_jacobian_rows.signatures) == 1, contact_jacobian_rows.signatures
 """
     run = subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, timeout=300
