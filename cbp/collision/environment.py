@@ -345,6 +345,8 @@ class PrimitiveEnvironment(Environment):
             if d < margin:
                 rows.append((i, point, other, normal, d))
         hits = Hits.from_rows(rows)
+        if len(rows) <= per_shape:  # no shape can have too many (counted in Python)
+            return hits
         return _keep_closest(hits, per_shape, min_angle_deg=0.0, min_spacing=0.0)
 
     def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:

@@ -154,6 +154,17 @@ class ContactSet:
             self.distance[mask],
         )
 
+    def rows(self, rows: slice) -> ContactSet:
+        """The contacts of a range of rows, as views of this set's arrays."""
+        return ContactSet(
+            self.shape[rows],
+            self.other_shape[rows],
+            self.point[rows],
+            self.other_point[rows],
+            self.normal[rows],
+            self.distance[rows],
+        )
+
     @property
     def is_self(self) -> np.ndarray:
         """Which contacts are between two robot shapes."""
@@ -357,7 +368,8 @@ class CollisionWorld:
         pin.updateGeometryPlacements(
             geometry.robot.model, state.data, self._geometry_model, self._geometry_data
         )
-        placements = list(self._geometry_data.oMg)
+        oMg = self._geometry_data.oMg
+        placements = [oMg[i] for i in range(len(shapes))]  # faster than iterating
         centres, halves = self._bounds(placements)
         radii = geometry.radii
         margin = self.margin(environment)
@@ -365,17 +377,14 @@ class CollisionWorld:
         hits = environment.query(
             shapes, placements, centres, radii, margin, per_shape, halves
         )
-        # Occupancy maps: the surface is uncertain by half a cell, so obstacles
-        # are inflated by that much (and step validation tolerates as much more).
-        obstacles = self._from_hits(hits, self.padding + environment.resolution)
         own = (
             self._self_contacts(placements, centres, halves)
             if self.settings.self_collision
-            else ContactSet.empty()
+            else []
         )
-        contacts = ContactSet.concatenate([obstacles, own])
-        contacts._split = (obstacles, own)  # the parts the constraints read
-        return contacts
+        # Occupancy maps: the surface is uncertain by half a cell, so obstacles
+        # are inflated by that much (and step validation tolerates as much more).
+        return _contact_set(hits, self.padding + environment.resolution, own)
 
     def _bounds(self, placements: list[pin.SE3]) -> tuple[FloatArray, FloatArray]:
         """The shapes' bounding-sphere centres and world box half extents, (n, 3).
@@ -388,20 +397,10 @@ class CollisionWorld:
         shape_bounds(frames, self._centres, self.geometry.box_halves, centres, halves)
         return centres, halves
 
-    @staticmethod
-    def _from_hits(hits: Hits, padding: float) -> ContactSet:
-        return ContactSet(
-            hits.shape,
-            np.full(len(hits), -1, dtype=np.intp),
-            hits.robot_point,
-            hits.obstacle_point,
-            hits.normal,
-            hits.distance - padding,
-        )
-
     def _self_contacts(
         self, placements: list[pin.SE3], centres: FloatArray, halves: FloatArray
-    ) -> ContactSet:
+    ) -> list[_SelfRow]:
+        """The self contacts, as rows (see ``_SelfRow``)."""
         shapes = self.geometry.shapes
         pad2 = 2.0 * self.padding
         margin = self.settings.activation_distance + pad2
@@ -421,18 +420,7 @@ class CollisionWorld:
             )
             if d < margin:
                 rows.append((i, j, point, other, normal, d - pad2))
-        if not rows:
-            return ContactSet.empty()
-        columns = list(zip(*rows, strict=True))
-        point, other, normal, distance = (np.array(c, dtype=float) for c in columns[2:])
-        return ContactSet(
-            np.array(columns[0], dtype=np.intp),
-            np.array(columns[1], dtype=np.intp),
-            point,
-            other,
-            normal,
-            distance,
-        )
+        return rows
 
     def __repr__(self) -> str:
         """Geometry, environment and settings."""
@@ -440,3 +428,53 @@ class CollisionWorld:
             f"CollisionWorld({self.geometry!r}, environment="
             f"{type(self._environment).__name__}, settings={self.settings!r})"
         )
+
+
+#: A self contact: shapes i and j, the points on each, the normal from j toward
+#: i, the signed distance of the padded shapes.
+_SelfRow = tuple[int, int, FloatArray, FloatArray, FloatArray, float]
+
+
+def _contact_set(hits: Hits, padding: float, own: list[_SelfRow]) -> ContactSet:
+    """One set of the obstacle contacts, then the self contacts, with both parts.
+
+    Each field is built by one numpy call, and the parts are views of it.
+    """
+    n = len(hits)
+    if not own:
+        obstacles = ContactSet(
+            hits.shape,
+            np.full(n, -1, dtype=np.intp),
+            hits.robot_point,
+            hits.obstacle_point,
+            hits.normal,
+            hits.distance - padding,
+        )
+        # The part is another set of the same arrays (itself would be a cycle).
+        obstacles._split = (obstacles.rows(slice(None)), _EMPTY)
+        return obstacles
+    i, j, point, other, normal, distance = zip(*own, strict=True)
+    if not n:
+        contacts = ContactSet(
+            np.array(i, dtype=np.intp),
+            np.array(j, dtype=np.intp),
+            np.array(point, dtype=float),
+            np.array(other, dtype=float),
+            np.array(normal, dtype=float),
+            np.array(distance, dtype=float),
+        )
+        contacts._split = (_EMPTY, contacts.rows(slice(None)))
+        return contacts
+    contacts = ContactSet(
+        np.concatenate((hits.shape, i)),
+        np.concatenate((np.full(n, -1, dtype=np.intp), j)),
+        np.concatenate((hits.robot_point, point)),
+        np.concatenate((hits.obstacle_point, other)),
+        np.concatenate((hits.normal, normal)),
+        np.concatenate((hits.distance - padding, distance)),
+    )
+    contacts._split = (contacts.rows(slice(0, n)), contacts.rows(slice(n, None)))
+    return contacts
+
+
+_EMPTY = ContactSet.empty()
