@@ -39,7 +39,9 @@ import abc
 import dataclasses
 from typing import Any, ClassVar, Generic, NamedTuple, TypeVar
 
-from cbp.errors import ConfigError
+import numpy as np
+
+from cbp.errors import ConfigError, PluginOutputError
 from cbp.robot import FloatArray, RobotModel
 from cbp.state import RobotState
 
@@ -140,6 +142,48 @@ class Plugin(abc.ABC, Generic[ParamsT]):
     def linearize(self, state: RobotState) -> Linearization:
         """Return value and Jacobian; override to share work between the two."""
         return Linearization(self.compute_value(state), self.compute_jacobian(state))
+
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Write f(q) into ``value`` (dim,) and its Jacobian into ``jacobian``.
+
+        The engine calls this with its own buffers (the plugin's rows of the
+        stacked QP), every step. The default copies :meth:`linearize`, checking
+        the shapes. Override it to write in place where that saves work; an
+        override must write every entry, and agree with :meth:`compute_value`
+        and :meth:`compute_jacobian` (:func:`cbp.testing.check_jacobian`
+        verifies both).
+
+        Raises:
+            PluginOutputError: the outputs have the wrong shapes.
+        """
+        out, jac = self.linearize(state)
+        shape = getattr(out, "shape", None), getattr(jac, "shape", None)
+        if shape != (value.shape, jacobian.shape):
+            raise PluginOutputError(
+                f"{self.name} ({self.type_name}): value has shape {np.shape(out)} "
+                f"and Jacobian {np.shape(jac)}, expected {value.shape} and "
+                f"{jacobian.shape}"
+            )
+        value[:] = out
+        jacobian[:] = jac
+
+    def value_into(self, state: RobotState, value: FloatArray) -> None:
+        """Write f(q) into ``value`` (dim,); the engine's call for a constant Jacobian.
+
+        As :meth:`linearize_into`: the default copies :meth:`compute_value`.
+
+        Raises:
+            PluginOutputError: the value has the wrong shape.
+        """
+        out = self.compute_value(state)
+        if getattr(out, "shape", None) != value.shape:
+            raise PluginOutputError(
+                f"{self.name} ({self.type_name}): value has shape {np.shape(out)}, "
+                f"expected {value.shape}"
+            )
+        value[:] = out
 
     def __repr__(self) -> str:
         """Type name, instance name and parameters."""

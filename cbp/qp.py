@@ -338,14 +338,15 @@ class _Block:
         starts = np.concatenate([[0], np.cumsum(dims)]).astype(int)
         self.slices = [slice(int(a), int(b)) for a, b in itertools.pairwise(starts)]
         self.items = [
-            (sl, e.plugin, ((d,), (d, nv)))
-            for sl, e, d in zip(self.slices, self.entries, dims, strict=True)
+            (sl, e.plugin) for sl, e in zip(self.slices, self.entries, strict=True)
         ]
+        # Each plugin with its rows of the buffers (views, made once).
+        self._rows = [(p, self.f[sl], self.J[sl]) for sl, p in self.items]
         # The first fill linearizes every entry; later ones only the entries
         # whose Jacobian varies, and evaluate the others' values.
-        self._linearized = list(self.items)
-        self._constant_items = [it for it in self.items if it[1].constant_jacobian]
-        self._evaluated: list[tuple[slice, AnyPlugin, tuple[Any, Any]]] = []
+        self._linearized = list(self._rows)
+        self._constant_items = [(p, v) for p, v, _ in self._rows if p.constant_jacobian]
+        self._evaluated: list[tuple[AnyPlugin, FloatArray]] = []
         self.row_entry = np.concatenate(
             [np.full(d, i) for (i, _), d in zip(entries, dims, strict=True)]
             or [np.zeros(0)]
@@ -359,7 +360,7 @@ class _Block:
         self.desired = np.zeros(self.m)
         self.limiting: list[tuple[slice, Task[Any]]] = [
             (sl, p)
-            for sl, p, _ in self.items
+            for sl, p in self.items
             if isinstance(p, Task) and type(p).limit_step is not Task.limit_step
         ]
         self.task_rows = np.concatenate(
@@ -371,41 +372,28 @@ class _Block:
         )
         self.has_tasks = bool(self.task_rows.any())
         self.constraints: list[tuple[slice, Constraint[Any]]] = [
-            (sl, p) for sl, p, _ in self.items if isinstance(p, Constraint)
+            (sl, p) for sl, p in self.items if isinstance(p, Constraint)
         ]
 
     def fill(self, state: RobotState) -> None:
-        """Linearize every entry into the stacked buffers, checking shapes.
+        """Linearize every entry into its rows of the stacked buffers.
 
         Entries that declare ``constant_jacobian`` are linearized at the first
         call only; later calls evaluate their values and keep their Jacobian rows.
         """
-        f, J = self.f, self.J
-        for sl, plugin, shapes in self._linearized:
-            value, jac = plugin.linearize(state)
-            if (getattr(value, "shape", None), getattr(jac, "shape", None)) != shapes:
-                raise PluginOutputError(
-                    f"{plugin.name} ({plugin.type_name}): value has shape "
-                    f"{np.shape(value)} and Jacobian {np.shape(jac)}, expected "
-                    f"{shapes[0]} and {shapes[1]}"
-                )
-            f[sl] = value
-            J[sl] = jac
-        for sl, plugin, shapes in self._evaluated:
-            value = plugin.compute_value(state)
-            if getattr(value, "shape", None) != shapes[0]:
-                raise PluginOutputError(
-                    f"{plugin.name} ({plugin.type_name}): value has shape "
-                    f"{np.shape(value)}, expected {shapes[0]}"
-                )
-            f[sl] = value
+        for plugin, value, jacobian in self._linearized:
+            plugin.linearize_into(state, value, jacobian)
+        for plugin, value in self._evaluated:
+            plugin.value_into(state, value)
         if self._evaluated is not self._constant_items:
-            self._linearized = [it for it in self.items if not it[1].constant_jacobian]
+            self._linearized = [
+                (p, v, J) for p, v, J in self._rows if not p.constant_jacobian
+            ]
             self._evaluated = self._constant_items
 
     def raise_non_finite(self) -> None:
         """Raise PluginOutputError naming the first entry with a NaN or inf output."""
-        for sl, plugin, _ in self.items:
+        for sl, plugin in self.items:
             if not (np.isfinite(self.f[sl]).all() and np.isfinite(self.J[sl]).all()):
                 raise PluginOutputError(
                     f"{plugin.name} ({plugin.type_name}): value or Jacobian is not "

@@ -399,6 +399,24 @@ class RobotModel:
             return q1 - q0
         return np.asarray(pin.difference(self.model, q0, q1), dtype=float)
 
+    def difference_into(
+        self,
+        q0: FloatArray,
+        q1: FloatArray,
+        out: FloatArray,
+        rows: IndexRows | None = None,
+    ) -> None:
+        """Write (q1 ⊖ q0)[rows] into ``out``; no allocation on Euclidean models."""
+        if self.is_euclidean:
+            if rows is None:
+                np.subtract(q1, q0, out=out)
+                return
+            if isinstance(rows, slice):
+                np.subtract(q1[rows], q0[rows], out=out)
+                return
+        difference = self.difference(q0, q1)
+        out[:] = difference if rows is None else difference[rows]
+
     def difference_jacobian(
         self, q0: FloatArray, q1: FloatArray, rows: IndexRows | None = None
     ) -> FloatArray:

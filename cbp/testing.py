@@ -92,7 +92,9 @@ def check_jacobian(
 
     The plugin is first prepared at ``q`` (step duration ``dt``), as the engine
     would at the start of a step; references it latches there stay fixed while the
-    configuration is perturbed.
+    configuration is perturbed. The in-place calls the engine makes
+    (:meth:`~cbp.plugin.Plugin.linearize_into`, ``value_into``) must write the
+    same value and Jacobian as ``compute_value`` and ``compute_jacobian``.
 
     Args:
         plugin: the plugin to check (any task or constraint, in-tree or yours).
@@ -143,7 +145,35 @@ def check_jacobian(
             + f"\n  at q = {np.array2string(state.q, precision=4)}"
             + f"\n  tolerance: atol {atol:g} + rtol {rtol:g} * |numeric|"
         )
+    _check_in_place(plugin, state, analytic, label)
     return report
+
+
+def _check_in_place(
+    plugin: AnyPlugin, state: RobotState, analytic: FloatArray, label: str
+) -> None:
+    """The engine's in-place calls write what compute_value and compute_jacobian return.
+
+    Into every entry: the buffers start as NaN here.
+    """
+    value = np.asarray(plugin.compute_value(state), dtype=float)
+    dim, nv = analytic.shape
+    written = np.full(dim, np.nan), np.full((dim, nv), np.nan), np.full(dim, np.nan)
+    plugin.linearize_into(state, written[0], written[1])
+    plugin.value_into(state, written[2])
+    for name, got, expected in (
+        ("linearize_into's value", written[0], value),
+        ("linearize_into's Jacobian", written[1], analytic),
+        ("value_into's value", written[2], value),
+    ):
+        if not np.allclose(got, expected, rtol=1e-12, atol=1e-12):
+            raise JacobianMismatchError(
+                f"{label}: {name} differs from compute_value/compute_jacobian "
+                f"(NaN: an entry left unwritten) at "
+                f"q = {np.array2string(state.q, precision=4)}:\n"
+                f"  written  {np.array2string(got, precision=6)}\n"
+                f"  expected {np.array2string(expected, precision=6)}"
+            )
 
 
 def _check_constant(

@@ -89,3 +89,36 @@ def test_joint_space_terms_declare_constant_jacobians(robots, rng) -> None:
     assert fixed.constant_jacobian
     check_jacobian(fixed, robots["panda"], q)
     assert not PostureTask(PostureParams(), robots["panda_floating"]).constant_jacobian
+
+
+class _StaleRow(PostureTask):
+    """Writes its Jacobian in place but forgets the last row."""
+
+    def linearize_into(self, state, value, jacobian) -> None:  # type: ignore[no-untyped-def]
+        full = np.empty_like(jacobian)
+        super().linearize_into(state, value, full)
+        jacobian[:-1] = full[:-1]
+
+
+class _OffByOne(PostureTask):
+    """Its in-place value (what the engine reads) is not its compute_value."""
+
+    def value_into(self, state: RobotState, value: FloatArray) -> None:
+        super().value_into(state, value)
+        value += 1.0
+
+
+@pytest.mark.parametrize(
+    ("task", "match"),
+    [
+        (_StaleRow, "linearize_into's Jacobian differs"),
+        (_OffByOne, "value_into's value differs"),
+    ],
+)
+def test_in_place_outputs_are_checked(robots, rng, task, match) -> None:
+    """The engine's in-place calls must agree with compute_value/compute_jacobian."""
+    robot = robots["panda"]
+    plugin = task(PostureParams(), robot)
+    q = sample_configurations(robot, rng, n=1)[0]
+    with pytest.raises(JacobianMismatchError, match=match):
+        check_jacobian(plugin, robot, q)

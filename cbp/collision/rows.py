@@ -98,19 +98,30 @@ class LatchedContacts:
 
     def value(self, state: RobotState) -> FloatArray:
         """f(q) for the active rows, zeros after them, shape (capacity,)."""
-        out = np.zeros(self.capacity)
+        out = np.empty(self.capacity)
+        self.value_into(state, out)
+        return out
+
+    def value_into(self, state: RobotState, out: FloatArray) -> None:
+        """Write :meth:`value` into ``out`` (capacity,)."""
         n, c = self.count, self._contacts
         out[:n] = c.distance
+        out[n:] = 0.0
         if n and not self._at_latch(state):
             point, other = self._moved_points(state)
             # The other side's point is the latched one for an obstacle contact.
             move = (point - c.point) - (other - c.other_point)
             out[:n] += np.einsum("ij,ij->i", c.normal, move)
-        return out
 
     def jacobian(self, state: RobotState) -> FloatArray:
         """n^T (J_p - J_p') for the active rows, zeros after, shape (capacity, nv)."""
-        out = np.zeros((self.capacity, state.robot.nv))
+        out = np.empty((self.capacity, state.robot.nv))
+        self.jacobian_into(state, out)
+        return out
+
+    def jacobian_into(self, state: RobotState, out: FloatArray) -> None:
+        """Write :meth:`jacobian` into ``out`` (capacity, nv)."""
+        out.fill(0.0)
         if self.count:
             c = self._contacts
             point, other = (
@@ -128,7 +139,6 @@ class LatchedContacts:
                 state.joint_jacobians(),
                 out,
             )
-        return out
 
     def bounds(self, safety_distance: float) -> tuple[FloatArray, FloatArray]:
         """Active rows: [safety_distance, inf); inactive rows: (-inf, inf).

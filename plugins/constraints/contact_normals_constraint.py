@@ -107,6 +107,18 @@ class ContactNormalsConstraint(Constraint[ContactParams]):
         """n^T J_c per row."""
         return self._latched().jacobian(state)
 
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Distances and n^T J_c, written in place."""
+        rows = self._latched()
+        rows.value_into(state, value)
+        rows.jacobian_into(state, jacobian)
+
+    def value_into(self, state: RobotState, value: FloatArray) -> None:
+        """Distances, written in place."""
+        self._latched().value_into(state, value)
+
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """[d_safe, inf) on active rows."""
         return self._latched().bounds(self.params.safety_distance)

@@ -85,6 +85,10 @@ class JointVelocityConstraint(Constraint[JointVelocityParams]):
         """Selected rows of q ⊖ q0."""
         return self.robot.difference(self._anchor(), state.q)[self.rows]
 
+    def value_into(self, state: RobotState, value: FloatArray) -> None:
+        """Selected rows of q ⊖ q0, written in place."""
+        self.robot.difference_into(self._anchor(), state.q, value, self.rows)
+
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """Selected rows of the Jacobian of q ⊖ q0."""
         return self.robot.difference_jacobian(self._anchor(), state.q, self.rows)

@@ -75,7 +75,7 @@ class GoalPoseTask(Task[GoalPoseParams]):
         self.frame_id = located(robot.frame_id, params.frame, "frame")
         self._target: pin.SE3 | None = None
         if params.target is not None:
-            self._target = params.target.to_se3()
+            self._set(params.target.to_se3())
 
     @property
     def dim(self) -> int:
@@ -88,7 +88,13 @@ class GoalPoseTask(Task[GoalPoseParams]):
         Raises:
             InvalidTargetError: wrong shape, NaN or not a rotation; the goal is kept.
         """
-        self._target = checked_se3(position, rotation, f"{self.name} target")
+        self._set(checked_se3(position, rotation, f"{self.name} target"))
+
+    def _set(self, target: pin.SE3) -> None:
+        self._target = target
+        # As numpy arrays once, not through pinocchio's accessors every step.
+        self._goal_translation = np.array(target.translation)
+        self._goal_rotation_t = np.array(target.rotation.T)
 
     @property
     def target(self) -> pin.SE3:
@@ -107,17 +113,23 @@ class GoalPoseTask(Task[GoalPoseParams]):
 
     def linearize(self, state: RobotState) -> Linearization:
         """Value and Jacobian sharing the rotation error matrix."""
-        goal = self.target
+        value, J = np.empty(6), np.empty((6, self.robot.nv))
+        self.linearize_into(state, value, J)
+        return Linearization(value, J)
+
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Value and Jacobian written in place, sharing the rotation error matrix."""
+        if self._target is None:
+            raise TargetNotSetError(f"{self.name} ({self.type_name}): no target set")
         placement = state.frame_placement(self.frame_id)
-        M = placement.rotation.dot(goal.rotation.T)
-        value = np.empty(6)
-        value[:3] = placement.translation - goal.translation
+        M = placement.rotation.dot(self._goal_rotation_t)
+        np.subtract(placement.translation, self._goal_translation, out=value[:3])
         value[3:] = pin.log3(M)
         J_frame = state.frame_jacobian(self.frame_id)
-        J = np.empty_like(J_frame)
-        J[:3] = J_frame[:3]
-        J[3:] = pin.Jlog3(M).dot(M.T).dot(J_frame[3:])
-        return Linearization(value, J)
+        jacobian[:3] = J_frame[:3]
+        np.dot(pin.Jlog3(M).dot(M.T), J_frame[3:], out=jacobian[3:])
 
     def limit_step(self, desired: FloatArray) -> FloatArray:
         """Bound the translation and rotation asked for in one step."""

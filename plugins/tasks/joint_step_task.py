@@ -61,6 +61,10 @@ class JointStepTask(Task[JointStepParams]):
         """Q ⊖ q0."""
         return self.robot.difference(self._anchor(), state.q)
 
+    def value_into(self, state: RobotState, value: FloatArray) -> None:
+        """Q ⊖ q0, written in place."""
+        self.robot.difference_into(self._anchor(), state.q, value)
+
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """Jacobian of q ⊖ q0 (identity on Euclidean joints)."""
         return self.robot.difference_jacobian(self._anchor(), state.q)

@@ -82,6 +82,10 @@ class PostureTask(Task[PostureParams]):
         """Selected rows of q ⊖ q_d."""
         return self.robot.difference(self._target, state.q)[self.rows]
 
+    def value_into(self, state: RobotState, value: FloatArray) -> None:
+        """Selected rows of q ⊖ q_d, written in place."""
+        self.robot.difference_into(self._target, state.q, value, self.rows)
+
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """Selected rows of the Jacobian of q ⊖ q_d."""
         return self.robot.difference_jacobian(self._target, state.q, self.rows)

@@ -147,6 +147,9 @@ def test_nan_output_is_named(robots) -> None:
         def compute_value(self, state):  # type: ignore[no-untyped-def]
             return np.full(self.dim, np.nan)
 
+        def value_into(self, state, value):  # type: ignore[no-untyped-def]
+            value[:] = self.compute_value(state)
+
     engine = Engine(
         robot,
         [
