@@ -53,6 +53,18 @@ def checked_se3(
     Raises:
         InvalidTargetError: wrong shape, not finite, or not a rotation matrix.
     """
+    p, R = checked_pose(position, rotation, what)
+    return pin.SE3(R, p)
+
+
+def checked_pose(
+    position: npt.ArrayLike, rotation: npt.ArrayLike, what: str = "target"
+) -> tuple[FloatArray, FloatArray]:
+    """Return copies of a position (3,) and a rotation matrix (3, 3), checked.
+
+    Raises:
+        InvalidTargetError: wrong shape, not finite, or not a rotation matrix.
+    """
     p = np.array(position, dtype=float)
     R = np.array(rotation, dtype=float)
     if p.shape != (3,) or R.shape != (3, 3):
@@ -62,8 +74,11 @@ def checked_se3(
         )
     # Scalar arithmetic: this runs on every goal update, where a dozen numpy
     # calls on 3x3 arrays cost more than the whole check.
-    a, b, c, d, e, f, g, h, i = R.ravel().tolist()
-    if not all(map(math.isfinite, (*p.tolist(), a, b, c, d, e, f, g, h, i))):
+    x, y, z = p.tolist()
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    # A NaN or an infinity makes the sum NaN or infinite (so do finite entries
+    # near 1e308, which are no pose either).
+    if not math.isfinite(x + y + z + a + b + c + d + e + f + g + h + i):
         raise InvalidTargetError(f"{what}: not finite (position {p}, rotation {R})")
     # Columns orthonormal (R^T R = I, as numpy's allclose(atol=1e-6) would judge
     # it) and det R = +1.
@@ -84,7 +99,7 @@ def checked_se3(
         or det < 0.0
     ):
         raise InvalidTargetError(f"{what}: rotation is not a rotation matrix: {R}")
-    return pin.SE3(R, p)
+    return p, R
 
 
 def cross3(a: FloatArray, b: FloatArray) -> FloatArray:

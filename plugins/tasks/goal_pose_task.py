@@ -14,7 +14,7 @@ import pinocchio as pin
 from cbp.errors import ConfigError, TargetNotSetError, located
 from cbp.plugin import FloatArray, Linearization, PluginParams, Task
 from cbp.robot import RobotModel
-from cbp.spatial import Pose, checked_se3
+from cbp.spatial import Pose, checked_pose
 from cbp.state import RobotState
 
 
@@ -74,8 +74,10 @@ class GoalPoseTask(Task[GoalPoseParams]):
         super().__init__(params, robot, name)
         self.frame_id = located(robot.frame_id, params.frame, "frame")
         self._target: pin.SE3 | None = None
+        self._has_target = False
         if params.target is not None:
-            self._set(params.target.to_se3())
+            target = params.target.to_se3()
+            self._set(np.array(target.translation), np.array(target.rotation))
 
     @property
     def dim(self) -> int:
@@ -88,19 +90,25 @@ class GoalPoseTask(Task[GoalPoseParams]):
         Raises:
             InvalidTargetError: wrong shape, NaN or not a rotation; the goal is kept.
         """
-        self._set(checked_se3(position, rotation, f"{self.name} target"))
+        self._set(*checked_pose(position, rotation, f"{self.name} target"))
 
-    def _set(self, target: pin.SE3) -> None:
-        self._target = target
-        # As numpy arrays once, not through pinocchio's accessors every step.
-        self._goal_translation = np.array(target.translation)
-        self._goal_rotation_t = np.array(target.rotation.T)
+    def _set(self, position: FloatArray, rotation: FloatArray) -> None:
+        # As numpy arrays, not read through pinocchio every step; the SE3 of
+        # ``target`` is made when asked for.
+        self._goal_translation = position
+        self._goal_rotation_t = rotation.T
+        self._target = None
+        self._has_target = True
 
     @property
     def target(self) -> pin.SE3:
         """The current goal pose."""
         if self._target is None:
-            raise TargetNotSetError(f"{self.name} ({self.type_name}): no target set")
+            if not self._has_target:
+                raise TargetNotSetError(
+                    f"{self.name} ({self.type_name}): no target set"
+                )
+            self._target = pin.SE3(self._goal_rotation_t.T, self._goal_translation)
         return self._target
 
     def compute_value(self, state: RobotState) -> FloatArray:
@@ -121,7 +129,7 @@ class GoalPoseTask(Task[GoalPoseParams]):
         self, state: RobotState, value: FloatArray, jacobian: FloatArray
     ) -> None:
         """Value and Jacobian written in place, sharing the rotation error matrix."""
-        if self._target is None:
+        if not self._has_target:
             raise TargetNotSetError(f"{self.name} ({self.type_name}): no target set")
         placement = state.frame_placement(self.frame_id)
         M = placement.rotation.dot(self._goal_rotation_t)
