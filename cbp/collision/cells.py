@@ -409,6 +409,7 @@ def compile_kernels() -> None:
         np.lexsort((distance, shape)), shape, outward, centre, 1, 0.9, 1e-4, keep
     )
     index.metaball_normals(centre, 0.03, np.ascontiguousarray(outward))
+    cell_hits(shape, centre, outward, distance, 0.005, 1, 0.9, 1e-4)
     _COMPILED = True
 
 
@@ -810,3 +811,119 @@ def spread_contacts(
             keep[n] = k
             n += 1
     return n
+
+
+def cell_hits(
+    shape: IntArray,
+    centre: FloatArray,
+    outward: FloatArray,
+    distance: FloatArray,
+    half: float,
+    per_shape: int,
+    cos_max: float,
+    spacing2: float,
+) -> tuple[IntArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Contacts from :meth:`ShapeTable.candidates`' cells, reduced per shape.
+
+    Per shape (the candidates come shape by shape), the closest cell first, then
+    the next closest unless a kept one has a normal within the angle (cosine
+    above ``cos_max``) and a robot point within the spacing (squared distance
+    below ``spacing2``), up to ``per_shape``: :func:`spread_contacts` on cells.
+
+    Returns:
+        (shape, point on the shape's surface, point on the cell toward the
+        shape, unit normal from the cell toward the shape, distance), by shape
+        and then distance.
+    """
+    n = len(shape)
+    out_shape = np.empty(n, dtype=np.intp)
+    robot, obstacle, normal = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    out_distance = np.empty(n)
+    count = _cell_hits(
+        shape,
+        centre,
+        outward,
+        distance,
+        half,
+        per_shape,
+        cos_max,
+        spacing2,
+        out_shape,
+        robot,
+        obstacle,
+        normal,
+        out_distance,
+    )
+    return (
+        out_shape[:count],
+        robot[:count],
+        obstacle[:count],
+        normal[:count],
+        out_distance[:count],
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def _cell_hits(
+    shape: IntArray,
+    centre: FloatArray,
+    outward: FloatArray,
+    distance: FloatArray,
+    half: float,
+    per_shape: int,
+    cos_max: float,
+    spacing2: float,
+    out_shape: IntArray,
+    robot: FloatArray,
+    obstacle: FloatArray,
+    normal: FloatArray,
+    out_distance: FloatArray,
+) -> int:
+    """The loop of :func:`cell_hits`; returns the number of contacts written."""
+    n = shape.size
+    keep = np.empty(max(per_shape, 1), dtype=np.int64)
+    count = 0
+    start = 0
+    while start < n:
+        end = start
+        while end < n and shape[end] == shape[start]:
+            end += 1
+        # Stable, as np.lexsort: equal distances keep the candidates' order.
+        order = np.argsort(distance[start:end], kind="mergesort") + start
+        kept = 0
+        for k in order:
+            if kept >= per_shape:
+                break
+            reach_k = distance[k] + half
+            similar = False
+            for i in range(kept):
+                m = keep[i]
+                dot = (
+                    outward[k, 0] * outward[m, 0]
+                    + outward[k, 1] * outward[m, 1]
+                    + outward[k, 2] * outward[m, 2]
+                )
+                if dot > cos_max:
+                    reach_m = distance[m] + half
+                    d2 = 0.0
+                    for a in range(3):
+                        d = (centre[k, a] - reach_k * outward[k, a]) - (
+                            centre[m, a] - reach_m * outward[m, a]
+                        )
+                        d2 += d * d
+                    if d2 < spacing2:
+                        similar = True
+                        break
+            if similar:
+                continue
+            keep[kept] = k
+            kept += 1
+            out_shape[count] = shape[k]
+            for a in range(3):
+                robot[count, a] = centre[k, a] - reach_k * outward[k, a]
+                obstacle[count, a] = centre[k, a] - half * outward[k, a]
+                normal[count, a] = -outward[k, a]
+            out_distance[count] = distance[k]
+            count += 1
+        start = end
+    return count

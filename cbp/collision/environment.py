@@ -27,6 +27,7 @@ from cbp.collision.broad import near_objects
 from cbp.collision.cells import (
     CellIndex,
     ShapeTable,
+    cell_hits,
     compile_kernels,
     spread_contacts,
 )
@@ -513,15 +514,19 @@ class OccupancyEnvironment(Environment):
         )
         if not len(shape):
             return Hits()
+        # On the shape's surface, on the cell toward the shape, the normal from
+        # the cell toward the shape; a few per shape, spread over directions.
         hits = Hits(
-            shape,
-            centre - (distance + half)[:, None] * outward,  # on the shape's surface
-            centre - half * outward,  # on the cell, toward the shape
-            -outward,  # from the cell toward the shape
-            distance,
-        )
-        hits = _keep_closest(
-            hits, per_shape, min_angle_deg=25.0, min_spacing=2.0 * self.cell
+            *cell_hits(
+                shape,
+                centre,
+                outward,
+                distance,
+                half,
+                per_shape,
+                _COS_SPREAD,
+                (2.0 * self.cell) ** 2,
+            )
         )
         if self.refiner is not None and len(hits):
             hits.normal = self.refiner.refine(
@@ -535,6 +540,11 @@ class OccupancyEnvironment(Environment):
             return np.full(len(points), np.inf)
         d, _ = self.tree.query(points)
         return np.asarray(d, dtype=float) - 0.5 * self.cell
+
+
+#: Occupancy contacts of one shape closer than this angle (25 degrees) and two
+#: cells apart are one contact (:func:`cell_hits`).
+_COS_SPREAD = math.cos(math.radians(25.0))
 
 
 def _keep_closest(

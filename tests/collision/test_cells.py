@@ -14,6 +14,7 @@ from cbp.collision.cells import (
     DIRECTIONS,
     CellIndex,
     ShapeTable,
+    cell_hits,
     spread_contacts,
 )
 from cbp.collision.geometry import LinkShape
@@ -198,6 +199,61 @@ def test_spread_contacts_keeps_distinct_directions() -> None:
     assert keep[:n].tolist() == [1, 3, 4]
 
 
+def test_cell_hits_reduce_as_the_general_contact_reduction(geometry, robots) -> None:
+    """The compiled reduction of cell candidates keeps what _keep_closest keeps."""
+    from cbp.collision.environment import Hits, _keep_closest
+
+    robot = robots["panda"]
+    margin, half = 0.06, 0.5 * CELL
+    cells = np.concatenate(
+        [
+            _shell(np.array([0.45, 0.0, 0.35]), 0.12),
+            _shell(np.array([0.3, 0.25, 0.6]), 0.08),
+        ]
+    )
+    index = CellIndex(cells, CELL)
+    table = ShapeTable.build(geometry.shapes, margin + half)
+    model = geometry.geometry_model()
+    data = pin.GeometryData(model)
+    compared = 0
+    for q in sample_configurations(robot, np.random.default_rng(9), 12):
+        state = RobotState(robot, q)
+        pin.updateGeometryPlacements(robot.model, state.data, model, data)
+        shape, centre, outward, distance = table.candidates(
+            index, list(data.oMg), margin
+        )
+        for per_shape, angle, spacing in ((3, 25.0, 2 * CELL), (1, 0.0, 0.0)):
+            expected = _keep_closest(
+                Hits(
+                    shape,
+                    centre - (distance + half)[:, None] * outward,
+                    centre - half * outward,
+                    -outward,
+                    distance,
+                ),
+                per_shape,
+                angle,
+                spacing,
+            )
+            got = cell_hits(
+                shape,
+                centre,
+                outward,
+                distance,
+                half,
+                per_shape,
+                math.cos(math.radians(angle)),
+                spacing**2,
+            )
+            fields = ("shape", "robot_point", "obstacle_point", "normal", "distance")
+            for name, array in zip(fields, got, strict=True):
+                np.testing.assert_allclose(
+                    array, getattr(expected, name), atol=1e-12, err_msg=name
+                )
+            compared += len(expected)
+    assert compared > 20
+
+
 def test_occupancy_query_uses_every_shape_kind(robots) -> None:
     """Capsule-approximated links find the same box as hulls, at the same distance."""
     robot = robots["panda"]
@@ -265,7 +321,8 @@ from cbp.bench import _cat_step, _near_board, _shelf_octree_world, SCENARIOS
 from cbp.scenario import load_scenario
 cells.compile_kernels()
 kernels = [cells._candidates, cells.metaball_normals, cells.spread_contacts,
-           broad.shape_bounds, broad.near_objects, broad.near_pairs]
+           cells._cell_hits, broad.shape_bounds, broad.near_objects,
+           broad.near_pairs]
 before = [len(k.signatures) for k in kernels]
 boards = load_scenario(SCENARIOS / "cat_boards.yaml")
 boards.q0[:] = _near_board(boards)
