@@ -447,11 +447,12 @@ def _parts_rows(cfg: BenchConfig) -> list[Row]:
 def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
     """The octree contact query inside the shelf, part by part."""
     from cbp.collision.cells import ShapeTable
+    from cbp.collision.geometry import ShapePlacements
 
     world, q = _shelf_octree_world()
     world.check(q)
     env = world.environment
-    placements = list(world._geometry_data.oMg)  # at q, from the check
+    placements = ShapePlacements(list(world._geometry_data.oMg))  # at q
     shapes = world.geometry.shapes
     margin = world.margin(env)
     centres, halves = world._bounds(placements)

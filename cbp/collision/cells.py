@@ -34,7 +34,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from cbp.collision.broad import compile_broad_phase
-from cbp.collision.geometry import LinkShape
+from cbp.collision.geometry import LinkShape, ShapePlacements
 from cbp.robot import FloatArray, IntArray
 
 __all__ = [
@@ -268,7 +268,11 @@ class ShapeTable:
                 f"margin {margin} + half a cell {half} exceeds the table's reach "
                 f"{self.reach}"
             )
-        frames = np.array([M.homogeneous for M in placements]).reshape(-1, 4, 4)
+        frames = (
+            placements.homogeneous
+            if isinstance(placements, ShapePlacements)
+            else np.array([M.homogeneous for M in placements]).reshape(-1, 4, 4)
+        )
         capacity = int(self.groups.sum())
         shape = np.empty(capacity, dtype=np.intp)
         centre = np.empty((capacity, 3))

@@ -147,7 +147,9 @@ class Environment(abc.ABC):
 
         Args:
             shapes: the robot's shapes.
-            placements: their world placements.
+            placements: their world placements; from a collision world, a
+                :class:`~cbp.collision.geometry.ShapePlacements` that also holds
+                them stacked as homogeneous matrices.
             centres: their bounding-sphere centres in the world, (n, 3).
             radii: their bounding-sphere radii, (n,).
             margin: report obstacles whose distance to a shape is below this [m].

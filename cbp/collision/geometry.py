@@ -29,7 +29,29 @@ from cbp.errors import ConfigError, suggestion
 from cbp.robot import Approximation, FloatArray, RobotModel
 from cbp.state import RobotState
 
-__all__ = ["LinkShape", "RobotGeometry", "find_ignorable_pairs", "fit_capsule"]
+__all__ = [
+    "LinkShape",
+    "RobotGeometry",
+    "ShapePlacements",
+    "find_ignorable_pairs",
+    "fit_capsule",
+]
+
+
+class ShapePlacements(list[pin.SE3]):
+    """The robot shapes' world placements, in shape order, also stacked.
+
+    A list of pinocchio SE3 (what coal's distance calls take) that keeps their
+    homogeneous matrices in one array, ``homogeneous`` (n, 4, 4), made once per
+    query for the compiled loops that read them all.
+    """
+
+    def __init__(self, placements: list[pin.SE3]) -> None:
+        """Keep the placements and stack their matrices."""
+        super().__init__(placements)
+        self.homogeneous: FloatArray = np.array(
+            [M.homogeneous for M in placements]
+        ).reshape(-1, 4, 4)
 
 
 @dataclass(frozen=True)
