@@ -18,6 +18,7 @@ from cbp.collision import (
     RobotGeometry,
 )
 from cbp.collision.environment import signed_distance
+from cbp.collision.geometry import ShapePlacements
 from cbp.sim.scene import PybulletScene
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
@@ -261,7 +262,7 @@ def test_box_broad_phase_loses_no_contact(geometry, robots, rng) -> None:
         pin.updateGeometryPlacements(
             robot.model, state.data, world._geometry_model, world._geometry_data
         )
-        placements = list(world._geometry_data.oMg)
+        placements = ShapePlacements(list(world._geometry_data.oMg))
         centres, halves = world._bounds(placements)
         args = (geometry.shapes, placements, centres, geometry.radii, margin, 99)
         spheres, boxes = env.query(*args), env.query(*args, halves)
