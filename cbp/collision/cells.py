@@ -142,7 +142,10 @@ class ShapeTable:
         grid_dims: the face grid's points per axis.
         grid_start: each shape's first entry in ``faces``.
         faces: the index (within its hull) of the largest face at each grid point.
-        values: that face's excess at the grid point [m].
+        values: that face's excess at the grid point in whole ``VALUE_UNIT``
+            (1 mm), rounded down and clipped to [0, 255]: a lower bound that
+            rejects the cells far outside a hull with one byte read (the grids
+            of an arm's hulls then fit a core's cache).
         groups: contact groups per shape (faces, or 26 directions for capsules).
         reach: the distance the boxes are grown by [m]: a query's margin plus
             half a cell.
@@ -160,7 +163,7 @@ class ShapeTable:
     grid_dims: npt.NDArray[np.int64]
     grid_start: npt.NDArray[np.int64]
     faces: npt.NDArray[np.int16]
-    values: npt.NDArray[np.float32]
+    values: npt.NDArray[np.uint8]
     groups: npt.NDArray[np.int64]
     reach: float
     step: float
@@ -204,7 +207,7 @@ class ShapeTable:
                 capsule[s] = r, h
                 lower[s], upper[s] = (-r, -r, -h - r), (r, r, h + r)
                 groups[s] = len(DIRECTIONS)
-                grid, value = np.zeros(1, dtype=np.int16), np.zeros(1, np.float32)
+                grid, value = np.zeros(1, dtype=np.int16), np.zeros(1, np.uint8)
             else:
                 if len(shape.planes) > np.iinfo(np.int16).max:
                     raise ValueError(
@@ -217,7 +220,8 @@ class ShapeTable:
                 groups[s] = len(shape.planes)
                 grid_origin[s] = lower[s] - reach - step
                 grid_dims[s] = np.ceil((upper[s] - lower[s] + 2 * reach) / step) + 3
-                grid, value = _largest_faces(shape, grid_origin[s], grid_dims[s], step)
+                grid, excess = _largest_faces(shape, grid_origin[s], grid_dims[s], step)
+                value = np.clip(np.floor(excess / VALUE_UNIT), 0, 255).astype(np.uint8)
             lower[s] -= reach
             upper[s] += reach
             plane_start.append(plane_start[-1] + (groups[s] if kind[s] == _HULL else 0))
@@ -339,6 +343,9 @@ class ShapeTable:
         return depth, face
 
 
+#: The unit of the face grids' values [m].
+VALUE_UNIT = 1e-3
+
 #: Tables by shapes and reach, oldest first, with the shapes they were built for.
 _TABLES: dict[tuple[tuple[int, ...], float], tuple[list[LinkShape], ShapeTable]] = {}
 _TABLE_CACHE = 8
@@ -439,7 +446,7 @@ def _hull_excess(
     z: float,
     planes: FloatArray,
     faces: npt.NDArray[np.int16],
-    values: npt.NDArray[np.float32],
+    values: npt.NDArray[np.uint8],
     gx: float,
     gy: float,
     gz: float,
@@ -456,22 +463,22 @@ def _hull_excess(
     first index of a grid cell per axis. The excess is the largest over the faces
     stored at the eight grid points around the point; it is ``inf`` (face -1)
     when the nearest grid point's value shows the excess is at least ``cutoff``
-    less the distance to that point (the excess changes by at most the distance
-    moved).
+    (both in ``VALUE_UNIT``) less the distance to that point (the excess changes
+    by at most the distance moved).
     """
     fx = (x - gx) * inv_step
     fy = (y - gy) * inv_step
     fz = (z - gz) * inv_step
+    # The nearest grid point first: most cells stop there.
+    near = (
+        min(max(int(fx + 0.5), 0), last[0] + 1) * ny
+        + min(max(int(fy + 0.5), 0), last[1] + 1)
+    ) * nz + min(max(int(fz + 0.5), 0), last[2] + 1)
+    if values[near] >= cutoff:  # in VALUE_UNIT
+        return np.inf, -1
     ix = min(max(int(fx), 0), last[0])
     iy = min(max(int(fy), 0), last[1])
     iz = min(max(int(fz), 0), last[2])
-    near = (
-        ((ix + int(fx - ix + 0.5)) * ny + iy + int(fy - iy + 0.5)) * nz
-        + iz
-        + int(fz - iz + 0.5)
-    )
-    if values[near] >= cutoff:
-        return np.inf, -1
     depth = -np.inf
     face = 0
     for cx in range(2):
@@ -496,7 +503,7 @@ def _hull_excesses(
     points: FloatArray,
     planes: FloatArray,
     faces: npt.NDArray[np.int16],
-    values: npt.NDArray[np.float32],
+    values: npt.NDArray[np.uint8],
     origin: FloatArray,
     dims: npt.NDArray[np.int64],
     inv_step: float,
@@ -543,7 +550,7 @@ def _candidates(
     grid_dims: npt.NDArray[np.int64],
     grid_start: npt.NDArray[np.int64],
     faces: npt.NDArray[np.int16],
-    values: npt.NDArray[np.float32],
+    values: npt.NDArray[np.uint8],
     step: float,
     directions: FloatArray,
     margin: float,
@@ -608,7 +615,9 @@ def _candidates(
         gx, gy, gz = grid_origin[s, 0], grid_origin[s, 1], grid_origin[s, 2]
         ny, nz = grid_dims[s, 1], grid_dims[s, 2]
         last = (grid_dims[s, 0] - 2, ny - 2, nz - 2)  # a grid cell's first point
-        cutoff = slack + half + margin
+        # A cell is rejected when its grid point's value (a lower bound, in
+        # VALUE_UNIT) shows it further than the margin even after the slack.
+        cutoff = (slack + half + margin) / VALUE_UNIT
         n_touched = 0
         for bx in range(bx0, bx1 + 1):
             for by in range(by0, by1 + 1):

@@ -99,6 +99,27 @@ def test_face_grid_gives_the_largest_excess_within_a_bound(geometry) -> None:
     assert error.max() < 1e-3  # and within 1 mm near ridges
 
 
+def test_grid_values_bound_the_excess_from_below(geometry) -> None:
+    """The quick reject's values: the excess at each grid point, rounded down."""
+    from cbp.collision.cells import VALUE_UNIT
+
+    table = ShapeTable.build(geometry.shapes, 0.065)
+    for s, shape in enumerate(geometry.shapes):
+        if table.kind[s] != 0:
+            continue
+        dims = table.grid_dims[s]
+        axes = [
+            table.grid_origin[s, k] + table.step * np.arange(dims[k]) for k in range(3)
+        ]
+        points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        excess = (points.dot(shape.planes[:, :3].T) - shape.planes[:, 3]).max(axis=1)
+        grid = slice(table.grid_start[s], table.grid_start[s + 1])
+        bound = table.values[grid] * VALUE_UNIT
+        assert np.all(bound <= np.maximum(excess, 0.0) + 1e-6), shape.name
+        tight = (excess > 0) & (excess < 0.25)
+        assert np.all(bound[tight] > excess[tight] - VALUE_UNIT - 1e-6), shape.name
+
+
 def test_candidates_match_brute_force_on_the_panda(geometry, robots) -> None:
     """Per shape and face (or direction), the closest cell within the margin."""
     robot = robots["panda"]
