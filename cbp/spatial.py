@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
@@ -107,3 +108,100 @@ def cross3(a: FloatArray, b: FloatArray) -> FloatArray:
     a0, a1, a2 = a.tolist()
     b0, b1, b2 = b.tolist()
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
+@numba.njit(cache=True, nogil=True)
+def log3(M: FloatArray) -> tuple[float, float, float, float]:
+    r"""The rotation vector w of a rotation matrix, with its angle: (angle, wx, wy, wz).
+
+    :math:`\exp([w]_\times) = M`, angle in [0, π]. Near π the axis comes from
+    the symmetric part of M (the antisymmetric part vanishes there); at π
+    exactly, either of the two opposite vectors may be returned.
+    """
+    c = min(max(0.5 * (M[0, 0] + M[1, 1] + M[2, 2] - 1.0), -1.0), 1.0)
+    # The antisymmetric part: 2 sin(angle) times the axis.
+    ax, ay, az = M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]
+    s = 0.5 * math.sqrt(ax * ax + ay * ay + az * az)
+    angle = math.atan2(s, c)  # accurate at every angle, unlike acos(c) near π
+    if angle < 1e-4:  # angle / (2 sin angle), to second order
+        t = 0.5 * (1.0 + angle * angle / 6.0)
+        return angle, t * ax, t * ay, t * az
+    if angle < math.pi - 1e-3:
+        t = 0.5 * angle / s
+        return angle, t * ax, t * ay, t * az
+    # M + M^T = 2 c I + 2 (1 - c) a a^T: the largest a_k from the diagonal (its
+    # sign from the antisymmetric part), the others from row k.
+    scale = 1.0 / (1.0 - c)
+    d = ((M[0, 0] - c) * scale, (M[1, 1] - c) * scale, (M[2, 2] - c) * scale)
+    k = 0 if d[0] >= d[1] and d[0] >= d[2] else (1 if d[1] >= d[2] else 2)
+    anti = (ax, ay, az)
+    a_k = math.sqrt(max(d[k], 0.0))
+    if anti[k] < 0.0:
+        a_k = -a_k
+    a = [0.0, 0.0, 0.0]
+    for j in range(3):
+        a[j] = a_k if j == k else 0.5 * (M[k, j] + M[j, k]) * scale / a_k
+    return angle, angle * a[0], angle * a[1], angle * a[2]
+
+
+@numba.njit(cache=True, nogil=True)
+def pose_error_into(
+    rotation: FloatArray,
+    translation: FloatArray,
+    goal_rotation_t: FloatArray,
+    goal_translation: FloatArray,
+    frame_jacobian: FloatArray,
+    value: FloatArray,
+    jacobian: FloatArray,
+) -> None:
+    r"""A frame's pose error to a goal, and its Jacobian, written in place.
+
+    With :math:`M = R R_g^T`: ``value`` (6,) is :math:`[p - p_g; \log_3 M]`,
+    ``jacobian`` (6, nv) is the frame's world-aligned Jacobian (linear rows
+    first) with the angular rows mapped through :math:`J_{\log_3}(M) M^T`,
+    :math:`J_{\log_3} = I + \frac12 [w]_\times + \alpha [w]_\times^2`,
+    :math:`\alpha = 1/\theta^2 - \cot(\theta/2) / (2\theta)` (to second order
+    near 0). Singular at θ = π.
+    """
+    M = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = (
+                rotation[i, 0] * goal_rotation_t[0, j]
+                + rotation[i, 1] * goal_rotation_t[1, j]
+                + rotation[i, 2] * goal_rotation_t[2, j]
+            )
+    for i in range(3):
+        value[i] = translation[i] - goal_translation[i]
+    angle, wx, wy, wz = log3(M)
+    value[3], value[4], value[5] = wx, wy, wz
+    if angle < 1e-4:
+        alpha = 1.0 / 12.0 + angle * angle / 720.0
+    else:
+        alpha = 1.0 / (angle * angle) - 0.5 / (angle * math.tan(0.5 * angle))
+    # J_log3 with [w]x^2 = w w^T - |w|^2 I, then A = J_log3 M^T.
+    W = np.array(((0.0, -wz, wy), (wz, 0.0, -wx), (-wy, wx, 0.0)))
+    w2 = wx * wx + wy * wy + wz * wz
+    w = (wx, wy, wz)
+    J_log = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            J_log[i, j] = 0.5 * W[i, j] + alpha * w[i] * w[j]
+        J_log[i, i] += 1.0 - alpha * w2
+    A = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            A[i, j] = (
+                J_log[i, 0] * M[j, 0] + J_log[i, 1] * M[j, 1] + J_log[i, 2] * M[j, 2]
+            )
+    nv = frame_jacobian.shape[1]
+    for c in range(nv):
+        jacobian[0, c] = frame_jacobian[0, c]
+        jacobian[1, c] = frame_jacobian[1, c]
+        jacobian[2, c] = frame_jacobian[2, c]
+        for i in range(3):
+            jacobian[3 + i, c] = (
+                A[i, 0] * frame_jacobian[3, c]
+                + A[i, 1] * frame_jacobian[4, c]
+                + A[i, 2] * frame_jacobian[5, c]
+            )

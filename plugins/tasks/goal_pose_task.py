@@ -14,7 +14,7 @@ import pinocchio as pin
 from cbp.errors import ConfigError, TargetNotSetError, located
 from cbp.plugin import FloatArray, Linearization, PluginParams, Task
 from cbp.robot import RobotModel
-from cbp.spatial import Pose, checked_pose
+from cbp.spatial import Pose, checked_pose, pose_error_into
 from cbp.state import RobotState
 
 
@@ -75,6 +75,19 @@ class GoalPoseTask(Task[GoalPoseParams]):
         self.frame_id = located(robot.frame_id, params.frame, "frame")
         self._target: pin.SE3 | None = None
         self._has_target = False
+        # Compile the pose error (or load it from numba's cache) now, on arrays
+        # of the kinds a step passes, rather than in the first control step.
+        state = RobotState(robot)
+        placement = state.frame_placement(self.frame_id)
+        pose_error_into(
+            placement.rotation,
+            placement.translation,
+            np.eye(3),
+            np.zeros(3),
+            state.frame_jacobian(self.frame_id),
+            np.empty(6),
+            np.empty((6, robot.nv)),
+        )
         if params.target is not None:
             target = params.target.to_se3()
             self._set(np.array(target.translation), np.array(target.rotation))
@@ -96,7 +109,7 @@ class GoalPoseTask(Task[GoalPoseParams]):
         # As numpy arrays, not read through pinocchio every step; the SE3 of
         # ``target`` is made when asked for.
         self._goal_translation = position
-        self._goal_rotation_t = rotation.T
+        self._goal_rotation_t = np.ascontiguousarray(rotation.T)  # one array kind
         self._target = None
         self._has_target = True
 
@@ -132,12 +145,15 @@ class GoalPoseTask(Task[GoalPoseParams]):
         if not self._has_target:
             raise TargetNotSetError(f"{self.name} ({self.type_name}): no target set")
         placement = state.frame_placement(self.frame_id)
-        M = placement.rotation.dot(self._goal_rotation_t)
-        np.subtract(placement.translation, self._goal_translation, out=value[:3])
-        value[3:] = pin.log3(M)
-        J_frame = state.frame_jacobian(self.frame_id)
-        jacobian[:3] = J_frame[:3]
-        np.dot(pin.Jlog3(M).dot(M.T), J_frame[3:], out=jacobian[3:])
+        pose_error_into(
+            placement.rotation,
+            placement.translation,
+            self._goal_rotation_t,
+            self._goal_translation,
+            state.frame_jacobian(self.frame_id),
+            value,
+            jacobian,
+        )
 
     def limit_step(self, desired: FloatArray) -> FloatArray:
         """Bound the translation and rotation asked for in one step."""

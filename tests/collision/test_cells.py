@@ -366,6 +366,8 @@ for i in range(10):
     step(i)
 assert len(world.check(shelf.q0).contacts) > 0
 assert len(_fill_qp.signatures) == 1, _fill_qp.signatures
+from cbp.spatial import pose_error_into
+assert len(pose_error_into.signatures) == 1, pose_error_into.signatures
 assert len(contact_jacobian_rows.signatures) == 1, contact_jacobian_rows.signatures
 """
     run = subprocess.run(

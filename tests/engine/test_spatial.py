@@ -41,3 +41,69 @@ def test_cross3_is_the_cross_product(rng) -> None:
     for _ in range(20):
         a, b = rng.normal(size=3), rng.normal(size=3)
         np.testing.assert_allclose(cross3(a, b), np.cross(a, b), atol=1e-15)
+
+
+def _rotations(rng, n):
+    """Random rotations, and rotations by angles near 0 and near and at π."""
+    for k in range(n):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = [
+            rng.uniform(0.0, np.pi),
+            rng.uniform(0.0, 1e-3),
+            np.pi - rng.uniform(0.0, 2e-3),
+            np.pi,
+            0.0,
+        ][k % 5]
+        yield angle, pin.exp3(angle * axis)
+
+
+def test_log3_inverts_the_exponential(rng) -> None:
+    """log3 agrees with pinocchio's, and exp3 of it is the rotation, even near π."""
+    from cbp.spatial import log3
+
+    for angle, M in _rotations(rng, 2000):
+        got_angle, *w = log3(M)
+        w = np.array(w)
+        assert got_angle == pytest.approx(angle, abs=1e-9)
+        np.testing.assert_allclose(pin.exp3(w), M, atol=1e-12)
+        if angle < np.pi - 1e-6:  # at π, w and -w are the same rotation
+            np.testing.assert_allclose(w, pin.log3(M), atol=1e-10)
+
+
+def test_pose_error_matches_pinocchio(robots, rng) -> None:
+    """The compiled pose error: [p - p_g; log3(R R_g^T)], Jlog3 M^T on angular rows."""
+    from cbp.spatial import pose_error_into
+    from cbp.state import RobotState
+    from cbp.testing import sample_configurations
+
+    robot = robots["panda"]
+    frame = robot.frame_id("panda_hand")
+    goals = list(_rotations(rng, 50))
+    for k, q in enumerate(sample_configurations(robot, rng, n=50)):
+        state = RobotState(robot, q)
+        placement = state.frame_placement(frame)
+        # Goals whose rotation error is random, tiny or near π.
+        R_goal = goals[k][1].T.dot(placement.rotation)
+        p_goal = rng.uniform(-1.0, 1.0, 3)
+        value, jacobian = np.empty(6), np.empty((6, robot.nv))
+        J_frame = state.frame_jacobian(frame)
+        pose_error_into(
+            placement.rotation,
+            placement.translation,
+            np.array(R_goal).T,
+            p_goal,
+            J_frame,
+            value,
+            jacobian,
+        )
+        M = placement.rotation.dot(R_goal.T)
+        np.testing.assert_allclose(
+            value[:3], placement.translation - p_goal, atol=1e-15
+        )
+        if goals[k][0] < np.pi - 1e-6:
+            np.testing.assert_allclose(value[3:], pin.log3(M), atol=1e-10)
+            if goals[k][0] < np.pi - 1e-2:  # Jlog3 grows without bound toward π
+                expected = pin.Jlog3(M).dot(M.T).dot(J_frame[3:])
+                np.testing.assert_allclose(jacobian[3:], expected, atol=1e-9)
+        np.testing.assert_array_equal(jacobian[:3], J_frame[:3])
