@@ -194,6 +194,14 @@ class QPAssembler:
         self._constant = _Block(constant, nv)
         self._constant_JtW = np.zeros((nv, self._constant.m))  # set at the first step
         self._folded = False
+        # The constant tasks' step -k f is formed by the compiled pass, unless a
+        # task limits it (then in Python, by desired_change).
+        folded = self._constant
+        self._constant_step = (
+            (folded.desired, np.ones(folded.m))
+            if folded.limiting
+            else (folded.f, folded.negative_gains)
+        )
         block = _Block([(i, e) for i, e in indexed if not _is_soft_task(e)], nv)
         self._rows = block
         soft_rows = np.concatenate(
@@ -246,7 +254,8 @@ class QPAssembler:
             if not self._folded:
                 self._fold_constant(state)
             constant.fill(state)
-            constant.desired_change()
+            if constant.limiting:
+                constant.desired_change()
         if soft.m:
             soft.fill(state)
             soft.desired_change()
@@ -262,7 +271,8 @@ class QPAssembler:
 
     def _fill(self) -> int:
         """Run :func:`_fill_qp` on the blocks' current outputs; return its status."""
-        soft, constant, block = self._soft, self._constant, self._rows
+        soft, block = self._soft, self._rows
+        constant_step, constant_scale = self._constant_step
         return int(
             _fill_qp(
                 self.nv,
@@ -273,7 +283,8 @@ class QPAssembler:
                 soft.weights,
                 soft.desired,
                 self._constant_JtW,
-                constant.desired,
+                constant_step,
+                constant_scale,
                 block.J,
                 block.f,
                 block.lower,
@@ -356,7 +367,7 @@ class _Block:
             [np.full(d, e.gain) for e, d in zip(self.entries, dims, strict=True)]
             or [np.zeros(0)]
         )
-        self._negative_gains = -self.gains
+        self.negative_gains = -self.gains
         self.desired = np.zeros(self.m)
         self.limiting: list[tuple[slice, Task[Any]]] = [
             (sl, p)
@@ -403,7 +414,7 @@ class _Block:
     def desired_change(self) -> None:
         """Write -k f of every row, after the tasks' step limits, into ``desired``."""
         desired = self.desired
-        np.multiply(self.f, self._negative_gains, out=desired)
+        np.multiply(self.f, self.negative_gains, out=desired)
         for sl, task in self.limiting:
             desired[sl] = task.limit_step(desired[sl])
 
@@ -448,7 +459,8 @@ def _fill_qp(
     soft_weights: FloatArray,
     soft_desired: FloatArray,
     constant_JtW: FloatArray,
-    constant_desired: FloatArray,
+    constant_step: FloatArray,
+    constant_scale: FloatArray,
     J: FloatArray,
     f: FloatArray,
     given_lower: FloatArray,
@@ -467,7 +479,9 @@ def _fill_qp(
     Cost, over the joint block: :math:`H = H_0 + J_s^T W J_s` and
     :math:`g = -(J_s^T W d_s + (J_c^T W_c) d_c)`, with :math:`d = -k f` after the
     tasks' step limits (soft tasks s, constant-Jacobian soft tasks c, whose
-    :math:`J_c^T W_c J_c` is already in :math:`H_0`).
+    :math:`J_c^T W_c J_c` is already in :math:`H_0`); :math:`d_c` is
+    ``constant_step * constant_scale``: f and -k, or (when a task there limits
+    its step) the limited step and ones.
 
     Rows: A = J; a constraint row's bounds are :math:`k (l - f)` and
     :math:`k (u - f)`, except that an infinite bound stays infinite when k = 0;
@@ -494,8 +508,8 @@ def _fill_qp(
             g[a] -= wa * d
             for b in range(nv):
                 H[a, b] += wa * soft_J[i, b]
-    for i in range(constant_desired.size):
-        d = constant_desired[i]
+    for i in range(constant_step.size):
+        d = constant_step[i] * constant_scale[i]
         if not math.isfinite(d):
             status |= _COST_NOT_FINITE
         for a in range(nv):

@@ -62,6 +62,8 @@ class JointVelocityConstraint(Constraint[JointVelocityParams]):
         self.rows = compact_rows(finite)
         self._velocity = params.scale * velocity[finite]
         self._reach = np.zeros(finite.size)
+        self._negative_reach = np.zeros(finite.size)
+        self._dt = 0.0
         self._q0: FloatArray | None = None
 
     @property
@@ -72,7 +74,10 @@ class JointVelocityConstraint(Constraint[JointVelocityParams]):
     def prepare(self, state: RobotState, dt: float) -> None:
         """Latch the start configuration and the step duration [s]."""
         self._q0 = state.q
-        self._reach = self._velocity * dt
+        if dt != self._dt:  # the same every step, usually
+            self._reach = self._velocity * dt
+            self._negative_reach = -self._reach
+            self._dt = dt
 
     def _anchor(self) -> FloatArray:
         if self._q0 is None:
@@ -95,7 +100,7 @@ class JointVelocityConstraint(Constraint[JointVelocityParams]):
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """±(scaled velocity limit) x (step duration)."""
-        return -self._reach, self._reach
+        return self._negative_reach, self._reach
 
     def __repr__(self) -> str:
         """Type, name and scale."""

@@ -260,6 +260,11 @@ def _reference_problem(entries, state, nv, regularization):
     )
 
 
+class _ClippedPosture(PostureTask):
+    def limit_step(self, desired):  # type: ignore[no-untyped-def]
+        return np.clip(desired, -0.01, 0.01)
+
+
 def _is_task(entry):
     from cbp.plugin import Task
 
@@ -275,9 +280,12 @@ def test_assembled_problem_matches_its_definition(robots, rng) -> None:
         entries[3] = Entry.make(entries[3].plugin, gain=0.5)
         hard = PostureTask(PostureParams(target={"panda_joint2": 0.3}), robot, "hard")
         open_limits = JointLimitsConstraint(JointLimitsParams(), robot, "open")
+        clipped = _ClippedPosture(PostureParams(), robot, "clipped")
+        assert clipped.constant_jacobian  # a limited step among the folded tasks
         entries += [
             Entry.make(hard, priority="hard", gain=0.2),
             Entry.make(open_limits, gain=0.0),
+            Entry.make(clipped, weight=0.1, gain=0.5),
         ]
         # Not solved: the zero-gain limits pin every joint against the hard task.
         engine = Engine(robot, entries, regularization=1e-7)
