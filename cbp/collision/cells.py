@@ -23,6 +23,7 @@ numpy can only batch at the cost of many temporary arrays); they release the GIL
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from dataclasses import dataclass
@@ -168,6 +169,11 @@ class ShapeTable:
     reach: float
     step: float
 
+    @functools.cached_property
+    def capacity(self) -> int:
+        """The most candidates a query can return: one per shape and group."""
+        return int(self.groups.sum())
+
     @classmethod
     def for_shapes(cls, shapes: list[LinkShape], reach: float) -> ShapeTable:
         """The table of ``shapes`` for ``reach``, built once and kept.
@@ -277,7 +283,7 @@ class ShapeTable:
             if isinstance(placements, ShapePlacements)
             else np.array([M.homogeneous for M in placements]).reshape(-1, 4, 4)
         )
-        capacity = int(self.groups.sum())
+        capacity = self.capacity
         shape = np.empty(capacity, dtype=np.intp)
         centre = np.empty((capacity, 3))
         outward = np.empty((capacity, 3))

@@ -471,6 +471,7 @@ class OccupancyEnvironment(Environment):
             coal.makeOctree(self.centres, self.cell) if len(self.centres) else None
         )
         self._identity = pin.SE3.Identity()
+        self._last_table: tuple[object, float, ShapeTable | None] = (None, 0.0, None)
 
     def __len__(self) -> int:
         """Number of occupied cells."""
@@ -510,7 +511,12 @@ class OccupancyEnvironment(Environment):
         if not len(self.centres):
             return Hits()
         half = 0.5 * self.cell
-        table = ShapeTable.for_shapes(shapes, margin + half)
+        # The table of the last query's shapes, kept as one tuple (one atomic
+        # read, whatever thread queries), else the shared cache's.
+        last_shapes, last_margin, table = self._last_table
+        if table is None or shapes is not last_shapes or margin != last_margin:
+            table = ShapeTable.for_shapes(shapes, margin + half)
+            self._last_table = (shapes, margin, table)
         shape, centre, outward, distance = table.candidates(
             self.index, placements, margin
         )
