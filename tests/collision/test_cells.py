@@ -37,6 +37,16 @@ def _shell(centre: np.ndarray, half: float, cell: float = CELL) -> np.ndarray:
     return centre - half + (surface + 0.5) * cell
 
 
+def _two_boxes() -> np.ndarray:
+    """The surface cells of two boxes in the Panda's workspace."""
+    return np.concatenate(
+        [
+            _shell(np.array([0.45, 0.0, 0.35]), 0.12),
+            _shell(np.array([0.3, 0.25, 0.6]), 0.08),
+        ]
+    )
+
+
 def _brute_force(
     shapes: list[LinkShape],
     placements: list[pin.SE3],
@@ -125,12 +135,7 @@ def test_candidates_match_brute_force_on_the_panda(geometry, robots) -> None:
     robot = robots["panda"]
     shapes = geometry.shapes
     margin, half = 0.06, 0.5 * CELL
-    cells = np.concatenate(
-        [
-            _shell(np.array([0.45, 0.0, 0.35]), 0.12),
-            _shell(np.array([0.3, 0.25, 0.6]), 0.08),
-        ]
-    )
+    cells = _two_boxes()
     index = CellIndex(cells, CELL)
     table = ShapeTable.build(shapes, margin + half)
     model = geometry.geometry_model()
@@ -226,12 +231,7 @@ def test_cell_hits_reduce_as_the_general_contact_reduction(geometry, robots) -> 
 
     robot = robots["panda"]
     margin, half = 0.06, 0.5 * CELL
-    cells = np.concatenate(
-        [
-            _shell(np.array([0.45, 0.0, 0.35]), 0.12),
-            _shell(np.array([0.3, 0.25, 0.6]), 0.08),
-        ]
-    )
+    cells = _two_boxes()
     index = CellIndex(cells, CELL)
     table = ShapeTable.build(geometry.shapes, margin + half)
     model = geometry.geometry_model()
