@@ -47,6 +47,21 @@ def _two_boxes() -> np.ndarray:
     )
 
 
+def _candidates_at_random_poses(
+    geometry: RobotGeometry, robot, cells: np.ndarray, margin: float, seed: int
+):
+    """(placements, ShapeTable.candidates) of the Panda at 12 random poses."""
+    index = CellIndex(cells, CELL)
+    table = ShapeTable.build(geometry.shapes, margin + 0.5 * CELL)
+    model = geometry.geometry_model()
+    data = pin.GeometryData(model)
+    for q in sample_configurations(robot, np.random.default_rng(seed), 12):
+        state = RobotState(robot, q)
+        pin.updateGeometryPlacements(robot.model, state.data, model, data)
+        placements = list(data.oMg)
+        yield placements, table.candidates(index, placements, margin)
+
+
 def _brute_force(
     shapes: list[LinkShape],
     placements: list[pin.SE3],
@@ -132,20 +147,14 @@ def test_grid_values_bound_the_excess_from_below(geometry) -> None:
 
 def test_candidates_match_brute_force_on_the_panda(geometry, robots) -> None:
     """Per shape and face (or direction), the closest cell within the margin."""
-    robot = robots["panda"]
     shapes = geometry.shapes
     margin, half = 0.06, 0.5 * CELL
     cells = _two_boxes()
-    index = CellIndex(cells, CELL)
-    table = ShapeTable.build(shapes, margin + half)
-    model = geometry.geometry_model()
-    data = pin.GeometryData(model)
     found_any = 0
-    for q in sample_configurations(robot, np.random.default_rng(5), 12):
-        state = RobotState(robot, q)
-        pin.updateGeometryPlacements(robot.model, state.data, model, data)
-        placements = list(data.oMg)
-        shape, centre, outward, distance = table.candidates(index, placements, margin)
+    for placements, found in _candidates_at_random_poses(
+        geometry, robots["panda"], cells, margin, seed=5
+    ):
+        shape, centre, outward, distance = found
         expected = _brute_force(shapes, placements, cells, margin, half)
         got = {}
         on_map = {tuple(c) for c in np.round(cells, 9)}
@@ -229,20 +238,12 @@ def test_cell_hits_reduce_as_the_general_contact_reduction(geometry, robots) -> 
     """The compiled reduction of cell candidates keeps what _keep_closest keeps."""
     from cbp.collision.environment import Hits, _keep_closest
 
-    robot = robots["panda"]
     margin, half = 0.06, 0.5 * CELL
-    cells = _two_boxes()
-    index = CellIndex(cells, CELL)
-    table = ShapeTable.build(geometry.shapes, margin + half)
-    model = geometry.geometry_model()
-    data = pin.GeometryData(model)
     compared = 0
-    for q in sample_configurations(robot, np.random.default_rng(9), 12):
-        state = RobotState(robot, q)
-        pin.updateGeometryPlacements(robot.model, state.data, model, data)
-        shape, centre, outward, distance = table.candidates(
-            index, list(data.oMg), margin
-        )
+    for _, found in _candidates_at_random_poses(
+        geometry, robots["panda"], _two_boxes(), margin, seed=9
+    ):
+        shape, centre, outward, distance = found
         for per_shape, angle, spacing in ((3, 25.0, 2 * CELL), (1, 0.0, 0.0)):
             expected = _keep_closest(
                 Hits(
