@@ -68,13 +68,33 @@ def near_objects(
     """The (shape, object) pairs whose bounds are within ``margin``.
 
     Objects are world-aligned boxes (``lower``, ``upper``); only those listed in
-    ``candidates`` are tested. Writes the pairs, shape-major, to the outputs and
-    returns their number.
+    ``candidates`` are tested, and first against the box around all the shapes'
+    spheres, so that objects far from the robot cost one test each. Writes the
+    pairs, shape-major, to the outputs and returns their number.
     """
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for s in range(len(centres)):
+        for a in range(3):
+            lo[a] = min(lo[a], centres[s, a] - radii[s] - margin)
+            hi[a] = max(hi[a], centres[s, a] + radii[s] + margin)
+    near = np.empty(len(candidates), dtype=np.int64)
+    count = 0
+    for k in candidates:
+        if (
+            (lower[k, 0] <= hi[0])
+            & (upper[k, 0] >= lo[0])
+            & (lower[k, 1] <= hi[1])
+            & (upper[k, 1] >= lo[1])
+            & (lower[k, 2] <= hi[2])
+            & (upper[k, 2] >= lo[2])
+        ):
+            near[count] = k
+            count += 1
     n = 0
     m2 = margin * margin
     for s in range(len(centres)):
-        for k in candidates:
+        for k in near[:count]:
             sphere = 0.0
             box = 0.0
             for a in range(3):

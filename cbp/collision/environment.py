@@ -260,9 +260,11 @@ class EnvironmentObject:
         return cls.make(name, model, placement)
 
 
-TREE_MIN_OBJECTS = 32
-"""Above this many declared objects, a k-d tree picks those near the robot first
-(below it, testing them all costs less than the tree query)."""
+TREE_MIN_OBJECTS = 32768
+"""Above this many declared objects, a k-d tree picks those near the robot first.
+Below it the compiled broad phase tests each object against the box around the
+robot, which costs less (4,000 far objects add 4 us to a query; the tree query
+alone takes 14 us)."""
 
 
 class PrimitiveEnvironment(Environment):

@@ -137,10 +137,17 @@ def test_self_collision_found_when_folded_not_at_home(geometry, robots) -> None:
         assert min(p[8] for p in points) < -0.01
 
 
-def test_far_objects_change_nothing(geometry, robots, rng) -> None:
-    """With many objects (k-d tree broad phase), contacts are those of the near ones."""
-    from cbp.collision.environment import TREE_MIN_OBJECTS
+@pytest.mark.parametrize("tree", [False, True], ids=["compiled", "k-d tree"])
+def test_far_objects_change_nothing(geometry, robots, rng, monkeypatch, tree) -> None:
+    """With many objects far away, contacts are those of the near ones.
 
+    Both broad phases: the compiled one, and the k-d tree that takes over above
+    ``TREE_MIN_OBJECTS`` (lowered here so that a hundred objects use it).
+    """
+    from cbp.collision import environment
+
+    if tree:
+        monkeypatch.setattr(environment, "TREE_MIN_OBJECTS", 16)
     robot = robots["panda"]
     near = [
         EnvironmentObject.primitive(
@@ -160,7 +167,7 @@ def test_far_objects_change_nothing(geometry, robots, rng) -> None:
             (0.2, 0.2, 0.2),
             pin.SE3(np.eye(3), np.array([4.0 + 0.5 * (k % 10), 0.5 * (k // 10), 0.1])),
         )
-        for k in range(2 * TREE_MIN_OBJECTS)
+        for k in range(100)
     ]
     settings = CollisionSettings(activation_distance=0.1)
     few = CollisionWorld(geometry, PrimitiveEnvironment(near), settings)
@@ -287,3 +294,58 @@ def test_box_broad_phase_loses_no_contact(geometry, robots, rng) -> None:
         found += len(boxes)
     assert found > 30
     assert dropped > 10
+
+
+def test_broad_phase_keeps_every_pair_within_the_margin(geometry, robots, rng) -> None:
+    """No (shape, object) pair that coal puts within the margin is culled.
+
+    Boxes of random sizes and orientations, near the robot and scattered around.
+    """
+    robot = robots["panda"]
+    objects = [
+        EnvironmentObject.primitive(
+            f"box_{k}",
+            "box",
+            tuple(rng.uniform(0.02, 0.3, 3)),
+            pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3)), centre),
+        )
+        for k, centre in enumerate(
+            rng.uniform([-1.0, -1.0, -0.2], [1.0, 1.0, 1.3], (40, 3))
+        )
+    ]
+    env = PrimitiveEnvironment(objects)
+    world = CollisionWorld(geometry, env, CollisionSettings(activation_distance=0.08))
+    margin = world.margin(env)
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    found = 0
+    for q in sample_configurations(robot, rng, n=30):
+        state = RobotState(robot, q)
+        pin.updateGeometryPlacements(
+            robot.model, state.data, world._geometry_model, world._geometry_data
+        )
+        placements = ShapePlacements(list(world._geometry_data.oMg))
+        centres, halves = world._bounds(placements)
+        hits = env.query(
+            geometry.shapes, placements, centres, geometry.radii, margin, 99, halves
+        )
+        expected = sorted(
+            (s, d)
+            for s, shape in enumerate(geometry.shapes)
+            for obj in objects
+            if (
+                d := signed_distance(
+                    obj.shape,
+                    obj.placement,
+                    shape.shape,
+                    placements[s],
+                    request,
+                    result,
+                )[0]
+            )
+            < margin
+        )
+        got = sorted(zip(hits.shape.tolist(), hits.distance.tolist(), strict=True))
+        assert [s for s, _ in got] == [s for s, _ in expected]
+        np.testing.assert_allclose([d for _, d in got], [d for _, d in expected])
+        found += len(got)
+    assert found > 30
