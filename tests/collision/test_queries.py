@@ -244,6 +244,19 @@ def test_a_non_finite_configuration_is_never_accepted(geometry, robots, bad) -> 
         assert world.check(robot.home()).accepted
 
 
+def _shapes_at(
+    world: CollisionWorld, q: np.ndarray
+) -> tuple[ShapePlacements, np.ndarray, np.ndarray]:
+    """The world's shape placements at q, with their bounding centres and boxes."""
+    robot = world.geometry.robot
+    state = RobotState(robot, q)
+    pin.updateGeometryPlacements(
+        robot.model, state.data, world._geometry_model, world._geometry_data
+    )
+    placements = ShapePlacements(list(world._geometry_data.oMg))
+    return (placements, *world._bounds(placements))
+
+
 def test_box_broad_phase_loses_no_contact(geometry, robots, rng) -> None:
     """Spheres and boxes select the same contacts as spheres alone, with fewer pairs.
 
@@ -265,12 +278,7 @@ def test_box_broad_phase_loses_no_contact(geometry, robots, rng) -> None:
     margin = world.margin(env)
     found = dropped = 0
     for q in sample_configurations(robot, rng, n=60):
-        state = RobotState(robot, q)
-        pin.updateGeometryPlacements(
-            robot.model, state.data, world._geometry_model, world._geometry_data
-        )
-        placements = ShapePlacements(list(world._geometry_data.oMg))
-        centres, halves = world._bounds(placements)
+        placements, centres, halves = _shapes_at(world, q)
         args = (geometry.shapes, placements, centres, geometry.radii, margin, 99)
         spheres, boxes = env.query(*args), env.query(*args, halves)
         np.testing.assert_array_equal(spheres.shape, boxes.shape)
@@ -319,12 +327,7 @@ def test_broad_phase_keeps_every_pair_within_the_margin(geometry, robots, rng) -
     request, result = coal.DistanceRequest(), coal.DistanceResult()
     found = 0
     for q in sample_configurations(robot, rng, n=30):
-        state = RobotState(robot, q)
-        pin.updateGeometryPlacements(
-            robot.model, state.data, world._geometry_model, world._geometry_data
-        )
-        placements = ShapePlacements(list(world._geometry_data.oMg))
-        centres, halves = world._bounds(placements)
+        placements, centres, halves = _shapes_at(world, q)
         hits = env.query(
             geometry.shapes, placements, centres, geometry.radii, margin, 99, halves
         )
