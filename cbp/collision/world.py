@@ -143,8 +143,11 @@ class ContactSet:
             )
         )
 
-    def select(self, mask: np.ndarray) -> ContactSet:
-        """The contacts where ``mask`` is true (or at the given indices)."""
+    def select(self, mask: np.ndarray | slice) -> ContactSet:
+        """The contacts where ``mask`` is true, at the given indices, or in a slice.
+
+        A slice gives views of this set's arrays; the others, copies.
+        """
         return ContactSet(
             self.shape[mask],
             self.other_shape[mask],
@@ -152,17 +155,6 @@ class ContactSet:
             self.other_point[mask],
             self.normal[mask],
             self.distance[mask],
-        )
-
-    def rows(self, rows: slice) -> ContactSet:
-        """The contacts of a range of rows, as views of this set's arrays."""
-        return ContactSet(
-            self.shape[rows],
-            self.other_shape[rows],
-            self.point[rows],
-            self.other_point[rows],
-            self.normal[rows],
-            self.distance[rows],
         )
 
     @property
@@ -452,7 +444,7 @@ def _contact_set(hits: Hits, padding: float, own: list[_SelfRow]) -> ContactSet:
             hits.distance - padding,
         )
         # The part is another set of the same arrays (itself would be a cycle).
-        obstacles._split = (obstacles.rows(slice(None)), _EMPTY)
+        obstacles._split = (obstacles.select(slice(None)), _EMPTY)
         return obstacles
     i, j, point, other, normal, distance = zip(*own, strict=True)
     if not n:
@@ -464,7 +456,7 @@ def _contact_set(hits: Hits, padding: float, own: list[_SelfRow]) -> ContactSet:
             np.array(normal, dtype=float),
             np.array(distance, dtype=float),
         )
-        contacts._split = (_EMPTY, contacts.rows(slice(None)))
+        contacts._split = (_EMPTY, contacts.select(slice(None)))
         return contacts
     contacts = ContactSet(
         np.concatenate((hits.shape, i)),
@@ -474,7 +466,7 @@ def _contact_set(hits: Hits, padding: float, own: list[_SelfRow]) -> ContactSet:
         np.concatenate((hits.normal, normal)),
         np.concatenate((hits.distance - padding, distance)),
     )
-    contacts._split = (contacts.rows(slice(0, n)), contacts.rows(slice(n, None)))
+    contacts._split = (contacts.select(slice(0, n)), contacts.select(slice(n, None)))
     return contacts
 
 
