@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from cbp.executors.cat import run_cat
+from cbp.executors.settings import CatSettings
 from cbp.scenario import load_scenario
 from cbp.trace import FULL_PERIOD_NOTE
 
@@ -43,7 +44,7 @@ def main() -> None:
         )
         trace = run_cat(scenario)
         full = [p for p in trace.periods if p.note == FULL_PERIOD_NOTE]
-        nominal = scenario.spec.method.cat.timing.period
+        nominal = scenario.spec.method.settings(CatSettings).timing.period
         period = np.array([p.period for p in full])
         # The period is adaptive: after a missed deadline it grows, and CAT,
         # which fills its budget, rarely brings it back. Steps are scaled to

@@ -69,8 +69,8 @@ def main() -> None:
         world = CollisionWorld(
             geometry, scenario.collision_world().environment, settings
         )
-        n = len(world._query(state, world.environment))
-        med, p95 = timed(lambda w=world: w._query(state, w.environment), 300)
+        n = len(world.query(state, world.environment))
+        med, p95 = timed(lambda w=world: w.query(state, w.environment), 300)
         rows.append(
             (
                 f"full arm ({approximation}) vs ground-truth box + self, {n} contacts",
@@ -80,8 +80,8 @@ def main() -> None:
         )
         octree = OccupancyEnvironment(cells, 0.01, MetaballRefiner())
         world = CollisionWorld(geometry, octree, settings)
-        n = len(world._query(state, octree))
-        med, p95 = timed(lambda w=world, o=octree: w._query(state, o), 50)
+        n = len(world.query(state, octree))
+        med, p95 = timed(lambda w=world, o=octree: w.query(state, o), 50)
         rows.append(
             (
                 f"full arm ({approximation}) vs octree of the box ({len(cells)} cells) + self, {n} contacts",

@@ -11,7 +11,8 @@ import typing
 from collections.abc import Sequence
 from pathlib import Path
 
-from cbp.errors import CbpError, ScenarioError, suggestion
+from cbp.errors import CbpError
+from cbp.executors import COMPARABLE, EXECUTORS
 from cbp.registry import Registry
 from cbp.schema import type_name
 
@@ -31,7 +32,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument(
         "--method",
         default=None,
-        help="executor: kinematic, cat, ik, mp, jt or velocity (default: method.name)",
+        help=f"executor: {', '.join(EXECUTORS)} (default: the scenario's method.name)",
     )
     run.add_argument("--gui", action="store_true", help="show PyBullet's window")
     run.add_argument(
@@ -46,7 +47,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     compare.add_argument("scenario", type=Path)
     compare.add_argument(
-        "--methods", default="cat,ik,mp,jt", help="comma-separated (default: all four)"
+        "--methods",
+        default=",".join(COMPARABLE),
+        help=f"comma-separated, from {', '.join(COMPARABLE)} (default: all)",
     )
     compare.add_argument(
         "--out", type=Path, default=None, help="output folder (default out/<name>)"
@@ -152,54 +155,20 @@ def _run(
     gui: bool,
     overrides: dict[str, str],
 ) -> int:
-    from cbp.executors import SIMULATED_METHODS, run_simulated
-    from cbp.executors.kinematic import run_kinematic
-    from cbp.report import write_outputs, write_runs
+    from cbp.executors import executor_info
     from cbp.scenario import load_scenario
 
     try:
         scenario = load_scenario(path, overrides=overrides)
-    except ScenarioError as exc:
+        name = method or scenario.spec.method.name
+        executor = executor_info(name).load()
+    except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
-    method = method or scenario.spec.method.name
-    choices = ("kinematic", "velocity", *SIMULATED_METHODS)
-    if method not in choices:
-        print(
-            f"unknown method '{method}'{suggestion(method, choices)} "
-            f"Methods: {', '.join(choices)}.",
-            file=sys.stderr,
-        )
-        return 2
     out = out or Path("out") / scenario.spec.name
-    if method == "kinematic":
-        trace = run_kinematic(scenario)
-        metrics = write_outputs(scenario, trace, out)
-        print(
-            f"{scenario.spec.name}: {metrics['steps']} steps, final position error "
-            f"{metrics['final_position_error_m']} m, {metrics['events']} events"
-        )
-        print(f"wrote {out}/report.md, metrics.json, trace.csv, tracking.png")
-        return 0
-    if method == "velocity":
-        from cbp.executors.velocity import run_velocity
-        from cbp.report import write_velocity_run
-
-        v = write_velocity_run(scenario, run_velocity(scenario, gui), out)
-        print(
-            f"{scenario.spec.name} (velocity): after {v['transient_s']} s, distance "
-            f"error <= {_num(v['distance_error_max_m'], 1e3)} mm, view error <= "
-            f"{_num(v['view_error_max_deg'])} deg, {v['events']:.0f} events"
-        )
-        print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
-        return 0
-    run_trace = run_simulated(scenario, method, gui)
-    m = write_runs(scenario, {method: run_trace}, out)[method]
-    print(
-        f"{scenario.spec.name} ({method}): reached {m['reached']}, final error "
-        f"{_num(m['final_position_error_m'], 1e3)} mm, peak contact force "
-        f"{m['peak_contact_force_n']:.1f} N, {m['events']} events"
-    )
+    trace = executor.run(scenario, gui)
+    metrics = executor.write(scenario, {name: trace}, out)[name]
+    print(executor.describe(scenario, name, metrics))
     print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
     return 0
 
@@ -208,20 +177,11 @@ def _compare(
     path: Path, methods: str, out: Path | None, jobs: int, overrides: dict[str, str]
 ) -> int:
     from cbp.compare import compare
-    from cbp.executors import SIMULATED_METHODS
 
     names = [m.strip() for m in methods.split(",") if m.strip()]
-    for name in names:
-        if name not in SIMULATED_METHODS:
-            print(
-                f"unknown method '{name}'{suggestion(name, SIMULATED_METHODS)} "
-                f"Methods: {', '.join(SIMULATED_METHODS)}.",
-                file=sys.stderr,
-            )
-            return 2
     try:
         result = compare(path, names, out, jobs=jobs, overrides=overrides)
-    except ScenarioError as exc:
+    except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
     for name, m in result.metrics.items():
@@ -234,18 +194,38 @@ def _compare(
 
 
 def _bench(quick: bool, out: Path | None, results: Path | None) -> int:
-    from cbp.bench import BenchConfig, dump, format_row, run_bench, write_results
+    """Run the benchmark harness of the source checkout (``benchmarks/bench.py``).
 
-    config = BenchConfig.quick() if quick else BenchConfig()
-    result = run_bench(config, progress=lambda row: print(format_row(row), flush=True))
+    The harness is not part of the installed package: it times peers (pink,
+    placo) and scenes that only the repository has.
+    """
+    import importlib.util
+
+    harness = Path(__file__).resolve().parents[1] / "benchmarks" / "bench.py"
+    spec = importlib.util.spec_from_file_location("cbp_benchmarks_bench", harness)
+    if not harness.is_file() or spec is None or spec.loader is None:
+        print(
+            f"cbp bench runs the benchmark harness of a source checkout "
+            f"({harness} is missing): clone the repository and install it with "
+            "'pip install -e .[bench]'",
+            file=sys.stderr,
+        )
+        return 2
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = bench  # dataclasses look their module up
+    spec.loader.exec_module(bench)
+    config = bench.BenchConfig.quick() if quick else bench.BenchConfig()
+    result = bench.run_bench(
+        config, progress=lambda row: print(bench.format_row(row), flush=True)
+    )
     print("profile of the CAT step (largest own-time shares):")
     for name, pct in result["profile_cat_step"]:
         print(f"  {name}: {pct:.0f} %")
     if out is not None:
-        dump(result, out)
+        bench.dump(result, out)
     if results is not None:
         flags = " --quick" if quick else ""
-        write_results(result, results, f"cbp bench{flags} --results {results}")
+        bench.write_results(result, results, f"cbp bench{flags} --results {results}")
     return 0
 
 

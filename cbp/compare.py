@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from cbp.executors import COMPARABLE, executor_info
 from cbp.goals import write_recorded
 from cbp.scenario import Scenario, load_scenario
 from cbp.trace import RunTrace
@@ -62,9 +63,12 @@ def record_goal(scenario: Scenario, path: Path) -> bool:
 
 
 def _run_one(path: Path, overrides: Mapping[str, str], method: str) -> RunTrace:
-    from cbp.executors import run_simulated
-
-    return run_simulated(load_scenario(path, overrides=overrides), method)
+    trace: RunTrace = (
+        executor_info(method, COMPARABLE)
+        .load()
+        .run(load_scenario(path, overrides=overrides))
+    )
+    return trace
 
 
 def compare(
@@ -79,7 +83,7 @@ def compare(
 
     Args:
         path: the scenario file.
-        methods: simulated method names (``cat``, ``ik``, ``mp``, ``jt``).
+        methods: comparable method names (:data:`cbp.executors.COMPARABLE`).
         out: output folder (default ``out/<scenario name>``).
         jobs: methods run in this many processes at once. Timing-dependent
             methods (CAT, IK, MP plan within wall-clock budgets) are slowed by
@@ -88,6 +92,8 @@ def compare(
     """
     from cbp.report import write_runs
 
+    for method in methods:
+        executor_info(method, COMPARABLE)  # an unknown name fails before any run
     path = Path(path)
     overrides = dict(overrides or {})
     scenario = load_scenario(path, overrides=overrides)

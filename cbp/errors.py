@@ -100,6 +100,10 @@ class RobotNotFoundError(ConfigError):
     """No robot description folder with that name."""
 
 
+class PluginDefinitionError(CbpError, TypeError):
+    """A plugin class breaks the plugin contract (raised when Python defines it)."""
+
+
 class TargetNotSetError(CbpError):
     """A plugin was evaluated before its target was set."""
 

@@ -22,14 +22,17 @@ from typing import Any
 
 import numpy as np
 
-from cbp.trace import FULL_PERIOD_NOTE, RunTrace
+from cbp.robot import FloatArray, RobotModel
+from cbp.trace import FULL_PERIOD_NOTE, KinematicTrace, RunTrace, VelocityTrace
 
 __all__ = [
     "CONTACT_FORCE",
     "MOVED",
     "REACH_POSITION",
     "REACH_ROTATION",
-    "compute_metrics",
+    "kinematic_metrics",
+    "orbit_metrics",
+    "run_metrics",
 ]
 
 REACH_POSITION = 0.01
@@ -42,7 +45,7 @@ CONTACT_FORCE = 0.05
 """Contact counts toward the duration above this force [N]."""
 
 
-def compute_metrics(trace: RunTrace) -> dict[str, Any]:
+def run_metrics(trace: RunTrace) -> dict[str, Any]:
     """The metrics of one run (keys as in the CAT issue; None where undefined)."""
     t = trace.t
     if t.size == 0:
@@ -108,3 +111,87 @@ def compute_metrics(trace: RunTrace) -> dict[str, Any]:
 def _full_periods(trace: RunTrace) -> list[int]:
     """Steps of the periods whose computation used the whole time budget."""
     return [p.steps for p in trace.periods if p.note == FULL_PERIOD_NOTE]
+
+
+#: A goal counts as reached within these tolerances.
+REACHED_POSITION = 0.01  # [m]
+REACHED_ROTATION = np.deg2rad(2.0)  # [rad]
+
+
+def kinematic_metrics(
+    trace: KinematicTrace, robot: RobotModel, last_key: float
+) -> dict[str, Any]:
+    """Summarize a kinematic run: tracking errors, timing, limit margins, events.
+
+    Args:
+        trace: the run.
+        robot: its robot (for the joint limits).
+        last_key: when the goal stops moving [s]; reaching is counted after it.
+    """
+    q = trace.q
+    bq = robot.bounded_q
+    lower, upper = robot.lower_limits[bq], robot.upper_limits[bq]
+    violation = float(
+        np.max(np.maximum(lower - q[:, bq], q[:, bq] - upper), initial=0.0)
+    )
+    within = (trace.position_error <= REACHED_POSITION) & (
+        trace.rotation_error <= REACHED_ROTATION
+    )
+    after = trace.t >= last_key
+    reached_at = trace.t[after & within]
+    step_us = trace.solve_time * 1e6
+    return {
+        "final_position_error_m": _finite(trace.position_error[-1]),
+        "final_rotation_error_deg": _finite(np.rad2deg(trace.rotation_error[-1])),
+        "mean_position_error_m": _finite(float(np.nanmean(trace.position_error))),
+        "goal_reached": bool(reached_at.size > 0),
+        "time_to_reach_after_last_keyframe_s": (
+            float(reached_at[0] - last_key) if reached_at.size else None
+        ),
+        "max_joint_limit_violation_rad": max(violation, 0.0),
+        "step_time_us_median": float(np.median(step_us)),
+        "step_time_us_p95": float(np.percentile(step_us, 95)),
+        "steps": int(trace.t.size),
+        "events": len(trace.events),
+    }
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def orbit_metrics(trace: VelocityTrace, transient: float) -> dict[str, float | None]:
+    """Metrics of an orbit run; the first ``transient`` [s] is left out."""
+    s = trace.signals
+    after = trace.t >= transient
+
+    def worst(key: str, values: FloatArray | None = None) -> float | None:
+        if key not in s and values is None:
+            return None
+        v = np.abs(values if values is not None else s[key])[after]
+        return float(np.max(v)) if v.size else None
+
+    def margin(key: str, bound: str) -> float | None:
+        if key not in s:
+            return None
+        return float(np.min(s[key] - s[bound]))
+
+    base_xy = trace.q[:, :2]
+    return {
+        "transient_s": transient,
+        "distance_error_max_m": (
+            worst("distance", s["distance"] - s["distance_desired"])
+            if "distance" in s
+            else None
+        ),
+        "view_error_max_deg": worst("view_error_deg"),
+        "roll_max_deg": worst("roll_deg"),
+        "altitude_margin_min_m": margin("altitude", "min_altitude"),
+        "obstacle_margin_min_m": margin("obstacle_distance", "min_obstacle_distance"),
+        "base_travel_m": float(
+            np.sum(np.linalg.norm(np.diff(base_xy, axis=0), axis=1))
+        ),
+        "arm_travel_rad": float(np.sum(np.abs(np.diff(trace.q[:, 4:], axis=0)))),
+        "compute_ms_per_tick_median": float(np.median(trace.compute_s) * 1e3),
+        "events": float(len(trace.events)),
+    }

@@ -31,28 +31,88 @@ Conventions, fixed once for every plugin and executor:
   step, before any compute method, with the state at the start of the step. A
   plugin that needs the step's start (a small-step term anchored at the current
   configuration, contacts found by a collision query) latches it there.
+
+**Writing a plugin.** Subclass :class:`Task` or :class:`Constraint`, naming the
+parameter schema as the generic argument, and define ``dim``,
+``compute_value`` and ``compute_jacobian`` (constraints: ``compute_bounds``)::
+
+    @dataclass(frozen=True, kw_only=True)
+    class HandAboveParams(PluginParams):
+        height: float = 0.3  # lowest hand height [m]
+
+    class HandAboveConstraint(Constraint[HandAboveParams]):
+        unit = "m"
+        dim = 1
+        ...
+
+The class is checked when Python defines it (:meth:`Plugin.__init_subclass__`),
+with the same rules whether it is then used from Python or from a scenario:
+
+* ``Params`` is read from the generic argument (``Constraint[HandAboveParams]``):
+  a frozen, keyword-only dataclass derived from :class:`PluginParams`;
+* ``type_name``, the name scenarios write in ``type:``, defaults to the class
+  name in snake_case without its ``Task`` / ``Constraint`` suffix
+  (``HandAboveConstraint`` -> ``hand_above``); if given, it must be snake_case;
+* ``unit`` is optional: the unit of f, one per block of rows joined by ``|``
+  (``"m"``, ``"rad"``, ``"m|rad"``), ``""`` when dimensionless or mixed;
+* ``default_gain`` is in [0, 1];
+* the constructor takes ``(params, robot, name="")``;
+* :meth:`Plugin.prepare` is the only method that may change the plugin.
+
+Optional capabilities are the protocols below (:class:`GoalReceiver`,
+:class:`TakesInput`, :class:`UsesCollisionWorld`, :class:`ReportsSignals`): a
+plugin has one by defining its methods, and executors test for it with
+``isinstance``. Writing rows in place (:meth:`Plugin.linearize_into`,
+:meth:`Plugin.value_into`) is an optional speed-up, not part of the contract;
+:class:`cbp.joint_space.JointDifference` does it for joint-space terms.
 """
 
 from __future__ import annotations
 
 import abc
 import dataclasses
-from typing import Any, ClassVar, Generic, NamedTuple, TypeVar
+import inspect
+import re
+import typing
+from collections.abc import Mapping
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    ClassVar,
+    Generic,
+    NamedTuple,
+    Protocol,
+    TypeVar,
+    runtime_checkable,
+)
 
 import numpy as np
+import numpy.typing as npt
 
-from cbp.errors import ConfigError, PluginOutputError
+from cbp.errors import (
+    ConfigError,
+    PluginDefinitionError,
+    PluginOutputError,
+    TargetNotSetError,
+)
 from cbp.robot import FloatArray, RobotModel
 from cbp.state import RobotState
+
+if TYPE_CHECKING:
+    from cbp.collision.world import CollisionWorld
 
 __all__ = [
     "Constraint",
     "FloatArray",
+    "GoalReceiver",
     "Linearization",
     "ParamsT",
     "Plugin",
     "PluginParams",
+    "ReportsSignals",
+    "TakesInput",
     "Task",
+    "UsesCollisionWorld",
 ]
 
 
@@ -63,11 +123,13 @@ class PluginParams:
     Subclasses declare one field per parameter, each with a type, a default when it
     has one, and a docstring that gives its unit in square brackets. Checks that need
     no robot go in ``__post_init__`` and raise :class:`~cbp.errors.ConfigError` with
-    ``location`` set to the field name.
+    ``location`` set to the field name. A plugin without parameters uses
+    ``PluginParams`` itself.
     """
 
 
 ParamsT = TypeVar("ParamsT", bound=PluginParams)
+T = TypeVar("T")
 
 
 class Linearization(NamedTuple):
@@ -77,6 +139,119 @@ class Linearization(NamedTuple):
     """f(q), shape (dim,)."""
     jacobian: FloatArray
     """df/dq along tangent directions, shape (dim, nv)."""
+
+
+# ---------------------------------------------------------------- definition checks
+
+_SNAKE = re.compile(r"^[a-z][a-z0-9_]*$")
+_SUFFIXES = ("_task", "_constraint")
+
+
+def default_type_name(class_name: str) -> str:
+    """``HandAboveConstraint`` -> ``hand_above``: snake_case, kind suffix removed."""
+    name = class_name.lstrip("_")
+    snake = re.sub(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])", "_", name)
+    snake = snake.lower()
+    for suffix in _SUFFIXES:
+        if snake.endswith(suffix) and len(snake) > len(suffix):
+            return snake[: -len(suffix)]
+    return snake
+
+
+def _generic_params(cls: type) -> list[object]:
+    """The generic arguments ``cls`` gives its plugin bases (``Task[X]`` -> X)."""
+    found: list[object] = []
+    for base in cls.__dict__.get("__orig_bases__", ()):
+        origin = typing.get_origin(base)
+        if isinstance(origin, type) and issubclass(origin, Plugin):
+            found.extend(typing.get_args(base)[:1])
+    return found
+
+
+def _check_definition(cls: type[Plugin[Any]]) -> None:
+    """Fill in the defaults of a plugin class and check the rest (one message)."""
+    name = cls.__qualname__
+    generic = _generic_params(cls)
+    if any(isinstance(arg, TypeVar) for arg in generic):
+        return  # a generic base such as Task[ParamsT]: its subclasses are checked
+    declared = cls.__dict__.get("Params")
+    params = generic[0] if generic else declared or getattr(cls, "Params", None)
+    how = (
+        f"declare its parameters as the generic argument: class {cls.__name__}"
+        f"(Task[{cls.__name__}Params]) or (Constraint[...]), where "
+        f"{cls.__name__}Params is a @dataclass(frozen=True, kw_only=True) "
+        "subclass of cbp.PluginParams (PluginParams itself when there are none)"
+    )
+    if params is None:
+        raise PluginDefinitionError(f"plugin {name} has no parameter schema: {how}")
+    named = {p for p in (*generic, declared) if p is not None}
+    if len(named) > 1:
+        names = sorted(getattr(p, "__name__", repr(p)) for p in named)
+        raise PluginDefinitionError(
+            f"plugin {name} names two parameter schemas ({', '.join(names)}): "
+            f"{how}; a Params attribute is not needed"
+        )
+    if not (
+        isinstance(params, type)
+        and issubclass(params, PluginParams)
+        and "__dataclass_params__" in vars(params)  # a dataclass of its own
+        and params.__dataclass_params__.frozen  # type: ignore[attr-defined]
+    ):
+        raise PluginDefinitionError(
+            f"plugin {name}: {getattr(params, '__name__', params)!s} is not a "
+            f"frozen PluginParams dataclass: {how}"
+        )
+    cls.Params = params
+    if "type_name" not in cls.__dict__:
+        cls.type_name = default_type_name(cls.__name__)
+    if not isinstance(cls.type_name, str) or not _SNAKE.match(cls.type_name):
+        raise PluginDefinitionError(
+            f"plugin {name}: type_name {cls.type_name!r} is not snake_case: use "
+            "lower-case letters, digits and underscores, starting with a letter "
+            f"(it is what scenarios write in 'type:'), e.g. "
+            f"'{default_type_name(cls.__name__)}', or leave it out for that default"
+        )
+    if not isinstance(cls.unit, str):
+        raise PluginDefinitionError(
+            f"plugin {name}: unit must be a string such as 'm', 'rad' or 'm|rad' "
+            f"(one per block of rows), or left out; got {cls.unit!r}"
+        )
+    gain = cls.default_gain
+    if not (isinstance(gain, int | float) and 0.0 <= gain <= 1.0):
+        raise PluginDefinitionError(
+            f"plugin {name}: default_gain must be a number in [0, 1], got {gain!r}"
+        )
+    missing = [
+        what
+        for attr, what in _REQUIRED
+        if getattr(getattr(cls, attr, None), "__isabstractmethod__", False)
+    ]
+    if missing:
+        raise PluginDefinitionError(
+            f"plugin {name} does not define {'; '.join(missing)}"
+        )
+    try:
+        inspect.signature(cls.__init__).bind(None, None, None, name="")
+    except TypeError:
+        raise PluginDefinitionError(
+            f"plugin {name}: the constructor must accept (params, robot, name=''), "
+            f"got {cls.__name__}{inspect.signature(cls.__init__)}"
+        ) from None
+
+
+_REQUIRED = (
+    ("dim", "dim (the number of rows: a property, or an int class attribute)"),
+    ("compute_value", "compute_value(self, state) -> f(q), shape (dim,)"),
+    (
+        "compute_jacobian",
+        "compute_jacobian(self, state) -> df/dq along tangent directions, "
+        "shape (dim, nv)",
+    ),
+    (
+        "compute_bounds",
+        "compute_bounds(self, state) -> (lower, upper), each shape (dim,)",
+    ),
+)
 
 
 class Plugin(abc.ABC, Generic[ParamsT]):
@@ -89,18 +264,29 @@ class Plugin(abc.ABC, Generic[ParamsT]):
     """
 
     type_name: ClassVar[str]
-    """Name used in YAML ``type:``; snake_case, unique within its kind."""
+    """Name used in YAML ``type:``; snake_case. Default: the class name in
+    snake_case without its ``Task`` or ``Constraint`` suffix."""
     Params: ClassVar[type[PluginParams]]
-    """Parameter schema."""
-    unit: ClassVar[str]
-    """Unit of f, e.g. ``"m"``, ``"rad"``, ``"m|rad"`` (translation then rotation)."""
+    """Parameter schema, read from the generic argument (``Task[MyParams]``)."""
+    unit: ClassVar[str] = ""
+    """Unit of f, one per block of rows joined by ``|``: ``"m"``, ``"rad"``,
+    ``"m|rad"`` (translation then rotation); ``""`` when dimensionless."""
     default_gain: ClassVar[float] = 1.0
-    """Feedback gain per step used when the scenario entry gives none."""
+    """Feedback gain per step used when the scenario entry gives none, in [0, 1]."""
     constant_jacobian: bool = False
     """The Jacobian is the same at every configuration, whatever ``prepare`` and
     the plugin's targets latch (a joint-space term on a Euclidean model). The
     engine then computes it once and folds a soft task's share of the Hessian into
     a constant. :func:`cbp.testing.check_jacobian` verifies the claim."""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Check the contract when the class is defined (see the module docstring).
+
+        Raises:
+            PluginDefinitionError: one message saying what to add or change.
+        """
+        super().__init_subclass__(**kwargs)
+        _check_definition(cls)
 
     def __init__(self, params: ParamsT, robot: RobotModel, name: str = "") -> None:
         """Bind the parameters to a robot; subclasses resolve names to indices here.
@@ -126,6 +312,8 @@ class Plugin(abc.ABC, Generic[ParamsT]):
     def prepare(self, state: RobotState, dt: float) -> None:
         """Latch what the step needs from its start; called once per step.
 
+        The only method that may change the plugin.
+
         Args:
             state: the state at the start of the step.
             dt: the duration of the step [s].
@@ -139,26 +327,39 @@ class Plugin(abc.ABC, Generic[ParamsT]):
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """Return df/dq along tangent directions, shape (dim, nv)."""
 
+    def latched(self, value: T | None) -> T:
+        """``value`` latched by :meth:`prepare`; an error if it was not called.
+
+        Raises:
+            TargetNotSetError: ``prepare`` has not run yet.
+        """
+        if value is None:
+            raise TargetNotSetError(
+                f"{self.name} ({self.type_name}): prepare() was not called"
+            )
+        return value
+
     def linearize(self, state: RobotState) -> Linearization:
-        """Return value and Jacobian; override to share work between the two."""
-        return Linearization(self.compute_value(state), self.compute_jacobian(state))
+        """Value and Jacobian in new arrays, through the engine's own call."""
+        value, jacobian = np.empty(self.dim), np.empty((self.dim, self.robot.nv))
+        self.linearize_into(state, value, jacobian)
+        return Linearization(value, jacobian)
 
     def linearize_into(
         self, state: RobotState, value: FloatArray, jacobian: FloatArray
     ) -> None:
         """Write f(q) into ``value`` (dim,) and its Jacobian into ``jacobian``.
 
-        The engine calls this with its own buffers (the plugin's rows of the
-        stacked QP), every step. The default copies :meth:`linearize`, checking
-        the shapes. Override it to write in place where that saves work; an
-        override must write every entry, and agree with :meth:`compute_value`
-        and :meth:`compute_jacobian` (:func:`cbp.testing.check_jacobian`
-        verifies both).
+        Optional speed-up. The engine calls this with its own buffers (the
+        plugin's rows of the stacked QP), every step. The default copies
+        :meth:`compute_value` and :meth:`compute_jacobian`, checking the shapes.
+        An override must write every entry and agree with them
+        (:func:`cbp.testing.check_jacobian` verifies both).
 
         Raises:
             PluginOutputError: the outputs have the wrong shapes.
         """
-        out, jac = self.linearize(state)
+        out, jac = self.compute_value(state), self.compute_jacobian(state)
         shape = getattr(out, "shape", None), getattr(jac, "shape", None)
         if shape != (value.shape, jacobian.shape):
             raise PluginOutputError(
@@ -172,7 +373,8 @@ class Plugin(abc.ABC, Generic[ParamsT]):
     def value_into(self, state: RobotState, value: FloatArray) -> None:
         """Write f(q) into ``value`` (dim,); the engine's call for a constant Jacobian.
 
-        As :meth:`linearize_into`: the default copies :meth:`compute_value`.
+        Optional speed-up, as :meth:`linearize_into`: the default copies
+        :meth:`compute_value`.
 
         Raises:
             PluginOutputError: the value has the wrong shape.
@@ -220,3 +422,64 @@ class Constraint(Plugin[ParamsT]):
 AnyTask = Task[Any]
 AnyConstraint = Constraint[Any]
 AnyPlugin = Plugin[Any]
+
+
+# ---------------------------------------------------------------------- capabilities
+
+
+@runtime_checkable
+class GoalReceiver(Protocol):
+    """A task that drives a frame toward the operator's goal pose.
+
+    The goal stream (``goal:`` in a scenario, the teleoperation page) calls
+    :meth:`set_target` every command period; executors read ``goal_frame`` to
+    measure the tracking error.
+    """
+
+    @property
+    def goal_frame(self) -> str:
+        """Name of the frame moved to the goal."""
+
+    def set_target(self, position: npt.ArrayLike, rotation: npt.ArrayLike) -> None:
+        """Set the goal: position (3,) [m], rotation matrix (3, 3), world frame.
+
+        Raises:
+            InvalidTargetError: the goal is refused (NaN, not a rotation); the
+                previous one is kept.
+        """
+
+
+@runtime_checkable
+class TakesInput(Protocol):
+    """A plugin driven by a live operator input (``inputs:`` in a scenario)."""
+
+    @property
+    def input_size(self) -> int:
+        """Number of input values."""
+
+    def set_input(self, values: npt.ArrayLike) -> None:
+        """Take new input values, shape (input_size,).
+
+        Raises:
+            ValueError: the values are refused; the previous ones are kept.
+        """
+
+
+@runtime_checkable
+class UsesCollisionWorld(Protocol):
+    """A plugin that reads contacts: the scenario attaches the collision world."""
+
+    def attach_world(self, world: CollisionWorld) -> None:
+        """Use ``world`` for contact queries from now on."""
+
+
+@runtime_checkable
+class ReportsSignals(Protocol):
+    """A plugin with named quantities worth recording over a run.
+
+    Executors record them at every tick; reports plot and summarise them (the
+    orbit's distance, view error, roll, altitude and their bounds).
+    """
+
+    def signals(self, state: RobotState) -> Mapping[str, float]:
+        """Values at ``state``, by name (the unit in the name: ``_deg``, ``_m``)."""

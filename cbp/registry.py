@@ -10,27 +10,29 @@ A type name resolves, in order, to:
 3. a plugin of an installed distribution, declared under the entry point group
    ``cbp.tasks`` or ``cbp.constraints``.
 
-Every class, whatever its source, passes the same checks (:meth:`Registry.validate`).
+Every class, whatever its source, was checked when Python defined it
+(:meth:`cbp.plugin.Plugin.__init_subclass__`); the registry checks its kind.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import importlib
 import importlib.metadata
 import importlib.util
-import re
 import sys
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
-from cbp.errors import ConfigError, UnknownPluginError, close_matches
-from cbp.plugin import Plugin, PluginParams
+from cbp.errors import (
+    ConfigError,
+    PluginDefinitionError,
+    UnknownPluginError,
+    close_matches,
+)
+from cbp.plugin import Plugin
 
 P = TypeVar("P", bound=Plugin[Any])
-
-_SNAKE = re.compile(r"^[a-z][a-z0-9_]*$")
 
 
 class Registry(Generic[P]):
@@ -63,22 +65,21 @@ class Registry(Generic[P]):
             raise TypeError(f"the {kind} registry must be sorted by type name: {names}")
 
     def validate(self, cls: object) -> type[P]:
-        """Check that ``cls`` honours the plugin contract of this kind; return it."""
+        """Check that ``cls`` is a concrete plugin class of this kind; return it.
+
+        The contract itself is checked when the class is defined
+        (:meth:`cbp.plugin.Plugin.__init_subclass__`); here only its kind.
+        """
         where = getattr(cls, "__qualname__", repr(cls))
         if not (isinstance(cls, type) and issubclass(cls, self.base)):
-            raise TypeError(f"{where} is not a subclass of {self.base.__name__}")
-        type_name = getattr(cls, "type_name", None)
-        if not isinstance(type_name, str) or not _SNAKE.match(type_name):
-            raise TypeError(f"{where}.type_name must be a snake_case string")
-        params = getattr(cls, "Params", None)
-        if not (
-            isinstance(params, type)
-            and issubclass(params, PluginParams)
-            and dataclasses.is_dataclass(params)
-        ):
-            raise TypeError(f"{where}.Params must be a PluginParams dataclass")
-        if not isinstance(getattr(cls, "unit", None), str):
-            raise TypeError(f"{where}.unit must be a string")
+            raise TypeError(
+                f"{where} is not a {self.kind}: subclass cbp.{self.base.__name__}"
+            )
+        if not hasattr(cls, "type_name"):
+            raise TypeError(
+                f"{where} is a generic base, not a plugin: subclass it with "
+                "concrete parameters"
+            )
         return cls
 
     def names(self) -> list[str]:
@@ -158,6 +159,8 @@ def _import_dotted(path: str, search_dirs: Iterable[Path]) -> object:
     if module is None:
         try:
             module = importlib.import_module(module_name)
+        except PluginDefinitionError as exc:
+            raise ConfigError(str(exc)) from exc
         except ImportError as exc:
             raise ConfigError(
                 f"cannot import module '{module_name}' of '{path}': {exc}"
@@ -183,6 +186,9 @@ def _import_file(module_name: str, path: Path) -> object:
     sys.modules[key] = module
     try:
         spec.loader.exec_module(module)
+    except PluginDefinitionError as exc:
+        del sys.modules[key]
+        raise ConfigError(f"{exc} ({path})") from exc
     except Exception as exc:
         del sys.modules[key]
         raise ConfigError(

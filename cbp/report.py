@@ -16,60 +16,23 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from cbp.executors.kinematic import Trace
-from cbp.executors.velocity import VelocityTrace
-from cbp.metrics import compute_metrics as compute_run_metrics
+from cbp.executors.settings import VelocitySettings
+from cbp.metrics import kinematic_metrics, orbit_metrics, run_metrics
 from cbp.plots import plot_orbit, plot_runs
 from cbp.robot import FloatArray
-from cbp.scenario import Scenario
-from cbp.trace import RunTrace
-
-#: A goal counts as reached within these tolerances.
-REACHED_POSITION = 0.01  # [m]
-REACHED_ROTATION = np.deg2rad(2.0)  # [rad]
+from cbp.scenario.runtime import Scenario
+from cbp.trace import KinematicTrace, RunTrace, VelocityTrace
 
 
-def compute_metrics(scenario: Scenario, trace: Trace) -> dict[str, Any]:
-    """Summarize a run: tracking errors, timing, limit margins, events."""
-    robot = scenario.robot
-    q = trace.q
-    bq = robot.bounded_q
-    lower, upper = robot.lower_limits[bq], robot.upper_limits[bq]
-    violation = float(
-        np.max(np.maximum(lower - q[:, bq], q[:, bq] - upper), initial=0.0)
-    )
-    within = (trace.position_error <= REACHED_POSITION) & (
-        trace.rotation_error <= REACHED_ROTATION
-    )
-    stream = scenario.goal_stream()
-    last_key = stream.end_time if stream is not None else 0.0
-    after = trace.t >= last_key
-    reached_at = trace.t[after & within]
-    step_us = trace.solve_time * 1e6
-    return {
-        "final_position_error_m": _finite(trace.position_error[-1]),
-        "final_rotation_error_deg": _finite(np.rad2deg(trace.rotation_error[-1])),
-        "mean_position_error_m": _finite(float(np.nanmean(trace.position_error))),
-        "goal_reached": bool(reached_at.size > 0),
-        "time_to_reach_after_last_keyframe_s": (
-            float(reached_at[0] - last_key) if reached_at.size else None
-        ),
-        "max_joint_limit_violation_rad": max(violation, 0.0),
-        "step_time_us_median": float(np.median(step_us)),
-        "step_time_us_p95": float(np.percentile(step_us, 95)),
-        "steps": int(trace.t.size),
-        "events": len(trace.events),
-    }
-
-
-def _finite(x: float) -> float | None:
-    return float(x) if np.isfinite(x) else None
-
-
-def write_outputs(scenario: Scenario, trace: Trace, out: Path) -> dict[str, Any]:
+def write_outputs(
+    scenario: Scenario, trace: KinematicTrace, out: Path
+) -> dict[str, Any]:
     """Write trace.csv, metrics.json, tracking.png and report.md into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    metrics = compute_metrics(scenario, trace)
+    stream = scenario.goal_stream()
+    metrics = kinematic_metrics(
+        trace, scenario.robot, stream.end_time if stream is not None else 0.0
+    )
     with open(out / "trace.csv", "w", newline="") as f:
         writer = csv.writer(f)
         q_names = [f"q{i}" for i in range(trace.q.shape[1])]
@@ -151,7 +114,7 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
-def _plot(trace: Trace, path: Path, title: str) -> None:
+def _plot(trace: KinematicTrace, path: Path, title: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -194,7 +157,7 @@ def write_runs(
         The metrics, by method.
     """
     out.mkdir(parents=True, exist_ok=True)
-    metrics = {name: compute_run_metrics(trace) for name, trace in traces.items()}
+    metrics = {name: run_metrics(trace) for name, trace in traces.items()}
     for name, trace in traces.items():
         csv_name = "trace.csv" if len(traces) == 1 else f"trace_{name}.csv"
         _write_run_csv(trace, out / csv_name)
@@ -277,10 +240,10 @@ def write_velocity_run(
     scenario: Scenario, trace: VelocityTrace, out: Path, method: str = "velocity"
 ) -> dict[str, Any]:
     """Write a velocity-executor run: trace.csv, metrics.json, the orbit figures."""
-    from cbp.executors.velocity import orbit_metrics
-
     out.mkdir(parents=True, exist_ok=True)
-    metrics = orbit_metrics(scenario, trace)
+    metrics = orbit_metrics(
+        trace, scenario.spec.method.settings(VelocitySettings).transient_s
+    )
     robot = scenario.robot
     v_labels = ["base_vx", "base_vy", "base_wz", *robot.joint_names[1:]]
     q_labels = ["base_x", "base_y", "base_cos", "base_sin", *robot.joint_names[1:]]

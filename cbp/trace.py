@@ -1,8 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
-"""What a simulated run recorded: samples, command periods and events.
+"""What runs record: samples, command periods and events.
 
 Every executor that runs in the simulator (CAT, and the IK, MP and JT methods)
-returns a :class:`RunTrace`; metrics, plots and comparisons read only this.
+returns a :class:`RunTrace`; metrics, plots and comparisons read only this. The
+kinematic executor returns a :class:`KinematicTrace` (one row per QP step, no
+simulator) and the velocity executor a :class:`VelocityTrace` (one row per
+tick, with the signals its plugins report).
 """
 
 from __future__ import annotations
@@ -13,7 +16,13 @@ import numpy as np
 
 from cbp.robot import FloatArray
 
-__all__ = ["FULL_PERIOD_NOTE", "PeriodRecord", "RunTrace"]
+__all__ = [
+    "FULL_PERIOD_NOTE",
+    "KinematicTrace",
+    "PeriodRecord",
+    "RunTrace",
+    "VelocityTrace",
+]
 
 #: The note of a period whose planner used its whole time budget.
 FULL_PERIOD_NOTE = "time budget spent"
@@ -96,3 +105,58 @@ class RunTrace:
         relative = np.einsum("nji,njk->nik", self.ee_rotation, self.goal_rotation)
         cos = 0.5 * (np.trace(relative, axis1=1, axis2=2) - 1.0)
         return np.asarray(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+@dataclass
+class KinematicTrace:
+    """What a kinematic run recorded, one row per control step.
+
+    Attributes:
+        t: times [s] (N,).
+        q: configurations (N, nq).
+        ee_position: end-effector position (N, 3) [m].
+        goal_position: goal position (N, 3) [m], NaN without a goal.
+        position_error: end-effector to goal distance (N,) [m].
+        rotation_error: rotation angle between end effector and goal (N,) [rad].
+        solve_time: engine step wall time (N,) [s].
+        events: (time, message) for every goal rejected or step not solved.
+        joint_names: names of the model's joints.
+        penetration: deepest penetration of the padded links at each step (N,)
+            [m]; empty without a collision world.
+        rejected_steps: steps rejected by step validation.
+    """
+
+    t: FloatArray
+    q: FloatArray
+    ee_position: FloatArray
+    goal_position: FloatArray
+    position_error: FloatArray
+    rotation_error: FloatArray
+    solve_time: FloatArray
+    events: list[tuple[float, str]] = field(default_factory=list)
+    joint_names: list[str] = field(default_factory=list)
+    penetration: FloatArray = field(default_factory=lambda: np.zeros(0))
+    rejected_steps: int = 0
+
+
+@dataclass
+class VelocityTrace:
+    """What a velocity-executor run recorded, one row per tick.
+
+    Attributes:
+        t: tick times (N,) [s].
+        q: measured configurations (N, nq).
+        u: commanded velocities (N, nv).
+        compute_s: wall time of each tick's QP (N,) [s].
+        inputs: the inputs' values at each tick, by entry name (N, k).
+        signals: the orbit's quantities over time (see :func:`orbit_signals`).
+        events: (time, message) of refused inputs and failed solves.
+    """
+
+    t: FloatArray
+    q: FloatArray
+    u: FloatArray
+    compute_s: FloatArray
+    inputs: dict[str, FloatArray]
+    signals: dict[str, FloatArray] = field(default_factory=dict)
+    events: list[tuple[float, str]] = field(default_factory=list)

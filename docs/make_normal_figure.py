@@ -5,6 +5,7 @@ Run: .venv/bin/python docs/make_normal_figure.py
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -14,7 +15,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from cbp.collision import MetaballRefiner
-from cbp.collision.normals_study import angle_errors, tilted_plane, yawed_box
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the study's folder
+from tests.collision.normals_study import (
+    angle_errors,
+    tilted_plane,
+    yawed_box,
+)
 
 HERE = Path(__file__).parent
 METHODS = {

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cbp.bench import BenchConfig, run_bench, write_results
+from benchmarks.bench import BenchConfig, run_bench, write_results
 
 
 def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:

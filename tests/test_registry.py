@@ -65,7 +65,7 @@ def test_dotted_path_loads_a_plugin_file_beside_the_scenario(tmp_path: Path) -> 
 
 def test_dotted_path_to_a_non_plugin_is_rejected() -> None:
     """A class that is not a Task is refused with a reason."""
-    with pytest.raises(ConfigError, match="is not a subclass of Task"):
+    with pytest.raises(ConfigError, match=r"Path is not a task: subclass cbp\.Task"):
         TASKS.get("pathlib:Path")
 
 

@@ -15,7 +15,6 @@ from cbp.collision.world import (
     CollisionWorld,
     ContactSet,
     StepCheck,
-    UsesCollisionWorld,
 )
 
 __all__ = [
@@ -31,6 +30,5 @@ __all__ = [
     "PrimitiveEnvironment",
     "RobotGeometry",
     "StepCheck",
-    "UsesCollisionWorld",
     "find_ignorable_pairs",
 ]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple
 
 import coal
 import numpy as np
@@ -28,7 +28,7 @@ from cbp.collision.environment import (
     signed_distance,
 )
 from cbp.collision.geometry import RobotGeometry, ShapePlacements
-from cbp.errors import ConfigError
+from cbp.collision.settings import CollisionSettings
 from cbp.robot import FloatArray, IntArray
 from cbp.state import RobotState
 
@@ -36,45 +36,26 @@ __all__ = [
     "CollisionSettings",
     "CollisionWorld",
     "ContactSet",
+    "SelfContact",
     "StepCheck",
-    "UsesCollisionWorld",
 ]
 
 
-@dataclass(frozen=True, kw_only=True)
-class CollisionSettings:
-    """The ``collision:`` section of a scenario."""
+class SelfContact(NamedTuple):
+    """A contact between two robot shapes (:meth:`CollisionWorld.self_contacts`)."""
 
-    activation_distance: float = 0.05
-    """Obstacles closer than this (after padding) produce contacts [m]."""
-    contacts_per_link: int = 3
-    """Contacts kept per robot shape: the closest, spread over directions."""
-    self_collision: bool = True
-    """Also query the robot's own shape pairs."""
-    padding: float | None = None
-    """Distance added around the links [m]; default: robot.yaml's."""
-    penetration_tolerance: float = 0.005
-    """Step validation rejects a step that penetrates deeper than this [m]
-    (plus half a cell against an occupancy map, whose surfaces are only known
-    to that resolution)."""
-
-    def __post_init__(self) -> None:
-        """Positive distances and counts."""
-        if not self.activation_distance > 0:
-            raise ConfigError(
-                f"must be > 0, got {self.activation_distance}", "activation_distance"
-            )
-        if self.contacts_per_link < 1:
-            raise ConfigError(
-                f"must be >= 1, got {self.contacts_per_link}", "contacts_per_link"
-            )
-        if self.padding is not None and not self.padding >= 0:
-            raise ConfigError(f"must be >= 0, got {self.padding}", "padding")
-        if not self.penetration_tolerance >= 0:
-            raise ConfigError(
-                f"must be >= 0, got {self.penetration_tolerance}",
-                "penetration_tolerance",
-            )
+    shape: int
+    """The shape the normal points toward."""
+    other_shape: int
+    """The other shape."""
+    point: FloatArray
+    """Witness point on ``shape`` (3,)."""
+    other_point: FloatArray
+    """Witness point on ``other_shape`` (3,)."""
+    normal: FloatArray
+    """Unit normal from ``other_shape`` toward ``shape`` (3,)."""
+    distance: float
+    """Signed distance of the padded shapes [m]."""
 
 
 @dataclass
@@ -143,6 +124,60 @@ class ContactSet:
             )
         )
 
+    @classmethod
+    def stack(cls, hits: Hits, padding: float, own: list[SelfContact]) -> ContactSet:
+        """The obstacle contacts, then the self contacts, with both parts.
+
+        Each field is built by one numpy call, and the parts are views of it.
+
+        Args:
+            hits: an environment's contacts, distances of the unpadded shapes.
+            padding: subtracted from the obstacle distances [m].
+            own: the self contacts (distances already padded).
+        """
+        n = len(hits)
+        if own:
+            i, j, point, other, normal, distance = zip(*own, strict=True)
+            arrays = (
+                np.concatenate((hits.shape, np.array(i, dtype=np.intp))),
+                np.concatenate((np.full(n, -1, dtype=np.intp), j)).astype(np.intp),
+                np.concatenate((hits.robot_point.reshape(-1, 3), point)),
+                np.concatenate((hits.obstacle_point.reshape(-1, 3), other)),
+                np.concatenate((hits.normal.reshape(-1, 3), normal)),
+                np.concatenate((hits.distance - padding, distance)),
+            )
+        else:
+            arrays = (
+                hits.shape,
+                np.full(n, -1, dtype=np.intp),
+                hits.robot_point,
+                hits.obstacle_point,
+                hits.normal,
+                hits.distance - padding,
+            )
+        # The parts are views of the same arrays (the set itself would be a cycle).
+        shape, other_shape, point_, other_point, normal_, distance_ = arrays
+
+        def part(rows: slice) -> ContactSet:
+            return cls(
+                shape[rows],
+                other_shape[rows],
+                point_[rows],
+                other_point[rows],
+                normal_[rows],
+                distance_[rows],
+            )
+
+        return cls(
+            shape,
+            other_shape,
+            point_,
+            other_point,
+            normal_,
+            distance_,
+            _split=(part(slice(0, n)), part(slice(n, None))),
+        )
+
     def select(self, mask: np.ndarray | slice) -> ContactSet:
         """The contacts where ``mask`` is true, at the given indices, or in a slice.
 
@@ -201,14 +236,6 @@ class StepCheck:
     accepted: bool
     penetration: float
     contacts: ContactSet
-
-
-@runtime_checkable
-class UsesCollisionWorld(Protocol):
-    """A plugin that reads contacts: the scenario loader attaches the world to it."""
-
-    def attach_world(self, world: CollisionWorld) -> None:
-        """Use ``world`` for contact queries from now on."""
 
 
 @dataclass
@@ -295,7 +322,7 @@ class CollisionWorld:
         key = state.q.tobytes()
         cache = self._cache
         if key != cache.key or environment is not cache.environment:
-            cache.contacts = self._query(state, environment)
+            cache.contacts = self.query(state, environment)
             cache.key, cache.environment = key, environment
         if len(self._carried):
             carried, self._carried = self._carried, ContactSet.empty()
@@ -317,6 +344,29 @@ class CollisionWorld:
         depth = contacts.penetration
         tolerance = self.settings.penetration_tolerance + self._environment.resolution
         return StepCheck(depth <= tolerance, depth, contacts)
+
+    def try_step(self, q: FloatArray, current_penetration: float = 0.0) -> StepCheck:
+        """Validate the step to ``q``; if it is rejected, constrain the retry.
+
+        :meth:`check`, then :meth:`reject` when the step is not kept: every
+        executor that validates its steps (CAT Sec. IV-C) calls this.
+
+        Args:
+            q: the configuration the step leads to.
+            current_penetration: the penetration where the step starts [m]; a
+                step that ends less deep than this is kept even beyond the
+                tolerance (it backs out of contact).
+
+        Returns:
+            The check; ``accepted`` says whether the step is kept.
+        """
+        check = self.check(q)
+        if check.accepted:
+            return check
+        if check.penetration < current_penetration:
+            return StepCheck(True, check.penetration, check.contacts)
+        self.reject(check)
+        return check
 
     def is_free(self, q: FloatArray) -> bool:
         """Whether ``q`` is collision-free, in one pinocchio call (planners, IK).
@@ -353,33 +403,21 @@ class CollisionWorld:
         contacts = check.contacts
         self.carry_over(contacts.select(contacts.distance < 0))
 
-    def _query(self, state: RobotState, environment: Environment) -> ContactSet:
-        geometry = self.geometry
-        shapes = geometry.shapes
-        # Every shape's placement in one pinocchio call, then the sphere centres.
+    def shape_placements(self, state: RobotState) -> ShapePlacements:
+        """Every robot shape's world placement at ``state``, in one pinocchio call."""
         pin.updateGeometryPlacements(
-            geometry.robot.model, state.data, self._geometry_model, self._geometry_data
+            self.geometry.robot.model,
+            state.data,
+            self._geometry_model,
+            self._geometry_data,
         )
         oMg = self._geometry_data.oMg
         # By index: faster than iterating over pinocchio's vector.
-        placements = ShapePlacements([oMg[i] for i in range(len(shapes))])
-        centres, halves = self._bounds(placements)
-        radii = geometry.radii
-        margin = self.margin(environment)
-        per_shape = self.settings.contacts_per_link
-        hits = environment.query(
-            shapes, placements, centres, radii, margin, per_shape, halves
-        )
-        own = (
-            self._self_contacts(placements, centres, halves)
-            if self.settings.self_collision
-            else []
-        )
-        # Occupancy maps: the surface is uncertain by half a cell, so obstacles
-        # are inflated by that much (and step validation tolerates as much more).
-        return _contact_set(hits, self.padding + environment.resolution, own)
+        return ShapePlacements([oMg[i] for i in range(len(self.geometry.shapes))])
 
-    def _bounds(self, placements: ShapePlacements) -> tuple[FloatArray, FloatArray]:
+    def shape_bounds(
+        self, placements: ShapePlacements
+    ) -> tuple[FloatArray, FloatArray]:
         """The shapes' bounding-sphere centres and world box half extents, (n, 3).
 
         The boxes are world-aligned boxes around the shapes' own bounding boxes,
@@ -390,10 +428,45 @@ class CollisionWorld:
         shape_bounds(frames, self._centres, self.geometry.box_halves, centres, halves)
         return centres, halves
 
-    def _self_contacts(
-        self, placements: list[pin.SE3], centres: FloatArray, halves: FloatArray
-    ) -> list[_SelfRow]:
-        """The self contacts, as rows (see ``_SelfRow``)."""
+    def query(
+        self, state: RobotState, environment: Environment | None = None
+    ) -> ContactSet:
+        """Contacts at ``state`` against ``environment`` (default: the current one).
+
+        Not cached, and without carried-over contacts: what :meth:`contacts`
+        computes when its cache misses.
+        """
+        environment = environment or self._environment
+        placements = self.shape_placements(state)
+        centres, halves = self.shape_bounds(placements)
+        hits = environment.query(
+            self.geometry.shapes,
+            placements,
+            centres,
+            self.geometry.radii,
+            self.margin(environment),
+            self.settings.contacts_per_link,
+            halves,
+        )
+        own = (
+            self.self_contacts(placements, centres, halves)
+            if self.settings.self_collision
+            else []
+        )
+        # Occupancy maps: the surface is uncertain by half a cell, so obstacles
+        # are inflated by that much (and step validation tolerates as much more).
+        return ContactSet.stack(hits, self.padding + environment.resolution, own)
+
+    def self_contacts(
+        self, placements: ShapePlacements, centres: FloatArray, halves: FloatArray
+    ) -> list[SelfContact]:
+        """The contacts between the robot's own shapes, at ``placements``.
+
+        Args:
+            placements: from :meth:`shape_placements`.
+            centres: from :meth:`shape_bounds`.
+            halves: from :meth:`shape_bounds`.
+        """
         shapes = self.geometry.shapes
         pad2 = 2.0 * self.padding
         margin = self.settings.activation_distance + pad2
@@ -412,7 +485,7 @@ class CollisionWorld:
                 result,
             )
             if d < margin:
-                rows.append((i, j, point, other, normal, d - pad2))
+                rows.append(SelfContact(i, j, point, other, normal, d - pad2))
         return rows
 
     def __repr__(self) -> str:
@@ -421,53 +494,3 @@ class CollisionWorld:
             f"CollisionWorld({self.geometry!r}, environment="
             f"{type(self._environment).__name__}, settings={self.settings!r})"
         )
-
-
-#: A self contact: shapes i and j, the points on each, the normal from j toward
-#: i, the signed distance of the padded shapes.
-_SelfRow = tuple[int, int, FloatArray, FloatArray, FloatArray, float]
-
-
-def _contact_set(hits: Hits, padding: float, own: list[_SelfRow]) -> ContactSet:
-    """One set of the obstacle contacts, then the self contacts, with both parts.
-
-    Each field is built by one numpy call, and the parts are views of it.
-    """
-    n = len(hits)
-    if not own:
-        obstacles = ContactSet(
-            hits.shape,
-            np.full(n, -1, dtype=np.intp),
-            hits.robot_point,
-            hits.obstacle_point,
-            hits.normal,
-            hits.distance - padding,
-        )
-        # The part is another set of the same arrays (itself would be a cycle).
-        obstacles._split = (obstacles.select(slice(None)), _EMPTY)
-        return obstacles
-    i, j, point, other, normal, distance = zip(*own, strict=True)
-    if not n:
-        contacts = ContactSet(
-            np.array(i, dtype=np.intp),
-            np.array(j, dtype=np.intp),
-            np.array(point, dtype=float),
-            np.array(other, dtype=float),
-            np.array(normal, dtype=float),
-            np.array(distance, dtype=float),
-        )
-        contacts._split = (_EMPTY, contacts.select(slice(None)))
-        return contacts
-    contacts = ContactSet(
-        np.concatenate((hits.shape, i)),
-        np.concatenate((np.full(n, -1, dtype=np.intp), j)),
-        np.concatenate((hits.robot_point, point)),
-        np.concatenate((hits.obstacle_point, other)),
-        np.concatenate((hits.normal, normal)),
-        np.concatenate((hits.distance - padding, distance)),
-    )
-    contacts._split = (contacts.select(slice(0, n)), contacts.select(slice(n, None)))
-    return contacts
-
-
-_EMPTY = ContactSet.empty()

@@ -22,10 +22,10 @@ import pinocchio as pin
 
 from cbp.errors import PluginOutputError, SolveError
 from cbp.executors.settings import CatSettings
-from cbp.executors.simulated import SimulatedRun
+from cbp.executors.simulated import SimulatedExecutor, SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
 from cbp.robot import FloatArray
-from cbp.scenario import Scenario
+from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, RunTrace
 
 __all__ = ["CatPlanner", "run_cat"]
@@ -69,10 +69,9 @@ class CatPlanner:
                 break
             q_next = robot.integrate(q, dq)
             if world is not None:
-                check = world.check(q_next)
-                if not check.accepted and not check.penetration < depth:
+                check = world.try_step(q_next, depth)
+                if not check.accepted:
                     rejections += 1
-                    world.reject(check)
                     if rejections >= s.max_rejections:
                         note = (
                             f"{rejections} steps rejected in a row "
@@ -98,6 +97,9 @@ class CatPlanner:
 
 def run_cat(scenario: Scenario, gui: bool = False) -> RunTrace:
     """Run ``scenario`` with the CAT executor; return the trace."""
-    settings = scenario.spec.method.cat
+    settings = scenario.spec.method.settings(CatSettings)
     run = SimulatedRun(scenario, "cat", gui)
     return run_trajectory_executor(run, CatPlanner(scenario, settings), settings.timing)
+
+
+EXECUTOR = SimulatedExecutor(run_cat)

@@ -19,10 +19,10 @@ import pinocchio as pin
 
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.settings import IkSettings
-from cbp.executors.simulated import SimulatedRun
+from cbp.executors.simulated import SimulatedExecutor, SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
 from cbp.robot import FloatArray
-from cbp.scenario import Scenario
+from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, RunTrace
 
 __all__ = ["IkPlanner", "run_ik"]
@@ -77,8 +77,11 @@ def interpolate_checked(
 
 def run_ik(scenario: Scenario, gui: bool = False) -> RunTrace:
     """Run ``scenario`` with the IK method; return the trace."""
-    settings = scenario.spec.method.ik
+    settings = scenario.spec.method.settings(IkSettings)
     run = SimulatedRun(scenario, "ik", gui, needs_world=True)
     return run_trajectory_executor(
         run, IkPlanner(scenario, run, settings), settings.timing
     )
+
+
+EXECUTOR = SimulatedExecutor(run_ik)

@@ -16,9 +16,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from cbp.executors.simulated import SimulatedRun
+from cbp.executors.settings import JtSettings
+from cbp.executors.simulated import SimulatedExecutor, SimulatedRun
 from cbp.robot import FloatArray
-from cbp.scenario import Scenario
+from cbp.scenario.runtime import Scenario
 from cbp.trace import RunTrace
 
 __all__ = ["JacobianTransposeController", "run_jt"]
@@ -29,7 +30,7 @@ class JacobianTransposeController:
 
     def __init__(self, scenario: Scenario, run: SimulatedRun) -> None:
         """Resolve the frame; the posture target is the initial configuration."""
-        self.settings = scenario.spec.method.jt
+        self.settings = scenario.spec.method.settings(JtSettings)
         self.robot = scenario.robot
         self.run = run
         self.frame_id = scenario.robot.frame_id(run.ee_frame)
@@ -81,3 +82,6 @@ def run_jt(scenario: Scenario, gui: bool = False) -> RunTrace:
     finally:
         trace = run.finish()
     return trace
+
+
+EXECUTOR = SimulatedExecutor(run_jt)

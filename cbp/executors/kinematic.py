@@ -18,62 +18,31 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from cbp.errors import InvalidTargetError, PluginOutputError, SolveError
-from cbp.robot import FloatArray
-from cbp.scenario import Scenario
+from cbp.executors.settings import KinematicSettings
+from cbp.report import write_outputs
+from cbp.scenario.runtime import Scenario
+from cbp.trace import KinematicTrace
 
 log = logging.getLogger(__name__)
 
 
-@dataclass
-class Trace:
-    """What a run recorded, one row per control step.
-
-    Attributes:
-        t: times [s] (N,).
-        q: configurations (N, nq).
-        ee_position: end-effector position (N, 3) [m].
-        goal_position: goal position (N, 3) [m], NaN without a goal.
-        position_error: end-effector to goal distance (N,) [m].
-        rotation_error: rotation angle between end effector and goal (N,) [rad].
-        solve_time: engine step wall time (N,) [s].
-        events: (time, message) for every goal rejected or step not solved.
-        joint_names: names of the model's joints.
-        penetration: deepest penetration of the padded links at each step (N,)
-            [m]; empty without a collision world.
-        rejected_steps: steps rejected by step validation.
-    """
-
-    t: FloatArray
-    q: FloatArray
-    ee_position: FloatArray
-    goal_position: FloatArray
-    position_error: FloatArray
-    rotation_error: FloatArray
-    solve_time: FloatArray
-    events: list[tuple[float, str]] = field(default_factory=list)
-    joint_names: list[str] = field(default_factory=list)
-    penetration: FloatArray = field(default_factory=lambda: np.zeros(0))
-    rejected_steps: int = 0
-
-
-def run_kinematic(scenario: Scenario) -> Trace:
+def run_kinematic(scenario: Scenario) -> KinematicTrace:
     """Run the scenario for its duration and return the trace."""
     robot = scenario.robot
     engine = scenario.make_engine()
     stream = scenario.goal_stream()
     goal_task = scenario.goal_task()
-    dt = scenario.spec.method.dt
+    dt = scenario.spec.method.settings(KinematicSettings).dt
     steps = math.ceil(scenario.spec.duration / dt) + 1
-    ee_frame = robot.frame_id(
-        robot.description.end_effector if robot.description else robot.frame_names[-1]
-    )
-    frame_id = getattr(goal_task, "frame_id", ee_frame)
+    frame_id = robot.frame_id(scenario.ee_frame)
     q = scenario.q0.copy()
     rows: dict[str, list[object]] = {
         k: [] for k in ("t", "q", "ee", "goal", "perr", "rerr", "time")
@@ -90,7 +59,7 @@ def run_kinematic(scenario: Scenario) -> Trace:
             next_goal_time += stream.period
             candidate = stream.pose(t)
             try:
-                goal_task.set_target(candidate.translation, candidate.rotation)  # type: ignore[attr-defined]
+                goal_task.set_target(candidate.translation, candidate.rotation)
                 goal = candidate
             except InvalidTargetError as exc:
                 events.append((t, f"goal rejected, previous goal kept: {exc}"))
@@ -121,18 +90,17 @@ def run_kinematic(scenario: Scenario) -> Trace:
             rows["rerr"].append(np.nan)
         q_next = robot.integrate(q, dq)
         if world is not None:
-            check = world.check(q_next)
+            check = world.try_step(q_next)
             if not check.accepted:
                 depth.append(depth[-1] if depth else 0.0)  # the robot stays
                 rejected += 1
-                world.reject(check)
                 events.append(
                     (t, f"step rejected: penetration {check.penetration * 1e3:.1f} mm")
                 )
                 continue
             depth.append(check.penetration)
         q = q_next
-    return Trace(
+    return KinematicTrace(
         t=np.array(rows["t"], dtype=float),
         q=np.array(rows["q"], dtype=float),
         ee_position=np.array(rows["ee"], dtype=float),
@@ -145,3 +113,32 @@ def run_kinematic(scenario: Scenario) -> Trace:
         penetration=np.array(depth, dtype=float),
         rejected_steps=rejected,
     )
+
+
+class KinematicExecutor:
+    """The kinematic executor's entry in the executor table."""
+
+    def run(self, scenario: Scenario, gui: bool = False) -> KinematicTrace:
+        """Run ``scenario`` (there is no simulator window to show)."""
+        return run_kinematic(scenario)
+
+    def write(
+        self, scenario: Scenario, traces: Mapping[str, Any], out: Path
+    ) -> dict[str, dict[str, Any]]:
+        """trace.csv, metrics.json, tracking.png and report.md (one run)."""
+        (method, trace), *more = traces.items()
+        if more:
+            raise ValueError("the kinematic executor writes one run at a time")
+        return {method: write_outputs(scenario, trace, out)}
+
+    def describe(
+        self, scenario: Scenario, method: str, metrics: Mapping[str, Any]
+    ) -> str:
+        """Steps, final error, events."""
+        return (
+            f"{scenario.spec.name}: {metrics['steps']} steps, final position error "
+            f"{metrics['final_position_error_m']} m, {metrics['events']} events"
+        )
+
+
+EXECUTOR = KinematicExecutor()

@@ -23,10 +23,10 @@ import pinocchio as pin
 
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.settings import MpSettings
-from cbp.executors.simulated import SimulatedRun
+from cbp.executors.simulated import SimulatedExecutor, SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
 from cbp.robot import FloatArray
-from cbp.scenario import Scenario
+from cbp.scenario.runtime import Scenario
 from cbp.trace import RunTrace
 
 __all__ = ["MpPlanner", "run_mp"]
@@ -168,10 +168,13 @@ def _always_valid(state: object) -> bool:
 
 def run_mp(scenario: Scenario, gui: bool = False) -> RunTrace:
     """Run ``scenario`` with the MP method; return the trace."""
-    settings = scenario.spec.method.mp
+    settings = scenario.spec.method.settings(MpSettings)
     run = SimulatedRun(scenario, "mp", gui, needs_world=True)
     planner = MpPlanner(scenario, run, settings)
     try:
         return run_trajectory_executor(run, planner, settings.timing)
     finally:
         planner.close()
+
+
+EXECUTOR = SimulatedExecutor(run_mp)

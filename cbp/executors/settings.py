@@ -14,6 +14,7 @@ __all__ = [
     "IkSearchSettings",
     "IkSettings",
     "JtSettings",
+    "KinematicSettings",
     "MpSettings",
     "VelocitySettings",
 ]
@@ -63,6 +64,18 @@ class ExecutorTiming:
         lo = self.min_period if self.min_period is not None else self.period
         hi = self.max_period if self.max_period is not None else 4.0 * self.period
         return lo, hi
+
+
+@dataclass(frozen=True, kw_only=True)
+class KinematicSettings:
+    """The ``method.kinematic:`` section: QP steps integrated exactly."""
+
+    dt: float = 0.01
+    """Duration of one control step [s]."""
+
+    def __post_init__(self) -> None:
+        """Positive step."""
+        require(self, "> 0", "dt")
 
 
 @dataclass(frozen=True, kw_only=True)

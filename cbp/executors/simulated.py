@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,14 +27,15 @@ from cbp.errors import InvalidTargetError
 from cbp.perception.camera import DepthCamera
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
-from cbp.plugin import Task
+from cbp.plugin import GoalReceiver
+from cbp.report import write_runs
 from cbp.robot import FloatArray
-from cbp.scenario import Scenario
+from cbp.scenario.runtime import Scenario
 from cbp.sim.simulation import Simulation
 from cbp.spatial import checked_se3
 from cbp.trace import PeriodRecord, RunTrace
 
-__all__ = ["SimulatedRun"]
+__all__ = ["SimulatedExecutor", "SimulatedRun"]
 
 log = logging.getLogger(__name__)
 
@@ -86,7 +89,7 @@ class SimulatedRun:
             gui,
         )
         self.stream = scenario.goal_stream()
-        self.goal_task: Task[Any] | None = scenario.goal_task()
+        self.goal_task: GoalReceiver | None = scenario.goal_task()
         self.events: list[tuple[float, str]] = []
         self.periods: list[PeriodRecord] = []
         self._goal = _Goal()
@@ -145,7 +148,7 @@ class SimulatedRun:
         """Sample the goal at ``t`` and hand it to the scenario's goal task."""
         pose = self.goal(t)
         if pose is not None and self.goal_task is not None:
-            self.goal_task.set_target(pose.translation, pose.rotation)  # type: ignore[attr-defined]
+            self.goal_task.set_target(pose.translation, pose.rotation)
         return pose
 
     def event(self, t: float, message: str) -> None:
@@ -224,15 +227,7 @@ class SimulatedRun:
     @property
     def ee_frame(self) -> str:
         """The frame that tracks the goal (the goal task's, else the robot's)."""
-        task = self.goal_task
-        if (
-            task is not None
-            and hasattr(task, "params")
-            and hasattr(task.params, "frame")
-        ):
-            return str(task.params.frame)
-        description = self.robot.description
-        return description.end_effector if description else self.robot.frame_names[-1]
+        return self.scenario.ee_frame
 
     def _clearance(self, t: FloatArray, q: FloatArray) -> FloatArray:
         """Unpadded links to declared objects, every CLEARANCE_PERIOD [m]."""
@@ -256,3 +251,40 @@ class SimulatedRun:
                 else CLEARANCE_RANGE
             )
         return out
+
+
+class SimulatedExecutor:
+    """An executor that runs in the simulator and returns a :class:`RunTrace`.
+
+    Its outputs are :func:`cbp.report.write_runs`'s, so ``cbp compare`` can put
+    it beside the others.
+
+    Args:
+        run: runs a scenario (``run(scenario, gui)``).
+    """
+
+    def __init__(self, run: Callable[[Scenario, bool], RunTrace]) -> None:
+        """Keep the run function."""
+        self._run = run
+
+    def run(self, scenario: Scenario, gui: bool = False) -> RunTrace:
+        """Run ``scenario``; return its trace."""
+        return self._run(scenario, gui)
+
+    def write(
+        self, scenario: Scenario, traces: Mapping[str, Any], out: Path
+    ) -> dict[str, dict[str, Any]]:
+        """Trace, metrics, figures and report of one or several methods."""
+        return write_runs(scenario, traces, out)
+
+    def describe(
+        self, scenario: Scenario, method: str, metrics: Mapping[str, Any]
+    ) -> str:
+        """Reached, final error, peak contact force, events."""
+        error = metrics["final_position_error_m"]
+        shown = "n/a" if error is None else f"{error * 1e3:.1f}"
+        return (
+            f"{scenario.spec.name} ({method}): reached {metrics['reached']}, final "
+            f"error {shown} mm, peak contact force "
+            f"{metrics['peak_contact_force_n']:.1f} N, {metrics['events']} events"
+        )

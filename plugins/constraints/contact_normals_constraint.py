@@ -53,7 +53,6 @@ class ContactNormalsConstraint(Constraint[ContactParams]):
     """
 
     type_name: ClassVar[str] = "contact_normals"
-    Params: ClassVar[type[PluginParams]] = ContactParams
     unit: ClassVar[str] = "m"
     default_gain: ClassVar[float] = 0.5
 

@@ -41,7 +41,6 @@ class JointLimitsConstraint(Constraint[JointLimitsParams]):
     """
 
     type_name: ClassVar[str] = "joint_limits"
-    Params: ClassVar[type[PluginParams]] = JointLimitsParams
     unit: ClassVar[str] = "rad"
     constant_jacobian = True  # a selection of tangent coordinates
 

@@ -8,9 +8,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from cbp.errors import ConfigError, TargetNotSetError, located
+from cbp.errors import ConfigError, located
+from cbp.joint_space import StepDisplacement
 from cbp.plugin import Constraint, FloatArray, PluginParams
-from cbp.robot import RobotModel, compact_rows, rows_count
+from cbp.robot import RobotModel, compact_rows
 from cbp.state import RobotState
 
 
@@ -32,7 +33,9 @@ class JointVelocityParams(PluginParams):
                 raise ConfigError(f"must be > 0, got {value}", f"limits.{joint}")
 
 
-class JointVelocityConstraint(Constraint[JointVelocityParams]):
+class JointVelocityConstraint(
+    StepDisplacement[JointVelocityParams], Constraint[JointVelocityParams]
+):
     r"""Displacement over one step within the velocity limits.
 
     .. math:: -s\,v_{max}\,\Delta t \le q \ominus q_0 \le s\,v_{max}\,\Delta t
@@ -45,7 +48,6 @@ class JointVelocityConstraint(Constraint[JointVelocityParams]):
     """
 
     type_name: ClassVar[str] = "joint_velocity"
-    Params: ClassVar[type[PluginParams]] = JointVelocityParams
     unit: ClassVar[str] = "rad"
 
     def __init__(
@@ -53,8 +55,6 @@ class JointVelocityConstraint(Constraint[JointVelocityParams]):
     ) -> None:
         """Gather the limits and keep the coordinates that have one."""
         super().__init__(params, robot, name)
-        # q ⊖ q_ref has the identity as its Jacobian when nq == nv.
-        self.constant_jacobian = robot.is_euclidean
         velocity = np.array(robot.velocity_limits)
         for joint, value in params.limits.items():
             velocity[located(robot.joint_v_slice, joint, f"limits.{joint}")] = value
@@ -64,39 +64,14 @@ class JointVelocityConstraint(Constraint[JointVelocityParams]):
         self._reach = np.zeros(finite.size)
         self._negative_reach = np.zeros(finite.size)
         self._dt = 0.0
-        self._q0: FloatArray | None = None
-
-    @property
-    def dim(self) -> int:
-        """One row per limited tangent coordinate."""
-        return rows_count(self.rows, self.robot.nv)
 
     def prepare(self, state: RobotState, dt: float) -> None:
         """Latch the start configuration and the step duration [s]."""
-        self._q0 = state.q
+        super().prepare(state, dt)
         if dt != self._dt:  # the same every step, usually
             self._reach = self._velocity * dt
             self._negative_reach = -self._reach
             self._dt = dt
-
-    def _anchor(self) -> FloatArray:
-        if self._q0 is None:
-            raise TargetNotSetError(
-                f"{self.name} ({self.type_name}): prepare() was not called"
-            )
-        return self._q0
-
-    def compute_value(self, state: RobotState) -> FloatArray:
-        """Selected rows of q ⊖ q0."""
-        return self.robot.difference(self._anchor(), state.q)[self.rows]
-
-    def value_into(self, state: RobotState, value: FloatArray) -> None:
-        """Selected rows of q ⊖ q0, written in place."""
-        self.robot.difference_into(self._anchor(), state.q, value, self.rows)
-
-    def compute_jacobian(self, state: RobotState) -> FloatArray:
-        """Selected rows of the Jacobian of q ⊖ q0."""
-        return self.robot.difference_jacobian(self._anchor(), state.q, self.rows)
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """±(scaled velocity limit) x (step duration)."""

@@ -8,11 +8,11 @@ from typing import ClassVar
 
 import numpy as np
 
+from cbp.orbit import frame_of
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel
 from cbp.spatial import cross3
 from cbp.state import RobotState
-from plugins.constraints._orbit import frame_of
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -39,7 +39,6 @@ class MinAltitudeConstraint(Constraint[MinAltitudeParams]):
     """
 
     type_name: ClassVar[str] = "min_altitude"
-    Params: ClassVar[type[PluginParams]] = MinAltitudeParams
     unit: ClassVar[str] = "m"
 
     def __init__(
@@ -77,3 +76,10 @@ class MinAltitudeConstraint(Constraint[MinAltitudeParams]):
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """z_min <= f."""
         return np.array([self.params.min_height]), np.array([np.inf])
+
+    def signals(self, state: RobotState) -> dict[str, float]:
+        """``altitude`` and its bound ``min_altitude`` [m]."""
+        return {
+            "altitude": float(self.compute_value(state)[0]),
+            "min_altitude": self.params.min_height,
+        }

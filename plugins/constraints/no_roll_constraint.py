@@ -3,16 +3,17 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
+from cbp.orbit import frame_of
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel
 from cbp.spatial import cross3
 from cbp.state import RobotState
-from plugins.constraints._orbit import frame_of
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -38,7 +39,6 @@ class NoRollConstraint(Constraint[NoRollParams]):
     """
 
     type_name: ClassVar[str] = "no_roll"
-    Params: ClassVar[type[PluginParams]] = NoRollParams
     unit: ClassVar[str] = "1"
 
     def __init__(self, params: NoRollParams, robot: RobotModel, name: str = "") -> None:
@@ -73,3 +73,7 @@ class NoRollConstraint(Constraint[NoRollParams]):
     def roll(self, state: RobotState) -> float:
         """Roll of the image about the line of sight [rad]."""
         return float(np.arcsin(np.clip(self.compute_value(state)[0], -1.0, 1.0)))
+
+    def signals(self, state: RobotState) -> dict[str, float]:
+        """``roll_deg``: :meth:`roll` in degrees."""
+        return {"roll_deg": math.degrees(self.roll(state))}

@@ -9,10 +9,10 @@ from typing import ClassVar
 import numpy as np
 
 from cbp.errors import ConfigError
+from cbp.orbit import frame_of, unit
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel
 from cbp.state import RobotState
-from plugins.constraints._orbit import frame_of, unit
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -49,7 +49,6 @@ class ObstacleDistanceConstraint(Constraint[ObstacleDistanceParams]):
     """
 
     type_name: ClassVar[str] = "obstacle_distance"
-    Params: ClassVar[type[PluginParams]] = ObstacleDistanceParams
     unit: ClassVar[str] = "m"
 
     def __init__(
@@ -84,3 +83,10 @@ class ObstacleDistanceConstraint(Constraint[ObstacleDistanceParams]):
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """r_r <= f."""
         return np.array([self.params.min_distance]), np.array([np.inf])
+
+    def signals(self, state: RobotState) -> dict[str, float]:
+        """``obstacle_distance`` and its bound ``min_obstacle_distance`` [m]."""
+        return {
+            "obstacle_distance": float(self.compute_value(state)[0]),
+            "min_obstacle_distance": self.params.min_distance,
+        }

@@ -9,10 +9,10 @@ from typing import ClassVar
 import numpy as np
 
 from cbp.errors import ConfigError
-from cbp.plugin import Constraint, FloatArray, PluginParams
+from cbp.orbit import CameraObjectParams, ObjectTarget, frame_of, unit
+from cbp.plugin import Constraint, FloatArray
 from cbp.robot import RobotModel
 from cbp.state import RobotState
-from plugins.constraints._orbit import CameraObjectParams, ObjectTarget, frame_of, unit
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -41,7 +41,6 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
     """
 
     type_name: ClassVar[str] = "orbit_distance"
-    Params: ClassVar[type[PluginParams]] = OrbitDistanceParams
     unit: ClassVar[str] = "m"
     input_size: ClassVar[int] = 1
 
@@ -83,3 +82,10 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
         """r_d <= f <= r_d (an equality when hard)."""
         r = np.array([self.distance])
         return r, r.copy()
+
+    def signals(self, state: RobotState) -> dict[str, float]:
+        """``distance`` and ``distance_desired`` (r_d) [m]."""
+        return {
+            "distance": float(self.compute_value(state)[0]),
+            "distance_desired": self.distance,
+        }

@@ -3,17 +3,18 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
 import numpy as np
 import pinocchio as pin
 
-from cbp.plugin import Constraint, FloatArray, PluginParams
+from cbp.orbit import CameraObjectParams, ObjectTarget, frame_of, unit
+from cbp.plugin import Constraint, FloatArray
 from cbp.robot import RobotModel
 from cbp.spatial import cross3
 from cbp.state import RobotState
-from plugins.constraints._orbit import CameraObjectParams, ObjectTarget, frame_of, unit
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -52,7 +53,6 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
     """
 
     type_name: ClassVar[str] = "view_direction"
-    Params: ClassVar[type[PluginParams]] = ViewDirectionParams
     unit: ClassVar[str] = "1"
 
     def __init__(
@@ -107,3 +107,7 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
         d = self.object.position - state.frame_position(self.frame_id)
         direction, _ = unit(d)
         return float(np.arccos(np.clip(x.dot(direction), -1.0, 1.0)))
+
+    def signals(self, state: RobotState) -> dict[str, float]:
+        """``view_error_deg``: :meth:`angle` in degrees."""
+        return {"view_error_deg": math.degrees(self.angle(state))}

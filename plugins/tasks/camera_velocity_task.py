@@ -8,11 +8,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from cbp.errors import TargetNotSetError
+from cbp.orbit import frame_of
 from cbp.plugin import FloatArray, PluginParams, Task
 from cbp.robot import RobotModel
 from cbp.state import RobotState
-from plugins.constraints._orbit import frame_of
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -42,7 +41,6 @@ class CameraVelocityTask(Task[CameraVelocityParams]):
     """
 
     type_name: ClassVar[str] = "camera_velocity"
-    Params: ClassVar[type[PluginParams]] = CameraVelocityParams
     unit: ClassVar[str] = "m"
     default_gain: ClassVar[float] = 1.0
 
@@ -77,21 +75,14 @@ class CameraVelocityTask(Task[CameraVelocityParams]):
             dt,
         )
 
-    def _latched(self) -> tuple[FloatArray, FloatArray, float]:
-        if self._anchor is None:
-            raise TargetNotSetError(
-                f"{self.name} ({self.type_name}): prepare() was not called"
-            )
-        return self._anchor
-
     def compute_value(self, state: RobotState) -> FloatArray:
         """Displacement along the latched axes, minus the commanded one."""
-        p_a, axes, dt = self._latched()
+        p_a, axes, dt = self.latched(self._anchor)
         return np.asarray(
             axes.dot(state.frame_position(self.frame_id) - p_a) - self.velocity * dt
         )
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """S R_a^T J_t."""
-        _, axes, _ = self._latched()
+        _, axes, _ = self.latched(self._anchor)
         return np.asarray(axes.dot(state.frame_jacobian(self.frame_id)[:3]))

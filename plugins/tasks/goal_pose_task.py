@@ -12,7 +12,7 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from cbp.errors import ConfigError, TargetNotSetError, located
-from cbp.plugin import FloatArray, Linearization, PluginParams, Task
+from cbp.plugin import FloatArray, PluginParams, Task
 from cbp.robot import RobotModel
 from cbp.spatial import Pose, checked_pose, pose_error_into
 from cbp.state import RobotState
@@ -64,7 +64,6 @@ class GoalPoseTask(Task[GoalPoseParams]):
     """
 
     type_name: ClassVar[str] = "goal_pose"
-    Params: ClassVar[type[PluginParams]] = GoalPoseParams
     unit: ClassVar[str] = "m|rad"
 
     def __init__(
@@ -124,19 +123,22 @@ class GoalPoseTask(Task[GoalPoseParams]):
             self._target = pin.SE3(self._goal_rotation_t.T, self._goal_translation)
         return self._target
 
+    @property
+    def goal_frame(self) -> str:
+        """The frame moved to the goal (``params.frame``)."""
+        return self.params.frame
+
     def compute_value(self, state: RobotState) -> FloatArray:
         """Translation error then rotation vector, world frame."""
-        return self.linearize(state).value
+        value, J = np.empty(6), np.empty((6, self.robot.nv))
+        self.linearize_into(state, value, J)
+        return value
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """World-aligned frame Jacobian with the log map's Jacobian on rotation rows."""
-        return self.linearize(state).jacobian
-
-    def linearize(self, state: RobotState) -> Linearization:
-        """Value and Jacobian sharing the rotation error matrix."""
         value, J = np.empty(6), np.empty((6, self.robot.nv))
         self.linearize_into(state, value, J)
-        return Linearization(value, J)
+        return J
 
     def linearize_into(
         self, state: RobotState, value: FloatArray, jacobian: FloatArray

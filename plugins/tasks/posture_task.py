@@ -9,9 +9,9 @@ from typing import ClassVar
 import numpy.typing as npt
 
 from cbp.errors import located
+from cbp.joint_space import JointDifference
 from cbp.plugin import FloatArray, PluginParams, Task
-from cbp.robot import IndexRows, RobotModel, compact_rows, rows_count
-from cbp.state import RobotState
+from cbp.robot import RobotModel, compact_rows
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -25,7 +25,7 @@ class PostureParams(PluginParams):
     """Joints the task acts on; default every joint but a mobile base's root."""
 
 
-class PostureTask(Task[PostureParams]):
+class PostureTask(JointDifference[PostureParams], Task[PostureParams]):
     r"""Tangent-space difference between the configuration and a target posture.
 
     .. math:: f(q) = S\,(q \ominus q_d)
@@ -38,7 +38,6 @@ class PostureTask(Task[PostureParams]):
     """
 
     type_name: ClassVar[str] = "posture"
-    Params: ClassVar[type[PluginParams]] = PostureParams
     unit: ClassVar[str] = "rad"
 
     def __init__(
@@ -46,10 +45,8 @@ class PostureTask(Task[PostureParams]):
     ) -> None:
         """Resolve joint names and build the target configuration."""
         super().__init__(params, robot, name)
-        # q ⊖ q_ref has the identity as its Jacobian when nq == nv.
-        self.constant_jacobian = robot.is_euclidean
         if params.joints is None:
-            self.rows: IndexRows = robot.articulated_v_indices()
+            self.rows = robot.articulated_v_indices()
         else:
             self.rows = compact_rows(
                 located(robot.joint_v_indices, params.joints, "joints")
@@ -59,11 +56,6 @@ class PostureTask(Task[PostureParams]):
             sl = located(robot.joint_q_slice, joint, f"target.{joint}")
             q_target[sl] = value
         self._target = robot.check_configuration(q_target, "posture target")
-
-    @property
-    def dim(self) -> int:
-        """One row per tangent coordinate of the selected joints."""
-        return rows_count(self.rows, self.robot.nv)
 
     def set_target(self, q_target: npt.ArrayLike) -> None:
         """Set the target configuration (nq), e.g. an IK solution to move toward.
@@ -78,17 +70,9 @@ class PostureTask(Task[PostureParams]):
         """The target configuration (nq)."""
         return self._target
 
-    def compute_value(self, state: RobotState) -> FloatArray:
-        """Selected rows of q ⊖ q_d."""
-        return self.robot.difference(self._target, state.q)[self.rows]
-
-    def value_into(self, state: RobotState, value: FloatArray) -> None:
-        """Selected rows of q ⊖ q_d, written in place."""
-        self.robot.difference_into(self._target, state.q, value, self.rows)
-
-    def compute_jacobian(self, state: RobotState) -> FloatArray:
-        """Selected rows of the Jacobian of q ⊖ q_d."""
-        return self.robot.difference_jacobian(self._target, state.q, self.rows)
+    def reference(self) -> FloatArray:
+        """The target configuration."""
+        return self._target
 
     def __repr__(self) -> str:
         """Type, name and selected joints."""

@@ -339,7 +339,7 @@ def test_queries_run_the_kernels_compiled_beforehand() -> None:
 
     script = """
 from cbp.collision import broad, cells
-from cbp.bench import _cat_step, _near_board, _shelf_octree_world, SCENARIOS
+from benchmarks.bench import _cat_step, _near_board, _shelf_octree_world, SCENARIOS
 from cbp.scenario import load_scenario
 cells.compile_kernels()
 kernels = [cells._candidates, cells.metaball_normals, cells.spread_contacts,

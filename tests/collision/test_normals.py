@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cbp.collision import MetaballRefiner
-from cbp.collision.normals_study import angle_errors, tilted_plane, yawed_box
+from tests.collision.normals_study import angle_errors, tilted_plane, yawed_box
 
 PAPER = MetaballRefiner(radius_cells=1.5, offset_cells=0.0)
 

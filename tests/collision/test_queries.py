@@ -248,13 +248,8 @@ def _shapes_at(
     world: CollisionWorld, q: np.ndarray
 ) -> tuple[ShapePlacements, np.ndarray, np.ndarray]:
     """The world's shape placements at q, with their bounding centres and boxes."""
-    robot = world.geometry.robot
-    state = RobotState(robot, q)
-    pin.updateGeometryPlacements(
-        robot.model, state.data, world._geometry_model, world._geometry_data
-    )
-    placements = ShapePlacements(list(world._geometry_data.oMg))
-    return (placements, *world._bounds(placements))
+    placements = world.shape_placements(RobotState(world.geometry.robot, q))
+    return (placements, *world.shape_bounds(placements))
 
 
 def test_box_broad_phase_loses_no_contact(geometry, robots, rng) -> None:

@@ -26,7 +26,7 @@ def test_panda_reach_tracks_the_goal_within_limits() -> None:
     bq = robot.bounded_q
     assert np.all(trace.q[:, bq] >= robot.lower_limits[bq] - 1e-9)
     assert np.all(trace.q[:, bq] <= robot.upper_limits[bq] + 1e-9)
-    steps = np.diff(trace.q, axis=0) / scenario.spec.method.dt
+    steps = np.diff(trace.q, axis=0) / scenario.spec.method.kinematic.dt
     assert np.all(np.abs(steps) <= 0.5 * robot.velocity_limits + 1e-9)
     assert trace.events == []
 

@@ -17,7 +17,7 @@ from cbp.executors.jt import run_jt
 from cbp.executors.mp import MpPlanner
 from cbp.executors.settings import IkSearchSettings
 from cbp.executors.simulated import SimulatedRun
-from cbp.metrics import compute_metrics
+from cbp.metrics import run_metrics
 from cbp.scenario import Scenario, load_scenario
 from tests.conftest import run_cbp
 
@@ -106,7 +106,7 @@ def test_jt_tracks_a_free_space_step() -> None:
         SCENARIOS / "cat_free_step.yaml", overrides={"duration": "2.0"}
     )
     trace = run_jt(scenario)
-    m = compute_metrics(trace)
+    m = run_metrics(trace)
     assert m["reached"], m
     assert m["response_time_s"] < 0.1
     assert trace.periods == []  # torque control: no command periods

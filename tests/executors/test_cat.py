@@ -10,7 +10,7 @@ import numpy as np
 
 from cbp.executors.cat import run_cat
 from cbp.goals import write_recorded
-from cbp.metrics import compute_metrics
+from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
 from tests.conftest import run_cbp
 
@@ -25,7 +25,7 @@ def test_free_space_step_reaches_the_goal_without_contact() -> None:
         SCENARIOS / "cat_free_step.yaml", overrides={"duration": "2.2"}
     )
     trace = run_cat(scenario)
-    m = compute_metrics(trace)
+    m = run_metrics(trace)
     assert m["reached"], m
     assert m["peak_contact_force_n"] == 0.0
     assert m["response_time_s"] < 0.3
@@ -66,7 +66,7 @@ def test_nan_goal_keeps_the_previous_goal_and_says_so(tmp_path: Path) -> None:
     assert len(rejected) == 4
     assert np.all(np.isfinite(trace.q))
     assert np.all(np.isfinite(trace.goal_position[10:]))
-    assert compute_metrics(trace)["reached"]
+    assert run_metrics(trace)["reached"]
 
 
 def test_failed_qp_holds_the_last_safe_trajectory(tmp_path: Path) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from cbp.executors.cat import run_cat
-from cbp.metrics import compute_metrics
+from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
 from cbp.trace import RunTrace
 
@@ -30,7 +30,7 @@ def _run(scene: str, source: str = "ground_truth") -> tuple[RunTrace, dict[str, 
         SCENARIOS / f"cat_{scene}.yaml", overrides={"perception.source": source}
     )
     trace = run_cat(scenario)
-    return trace, compute_metrics(trace)
+    return trace, run_metrics(trace)
 
 
 @pytest.mark.parametrize("source", ["ground_truth", "depth_camera"])

@@ -12,9 +12,12 @@ import numpy as np
 import pytest
 
 from cbp.errors import ScenarioError
-from cbp.executors.velocity import VelocityTrace, orbit_metrics, run_velocity
+from cbp.executors.settings import VelocitySettings
+from cbp.executors.velocity import run_velocity
+from cbp.metrics import orbit_metrics
 from cbp.scenario import Scenario, load_scenario
 from cbp.state import RobotState
+from cbp.trace import VelocityTrace
 from tests.conftest import run_cbp
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
@@ -24,7 +27,13 @@ SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 def _run(name: str) -> tuple[Scenario, VelocityTrace, dict[str, Any]]:
     scenario = load_scenario(SCENARIOS / f"{name}.yaml")
     trace = run_velocity(scenario)
-    return scenario, trace, orbit_metrics(scenario, trace)
+    return (
+        scenario,
+        trace,
+        orbit_metrics(
+            trace, scenario.spec.method.settings(VelocitySettings).transient_s
+        ),
+    )
 
 
 @pytest.mark.parametrize("case", ["youbot_orbit_case1", "youbot_orbit_case2"])
@@ -95,7 +104,8 @@ def test_refused_input_keeps_the_previous_value(tmp_path: Path) -> None:
     trace = run_velocity(load_scenario(path))
     refused = [msg for _, msg in trace.events if "refused" in msg]
     assert len(refused) == 49  # every tick after 1 s (1.02 s to 1.98 s)
-    assert np.all(trace.signals["distance_desired"][trace.t > 1.0] == -1)
+    # The desired distance in effect stays the last accepted one.
+    assert np.all(trace.signals["distance_desired"][trace.t > 1.0] == 0.6)
     assert np.all(np.isfinite(trace.q))
 
 

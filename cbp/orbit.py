@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Shared pieces of the orbit-object plugins (orbit paper, eqs. 7-18)."""
+"""Camera and object geometry shared by the orbit-object plugins (orbit paper)."""
 
 from __future__ import annotations
 

@@ -447,15 +447,15 @@ def _parts_rows(cfg: BenchConfig) -> list[Row]:
 def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
     """The octree contact query inside the shelf, part by part."""
     from cbp.collision.cells import ShapeTable
-    from cbp.collision.geometry import ShapePlacements
+    from cbp.state import RobotState
 
     world, q = _shelf_octree_world()
     world.check(q)
     env = world.environment
-    placements = ShapePlacements(list(world._geometry_data.oMg))  # at q
+    placements = world.shape_placements(RobotState(world.geometry.robot, q))
     shapes = world.geometry.shapes
     margin = world.margin(env)
-    centres, halves = world._bounds(placements)
+    centres, halves = world.shape_bounds(placements)
     table = ShapeTable.for_shapes(shapes, margin + env.resolution)
     pair = (q, q + 1e-9)
     per_shape = world.settings.contacts_per_link
@@ -477,7 +477,7 @@ def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
         ),
         (
             "self pairs (coal distance calls from Python)",
-            lambda i: world._self_contacts(placements, centres, halves),
+            lambda i: world.self_contacts(placements, centres, halves),
         ),
     ]
 
@@ -539,12 +539,8 @@ def _cat_step(
         q = start if i % RESTART == 0 else current["q"]
         dq = engine.step(q, 0.02)
         q_new = robot.integrate(q, dq)
-        check = world.check(q_new)
-        if check.accepted:
-            current["q"] = q_new
-        else:
-            world.reject(check)
-            current["q"] = q
+        check = world.try_step(q_new)
+        current["q"] = q_new if check.accepted else q
         return dq
 
     return step, world
@@ -788,6 +784,7 @@ def _mp_row(cfg: BenchConfig) -> list[Row]:
     import ompl.util as ou
 
     from cbp.executors.mp import MpPlanner
+    from cbp.executors.settings import MpSettings
     from cbp.executors.simulated import SimulatedRun
     from cbp.scenario import load_scenario
 
@@ -797,7 +794,7 @@ def _mp_row(cfg: BenchConfig) -> list[Row]:
     samples = []
     solved = 0
     try:
-        planner = MpPlanner(scenario, run, scenario.spec.method.mp)
+        planner = MpPlanner(scenario, run, scenario.spec.method.settings(MpSettings))
         goal = _final_goal(scenario)  # in the shelf
         target = planner.search.solution_for(goal, scenario.q0, time.perf_counter() + 5)
         for _ in range(cfg.mp_seeds):
@@ -836,7 +833,7 @@ def _orbit_row(cfg: BenchConfig) -> list[Row]:
 
     def tick(i: int) -> object:
         for plugin, functions in inputs:
-            plugin.set_input(np.array([f(0.02 * i) for f in functions]))  # type: ignore[attr-defined]
+            plugin.set_input(np.array([f(0.02 * i) for f in functions]))
         return engine.step(q, 0.02)
 
     n = cfg.repetitions

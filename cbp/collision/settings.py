@@ -1,0 +1,46 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The ``collision:`` section of a scenario: contact queries and step validation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from cbp.errors import ConfigError
+
+__all__ = ["CollisionSettings"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class CollisionSettings:
+    """The ``collision:`` section of a scenario."""
+
+    activation_distance: float = 0.05
+    """Obstacles closer than this (after padding) produce contacts [m]."""
+    contacts_per_link: int = 3
+    """Contacts kept per robot shape: the closest, spread over directions."""
+    self_collision: bool = True
+    """Also query the robot's own shape pairs."""
+    padding: float | None = None
+    """Distance added around the links [m]; default: robot.yaml's."""
+    penetration_tolerance: float = 0.005
+    """Step validation rejects a step that penetrates deeper than this [m]
+    (plus half a cell against an occupancy map, whose surfaces are only known
+    to that resolution)."""
+
+    def __post_init__(self) -> None:
+        """Positive distances and counts."""
+        if not self.activation_distance > 0:
+            raise ConfigError(
+                f"must be > 0, got {self.activation_distance}", "activation_distance"
+            )
+        if self.contacts_per_link < 1:
+            raise ConfigError(
+                f"must be >= 1, got {self.contacts_per_link}", "contacts_per_link"
+            )
+        if self.padding is not None and not self.padding >= 0:
+            raise ConfigError(f"must be >= 0, got {self.padding}", "padding")
+        if not self.penetration_tolerance >= 0:
+            raise ConfigError(
+                f"must be >= 0, got {self.penetration_tolerance}",
+                "penetration_tolerance",
+            )

@@ -1,0 +1,304 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Scenario files: strict YAML loading into the schema, then binding to plugins.
+
+A scenario names the robot, the world, the goal input, the method (executor) and
+its settings, and the lists of task and constraint entries. Every entry has the
+engine keys ``type``, ``name``, ``priority``, ``weight`` and ``gain``; what the
+plugin itself needs goes under ``params``. All problems of a file are reported
+together, each with the file, line, path in the document, what was expected and
+the nearest valid choice (:class:`~cbp.errors.ScenarioError`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+
+from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
+from cbp.expressions import compile_time_function
+from cbp.goals import GoalStream
+from cbp.plugin import Plugin, TakesInput
+from cbp.qp import Entry
+from cbp.registry import Registry
+from cbp.robot import FloatArray, RobotModel
+from cbp.scenario.runtime import Scenario, goal_receivers
+from cbp.scenario.spec import RobotSpec, ScenarioSpec
+from cbp.schema import INVALID, Document, join_path, mapping_items
+
+__all__ = ["load_scenario"]
+
+_ENTRY_KEYS = ("type", "name", "priority", "weight", "gain", "params")
+
+
+def load_scenario(
+    path: str | Path,
+    *,
+    tasks: Registry[Any] | None = None,
+    constraints: Registry[Any] | None = None,
+    overrides: Mapping[str, str] | None = None,
+) -> Scenario:
+    """Read, check and bind a scenario file.
+
+    Args:
+        path: the YAML file.
+        overrides: values that replace the file's, by dotted path
+            (``{"perception.source": "depth_camera"}``; values are YAML).
+        tasks: task registry (default: the in-tree ``plugins.tasks.TASKS``).
+        constraints: constraint registry (default ``plugins.constraints.CONSTRAINTS``).
+
+    Raises:
+        ScenarioError: listing every problem in the file.
+    """
+    from plugins.constraints import CONSTRAINTS
+    from plugins.tasks import TASKS
+
+    tasks = TASKS if tasks is None else tasks
+    constraints = CONSTRAINTS if constraints is None else constraints
+    path = Path(path)
+    doc = Document.from_file(path)
+    doc.resolve_includes()
+    for dotted, text in (overrides or {}).items():
+        doc.override(dotted, text)
+    root = doc.root
+    spec = doc.build(ScenarioSpec, root, "")
+    if root is None:
+        doc.raise_if_problems()
+        raise AssertionError("unreachable: an empty document records a problem")
+    # Entries are bound even when another section is wrong, so that one pass
+    # reports every problem of the file.
+    robot_spec = spec.robot if spec is not INVALID else _robot_spec_quietly(doc, root)
+    robot: RobotModel | None = None
+    if robot_spec is not INVALID and robot_spec is not None:
+        try:
+            robot = RobotModel.load(robot_spec.name, base=robot_spec.base)
+        except CbpError as exc:
+            doc.report(_key_node(root, "robot", "name"), "robot.name", str(exc))
+    entries: list[Entry] = []
+    q0 = np.zeros(0)
+    if robot is not None:
+        items = mapping_items(doc, root, "") or {}
+        for section, registry in (("tasks", tasks), ("constraints", constraints)):
+            node = items.get(section)
+            if node is not None:
+                entries += _bind_entries(
+                    doc, node, section, registry, robot, path.parent
+                )
+        q0 = _initial_configuration(doc, robot_spec, robot, root)
+        if spec is not INVALID:
+            _check_goal(doc, spec, entries, root, path.parent)
+            _check_inputs(doc, spec, entries, root)
+        names = [e.name for e in entries]
+        for name in sorted({n for n in names if names.count(n) > 1}):
+            doc.report(
+                None,
+                "tasks/constraints",
+                f"entry name '{name}' is used twice; give each entry its own 'name'",
+            )
+    doc.raise_if_problems()
+    assert robot is not None
+    scenario = Scenario(path=path, spec=spec, robot=robot, entries=entries, q0=q0)
+    if scenario.needs_collision_world:
+        try:
+            scenario.collision_world()
+        except ConfigError as exc:
+            where = f" ({exc.location})" if exc.location else ""
+            raise ScenarioError(
+                str(path), [f"collision world{where}: {exc.message}"]
+            ) from exc
+    return scenario
+
+
+def _robot_spec_quietly(doc: Document, root: yaml.Node) -> Any:
+    """Build the robot section, whose problems were already reported; else INVALID."""
+    node = _key_node(root, "robot")
+    saved = len(doc.problems)
+    value = doc.build(RobotSpec, node, "robot") if node is not None else INVALID
+    del doc.problems[saved:]
+    return value
+
+
+def _key_node(root: yaml.Node, *keys: str) -> yaml.Node | None:
+    node: yaml.Node | None = root
+    for key in keys:
+        if not isinstance(node, yaml.MappingNode):
+            return None
+        node = next(
+            (
+                v
+                for k, v in node.value
+                if isinstance(k, yaml.ScalarNode) and k.value == key
+            ),
+            None,
+        )
+    return node
+
+
+def _bind_entries(
+    doc: Document,
+    node: yaml.Node,
+    section: str,
+    registry: Registry[Any],
+    robot: RobotModel,
+    folder: Path,
+) -> list[Entry]:
+    if not isinstance(node, yaml.SequenceNode):
+        doc.report(node, section, "expected a list of entries")
+        return []
+    entries: list[Entry] = []
+    for i, item in enumerate(node.value):
+        where = join_path(section, i)
+        entry = _bind_entry(doc, item, where, registry, robot, folder)
+        if entry is not None:
+            entries.append(entry)
+    return entries
+
+
+def _bind_entry(
+    doc: Document,
+    node: yaml.Node,
+    where: str,
+    registry: Registry[Any],
+    robot: RobotModel,
+    folder: Path,
+) -> Entry | None:
+    items = mapping_items(doc, node, where)
+    if items is None:
+        return None
+    for key, value in items.items():
+        if key not in _ENTRY_KEYS:
+            doc.report(
+                value,
+                join_path(where, key),
+                f"unknown key '{key}'{suggestion(key, _ENTRY_KEYS)} Entry keys: "
+                f"{', '.join(_ENTRY_KEYS)} (plugin parameters go under 'params').",
+            )
+    if "type" not in items:
+        doc.report(node, where, f"missing required key 'type' (a {registry.kind} type)")
+        return None
+    type_name = doc.build(str, items["type"], join_path(where, "type"))
+    name = doc.build(str | None, items.get("name"), join_path(where, "name"))
+    if type_name is INVALID or name is INVALID:
+        return None
+    label = f"{where} '{name}'" if name else where
+    try:
+        cls = registry.get(type_name, search_dirs=[folder])
+    except ConfigError as exc:
+        doc.report(items["type"], join_path(where, "type"), exc.message)
+        return None
+    label = f"{label} ({type_name})"
+    params = doc.build(cls.Params, items.get("params"), join_path(where, "params"))
+    settings = {
+        key: doc.build(tp, items[key], join_path(where, key))
+        for key, tp in (
+            ("priority", Literal["soft", "hard"]),
+            ("weight", float | tuple[float, ...]),
+            ("gain", float),
+        )
+        if key in items
+    }
+    if params is INVALID or INVALID in settings.values():
+        return None
+    try:
+        plugin: Plugin[Any] = cls(params, robot, name or "")
+    except ConfigError as exc:
+        loc = f"params.{exc.location}" if exc.location else "params"
+        key_node = _key_node(node, "params", *exc.location.split(".")[:1])
+        doc.report(key_node or node, join_path(where, loc), f"{label}: {exc.message}")
+        return None
+    try:
+        return Entry.make(plugin, **settings)
+    except ConfigError as exc:
+        doc.report(
+            items.get(exc.location, node),
+            join_path(where, exc.location),
+            f"{label}: {exc.message}",
+        )
+        return None
+
+
+def _initial_configuration(
+    doc: Document, spec: RobotSpec, robot: RobotModel, root: yaml.Node
+) -> FloatArray:
+    q0 = robot.home()
+    for joint, value in spec.initial.items():
+        try:
+            q0[robot.joint_q_slice(joint)] = value
+        except ConfigError as exc:
+            doc.report(
+                _key_node(root, "robot", "initial", joint),
+                f"robot.initial.{joint}",
+                exc.message,
+            )
+    return q0
+
+
+def _check_goal(
+    doc: Document,
+    spec: ScenarioSpec,
+    entries: list[Entry],
+    root: yaml.Node,
+    folder: Path,
+) -> None:
+    goal = spec.goal
+    if goal is None:
+        return
+    if goal.type == "recorded":
+        try:
+            GoalStream(goal, folder)
+        except ConfigError as exc:
+            doc.report(_key_node(root, "goal", "file"), "goal.file", exc.message)
+    receivers = goal_receivers(entries, goal.task)
+    if len(receivers) != 1:
+        tasks = [e.name for e in goal_receivers(entries, None)]
+        if goal.task is None and receivers:
+            message = (
+                f"several tasks can take the goal ({', '.join(tasks)}): name one "
+                "with 'task:'"
+            )
+        elif goal.task is None:
+            message = (
+                "the goal needs a task that takes a goal pose (such as "
+                "'goal_pose'), or 'task:' naming one"
+            )
+        else:
+            message = (
+                f"no task named '{goal.task}' takes a goal pose"
+                f"{suggestion(goal.task, tasks)} Tasks that do: "
+                f"{', '.join(tasks) or '(none)'}."
+            )
+        doc.report(_key_node(root, "goal"), "goal.task", message)
+
+
+def _check_inputs(
+    doc: Document, spec: ScenarioSpec, entries: list[Entry], root: yaml.Node
+) -> None:
+    takers = {e.name: e.plugin for e in entries if isinstance(e.plugin, TakesInput)}
+    node = _key_node(root, "inputs")
+    for i, item in enumerate(spec.inputs):
+        where = f"inputs[{i}]"
+        plugin = takers.get(item.entry)
+        if plugin is None:
+            doc.report(
+                node,
+                f"{where}.entry",
+                f"no entry named '{item.entry}' takes an input"
+                f"{suggestion(item.entry, takers)} Entries with inputs: "
+                f"{', '.join(takers) or '(none)'}.",
+            )
+            continue
+        size = plugin.input_size
+        if len(item.values) != size:
+            doc.report(
+                node,
+                f"{where}.values",
+                f"'{item.entry}' takes {size} input value(s), got {len(item.values)}",
+            )
+        for k, value in enumerate(item.values):
+            try:
+                compile_time_function(value, f"{where}.values[{k}]")
+            except ConfigError as exc:
+                doc.report(node, exc.location, exc.message)

@@ -1,0 +1,187 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The schema of a scenario file: one frozen dataclass per section.
+
+:func:`cbp.scenario.load_scenario` builds these from YAML with located errors
+(:mod:`cbp.schema`); tasks and constraints are bound to plugins there. The
+``method:`` section is made from the executor table
+(:data:`cbp.executors.EXECUTORS`): ``name`` and one settings section per
+executor.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, TypeVar
+
+from cbp.collision.settings import CollisionSettings
+from cbp.errors import ConfigError, suggestion
+from cbp.executors import EXECUTORS
+from cbp.goals import GoalSpec
+from cbp.perception.spec import PerceptionSpec
+from cbp.robot import BaseType
+from cbp.sim.settings import ObjectSpec, SimulationSettings
+from cbp.solvers import SOLVERS
+
+__all__ = [
+    "InputSpec",
+    "MethodSpec",
+    "ObjectSpec",
+    "RobotSpec",
+    "ScenarioSpec",
+    "SolverSpec",
+    "WorldSpec",
+]
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotSpec:
+    """The ``robot:`` section."""
+
+    name: str
+    """Robot folder under ``robots/`` (or a path to one)."""
+    base: BaseType | None = None
+    """``fixed``, ``planar`` (x, y, yaw) or ``floating``; default: the robot's
+    own (robot.yaml's ``base``)."""
+    initial: dict[str, float] = field(default_factory=dict)
+    """Initial joint positions by name [rad or m]; others start at home."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class SolverSpec:
+    """The ``solver:`` section."""
+
+    name: str = "daqp"
+    """QP backend: one of :data:`cbp.solvers.SOLVERS` (daqp, piqp, cvxpy)."""
+    regularization: float = 1e-9
+    """Added to the diagonal of the QP cost matrix."""
+
+    def __post_init__(self) -> None:
+        """A known backend; regularization must be positive."""
+        if self.name not in SOLVERS:
+            raise ConfigError(
+                f"unknown solver '{self.name}'{suggestion(self.name, SOLVERS)} "
+                f"Solvers: {', '.join(SOLVERS)}.",
+                "name",
+            )
+        if not self.regularization > 0:
+            raise ConfigError(
+                f"must be > 0, got {self.regularization}", "regularization"
+            )
+
+
+class _MethodBase:
+    """What every ``method:`` section has besides the executors' settings."""
+
+    name: str
+
+    def __post_init__(self) -> None:
+        """A known executor."""
+        if self.name not in EXECUTORS:
+            raise ConfigError(
+                f"unknown method '{self.name}'{suggestion(self.name, EXECUTORS)} "
+                f"Methods: {', '.join(EXECUTORS)}.",
+                "name",
+            )
+
+    def settings(self, cls: type[T]) -> T:
+        """The settings section of type ``cls`` (``method.settings(CatSettings)``)."""
+        for info in EXECUTORS.values():
+            if info.settings is cls:
+                value: T = getattr(self, info.name)
+                return value
+        raise KeyError(f"no executor has settings of type {cls.__name__}")
+
+
+if TYPE_CHECKING:
+
+    @dataclass(frozen=True, kw_only=True)
+    class MethodSpec(_MethodBase):
+        """The ``method:`` section: which executor runs the scenario, and settings."""
+
+        name: str = "kinematic"
+
+else:
+    MethodSpec = dataclasses.make_dataclass(
+        "MethodSpec",
+        [
+            ("name", str, field(default="kinematic")),
+            *(
+                (info.name, info.settings, field(default_factory=info.settings))
+                for info in EXECUTORS.values()
+            ),
+        ],
+        bases=(_MethodBase,),
+        frozen=True,
+        kw_only=True,
+    )
+    MethodSpec.__module__ = __name__
+    MethodSpec.__doc__ = (
+        "The ``method:`` section: ``name`` (the executor: "
+        + "; ".join(f"``{n}``: {i.summary}" for n, i in EXECUTORS.items())
+        + ") and one settings section per executor."
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class InputSpec:
+    """One live operator input: values for an entry's ``set_input``, as functions of t.
+
+    The orbit's user velocity and desired distance are inputs; so is anything a
+    plugin exposes through ``set_input``.
+    """
+
+    entry: str
+    """Name of the task or constraint entry that takes the input."""
+    values: list[str | float]
+    """One number or expression of ``t`` per input value (see
+    :mod:`cbp.expressions`)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class WorldSpec:
+    """The ``world:`` section: the objects around the robot."""
+
+    objects: list[ObjectSpec] = field(default_factory=list)
+    """Objects, in the world frame."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ScenarioSpec:
+    """A whole scenario file (tasks and constraints are bound separately)."""
+
+    name: str
+    """Scenario name, used for output folders."""
+    description: str = ""
+    """What the scenario shows."""
+    robot: RobotSpec
+    """The robot."""
+    duration: float
+    """Length of a run [s]."""
+    method: MethodSpec = field(default_factory=MethodSpec)
+    """The executor and its timing."""
+    solver: SolverSpec = field(default_factory=SolverSpec)
+    """The QP backend."""
+    goal: GoalSpec | None = None
+    """The goal input, if any."""
+    world: WorldSpec = field(default_factory=WorldSpec)
+    """The objects around the robot."""
+    simulation: SimulationSettings = field(default_factory=SimulationSettings)
+    """Physics rate and the joint impedance of the simulated robot."""
+    collision: CollisionSettings = field(default_factory=CollisionSettings)
+    """Contact queries and step validation."""
+    perception: PerceptionSpec = field(default_factory=PerceptionSpec)
+    """Where the collision world's environment comes from."""
+    inputs: list[InputSpec] = field(default_factory=list)
+    """Live operator inputs to entries (velocity executor), functions of time."""
+    tasks: Any = None
+    """Task entries (bound by :func:`load_scenario`)."""
+    constraints: Any = None
+    """Constraint entries (bound by :func:`load_scenario`)."""
+
+    def __post_init__(self) -> None:
+        """Positive duration."""
+        if not self.duration > 0:
+            raise ConfigError(f"must be > 0, got {self.duration}", "duration")

@@ -1,0 +1,156 @@
+"""The layering holds: no import cycle, no private name across modules, light import.
+
+No import cycle in ``cbp``, no private name of one module used by another, and
+``import cbp`` stays light.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+LIBRARY = ("cbp", "plugins", "benchmarks")
+
+
+def _modules(package: str) -> dict[str, Path]:
+    """Dotted module name -> file, for every module of ``package``."""
+    out = {}
+    for path in sorted((ROOT / package).rglob("*.py")):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        out[".".join(parts)] = path
+    return out
+
+
+def _imports(path: Path) -> list[tuple[int, str, list[str]]]:
+    """(line, module, names) of every import outside ``if TYPE_CHECKING:``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    skipped: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            skipped |= {id(n) for child in node.body for n in ast.walk(child)}
+    found = []
+    for node in ast.walk(tree):
+        if id(node) in skipped:
+            continue
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name, []) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            found.append((node.lineno, node.module, [a.name for a in node.names]))
+    return found
+
+
+def _edges(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """Module -> the cbp modules it imports (a submodule imports its packages)."""
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for name, path in modules.items():
+        for _, module, names in _imports(path):
+            targets = [f"{module}.{n}" for n in names if f"{module}.{n}" in modules]
+            targets.append(module)
+            for target in targets:
+                parts = target.split(".")
+                for k in range(1, len(parts) + 1):
+                    prefix = ".".join(parts[:k])
+                    if prefix in modules and prefix != name:
+                        graph[name].add(prefix)
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_cycle_in_cbp() -> None:
+    """No set of cbp modules imports itself round, lazily or not."""
+    modules = _modules("cbp")
+    graph = _edges(modules)
+    # A package's __init__ re-exporting its submodules is not a layer of its own:
+    # a submodule importing a sibling through it is the only cycle that matters.
+    for package in [m for m, p in modules.items() if p.name == "__init__.py"]:
+        for sub in list(graph[package]):
+            if sub.startswith(package + "."):
+                graph[package].discard(sub)
+    assert _cycles(graph) == []
+
+
+def test_no_private_name_crosses_a_module() -> None:
+    """No library or benchmark module imports or reads another's private names."""
+    problems = []
+    for package in LIBRARY:
+        for path in _modules(package).values():
+            for line, module, names in _imports(path):
+                private = [n for n in names if n.startswith("_") and n != "__version__"]
+                hidden = [
+                    p
+                    for p in module.split(".")
+                    if p.startswith("_") and not p.startswith("__")
+                ]
+                if private or hidden:
+                    problems.append(f"{path.relative_to(ROOT)}:{line}: {module}")
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            for node in ast.walk(tree):
+                if (
+                    isinstance(node, ast.Attribute)
+                    and node.attr.startswith("_")
+                    and not node.attr.startswith("__")
+                    and not (
+                        isinstance(node.value, ast.Name)
+                        and node.value.id in ("self", "cls")
+                    )
+                ):
+                    where = f"{path.relative_to(ROOT)}:{node.lineno}"
+                    problems.append(f"{where}: .{node.attr}")
+    assert problems == []
+
+
+def test_importing_the_plugin_contract_stays_light() -> None:
+    """``import cbp.plugin`` loads no collision, scenario, solver or QP module.
+
+    (pinocchio itself imports coal, so coal is not on the list.)
+    """
+    code = (
+        "import sys, cbp.plugin, cbp; "
+        "heavy = sorted(m for m in sys.modules if m.split('.')[0] in "
+        "('trimesh', 'numba', 'cvxpy', 'pybullet', 'ompl', 'matplotlib') "
+        "or m in ('cbp.scenario', 'cbp.qp', 'cbp.collision', 'cbp.engine')); "
+        "print(heavy)"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    )
+    assert done.stdout.strip() == "[]"
