@@ -41,6 +41,23 @@ class ConfigError(CbpError, ValueError):
         super().__init__(f"{location}: {message}" if location else message)
 
 
+def require_choice(
+    value: str, choices: Iterable[str], kind: str, location: str
+) -> None:
+    """Raise a located ConfigError unless ``value`` is one of ``choices``.
+
+    The message names the nearest choice and lists them all:
+    ``unknown solver 'daq'; did you mean 'daqp'? Solvers: daqp, piqp, cvxpy.``
+    """
+    allowed = list(choices)
+    if value not in allowed:
+        raise ConfigError(
+            f"unknown {kind} '{value}'{suggestion(value, allowed)} "
+            f"{kind.capitalize()}s: {', '.join(allowed)}.",
+            location,
+        )
+
+
 def require(obj: object, condition: str, *names: str) -> None:
     """Check fields of a settings object; a located ConfigError for the first bad one.
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from cbp.errors import ConfigError, suggestion
+from cbp.errors import require_choice
 from cbp.executors.settings import (
     CatSettings,
     IkSettings,
@@ -40,6 +40,7 @@ __all__ = [
     "Executor",
     "ExecutorInfo",
     "executor_info",
+    "single_run",
 ]
 
 
@@ -152,10 +153,17 @@ def executor_info(name: str, choices: tuple[str, ...] | None = None) -> Executor
         ConfigError: ``name`` is not among them; the message lists them and the
             nearest one.
     """
-    allowed = tuple(EXECUTORS) if choices is None else choices
-    if name not in allowed:
-        raise ConfigError(
-            f"unknown method '{name}'{suggestion(name, allowed)} "
-            f"Methods: {', '.join(allowed)}."
-        )
+    require_choice(name, EXECUTORS if choices is None else choices, "method", "")
     return EXECUTORS[name]
+
+
+def single_run(traces: Mapping[str, Any], executor: str) -> tuple[str, Any]:
+    """The one (method, trace) of ``traces``, for executors that write one run.
+
+    Raises:
+        ValueError: there is more than one.
+    """
+    (method, trace), *more = traces.items()
+    if more:
+        raise ValueError(f"the {executor} executor writes one run at a time")
+    return method, trace

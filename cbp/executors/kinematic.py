@@ -26,6 +26,7 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.errors import InvalidTargetError, PluginOutputError, SolveError
+from cbp.executors import single_run
 from cbp.executors.settings import KinematicSettings
 from cbp.report import write_outputs
 from cbp.scenario.runtime import Scenario
@@ -126,9 +127,7 @@ class KinematicExecutor:
         self, scenario: Scenario, traces: Mapping[str, Any], out: Path
     ) -> dict[str, dict[str, Any]]:
         """trace.csv, metrics.json, tracking.png and report.md (one run)."""
-        (method, trace), *more = traces.items()
-        if more:
-            raise ValueError("the kinematic executor writes one run at a time")
+        method, trace = single_run(traces, "kinematic")
         return {method: write_outputs(scenario, trace, out)}
 
     def describe(

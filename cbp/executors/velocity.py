@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from cbp.errors import PluginOutputError, SolveError
+from cbp.executors import single_run
 from cbp.executors.settings import VelocitySettings
 from cbp.plugin import ReportsSignals
 from cbp.report import write_velocity_run
@@ -127,9 +128,7 @@ class VelocityExecutor:
         self, scenario: Scenario, traces: Mapping[str, Any], out: Path
     ) -> dict[str, dict[str, Any]]:
         """trace.csv, metrics.json, the orbit figures and report.md (one run)."""
-        (method, trace), *more = traces.items()
-        if more:
-            raise ValueError("the velocity executor writes one run at a time")
+        method, trace = single_run(traces, "velocity")
         return {method: write_velocity_run(scenario, trace, out, method)}
 
     def describe(

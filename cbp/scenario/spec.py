@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from cbp.collision.settings import CollisionSettings
-from cbp.errors import ConfigError, suggestion
+from cbp.errors import ConfigError, require_choice
 from cbp.executors import EXECUTORS
 from cbp.goals import GoalSpec
 from cbp.perception.spec import PerceptionSpec
@@ -60,12 +60,7 @@ class SolverSpec:
 
     def __post_init__(self) -> None:
         """A known backend; regularization must be positive."""
-        if self.name not in SOLVERS:
-            raise ConfigError(
-                f"unknown solver '{self.name}'{suggestion(self.name, SOLVERS)} "
-                f"Solvers: {', '.join(SOLVERS)}.",
-                "name",
-            )
+        require_choice(self.name, SOLVERS, "solver", "name")
         if not self.regularization > 0:
             raise ConfigError(
                 f"must be > 0, got {self.regularization}", "regularization"
@@ -79,12 +74,7 @@ class _MethodBase:
 
     def __post_init__(self) -> None:
         """A known executor."""
-        if self.name not in EXECUTORS:
-            raise ConfigError(
-                f"unknown method '{self.name}'{suggestion(self.name, EXECUTORS)} "
-                f"Methods: {', '.join(EXECUTORS)}.",
-                "name",
-            )
+        require_choice(self.name, EXECUTORS, "method", "name")
 
     def settings(self, cls: type[T]) -> T:
         """The settings section of type ``cls`` (``method.settings(CatSettings)``)."""
