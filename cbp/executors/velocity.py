@@ -92,8 +92,9 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> VelocityTrace:
                 failing = 0
             elapsed = time.perf_counter() - start
             # What the plugins report, at the tick's measured configuration and
-            # with the inputs in effect.
-            state.update(q)
+            # with the inputs in effect (no kinematics when nothing reports).
+            if reporters:
+                state.update(q)
             for reporter in reporters:
                 for key, signal in reporter.signals(state).items():
                     signals.setdefault(key, []).append(signal)

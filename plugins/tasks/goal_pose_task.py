@@ -130,15 +130,11 @@ class GoalPoseTask(Task[GoalPoseParams]):
 
     def compute_value(self, state: RobotState) -> FloatArray:
         """Translation error then rotation vector, world frame."""
-        value, J = np.empty(6), np.empty((6, self.robot.nv))
-        self.linearize_into(state, value, J)
-        return value
+        return self.linearize(state).value
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """World-aligned frame Jacobian with the log map's Jacobian on rotation rows."""
-        value, J = np.empty(6), np.empty((6, self.robot.nv))
-        self.linearize_into(state, value, J)
-        return J
+        return self.linearize(state).jacobian
 
     def linearize_into(
         self, state: RobotState, value: FloatArray, jacobian: FloatArray
