@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from cbp.errors import ConfigError, suggestion
+import numpy as np
+
+from cbp.errors import ConfigError, SolveError, suggestion
 from cbp.plugin import AnyPlugin, Plugin
 from cbp.qp import Entry, QPAssembler, QPProblem
 from cbp.robot import FloatArray, RobotModel
@@ -25,6 +27,8 @@ class Engine:
     Attributes:
         state: the state of the last step (kinematics at its start).
         problem: the QP of the last step, for inspection.
+        recovery: how the last step's QP was eased to be solvable (None: it
+            was solved as assembled); see :meth:`step`.
     """
 
     def __init__(
@@ -48,6 +52,7 @@ class Engine:
         self.assembler = QPAssembler(self.entries, robot.nv, regularization)
         self.state = RobotState(robot)
         self.problem: QPProblem | None = None
+        self.recovery: str | None = None
         self._by_name = {e.name: e for e in self.entries}
         # Plugins that latch something at the start of a step (the others keep
         # the base class's empty prepare and are not called for it).
@@ -67,6 +72,11 @@ class Engine:
     def step(self, q: FloatArray, dt: float) -> FloatArray:
         """Return the displacement dq (nv) of one step of duration ``dt`` from ``q``.
 
+        When the QP is infeasible because hard rows ask for more motion than the
+        others allow (the arm inside its safety distance or in penetration, a
+        joint past its limit), those rows are eased and the step solved again
+        (:meth:`_recover`); :attr:`recovery` then says how.
+
         Raises:
             SolveError: the QP is infeasible or the backend failed; nothing moved.
             PluginOutputError: a plugin returned a malformed or non-finite output.
@@ -77,5 +87,88 @@ class Engine:
             plugin.prepare(state, dt)
         problem = self.assembler.assemble(state)
         self.problem = problem
-        x = self.solver.solve(problem)
+        self.recovery = None
+        try:
+            x = self.solver.solve(problem)
+        except SolveError as exc:
+            x = self._recover(problem, exc)
         return x[: self.robot.nv]
+
+    def _recover(self, problem: QPProblem, error: SolveError) -> FloatArray:
+        """Solve again with the hard rows that ask for motion eased; else re-raise.
+
+        A hard inequality row whose bound excludes standing still (a contact
+        inside its safety distance, a joint past its limit) asks the step for a
+        motion of its own; several of them, or one beyond what the velocity rows
+        allow, can leave no feasible step. First each such demand is capped at
+        half of what the single-joint rows (the velocity bounds) let that row
+        reach: the arm backs out as fast as its limits allow. If that is still
+        infeasible, the demands become "no further" (the k = 0 form: the row may
+        not get worse). :attr:`recovery` says which was used.
+        """
+        lower, upper = problem.lower, problem.upper
+        nv = self.robot.nv
+        hard = ~problem.equality & ~problem.A[:, nv:].any(axis=1)  # no slack
+        demanding = hard & ((lower > _EASE_TOL) | (upper < -_EASE_TOL))
+        if not demanding.any():
+            raise error
+        A = problem.A[:, :nv]
+        reach_hi, reach_lo = _row_reach(A, lower, upper)
+        rows = np.flatnonzero(demanding)
+        names = sorted({problem.entry_names[problem.row_entry[r]] for r in rows})
+        given = (lower[rows].copy(), upper[rows].copy())
+        for how in ("eased", "held"):
+            if how == "eased":
+                ease_hi = 0.5 * np.maximum(reach_hi[rows], 0.0)
+                ease_lo = 0.5 * np.minimum(reach_lo[rows], 0.0)
+                lower[rows] = np.minimum(given[0], ease_hi)
+                upper[rows] = np.maximum(given[1], ease_lo)
+            else:
+                lower[rows] = np.minimum(given[0], 0.0)
+                upper[rows] = np.maximum(given[1], 0.0)
+            try:
+                x = self.solver.solve(problem)
+            except SolveError:
+                continue
+            self.recovery = (
+                f"{len(rows)} row(s) of {', '.join(names)} asked for more motion "
+                "than the limits allow together: "
+                + (
+                    "eased to half of what the velocity bounds reach (backing out)"
+                    if how == "eased"
+                    else "held at 'no further' (k = 0)"
+                )
+            )
+            return x
+        lower[rows], upper[rows] = given
+        raise error
+
+
+#: A hard row's bound within this of zero does not count as asking for motion.
+_EASE_TOL = 1e-12
+
+
+def _row_reach(
+    A: FloatArray, lower: FloatArray, upper: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The largest and smallest value each row of ``A dq`` can take in the box.
+
+    The box is what the single-variable rows (velocity bounds) allow each
+    variable; a variable no such row bounds makes the reach infinite.
+    """
+    nonzero = A != 0.0
+    single = np.flatnonzero(nonzero.sum(axis=1) == 1)
+    lo = np.full(A.shape[1], -np.inf)
+    hi = np.full(A.shape[1], np.inf)
+    for r in single.tolist():
+        i = int(np.flatnonzero(nonzero[r])[0])
+        a = A[r, i]
+        bounds = sorted((lower[r] / a, upper[r] / a))
+        lo[i] = max(lo[i], bounds[0])
+        hi[i] = min(hi[i], bounds[1])
+    with np.errstate(invalid="ignore"):
+        top = np.where(A > 0, A * hi, A * lo)
+        bottom = np.where(A > 0, A * lo, A * hi)
+    top[A == 0.0] = 0.0
+    bottom[A == 0.0] = 0.0
+    return top.sum(axis=1), bottom.sum(axis=1)

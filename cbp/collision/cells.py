@@ -100,6 +100,35 @@ class CellIndex:
         self.start = np.zeros(counts.size + 1, dtype=np.int64)
         np.cumsum(counts, out=self.start[1:])
 
+    @classmethod
+    def from_bricks(
+        cls,
+        centres: FloatArray,
+        start: IntArray,
+        origin: FloatArray,
+        cell: float,
+        brick: int,
+        dims: IntArray,
+    ) -> CellIndex:
+        """An index of centres already sorted by brick (a map's compiled pass).
+
+        Args:
+            centres: cell centres (N, 3), brick by brick.
+            start: brick b's cells are ``centres[start[b]:start[b + 1]]``.
+            origin: the corner of the grid the bricks are counted from [m].
+            cell: cell size [m].
+            brick: cells per brick side.
+            dims: bricks along x, y and z; bricks are numbered in C order.
+        """
+        index = cls.__new__(cls)
+        index.cell = float(cell)
+        index.origin = np.asarray(origin, dtype=float)
+        index.brick = int(brick)
+        index.dims = np.asarray(dims, dtype=np.int64)
+        index.centres = np.ascontiguousarray(centres, dtype=float)
+        index.start = np.ascontiguousarray(start, dtype=np.int64)
+        return index
+
     def __len__(self) -> int:
         """Number of cells."""
         return len(self.centres)

@@ -77,14 +77,24 @@ class FreeSpaceChecker:
             self._model, geometry_model, self._geometry_data
         )
         self._has_pairs = len(geometry_model.collisionPairs) > 0
+        # A map's octree holds only the shell of its obstacle cells: a shape
+        # that touches no shell cell is free unless it lies wholly inside (its
+        # centre in an obstacle cell), which the map's grid tells.
+        self._interior = environment.surfaces_only
+        self._centres = [s.placement.actInv(s.centre) for s in geometry.shapes]
 
     def is_free(self, q: FloatArray) -> bool:
         """True when no checked pair of padded shapes overlaps at ``q``."""
         if not self._has_pairs:
             return True
-        return not pin.computeCollisions(
-            self._model, self._data, self._manager, np.asarray(q, dtype=float), True
-        )
+        q = np.asarray(q, dtype=float)
+        if pin.computeCollisions(self._model, self._data, self._manager, q, True):
+            return False
+        if not self._interior:
+            return True
+        oMg = self._geometry_data.oMg  # placed by computeCollisions
+        points = np.array([oMg[i].act(c) for i, c in enumerate(self._centres)])
+        return not bool(self.environment.inside(points).any())
 
     def __repr__(self) -> str:
         """Shape and pair counts."""

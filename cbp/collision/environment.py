@@ -36,6 +36,7 @@ from cbp.errors import ConfigError
 from cbp.robot import FloatArray, IntArray
 
 __all__ = [
+    "BlockedGrid",
     "Environment",
     "EnvironmentObject",
     "Hits",
@@ -175,12 +176,21 @@ class Environment(abc.ABC):
         For yes-or-no checks (:class:`~cbp.collision.checker.FreeSpaceChecker`).
         """
 
+    #: True when :meth:`collision_objects` holds only the obstacles' surfaces
+    #: (a map's shell of cells next to open space): a shape wholly inside an
+    #: obstacle then touches none of them, and checks ask :meth:`inside` too.
+    surfaces_only: bool = False
+
     @abc.abstractmethod
     def clearance(self, points: FloatArray) -> FloatArray:
         """Distance from each point (n, 3) to the nearest obstacle [m].
 
         For tests and plots; not used in the control loop.
         """
+
+    def inside(self, points: FloatArray) -> np.ndarray:
+        """Which points (n, 3) lie in an obstacle (boolean (n,))."""
+        return np.asarray(self.clearance(points) <= 0.0)
 
 
 # ---------------------------------------------------------------- declared objects
@@ -394,6 +404,31 @@ class PrimitiveEnvironment(Environment):
 # ---------------------------------------------------------------- occupancy map
 
 
+@dataclass(frozen=True)
+class BlockedGrid:
+    """Which cells of a dense grid are obstacles: occupied, or unknown and counted so.
+
+    Attributes:
+        mask: True for obstacle cells, (nx, ny, nz).
+        lower: the grid's lower corner [m].
+        cell: cell size [m].
+    """
+
+    mask: np.ndarray
+    lower: FloatArray
+    cell: float
+
+    def contains(self, points: FloatArray) -> np.ndarray:
+        """Which points (n, 3) lie in an obstacle cell; outside the grid: none."""
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        idx = np.floor((points - self.lower) / self.cell).astype(np.intp)
+        inside = np.all((idx >= 0) & (idx < np.array(self.mask.shape)), axis=1)
+        out = np.zeros(len(points), dtype=bool)
+        i = idx[inside]
+        out[inside] = self.mask[i[:, 0], i[:, 1], i[:, 2]]
+        return out
+
+
 @dataclass(frozen=True, kw_only=True)
 class MetaballRefiner:
     r"""Re-estimate a contact normal from a metaball surface over occupied cells.
@@ -451,10 +486,16 @@ class OccupancyEnvironment(Environment):
     query was slower (every voxel within the margin is visited) and off by up to
     4.5 mm and 14 deg on hulls (``benchmarks/RESULTS.md``, issue 3).
 
+    A map built from a dense grid (:meth:`cbp.perception.OccupancyGrid.environment`)
+    indexes only the shell of its obstacle cells, those next to open space, and
+    keeps the grid's obstacle mask for :meth:`inside` (``surfaces_only``).
+
     Args:
-        centres: occupied cell centres (N, 3) [m].
+        centres: occupied cell centres (N, 3) [m] (with ``index``: ignored).
         cell: cell size [m].
         refiner: normal refinement, or None to keep the hull faces' normals.
+        index: the cells already indexed by brick (a map's compiled pass).
+        blocked: the dense obstacle mask the cells are the shell of.
     """
 
     def __init__(
@@ -462,16 +503,28 @@ class OccupancyEnvironment(Environment):
         centres: FloatArray,
         cell: float,
         refiner: MetaballRefiner | None = None,
+        *,
+        index: CellIndex | None = None,
+        blocked: BlockedGrid | None = None,
     ) -> None:
-        """Index the centres and build their octree."""
-        self.centres = np.ascontiguousarray(centres, dtype=float).reshape(-1, 3)
+        """Index the centres (the octree is built when a checker first asks)."""
         self.cell = float(cell)
+        self.index = (
+            index
+            if index is not None
+            else CellIndex(
+                np.ascontiguousarray(centres, dtype=float).reshape(-1, 3), self.cell
+            )
+        )
+        self.centres = (
+            self.index.centres
+            if index is not None
+            else np.ascontiguousarray(centres, dtype=float).reshape(-1, 3)
+        )
         self.resolution = 0.5 * self.cell
         self.refiner = refiner
-        self.index = CellIndex(self.centres, self.cell)
-        self.octree = (
-            coal.makeOctree(self.centres, self.cell) if len(self.centres) else None
-        )
+        self.blocked = blocked
+        self.surfaces_only = blocked is not None
         self._identity = pin.SE3.Identity()
         self._last_table: tuple[object, float, ShapeTable | None] = (None, 0.0, None)
 
@@ -489,11 +542,32 @@ class OccupancyEnvironment(Environment):
         """A k-d tree of the cell centres (built on first use, for clearances)."""
         return cKDTree(self.centres)
 
+    @functools.cached_property
+    def octree(self) -> coal.OcTree | None:
+        """The coal octree of the cells (built on first use; None for no cells).
+
+        Only planners' yes-or-no checks use it, so a map update that no planner
+        reads does not pay for it (2-12 ms for 10-50k cells).
+        """
+        if not len(self.centres):
+            return None
+        return coal.makeOctree(self.centres, self.cell)
+
     def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
         """The octree (none while the map is empty)."""
         if self.octree is None:
             return []
         return [("octree", self.octree, self._identity)]
+
+    def inside(self, points: FloatArray) -> np.ndarray:
+        """Which points (n, 3) lie in an obstacle cell (unknown ones included)."""
+        if self.blocked is not None:
+            return self.blocked.contains(points)
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if not len(self.centres):
+            return np.zeros(len(points), dtype=bool)
+        d, _ = self.tree.query(points, p=np.inf)
+        return np.asarray(d <= 0.5 * self.cell)
 
     def query(
         self,

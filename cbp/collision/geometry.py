@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import coal
+import numba
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
@@ -26,15 +27,18 @@ from scipy.optimize import minimize
 
 from cbp.collision.broad import near_pairs
 from cbp.errors import ConfigError, suggestion
-from cbp.robot import Approximation, FloatArray, RobotModel
+from cbp.robot import Approximation, FloatArray, IntArray, RobotModel
 from cbp.state import RobotState
 
 __all__ = [
     "LinkShape",
     "RobotGeometry",
     "ShapePlacements",
+    "WorldShapes",
     "find_ignorable_pairs",
     "fit_capsule",
+    "inside_convex",
+    "points_inside",
 ]
 
 
@@ -373,6 +377,26 @@ class RobotGeometry:
         centres = np.array([oMf[s.frame_id].act(s.centre) for s in self.shapes])
         return centres.reshape(-1, 3), self.radii
 
+    def world_shapes(self, state: RobotState) -> WorldShapes:
+        """Every shape's half-spaces and bounding sphere in the world at ``state``."""
+        oMf = state.data.oMf
+        planes = []
+        for s in self.shapes:
+            M = oMf[s.frame_id]
+            planes.append(_transform_planes(s.planes, M))
+        centres, radii = self.world_spheres(state)
+        return WorldShapes(
+            np.ascontiguousarray(np.vstack(planes)).reshape(-1, 4),
+            self._plane_start,
+            np.ascontiguousarray(centres),
+            np.ascontiguousarray(radii, dtype=float),
+        )
+
+    @functools.cached_property
+    def _plane_start(self) -> IntArray:
+        counts = [len(s.planes) for s in self.shapes]
+        return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
     def contains(
         self, state: RobotState, points: FloatArray, margin: float = 0.0
     ) -> np.ndarray:
@@ -382,20 +406,18 @@ class RobotGeometry:
         exact on faces and conservative (a little too large) near edges and corners.
         Returns a boolean array of shape (n,).
         """
-        grow = self.padding + margin
-        inside = np.zeros(len(points), dtype=bool)
-        centres, radii = self.world_spheres(state)
-        for shape, centre, radius in zip(self.shapes, centres, radii, strict=True):
-            near = np.flatnonzero(
-                np.sum((points - centre) ** 2, axis=1) <= (radius + grow) ** 2
-            )
-            if near.size == 0:
-                continue
-            M = state.data.oMf[shape.frame_id]
-            # World points in the frame: R^T (p - t); the planes are in the frame.
-            local = (points[near] - M.translation).dot(M.rotation)
-            excess = local.dot(shape.planes[:, :3].T) - shape.planes[:, 3]
-            inside[near[np.max(excess, axis=1) <= grow]] = True
+        points = np.ascontiguousarray(points, dtype=float).reshape(-1, 3)
+        inside = np.empty(len(points), dtype=np.bool_)
+        shapes = self.world_shapes(state)
+        points_inside(
+            points,
+            shapes.planes,
+            shapes.plane_start,
+            shapes.centres,
+            shapes.radii,
+            self.padding + margin,
+            inside,
+        )
         return inside
 
     def __len__(self) -> int:
@@ -408,6 +430,74 @@ class RobotGeometry:
             f"RobotGeometry({self.robot.name!r}, shapes={len(self.shapes)}, "
             f"self_pairs={len(self.self_pairs)}, padding={self.padding})"
         )
+
+
+@dataclass(frozen=True)
+class WorldShapes:
+    """A robot's convex shapes placed in the world, packed for compiled loops.
+
+    Attributes:
+        planes: half-spaces ``n . x <= d`` of every shape as rows (n, d), stacked,
+            (P, 4).
+        plane_start: shape s's planes are rows ``plane_start[s]`` to
+            ``plane_start[s + 1]``, (shapes + 1,).
+        centres: bounding-sphere centres (shapes, 3) [m].
+        radii: bounding-sphere radii (shapes,) [m].
+    """
+
+    planes: FloatArray
+    plane_start: IntArray
+    centres: FloatArray
+    radii: FloatArray
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def inside_convex(
+    x: float,
+    y: float,
+    z: float,
+    planes: FloatArray,
+    start: int,
+    stop: int,
+    grow: float,
+) -> bool:
+    """Whether (x, y, z) is within ``grow`` of every plane of rows [start, stop)."""
+    for p in range(start, stop):
+        if planes[p, 0] * x + planes[p, 1] * y + planes[p, 2] * z - planes[p, 3] > grow:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def points_inside(
+    points: FloatArray,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    grow: float,
+    out: np.ndarray,
+) -> int:
+    """Flag the points (n, 3) inside some shape grown by ``grow``; return the count.
+
+    The shapes as :class:`WorldShapes` gives them; a point within ``grow`` of every
+    face plane counts as inside (exact on faces, a little generous at edges and
+    corners).
+    """
+    count = 0
+    for n in range(points.shape[0]):
+        x, y, z = points[n, 0], points[n, 1], points[n, 2]
+        out[n] = False
+        for s in range(radii.size):
+            dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
+            reach = radii[s] + grow
+            if dx * dx + dy * dy + dz * dz > reach * reach:
+                continue
+            if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grow):
+                out[n] = True
+                count += 1
+                break
+    return count
 
 
 def _transform_planes(planes: FloatArray, placement: pin.SE3) -> FloatArray:

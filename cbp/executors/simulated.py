@@ -24,7 +24,7 @@ from cbp.collision.environment import PrimitiveEnvironment
 from cbp.collision.geometry import RobotGeometry
 from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.errors import InvalidTargetError
-from cbp.perception.camera import DepthCamera
+from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.plugin import GoalReceiver
@@ -33,6 +33,7 @@ from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.sim.simulation import Simulation
 from cbp.spatial import checked_se3
+from cbp.state import RobotState
 from cbp.trace import PeriodRecord, RunTrace
 
 __all__ = ["SimulatedExecutor", "SimulatedRun"]
@@ -92,26 +93,33 @@ class SimulatedRun:
         self.goal_task: GoalReceiver | None = scenario.goal_task()
         self.events: list[tuple[float, str]] = []
         self.periods: list[PeriodRecord] = []
+        self.last_recovery: str | None = None
+        """The engine's last easing of an infeasible QP (reported once a change)."""
         self._goal = _Goal()
+        self._goal_space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
+        self._goal_blocked = False
         use_camera = spec.perception.source == "depth_camera"
         self.world: CollisionWorld | None = None
         if needs_world or scenario.needs_collision_world or use_camera:
             self.world = scenario.collision_world()
         self.mapper: MapUpdater | None = None
-        self.camera: DepthCamera | None = None
-        self._next_frame = 0.0
+        self.cameras: list[DepthCamera] = []
+        self._next_frame: list[float] = []
+        self._camera_state = RobotState(self.robot)
         if use_camera:
             assert self.world is not None
-            assert spec.perception.camera is not None
             self.world.set_environment(PrimitiveEnvironment([]))
-            self.camera = DepthCamera(self.sim.client, spec.perception.camera)
+            self.cameras = [
+                DepthCamera(self.sim.client, camera, self.robot)
+                for camera in spec.perception.all_cameras
+            ]
             grid = OccupancyGrid(spec.perception, self.world.geometry)
             # The robot looks once before it moves; later frames go to the thread.
-            MapUpdater(grid, self.world, synchronous=True).submit(
-                self.camera.capture(), self.sim.q.copy()
-            )
+            first = MapUpdater(grid, self.world, synchronous=True)
+            for camera in self.cameras:
+                first.submit(self._capture(camera), self.sim.q.copy())
             self.mapper = MapUpdater(grid, self.world)
-            self._next_frame = 1.0 / spec.perception.camera.rate_hz
+            self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
 
     # ------------------------------------------------------------------ goal input
 
@@ -149,7 +157,37 @@ class SimulatedRun:
         pose = self.goal(t)
         if pose is not None and self.goal_task is not None:
             self.goal_task.set_target(pose.translation, pose.rotation)
+        if pose is not None:
+            self._check_goal_space(t, pose)
         return pose
+
+    def _check_goal_space(self, t: float, pose: pin.SE3) -> None:
+        """Say when the goal enters or leaves an obstacle (or unseen space)."""
+        world = self.world
+        if world is None:
+            return
+        environment = world.environment
+        checked_environment, checked_position = self._goal_space_checked
+        if environment is checked_environment and np.array_equal(
+            pose.translation, checked_position
+        ):
+            return
+        self._goal_space_checked = (environment, pose.translation.copy())
+        blocked = bool(environment.inside(pose.translation[None])[0])
+        if blocked == self._goal_blocked:
+            return
+        self._goal_blocked = blocked
+        if not blocked:
+            self.event(t, "goal is in open space again")
+        elif self.mapper is not None:
+            self.event(
+                t,
+                "goal lies in an obstacle or in space no camera has seen "
+                "(perception.unknown: occupied counts it as an obstacle): the arm "
+                "stops short of it",
+            )
+        else:
+            self.event(t, "goal lies inside an obstacle: the arm stops short of it")
 
     def event(self, t: float, message: str) -> None:
         """Record (and log) something that went wrong and was handled."""
@@ -160,17 +198,27 @@ class SimulatedRun:
 
     def perceive_until(self, t: float) -> None:
         """Capture the camera frames due before ``t`` and hand them to the map."""
-        if self.camera is None or self.mapper is None:
+        if self.mapper is None:
             return
-        assert self.scenario.spec.perception.camera is not None
-        period = 1.0 / self.scenario.spec.perception.camera.rate_hz
-        while self._next_frame <= t:
-            self.sim.run_until(self._next_frame)
-            self.mapper.submit(self.camera.capture(), self.sim.q.copy())
+        due = self._next_frame
+        while True:
+            i = min(range(len(due)), key=due.__getitem__)
+            if due[i] > t:
+                break
+            camera = self.cameras[i]
+            self.sim.run_until(due[i])
+            self.mapper.submit(self._capture(camera), self.sim.q.copy())
             if self.mapper.error is not None:
                 error, self.mapper.error = self.mapper.error, None
                 self.event(self.sim.t, f"map update failed, previous map kept: {error}")
-            self._next_frame += period
+            due[i] += 1.0 / camera.spec.rate_hz
+
+    def _capture(self, camera: DepthCamera) -> DepthFrame:
+        """One frame of ``camera``; a mounted one from the robot as it is now."""
+        if not camera.mounted:
+            return camera.capture()
+        self._camera_state.update(self.sim.q.copy())
+        return camera.capture(self._camera_state)
 
     def advance(self, t: float) -> None:
         """Simulate (and perceive) until ``t``."""

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""A simulated depth camera in PyBullet, and depth images back to world points.
+"""Simulated depth cameras in PyBullet (fixed or on a link), images back to points.
 
 PyBullet's ER_TINY_RENDERER samples pixel (u, v) at NDC x = 2u/W - 1,
 y = 2(H - 1 - v)/H - 1 (not at pixel centres), and returns its matrices
@@ -13,10 +13,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 import pybullet as pb
 
+from cbp.errors import ConfigError, FrameNotFoundError
 from cbp.perception.spec import CameraSpec
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, RobotModel
+from cbp.state import RobotState
 
 __all__ = ["DepthCamera", "DepthFrame"]
 
@@ -31,6 +34,7 @@ class DepthFrame:
         projection: the 4x4 projection matrix.
         near: near plane [m].
         far: far plane [m].
+        camera: the camera's name.
     """
 
     depth: FloatArray
@@ -38,6 +42,7 @@ class DepthFrame:
     projection: FloatArray
     near: float
     far: float
+    camera: str = ""
 
     @property
     def position(self) -> FloatArray:
@@ -45,12 +50,25 @@ class DepthFrame:
         R, t = self.view[:3, :3], self.view[:3, 3]
         return np.asarray(-R.T.dot(t))
 
+    def valid(self) -> np.ndarray:
+        """Pixels that hold a reading: finite and within [0, 1] (H, W)."""
+        z = self.depth
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(z) & (z >= 0.0) & (z <= 1.0)
+
     def ranges(self) -> FloatArray:
-        """Metric depth along the optical axis per pixel [m]; inf on background."""
+        """Metric depth along the optical axis per pixel [m].
+
+        inf on background (nothing before the far plane), NaN where the pixel
+        holds no valid reading.
+        """
         z = self.depth
         n, f = self.near, self.far
-        metric = f * n / (f - (f - n) * z)
-        return np.where(z >= 1.0 - 1e-6, np.inf, metric)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            metric = f * n / (f - (f - n) * z)
+            out = np.where(z >= 1.0 - 1e-6, np.inf, metric)
+        out[~self.valid()] = np.nan
+        return np.asarray(out)
 
     def points(self) -> tuple[FloatArray, np.ndarray]:
         """World points (H, W, 3) of every pixel, and the mask of real hits (H, W)."""
@@ -65,7 +83,8 @@ class DepthFrame:
         inv = np.linalg.inv(self.projection.dot(self.view))
         world = ndc.dot(inv.T)
         world = world[:, :3] / world[:, 3:4]
-        hit = self.depth < 1.0 - 1e-6
+        with np.errstate(invalid="ignore"):
+            hit = self.valid() & (self.depth < 1.0 - 1e-6)
         return world.reshape(h, w, 3), hit
 
     def project(self, points: FloatArray) -> tuple[np.ndarray, np.ndarray, FloatArray]:
@@ -89,29 +108,79 @@ class DepthFrame:
 
 
 class DepthCamera:
-    """A fixed camera rendering depth images of a PyBullet client.
+    """A camera rendering depth images of a PyBullet client: fixed or mounted.
 
     Args:
         client: PyBullet client id.
-        spec: pose, resolution, field of view and clipping planes.
+        spec: pose (or parent frame and offset), resolution, field of view and
+            clipping planes.
+        robot: the robot a mounted camera's ``parent`` frame belongs to.
+
+    Raises:
+        ConfigError: a mounted camera without a robot, or with an unknown frame.
     """
 
-    def __init__(self, client: int, spec: CameraSpec) -> None:
-        """Compute the view and projection matrices once."""
+    def __init__(
+        self, client: int, spec: CameraSpec, robot: RobotModel | None = None
+    ) -> None:
+        """Compute the projection (and a fixed camera's view) once."""
         self.client = client
         self.spec = spec
-        self._view_list = pb.computeViewMatrix(
-            list(spec.position), list(spec.target), list(spec.up)
-        )
+        self.name = spec.name
         self._projection_list = pb.computeProjectionMatrixFOV(
             spec.fov_deg, spec.width / spec.height, spec.near, spec.far
         )
         # PyBullet's matrices are column-major.
-        self.view = np.array(self._view_list).reshape(4, 4).T
         self.projection = np.array(self._projection_list).reshape(4, 4).T
+        self._frame: int | None = None
+        self._offset = spec.offset.to_se3()
+        if spec.parent is not None:
+            if robot is None:
+                raise ConfigError(
+                    f"camera '{spec.name}' is mounted on '{spec.parent}' but there "
+                    "is no robot",
+                    "parent",
+                )
+            try:
+                self._frame = robot.frame_id(spec.parent)
+            except FrameNotFoundError as exc:
+                raise ConfigError(str(exc), "parent") from None
+            self._view_list: list[float] = []
+            self.view = np.eye(4)
+        else:
+            assert spec.position is not None
+            assert spec.target is not None
+            self._set_view(spec.position, spec.target, spec.up)
 
-    def capture(self) -> DepthFrame:
-        """Render one depth image (tiny renderer; no window needed)."""
+    @property
+    def mounted(self) -> bool:
+        """Whether the camera moves with the robot."""
+        return self._frame is not None
+
+    def optical_pose(self, state: RobotState | None = None) -> pin.SE3:
+        """The optical frame in the world (+z along the axis, +y down the image).
+
+        A mounted camera's pose is taken from ``state`` (the robot when the
+        frame is taken).
+        """
+        if self._frame is None:
+            R = self.view[:3, :3].T.dot(np.diag([1.0, -1.0, -1.0]))
+            return pin.SE3(R, -self.view[:3, :3].T.dot(self.view[:3, 3]))
+        if state is None:
+            raise ValueError(f"camera '{self.name}' is mounted: pass the robot state")
+        return state.data.oMf[self._frame] * self._offset
+
+    def capture(self, state: RobotState | None = None) -> DepthFrame:
+        """Render one depth image (tiny renderer; no window needed).
+
+        Args:
+            state: the robot at capture time (mounted cameras; kinematics
+                updated).
+        """
+        if self._frame is not None:
+            M = self.optical_pose(state)
+            eye = M.translation
+            self._set_view(eye, eye + M.rotation[:, 2], -M.rotation[:, 1])
         s = self.spec
         _, _, _, depth, _ = pb.getCameraImage(
             s.width,
@@ -123,4 +192,14 @@ class DepthCamera:
             physicsClientId=self.client,
         )
         buffer = np.asarray(depth, dtype=float).reshape(s.height, s.width)
-        return DepthFrame(buffer, self.view, self.projection, s.near, s.far)
+        return DepthFrame(
+            buffer, self.view.copy(), self.projection, s.near, s.far, self.name
+        )
+
+    def _set_view(self, eye: object, target: object, up: object) -> None:
+        self._view_list = pb.computeViewMatrix(
+            [float(v) for v in eye],  # type: ignore[attr-defined]
+            [float(v) for v in target],  # type: ignore[attr-defined]
+            [float(v) for v in up],  # type: ignore[attr-defined]
+        )
+        self.view = np.array(self._view_list).reshape(4, 4).T

@@ -3,10 +3,11 @@
 
 The control loop hands each captured frame (with the robot's configuration at
 capture time) to :meth:`MapUpdater.submit`, which returns at once. A worker thread
-integrates the newest frame into the grid, builds an environment snapshot and
-swaps it into the collision world; frames that arrive while it is busy replace
-the waiting one (the map skips frames rather than lag). Queries in flight keep
-the snapshot they started with.
+integrates the waiting frames into the one grid (one per camera: the newest),
+builds an environment snapshot and swaps it into the collision world; a frame
+that arrives while the worker is busy replaces its camera's waiting one (the map
+skips frames rather than lag). Queries in flight keep the snapshot they started
+with.
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ class MapUpdater:
         self.last_update_s = 0.0
         self.error: BaseException | None = None
         self._state = RobotState(world.geometry.robot)
-        self._pending: tuple[DepthFrame, FloatArray] | None = None
+        self._pending: dict[str, tuple[DepthFrame, FloatArray]] = {}
         self._cond = threading.Condition()
         self._stop = False
         self._busy = False
@@ -64,19 +65,19 @@ class MapUpdater:
     def submit(self, frame: DepthFrame, q: FloatArray) -> None:
         """Queue a frame taken at configuration ``q``; never waits for the map."""
         if self.synchronous:
-            self._integrate(frame, q)
+            self._integrate([(frame, q)])
             return
         with self._cond:
-            if self._pending is not None:
+            if frame.camera in self._pending:
                 self.skipped += 1
-            self._pending = (frame, q)
+            self._pending[frame.camera] = (frame, q)
             self._cond.notify()
 
     def wait_idle(self, timeout: float = 10.0) -> bool:
         """Block until no frame is waiting or being integrated (for tests)."""
         deadline = time.monotonic() + timeout
         with self._cond:
-            while self._pending is not None or self._busy:
+            while self._pending or self._busy:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
@@ -86,16 +87,15 @@ class MapUpdater:
     def _run(self) -> None:
         while True:
             with self._cond:
-                while self._pending is None and not self._stop:
+                while not self._pending and not self._stop:
                     self._cond.wait()
                 if self._stop:
                     return
-                assert self._pending is not None
-                frame, q = self._pending
-                self._pending = None
+                frames = list(self._pending.values())
+                self._pending = {}
                 self._busy = True
             try:
-                self._integrate(frame, q)
+                self._integrate(frames)
             except BaseException as exc:  # reported by the executor, never lost
                 self.error = exc
             finally:
@@ -103,10 +103,11 @@ class MapUpdater:
                     self._busy = False
                     self._cond.notify_all()
 
-    def _integrate(self, frame: DepthFrame, q: FloatArray) -> None:
+    def _integrate(self, frames: list[tuple[DepthFrame, FloatArray]]) -> None:
         start = time.perf_counter()
-        self._state.update(q)
-        self.grid.integrate(frame, self._state)
+        for frame, q in frames:
+            self._state.update(q)
+            self.grid.integrate(frame, self._state)
         self.world.set_environment(self.grid.environment())
         self.updates += 1
         self.last_update_s = time.perf_counter() - start

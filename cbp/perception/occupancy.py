@@ -1,116 +1,289 @@
 # SPDX-License-Identifier: Apache-2.0
-"""An occupancy grid updated from depth frames, with the robot filtered out.
+"""A three-state occupancy grid (unknown, free, occupied) updated from depth frames.
+
+Every cell starts **unknown**. A frame marks the cells it sees *through* free (the
+measured surface along their pixel lies more than a cell beyond them) and the
+cells its readings fall in **occupied**; an occupied cell seen through
+``misses_to_clear`` times becomes free again (a removed obstacle). The space the
+robot's padded shapes hold at a frame's time is free too: the robot was there.
+With ``perception.unknown: occupied`` (the default) unknown cells are obstacles
+for every collision-aware method, so the arm never moves into space nothing has
+seen: the far side of an obstacle, its shadow, or what the arm itself hides.
 
 Why not OctoMap: ray-cast insertion of one 320x240 frame takes 120-250 ms on this
 machine and its default clamping keeps a moved obstacle for about nine frames
-(``../shared/notes/perception.md``). This grid marks hits in a dense voxel array
-and clears cells by projecting them into the image: a cell the camera sees
-*through* (the measured surface along its pixel is farther than the cell) gets a
-miss, and ``misses_to_clear`` misses remove it. That is a few ms per frame and
-clears a removed obstacle in ``misses_to_clear`` frames. The collision queries
-still run on an octree (coal's), built from the occupied centres.
+(``../shared/notes/perception.md``). Here each pass is a compiled loop over the
+grid (:mod:`cbp.perception.kernels`): the cells of the frustum are projected into
+the image (free cells skipped), the robot's points are filtered out against its
+shapes, and the snapshot for the collision world indexes only the **shell** of the
+obstacle cells, those next to open space, so a solid block of unknown space costs
+its surface, not its volume.
 
-Robot pixels: points within the robot's padded shapes are not inserted, and their
-pixels count as unknown for clearing, so the robot never clears what it hides.
+Robot pixels: their readings are not inserted, but the space in front of them
+along their rays is seen, so the robot never clears what it hides.
 """
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import dataclass
 
-from cbp.collision.environment import MetaballRefiner, OccupancyEnvironment
-from cbp.collision.geometry import RobotGeometry
+import numpy as np
+from scipy.ndimage import minimum_filter
+
+from cbp.collision.cells import BRICK, MAX_BRICKS, CellIndex
+from cbp.collision.environment import (
+    BlockedGrid,
+    MetaballRefiner,
+    OccupancyEnvironment,
+)
+from cbp.collision.geometry import RobotGeometry, points_inside
 from cbp.perception.camera import DepthFrame
+from cbp.perception.kernels import (
+    FREE,
+    OCCUPIED,
+    UNKNOWN,
+    carve_shapes,
+    mark_seen,
+    shell_cells,
+)
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import FloatArray
 from cbp.state import RobotState
 
-__all__ = ["OccupancyGrid"]
+__all__ = ["FrameSummary", "OccupancyGrid"]
+
+
+@dataclass(frozen=True)
+class FrameSummary:
+    """What one frame did to the map.
+
+    Attributes:
+        camera: the camera's name.
+        valid_fraction: pixels with a valid reading (finite, in range), of all.
+        robot_points: readings filtered out as the robot.
+        inserted: readings inserted as obstacles.
+        seen: cells whose state the frame changed by seeing through them.
+        carved: unknown cells made free because the robot held them.
+    """
+
+    camera: str
+    valid_fraction: float
+    robot_points: int
+    inserted: int
+    seen: int
+    carved: int
 
 
 class OccupancyGrid:
-    """A dense voxel grid over the mapped region.
+    """A dense three-state voxel grid over the mapped region.
 
     Args:
-        spec: resolution, bounds, range and clearing settings.
-        geometry: the robot's shapes, for filtering it out (None: no filter).
+        spec: resolution, bounds, range, clearing and unknown-space settings.
+        geometry: the robot's shapes, for filtering it out and for the space it
+            holds (None: no robot).
+
+    Attributes:
+        cells: cell states (nx, ny, nz): :data:`~cbp.perception.kernels.UNKNOWN`,
+            ``FREE`` or ``OCCUPIED``.
+        frames: frames integrated so far.
+        robot_points_removed: readings filtered out as the robot, over all frames.
+        last: the last frame's :class:`FrameSummary`.
     """
 
     def __init__(self, spec: PerceptionSpec, geometry: RobotGeometry | None) -> None:
-        """Allocate the grid (all free)."""
+        """Allocate the grid, all unknown."""
         self.spec = spec
         self.cell = spec.cell_size
         self.lower = np.asarray(spec.bounds[0], dtype=float)
         upper = np.asarray(spec.bounds[1], dtype=float)
-        self.shape = tuple(np.ceil((upper - self.lower) / self.cell).astype(int))
-        self.occupied = np.zeros(self.shape, dtype=bool)
+        self.shape = tuple(int(n) for n in np.ceil((upper - self.lower) / self.cell))
+        self.upper = self.lower + np.array(self.shape) * self.cell
+        self.cells = np.full(self.shape, UNKNOWN, dtype=np.uint8)
         self.misses = np.zeros(self.shape, dtype=np.uint8)
         self.geometry = geometry
         self.frames = 0
         self.robot_points_removed = 0
+        self.last: FrameSummary | None = None
+        brick = BRICK
+        dims = -(-np.array(self.shape) // brick)
+        while np.prod(dims) > MAX_BRICKS:
+            brick *= 2
+            dims = -(-np.array(self.shape) // brick)
+        self._brick = brick
+        self._dims = dims
 
-    def centres(self) -> FloatArray:
-        """Centres of the occupied cells (N, 3) [m]."""
-        idx = np.argwhere(self.occupied)
+    # ------------------------------------------------------------------ reading
+
+    def centres(self, state: int = OCCUPIED) -> FloatArray:
+        """Centres of the cells in ``state`` (N, 3) [m] (default: occupied)."""
+        idx = np.argwhere(self.cells == state)
         return np.asarray(self.lower + (idx + 0.5) * self.cell)
 
-    def integrate(self, frame: DepthFrame, state: RobotState | None) -> None:
-        """Insert a frame's hits and clear the cells it sees through.
+    def count(self, state: int) -> int:
+        """Number of cells in ``state``."""
+        return int(np.count_nonzero(self.cells == state))
+
+    def state_at(self, points: FloatArray) -> np.ndarray:
+        """The state of the cell of each point (n, 3); outside the grid: FREE.
+
+        (Outside the mapped region nothing is mapped: it is not an obstacle.)
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        idx = np.floor((points - self.lower) / self.cell).astype(np.intp)
+        inside = np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
+        out = np.full(len(points), FREE, dtype=np.uint8)
+        i = idx[inside]
+        out[inside] = self.cells[i[:, 0], i[:, 1], i[:, 2]]
+        return out
+
+    # ------------------------------------------------------------------ updates
+
+    def integrate(self, frame: DepthFrame, state: RobotState | None) -> FrameSummary:
+        """Add one frame: the robot's space, the space seen through, the readings.
 
         Args:
             frame: the depth image.
-            state: the robot at capture time, for the self-filter (None: no robot).
+            state: the robot at capture time, for the self-filter and the space
+                it holds (None: no robot).
         """
+        carved = self.carve_robot(state) if state is not None else 0
         points, hit = frame.points()
-        ranges = frame.ranges()
+        valid = frame.valid()
         camera = frame.position
-        dist = np.linalg.norm(points - camera, axis=-1)
-        valid = hit & (dist <= self.spec.max_range)
-        robot = np.zeros_like(valid)
-        if state is not None and self.geometry is not None:
-            rows, cols = np.nonzero(valid)
-            on_robot = self.geometry.contains(
-                state, points[rows, cols], margin=self.spec.robot_margin
+        rows, cols = np.nonzero(hit)
+        pts = np.ascontiguousarray(points[rows, cols])
+        near = np.einsum("ij,ij->i", pts - camera, pts - camera) <= (
+            self.spec.max_range**2
+        )
+        robot = np.zeros(len(pts), dtype=np.bool_)
+        if state is not None and self.geometry is not None and len(pts):
+            shapes = self.geometry.world_shapes(state)
+            points_inside(
+                pts,
+                shapes.planes,
+                shapes.plane_start,
+                shapes.centres,
+                shapes.radii,
+                self.geometry.padding + self.spec.robot_margin,
+                robot,
             )
-            robot[rows[on_robot], cols[on_robot]] = True
-            self.robot_points_removed += int(on_robot.sum())
-        keep = valid & ~robot
-        self._clear(frame, ranges, robot)
-        self._insert(points[keep])
+        removed = int(robot.sum())
+        self.robot_points_removed += removed
+        seen = self._see_through(frame)
+        keep = pts[near & ~robot]
+        self._insert(keep)
         self.frames += 1
+        self.last = FrameSummary(
+            camera=frame.camera,
+            valid_fraction=float(valid.mean()) if valid.size else 0.0,
+            robot_points=removed,
+            inserted=len(keep),
+            seen=seen,
+            carved=carved,
+        )
+        return self.last
+
+    def carve_robot(self, state: RobotState) -> int:
+        """Mark the unknown cells the robot holds free; return how many.
+
+        The robot's shapes grown by the padding and ``robot_margin`` (the space
+        the self-filter takes for the robot, so no reading is ever inserted
+        there) and one cell more: the contact query measures cells near a hull's
+        edges by their face planes, which can be up to sqrt(3) times nearer than
+        the cell; without the extra cell the robot would start in contact with
+        the unknown space around it.
+        """
+        if self.geometry is None:
+            return 0
+        grow = self.geometry.padding + self.spec.robot_margin + self.cell
+        shapes = self.geometry.world_shapes(state)
+        boxes = np.empty((len(self.geometry.shapes), 6))
+        oMf = state.data.oMf
+        for s, shape in enumerate(self.geometry.shapes):
+            M = oMf[shape.frame_id]
+            centre = M.act(0.5 * (shape.lower + shape.upper))
+            half = np.abs(M.rotation).dot(0.5 * (shape.upper - shape.lower)) + grow
+            boxes[s, :3] = centre - half
+            boxes[s, 3:] = centre + half
+        return int(
+            carve_shapes(
+                self.cells,
+                self.lower,
+                self.cell,
+                shapes.planes,
+                shapes.plane_start,
+                shapes.centres,
+                shapes.radii,
+                boxes,
+                grow,
+            )
+        )
+
+    def _see_through(self, frame: DepthFrame) -> int:
+        """Free the cells in front of the readings (eroded over a cell's footprint)."""
+        # The nearest reading around each pixel: a cell at a depth edge or on a
+        # grazing surface spans several pixels, and is free only in front of all
+        # of them. NaN (no reading) says nothing: it becomes -inf; background
+        # sees to the far plane.
+        ranges = np.nan_to_num(frame.ranges(), nan=-np.inf, posinf=frame.far)
+        ranges = minimum_filter(ranges, size=3, mode="nearest")
+        box = self._frustum_box(frame)
+        if box is None:
+            return 0
+        PV = frame.projection.dot(frame.view)
+        clip = np.ascontiguousarray(PV[[0, 1, 3]])
+        return int(
+            mark_seen(
+                self.cells,
+                self.misses,
+                self.lower,
+                self.cell,
+                box,
+                clip,
+                np.ascontiguousarray(frame.view[2]),
+                np.ascontiguousarray(frame.position),
+                np.ascontiguousarray(ranges),
+                frame.near,
+                self.spec.max_range,
+                self.spec.misses_to_clear,
+            )
+        )
+
+    def _frustum_box(self, frame: DepthFrame) -> np.ndarray | None:
+        """Index range of the grid cells within the frustum's bounding box."""
+        reach = min(self.spec.max_range, frame.far / _min_axis_cos(frame))
+        inv = np.linalg.inv(frame.projection.dot(frame.view))
+        corners = [frame.position]
+        for x in (-1.0, 1.0):
+            for y in (-1.0, 1.0):
+                p = inv.dot([x, y, 1.0, 1.0])
+                far = p[:3] / p[3]
+                ray = far - frame.position
+                corners.append(frame.position + ray * (reach / np.linalg.norm(ray)))
+        pts = np.array(corners)
+        lo = np.floor((pts.min(axis=0) - self.lower) / self.cell).astype(int)
+        hi = np.floor((pts.max(axis=0) - self.lower) / self.cell).astype(int) + 1
+        lo = np.maximum(lo, 0)
+        hi = np.minimum(hi, self.shape)
+        if np.any(hi <= lo):
+            return None
+        return np.array([lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]], dtype=np.int64)
 
     def _insert(self, points: FloatArray) -> None:
         idx = np.floor((points - self.lower) / self.cell).astype(np.intp)
         inside = np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
         idx = idx[inside]
-        self.occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+        self.cells[idx[:, 0], idx[:, 1], idx[:, 2]] = OCCUPIED
         self.misses[idx[:, 0], idx[:, 1], idx[:, 2]] = 0
 
-    def _clear(self, frame: DepthFrame, ranges: FloatArray, robot: np.ndarray) -> None:
-        idx = np.argwhere(self.occupied)
-        if len(idx) == 0:
-            return
-        centres = self.lower + (idx + 0.5) * self.cell
-        rows, cols, depth = frame.project(centres)
-        seen = rows >= 0
-        measured = np.full(len(idx), -np.inf)
-        measured[seen] = ranges[rows[seen], cols[seen]]
-        # Robot pixels are unknown: the robot may hide the cell.
-        measured[seen] = np.where(
-            robot[rows[seen], cols[seen]], -np.inf, measured[seen]
-        )
-        # Background (inf) sees through everything up to the far plane.
-        measured = np.minimum(measured, frame.far)
-        through = seen & (depth < measured - self.cell) & (depth > frame.near)
-        hit_idx = idx[through]
-        m = self.misses[hit_idx[:, 0], hit_idx[:, 1], hit_idx[:, 2]] + 1
-        self.misses[hit_idx[:, 0], hit_idx[:, 1], hit_idx[:, 2]] = m
-        gone = hit_idx[m >= self.spec.misses_to_clear]
-        self.occupied[gone[:, 0], gone[:, 1], gone[:, 2]] = False
-        self.misses[gone[:, 0], gone[:, 1], gone[:, 2]] = 0
+    # ------------------------------------------------------------------ snapshot
 
     def environment(self) -> OccupancyEnvironment:
-        """A snapshot for the collision world (brick index + octree of the centres)."""
+        """A snapshot for the collision world: the obstacle shell, indexed by brick.
+
+        Obstacles are the occupied cells and, with ``unknown: occupied``, the
+        unknown ones. The snapshot owns its arrays: later frames do not change it.
+        """
         s = self.spec
         refiner = (
             MetaballRefiner(
@@ -120,11 +293,36 @@ class OccupancyGrid:
             if s.refine_normals
             else None
         )
-        return OccupancyEnvironment(self.centres(), self.cell, refiner)
+        blocked = np.empty(self.shape, dtype=np.bool_)
+        centres, start = shell_cells(
+            self.cells, self.lower, self.cell, self._brick, s.unknown_blocks, blocked
+        )
+        index = CellIndex.from_bricks(
+            centres, start, self.lower, self.cell, self._brick, self._dims
+        )
+        return OccupancyEnvironment(
+            centres,
+            self.cell,
+            refiner,
+            index=index,
+            blocked=BlockedGrid(blocked, self.lower.copy(), self.cell),
+        )
 
     def __repr__(self) -> str:
-        """Size, resolution and occupancy."""
+        """Size, resolution and the cells in each state."""
         return (
             f"OccupancyGrid(shape={self.shape}, cell={self.cell}, "
-            f"occupied={int(self.occupied.sum())}, frames={self.frames})"
+            f"occupied={self.count(OCCUPIED)}, unknown={self.count(UNKNOWN)}, "
+            f"frames={self.frames})"
         )
+
+
+def _min_axis_cos(frame: DepthFrame) -> float:
+    """The cosine of the widest angle between the optical axis and a corner ray."""
+    inv = np.linalg.inv(frame.projection.dot(frame.view))
+    centre = inv.dot([0.0, 0.0, 1.0, 1.0])
+    axis = centre[:3] / centre[3] - frame.position
+    axis /= np.linalg.norm(axis)
+    p = inv.dot([1.0, 1.0, 1.0, 1.0])
+    ray = p[:3] / p[3] - frame.position
+    return float(axis.dot(ray) / np.linalg.norm(ray))

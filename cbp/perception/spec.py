@@ -3,24 +3,42 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
+import numpy as np
+
 from cbp.errors import ConfigError
+from cbp.spatial import Pose
 
 Vec3 = tuple[float, float, float]
+
+MAX_CELLS = 1 << 27
+"""The largest map: three bytes a cell, so about 400 MB."""
 
 
 @dataclass(frozen=True, kw_only=True)
 class CameraSpec:
-    """A depth camera fixed in the world, looking at ``target`` from ``position``."""
+    """A depth camera: fixed in the world, or mounted on a robot link.
 
-    position: Vec3
-    """Optical centre in the world [m]."""
-    target: Vec3
-    """A point on the optical axis [m]."""
+    A fixed camera looks at ``target`` from ``position``. A mounted camera
+    (``parent:`` a frame of the robot) sits at ``offset`` in that frame and looks
+    along the offset's +z axis with +x to the right of the image and +y down
+    (the optical frame of ROS and OpenCV); its pose follows the robot.
+    """
+
+    name: str = ""
+    """Name in events and plots (default: ``camera<i>`` in list order)."""
+    position: Vec3 | None = None
+    """Optical centre in the world [m] (fixed cameras)."""
+    target: Vec3 | None = None
+    """A point on the optical axis [m] (fixed cameras)."""
     up: Vec3 = (0.0, 0.0, 1.0)
-    """The world direction that appears up in the image."""
+    """The world direction that appears up in the image (fixed cameras)."""
+    parent: str | None = None
+    """The robot frame a mounted camera is fixed to (for example ``panda_hand``)."""
+    offset: Pose = field(default_factory=lambda: Pose(position=(0.0, 0.0, 0.0)))
+    """The optical frame in ``parent``'s frame (mounted cameras)."""
     width: int = 320
     """Image width [px]."""
     height: int = 240
@@ -35,21 +53,46 @@ class CameraSpec:
     """Frames per second."""
 
     def __post_init__(self) -> None:
-        """Positive sizes and a sensible frustum."""
+        """Positive sizes, a sensible frustum, and either a pose or a parent."""
         if self.width < 8 or self.height < 8:
             raise ConfigError(
                 f"image must be at least 8x8, got {self.width}x{self.height}", "width"
             )
+        if self.width * self.height > 4096 * 4096:
+            raise ConfigError(
+                f"image of {self.width}x{self.height} px is too large", "width"
+            )
         if not 1.0 < self.fov_deg < 170.0:
             raise ConfigError(f"must be in (1, 170) deg, got {self.fov_deg}", "fov_deg")
-        if not 0 < self.near < self.far:
+        if not 0 < self.near < self.far < 1e3:
             raise ConfigError(
-                f"need 0 < near < far, got near={self.near}, far={self.far}", "near"
+                f"need 0 < near < far < 1000 m, got near={self.near}, far={self.far}",
+                "near",
             )
-        if not self.rate_hz > 0:
-            raise ConfigError(f"must be > 0, got {self.rate_hz}", "rate_hz")
-        if self.position == self.target:
-            raise ConfigError("position and target coincide", "target")
+        if not 0 < self.rate_hz <= 1000.0:
+            raise ConfigError(f"must be in (0, 1000] Hz, got {self.rate_hz}", "rate_hz")
+        if self.parent is None:
+            if self.position is None or self.target is None:
+                raise ConfigError(
+                    "a fixed camera needs 'position' and 'target' (or give "
+                    "'parent', a robot frame, for a mounted camera)",
+                    "position" if self.position is None else "target",
+                )
+            if not np.all(np.isfinite(self.position + self.target + self.up)):
+                raise ConfigError("must be finite", "position")
+            axis = np.subtract(self.target, self.position)
+            if not np.linalg.norm(axis) > 1e-9:
+                raise ConfigError("position and target coincide", "target")
+            if np.linalg.norm(np.cross(axis, self.up)) < 1e-9 * np.linalg.norm(axis):
+                raise ConfigError(
+                    "'up' is parallel to the optical axis (target - position)", "up"
+                )
+        elif self.position is not None or self.target is not None:
+            raise ConfigError(
+                "a mounted camera (with 'parent') takes 'offset', not "
+                "'position'/'target'",
+                "position" if self.position is not None else "target",
+            )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,9 +101,15 @@ class PerceptionSpec:
 
     source: Literal["ground_truth", "depth_camera"] = "ground_truth"
     """``ground_truth``: the declared objects; ``depth_camera``: an occupancy map
-    built at run time from the camera's depth images."""
+    built at run time from the cameras' depth images."""
+    cameras: list[CameraSpec] = field(default_factory=list)
+    """The cameras feeding the one map (``depth_camera`` needs at least one)."""
     camera: CameraSpec | None = None
-    """The camera (required for ``depth_camera``)."""
+    """One camera: shorthand for a one-item ``cameras`` list."""
+    unknown: Literal["occupied", "free"] = "occupied"
+    """How the map counts the space no camera has seen (and the robot has not
+    held): ``occupied`` (an obstacle, for every collision-aware method) or
+    ``free`` (the behaviour before version 0.3, for comparison)."""
     cell_size: float = 0.01
     """Occupancy map resolution [m]."""
     bounds: tuple[Vec3, Vec3] = ((-1.0, -1.0, -0.1), (1.5, 1.0, 1.5))
@@ -80,8 +129,21 @@ class PerceptionSpec:
 
     def __post_init__(self) -> None:
         """Camera present for depth_camera; positive sizes; ordered bounds."""
-        if self.source == "depth_camera" and self.camera is None:
-            raise ConfigError("source 'depth_camera' needs a 'camera:'", "camera")
+        if self.camera is not None and self.cameras:
+            raise ConfigError(
+                "give either 'camera' (one) or 'cameras' (a list), not both", "camera"
+            )
+        if self.source == "depth_camera" and not self.all_cameras:
+            raise ConfigError(
+                "source 'depth_camera' needs 'cameras:' (or one 'camera:')", "cameras"
+            )
+        names = [c.name for c in self.all_cameras]
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        if repeated:
+            raise ConfigError(
+                f"camera names must be unique; repeated: {', '.join(repeated)}",
+                "cameras",
+            )
         if not 0.001 <= self.cell_size <= 0.2:
             raise ConfigError(
                 f"must be in [0.001, 0.2] m, got {self.cell_size}", "cell_size"
@@ -91,7 +153,28 @@ class PerceptionSpec:
             raise ConfigError(
                 f"lower corner must be below upper, got {lo}, {hi}", "bounds"
             )
+        cells = np.prod(np.ceil((np.subtract(hi, lo)) / self.cell_size))
+        if cells > MAX_CELLS:
+            raise ConfigError(
+                f"the map would have {cells:.3g} cells (bounds / cell_size); at most "
+                f"{MAX_CELLS:.3g}: shrink the bounds or grow the cells",
+                "bounds",
+            )
         if self.misses_to_clear < 1:
             raise ConfigError(
                 f"must be >= 1, got {self.misses_to_clear}", "misses_to_clear"
             )
+
+    @property
+    def all_cameras(self) -> list[CameraSpec]:
+        """``cameras``, or ``camera`` as a list; unnamed ones named ``camera<i>``."""
+        cameras = self.cameras or ([self.camera] if self.camera is not None else [])
+        return [
+            c if c.name else replace(c, name=f"camera{i}")
+            for i, c in enumerate(cameras)
+        ]
+
+    @property
+    def unknown_blocks(self) -> bool:
+        """Whether unknown space counts as an obstacle."""
+        return self.unknown == "occupied"

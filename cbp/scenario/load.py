@@ -15,9 +15,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
+import coal
 import numpy as np
 import yaml
 
+from cbp.collision.environment import signed_distance
+from cbp.collision.geometry import RobotGeometry
 from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
 from cbp.expressions import compile_time_function
 from cbp.goals import GoalStream
@@ -28,6 +31,7 @@ from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.runtime import Scenario, goal_receivers
 from cbp.scenario.spec import RobotSpec, ScenarioSpec
 from cbp.schema import INVALID, Document, join_path, mapping_items
+from cbp.state import RobotState
 
 __all__ = ["load_scenario"]
 
@@ -109,7 +113,57 @@ def load_scenario(
             raise ScenarioError(
                 str(path), [f"collision world{where}: {exc.message}"]
             ) from exc
+    if not spec.robot.allow_initial_contact:
+        _check_initial_contact(doc, scenario, root)
+        doc.raise_if_problems()
     return scenario
+
+
+#: A start deeper than this in a declared object is refused [m].
+INITIAL_CONTACT_TOLERANCE = 5e-4
+
+
+def _check_initial_contact(doc: Document, scenario: Scenario, root: yaml.Node) -> None:
+    """Refuse an initial configuration that penetrates a declared object.
+
+    The robot's own shapes, unpadded, against each object (coal's signed
+    distance); the deepest overlap of each (link, object) pair is reported.
+    """
+    objects = scenario.environment_objects()
+    if not objects:
+        return
+    geometry = (
+        scenario.collision_world().geometry
+        if scenario.needs_collision_world
+        else RobotGeometry(scenario.robot)
+    )
+    state = RobotState(scenario.robot, scenario.q0)
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    deepest: dict[tuple[str, str], float] = {}
+    centres, radii = geometry.world_spheres(state)
+    for shape, centre, radius in zip(geometry.shapes, centres, radii, strict=True):
+        placement = shape.world_placement(state)
+        for obj in objects:
+            apart = np.any(centre + radius < obj.lower) or np.any(
+                centre - radius > obj.upper
+            )
+            if apart:
+                continue
+            d = signed_distance(
+                obj.shape, obj.placement, shape.shape, placement, request, result
+            )[0]
+            key = (shape.link, obj.name)
+            if d < -INITIAL_CONTACT_TOLERANCE and d < deepest.get(key, 0.0):
+                deepest[key] = d
+    for (link, name), d in sorted(deepest.items(), key=lambda item: item[1]):
+        doc.report(
+            _key_node(root, "robot", "initial") or _key_node(root, "robot"),
+            "robot.initial",
+            f"the initial configuration puts {link} {-d * 1e3:.1f} mm deep into "
+            f"'{name}'; move the robot or the object, or set "
+            "robot.allow_initial_contact: true to start in contact (the arm then "
+            "backs out)",
+        )
 
 
 def _robot_spec_quietly(doc: Document, root: yaml.Node) -> Any:

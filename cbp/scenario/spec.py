@@ -47,6 +47,10 @@ class RobotSpec:
     own (robot.yaml's ``base``)."""
     initial: dict[str, float] = field(default_factory=dict)
     """Initial joint positions by name [rad or m]; others start at home."""
+    allow_initial_contact: bool = False
+    """Accept an initial configuration that penetrates a declared object (the
+    arm then backs out); by default the scenario is refused, naming the link,
+    the object and the depth."""
 
 
 @dataclass(frozen=True, kw_only=True)

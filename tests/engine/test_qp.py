@@ -355,3 +355,31 @@ def test_assembly_pass_compiles_once(robots, rng) -> None:
     limits = JointLimitsConstraint(JointLimitsParams(), robot)
     Engine(robot, [Entry.make(limits)]).step(q, 0.01)
     assert len(_fill_qp.signatures) == 1
+
+
+def test_rows_asking_for_more_than_the_limits_allow_are_eased(robots) -> None:
+    """A joint far past its limit: back out at the velocity bound's pace, no error."""
+    robot = robots["panda"]
+    q = robot.home()
+    q[3] = robot.lower_limits[3] - 0.3  # 0.3 rad past: one step cannot undo it
+    limits = JointLimitsConstraint(JointLimitsParams(), robot, "limits")
+    velocity = JointVelocityConstraint(JointVelocityParams(), robot, "velocity")
+    engine = Engine(
+        robot,
+        [
+            Entry.make(PostureTask(PostureParams(), robot), weight=1e-3),
+            Entry.make(limits, gain=1.0),
+            Entry.make(velocity),
+        ],
+    )
+    dt = 0.01
+    dq = engine.step(q, dt)
+    assert engine.recovery is not None
+    assert "limits" in engine.recovery
+    assert "eased" in engine.recovery
+    bound = robot.velocity_limits[3] * dt
+    # Backing out (toward the range), at half the bound, and no further than it.
+    assert 0.5 * bound - 1e-9 <= dq[3] <= bound + 1e-9
+    # Within the range again, the step is solved as assembled.
+    engine.step(robot.home(), dt)
+    assert engine.recovery is None

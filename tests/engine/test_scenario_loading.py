@@ -138,3 +138,40 @@ def test_cbp_check_exit_codes(tmp_path: Path) -> None:
     )
     assert result.returncode == 2
     assert "did you mean 'posture'" in result.stderr
+
+
+def test_a_start_inside_a_declared_object_is_refused(tmp_path) -> None:
+    """The error names the link, the object and the depth, at robot.initial."""
+    from cbp.state import RobotState
+
+    text = """
+name: start_inside
+include: {configs}/cat.yaml
+robot:
+  name: franka_panda
+  initial: {{panda_joint1: 0.0}}
+duration: 1.0
+world:
+  objects:
+    - {{name: block, shape: box, size: [0.1, 0.1, 0.1], pose: {{position: [{x}, 0.0, {z}]}}}}
+"""
+    configs = Path(__file__).resolve().parents[2] / "scenarios" / "configs"
+    # Put the block 5 mm into the hand: the hand's lowest point at home, less 5 mm.
+    probe = tmp_path / "probe.yaml"
+    probe.write_text(text.format(configs=configs, x=2.0, z=2.0))
+    scenario = load_scenario(probe)
+    state = RobotState(scenario.robot, scenario.q0)
+    hand = state.data.oMf[scenario.robot.frame_id("panda_hand")].translation
+    path = tmp_path / "inside.yaml"
+    path.write_text(text.format(configs=configs, x=hand[0], z=hand[2]))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    message = str(info.value)
+    assert "robot.initial" in message
+    assert "'block'" in message
+    assert "mm deep" in message
+    allowed = text.format(configs=configs, x=hand[0], z=hand[2]).replace(
+        "  initial:", "  allow_initial_contact: true\n  initial:"
+    )
+    path.write_text(allowed)
+    assert load_scenario(path).spec.robot.allow_initial_contact

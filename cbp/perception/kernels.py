@@ -1,0 +1,258 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Compiled loops of the occupancy map: seen space, robot volume, obstacle shell.
+
+Each pass visits cells of a dense ``uint8`` grid (:data:`UNKNOWN`, :data:`FREE`,
+:data:`OCCUPIED`) a few dozen flops at a time, which numpy could only batch at
+the cost of temporaries the size of the grid. They release the GIL, so the map
+thread runs beside the control loop.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from cbp.collision.geometry import inside_convex
+from cbp.robot import FloatArray, IntArray
+
+__all__ = [
+    "FREE",
+    "OCCUPIED",
+    "UNKNOWN",
+    "carve_shapes",
+    "mark_seen",
+    "shell_cells",
+]
+
+UNKNOWN = 0
+"""Never seen, never held by the robot."""
+FREE = 1
+"""Seen through, or held by the robot's padded shapes."""
+OCCUPIED = 2
+"""A depth reading fell in it (and no later frame saw through it often enough)."""
+
+
+@numba.njit(cache=True, nogil=True)
+def mark_seen(
+    grid: np.ndarray,
+    misses: np.ndarray,
+    lower: FloatArray,
+    cell: float,
+    box: IntArray,
+    clip: FloatArray,
+    axis: FloatArray,
+    centre: FloatArray,
+    ranges: FloatArray,
+    near: float,
+    max_range: float,
+    misses_to_clear: int,
+) -> int:
+    """Mark the cells a depth image sees through; return how many changed state.
+
+    A cell is seen through when its centre lies in front of the measured surface
+    at its pixel by more than a cell (``ranges`` should be the image's range
+    eroded over the cell's footprint, so a cell at a depth edge is not taken as
+    seen). Unknown cells seen through become free; occupied cells count a miss
+    and become free after ``misses_to_clear``. Free cells are skipped: only a
+    depth reading (inserted by the caller) makes them occupied.
+
+    Args:
+        grid: cell states (nx, ny, nz), updated in place.
+        misses: misses of occupied cells, updated in place.
+        lower: the grid's lower corner [m].
+        cell: cell size [m].
+        box: index range [i0, i1, j0, j1, k0, k1) to visit (the frustum's box).
+        clip: the first, second and fourth rows of P V (3, 4): world to clip x,
+            y and w.
+        axis: the third row of V (4,): -depth along the optical axis.
+        centre: the optical centre [m].
+        ranges: measured depth along the axis per pixel (H, W): inf sees to
+            ``max_range``, -inf (or NaN) says nothing.
+        near: the camera's near plane [m].
+        max_range: cells farther from the camera are not marked [m].
+        misses_to_clear: misses that clear an occupied cell.
+    """
+    h, w = ranges.shape
+    _, ny, nz = grid.shape
+    flat = grid.reshape(-1)
+    missed = misses.reshape(-1)
+    changed = 0
+    limit2 = (max_range - cell) * (max_range - cell)
+    for i in range(box[0], box[1]):
+        x = lower[0] + (i + 0.5) * cell
+        for j in range(box[2], box[3]):
+            y = lower[1] + (j + 0.5) * cell
+            row = (i * ny + j) * nz
+            # Everything but z is the same along the row: per cell, one multiply-add
+            # per coordinate.
+            d0 = axis[0] * x + axis[1] * y + axis[3]
+            x0 = clip[0, 0] * x + clip[0, 1] * y + clip[0, 3]
+            y0 = clip[1, 0] * x + clip[1, 1] * y + clip[1, 3]
+            w0 = clip[2, 0] * x + clip[2, 1] * y + clip[2, 3]
+            r0 = (x - centre[0]) ** 2 + (y - centre[1]) ** 2
+            for k in range(box[4], box[5]):
+                c = row + k
+                state = flat[c]
+                if state == FREE:
+                    continue
+                z = lower[2] + (k + 0.5) * cell
+                depth = -(d0 + axis[2] * z)
+                if depth <= near:
+                    continue
+                cw = w0 + clip[2, 2] * z
+                col = int(np.rint(((x0 + clip[0, 2] * z) / cw + 1.0) * w * 0.5))
+                if col < 0 or col >= w:
+                    continue
+                ndc_y = (y0 + clip[1, 2] * z) / cw
+                prow = int(np.rint(h - 1 - (ndc_y + 1.0) * h * 0.5))
+                if prow < 0 or prow >= h:
+                    continue
+                if not depth < ranges[prow, col] - cell:  # also false for NaN
+                    continue
+                if r0 + (z - centre[2]) ** 2 > limit2:
+                    continue
+                if state == UNKNOWN:
+                    flat[c] = FREE
+                    changed += 1
+                else:
+                    m = missed[c] + 1
+                    if m >= misses_to_clear:
+                        flat[c] = FREE
+                        missed[c] = 0
+                        changed += 1
+                    else:
+                        missed[c] = m
+    return changed
+
+
+@numba.njit(cache=True, nogil=True)
+def carve_shapes(
+    grid: np.ndarray,
+    lower: FloatArray,
+    cell: float,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    boxes: FloatArray,
+    grow: float,
+) -> int:
+    """Mark unknown cells whose centre is inside a grown shape free; return count.
+
+    The robot was there, so the space is free (occupied cells are kept: an
+    obstacle seen inside the robot's padding is real). The shapes as
+    :class:`~cbp.collision.geometry.WorldShapes` gives them; ``boxes``
+    (shapes, 6) holds each grown shape's world bounding box (lower corner,
+    upper corner).
+    """
+    nx, ny, nz = grid.shape
+    flat = grid.reshape(-1)
+    size = (nx, ny, nz)
+    lo = np.empty(3, dtype=np.int64)
+    hi = np.empty(3, dtype=np.int64)
+    changed = 0
+    for s in range(boxes.shape[0]):
+        for a in range(3):
+            lo[a] = max(int(np.ceil((boxes[s, a] - lower[a]) / cell - 0.5)), 0)
+            top = int(np.floor((boxes[s, 3 + a] - lower[a]) / cell - 0.5)) + 1
+            hi[a] = min(top, size[a])
+        first, last = plane_start[s], plane_start[s + 1]
+        cx, cy, cz = centres[s, 0], centres[s, 1], centres[s, 2]
+        reach2 = (radii[s] + grow) ** 2
+        for i in range(lo[0], hi[0]):
+            x = lower[0] + (i + 0.5) * cell
+            for j in range(lo[1], hi[1]):
+                y = lower[1] + (j + 0.5) * cell
+                row = (i * ny + j) * nz
+                for k in range(lo[2], hi[2]):
+                    if flat[row + k] != UNKNOWN:
+                        continue
+                    z = lower[2] + (k + 0.5) * cell
+                    if (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2 > reach2:
+                        continue
+                    if inside_convex(x, y, z, planes, first, last, grow):
+                        flat[row + k] = FREE
+                        changed += 1
+    return changed
+
+
+@numba.njit(cache=True, nogil=True)
+def shell_cells(
+    grid: np.ndarray,
+    lower: FloatArray,
+    cell: float,
+    brick: int,
+    unknown_blocks: bool,
+    blocked: np.ndarray,
+) -> tuple[FloatArray, IntArray]:
+    """The obstacle cells next to open space, sorted by brick, and each brick's run.
+
+    A cell is blocked when occupied, or unknown and ``unknown_blocks``; it is in
+    the shell when one of its six neighbours inside the grid is not blocked.
+    Only the shell can be the cell closest to a robot shape that stands in open
+    space, so only the shell is indexed: a solid block of unknown space costs
+    its surface, not its volume. ``blocked`` (nx, ny, nz) receives the blocked
+    mask (for point-inside tests).
+
+    Returns:
+        (centres (N, 3) in brick order, start (bricks + 1,)): brick b's cells
+        are ``centres[start[b]:start[b + 1]]``, bricks numbered in C order over
+        ``ceil(shape / brick)``.
+    """
+    nx, ny, nz = grid.shape
+    flat = grid.reshape(-1)
+    mask = blocked.reshape(-1)
+    n = flat.size
+    for c in range(n):
+        v = flat[c]
+        mask[c] = v == OCCUPIED or (unknown_blocks and v == UNKNOWN)
+    sx, sy = ny * nz, nz
+    found = np.empty(1024, dtype=np.int64)
+    count = 0
+    for i in range(nx):
+        for j in range(ny):
+            row = i * sx + j * sy
+            for k in range(nz):
+                c = row + k
+                if not mask[c]:
+                    continue
+                if (
+                    (k > 0 and not mask[c - 1])
+                    or (k + 1 < nz and not mask[c + 1])
+                    or (j > 0 and not mask[c - sy])
+                    or (j + 1 < ny and not mask[c + sy])
+                    or (i > 0 and not mask[c - sx])
+                    or (i + 1 < nx and not mask[c + sx])
+                ):
+                    if count == found.size:
+                        grown = np.empty(2 * found.size, dtype=np.int64)
+                        grown[:count] = found
+                        found = grown
+                    found[count] = c
+                    count += 1
+    by, bz = -(-ny // brick), -(-nz // brick)
+    bx = -(-nx // brick)
+    key = np.empty(count, dtype=np.int64)
+    counts = np.zeros(bx * by * bz, dtype=np.int64)
+    for m in range(count):
+        c = found[m]
+        i, rest = c // sx, c % sx
+        j, k = rest // sy, rest % sy
+        b = ((i // brick) * by + j // brick) * bz + k // brick
+        key[m] = b
+        counts[b] += 1
+    start = np.zeros(counts.size + 1, dtype=np.int64)
+    for b in range(counts.size):
+        start[b + 1] = start[b] + counts[b]
+    centres = np.empty((count, 3))
+    fill = start[:-1].copy()
+    for m in range(count):
+        c = found[m]
+        i, rest = c // sx, c % sx
+        j, k = rest // sy, rest % sy
+        slot = fill[key[m]]
+        centres[slot, 0] = lower[0] + (i + 0.5) * cell
+        centres[slot, 1] = lower[1] + (j + 0.5) * cell
+        centres[slot, 2] = lower[2] + (k + 0.5) * cell
+        fill[key[m]] = slot + 1
+    return centres, start

@@ -1,0 +1,181 @@
+"""The three-state map: unseen space is an obstacle, seen space is free, cameras merge."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from cbp.collision import CollisionWorld, RobotGeometry
+from cbp.collision.checker import FreeSpaceChecker
+from cbp.perception.camera import DepthCamera, DepthFrame
+from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
+from cbp.perception.mapper import MapUpdater
+from cbp.perception.occupancy import OccupancyGrid
+from cbp.perception.spec import CameraSpec, PerceptionSpec
+from cbp.scenario import ObjectSpec
+from cbp.sim.scene import PybulletScene
+from cbp.spatial import Pose
+from cbp.state import RobotState
+
+BOX = ObjectSpec(
+    name="box",
+    shape="box",
+    size=(0.3, 0.1, 0.3),
+    pose=Pose(position=(0.6, 0.0, 0.15)),
+)
+# Looking along +y at the box: behind it (y > 0.05) is its shadow, which the
+# side camera (looking along -x) sees.
+FRONT = CameraSpec(
+    name="front", position=(0.6, -1.2, 0.3), target=(0.6, 0.0, 0.15), far=3.0
+)
+SIDE = CameraSpec(
+    name="side", position=(1.8, 0.2, 0.3), target=(0.6, 0.2, 0.15), far=3.0
+)
+SPEC = PerceptionSpec(
+    source="depth_camera",
+    cameras=[FRONT],
+    cell_size=0.02,
+    bounds=((-0.4, -0.6, -0.02), (1.0, 0.6, 1.0)),
+)
+BEHIND = np.array([[0.6, 0.2, 0.15]])  # in the box's shadow from FRONT
+BEFORE = np.array([[0.6, -0.35, 0.15]])  # between the camera and the box
+IN_BOX = np.array([[0.6, 0.0, 0.15]])
+FRONT_FACE = np.array([[0.6, -0.06, 0.15]])
+
+
+@pytest.fixture
+def scene(robots):
+    robot = robots["panda"]
+    with PybulletScene(robot, [BOX]) as scene:
+        scene.set_configuration(robot.home())
+        yield scene
+
+
+def test_cells_start_unknown_and_frames_sort_them(scene, robots) -> None:
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(SPEC, geometry)
+    assert grid.count(UNKNOWN) == grid.cells.size
+    state = RobotState(robot, robot.home())
+    summary = grid.integrate(DepthCamera(scene.client, FRONT).capture(), state)
+    assert summary.valid_fraction == 1.0
+    assert summary.seen > 1000
+    assert summary.carved > 100
+    assert grid.state_at(BEFORE)[0] == FREE
+    assert grid.state_at(BEHIND)[0] == UNKNOWN
+    # The box's front face is occupied; its inside was never seen.
+    assert grid.state_at(FRONT_FACE)[0] == OCCUPIED
+    assert grid.state_at(IN_BOX)[0] == UNKNOWN
+    # The robot's space is free, though the camera sees only its front.
+    hand = state.data.oMf[robot.frame_id("panda_link4")].translation
+    assert grid.state_at(hand[None])[0] == FREE
+
+
+def test_unknown_space_blocks_unless_set_free(scene, robots) -> None:
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    state = RobotState(robot, robot.home())
+    frame = DepthCamera(scene.client, FRONT).capture()
+    for unknown, blocked in (("occupied", True), ("free", False)):
+        grid = OccupancyGrid(replace(SPEC, unknown=unknown), geometry)
+        grid.integrate(frame, state)
+        env = grid.environment()
+        assert bool(env.inside(BEHIND)[0]) is blocked
+        assert not env.inside(BEFORE)[0]
+        # Only the shell is indexed: far fewer cells than the blocked volume.
+        assert len(env) < int(env.blocked.mask.sum()) or not blocked
+
+
+def test_a_second_camera_sees_the_shadow_free(scene, robots) -> None:
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(replace(SPEC, cameras=[FRONT, SIDE]), geometry)
+    world = CollisionWorld(geometry, grid.environment())
+    updater = MapUpdater(grid, world)
+    try:
+        q = robot.home()
+        updater.submit(DepthCamera(scene.client, FRONT).capture(), q)
+        updater.submit(DepthCamera(scene.client, SIDE).capture(), q)
+        assert updater.wait_idle()
+    finally:
+        updater.close()
+    assert grid.frames == 2
+    assert grid.state_at(BEHIND)[0] == FREE
+    assert not world.environment.inside(BEHIND)[0]
+
+
+def test_the_checker_finds_a_shape_wholly_inside_unknown_space(robots) -> None:
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(SPEC, geometry)
+    home = robot.home()
+    grid.carve_robot(RobotState(robot, home))  # nothing seen: only the robot's space
+    env = grid.environment()
+    checker = FreeSpaceChecker(geometry, env, padding=0.0, self_collision=False)
+    assert checker.is_free(home)
+    moved = home.copy()
+    moved[0] += 1.5  # the whole arm swings into space nothing has seen
+    assert not checker.is_free(moved)
+    world = CollisionWorld(geometry, env)
+    assert world.check(home).penetration == 0.0
+
+
+def test_frames_without_valid_readings_change_nothing(scene, robots) -> None:
+    robot = robots["panda"]
+    grid = OccupancyGrid(SPEC, RobotGeometry(robot))
+    good = DepthCamera(scene.client, FRONT).capture()
+    for fill in (np.nan, 0.0 * np.nan + np.inf, -1.0):
+        bad = DepthFrame(
+            np.full_like(good.depth, fill),
+            good.view,
+            good.projection,
+            good.near,
+            good.far,
+            "front",
+        )
+        summary = grid.integrate(bad, None)
+        assert summary.valid_fraction == 0.0
+        assert summary.inserted == 0
+        assert summary.seen == 0
+    assert grid.count(UNKNOWN) == grid.cells.size
+
+
+def test_a_mounted_camera_follows_its_link(scene, robots) -> None:
+    robot = robots["panda"]
+    spec = CameraSpec(
+        name="wrist",
+        parent="panda_hand",
+        offset=Pose(position=(0.06, 0.0, 0.03), rpy_deg=(0.0, 25.0, 0.0)),
+        near=0.05,
+    )
+    camera = DepthCamera(scene.client, spec, robot)
+    state = RobotState(robot, robot.home())
+    frame = camera.capture(state)
+    expected = state.data.oMf[robot.frame_id("panda_hand")] * spec.offset.to_se3()
+    np.testing.assert_allclose(frame.position, expected.translation, atol=1e-9)
+    # The optical axis is the offset frame's +z: the image centre's ray.
+    centre = frame.project((expected.translation + 0.5 * expected.rotation[:, 2])[None])
+    rows, cols = centre[0][0], centre[1][0]
+    assert abs(rows - spec.height / 2) <= 1
+    assert abs(cols - spec.width / 2) <= 1
+    moved = robot.home()
+    moved[0] += 0.5
+    state.update(moved)
+    assert not np.allclose(camera.capture(state).position, frame.position)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"parent": None}, "needs 'position' and 'target'"),
+        ({"position": (0.0, 0.0, 1.0)}, "takes 'offset'"),
+    ],
+)
+def test_camera_poses_are_checked(changes, message) -> None:
+    from cbp.errors import ConfigError
+
+    base = {"name": "c", "parent": "panda_hand"}
+    with pytest.raises(ConfigError, match=message):
+        CameraSpec(**{**base, **changes})
