@@ -82,6 +82,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--samples", type=_positive_int, default=20000, help="random configurations"
     )
     pairs.add_argument("--seed", type=int, default=0)
+    scenes = sub.add_parser(
+        "scenes", help="write seeded cluttered scenes (scenario files) for the Panda"
+    )
+    scenes.add_argument("--count", type=_positive_int, default=30)
+    scenes.add_argument("--seed", type=int, default=0, help="first seed")
+    scenes.add_argument("--out", type=Path, default=Path("out/scenes"))
     args = parser.parse_args(argv)
     if args.command == "run":
         overrides = _overrides(args.set)
@@ -99,6 +105,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _check(args.scenarios)
     if args.command == "robot-pairs":
         return _robot_pairs(args.robot, args.samples, args.seed)
+    if args.command == "scenes":
+        from cbp.scenes import write_scenes
+
+        for path in write_scenes(args.out, args.count, args.seed):
+            print(path)
+        return 0
     return _plugins()
 
 

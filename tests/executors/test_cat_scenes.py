@@ -109,3 +109,22 @@ def test_many_steps_per_period_on_boards_and_shelf() -> None:
     for scene in ("boards", "shelf_reach"):
         _, m = _run(scene)
         assert m["steps_per_full_period_median"] > 20, (scene, m)
+
+
+@pytest.mark.parametrize(
+    "scene",
+    [
+        "boards",
+        "local_minimum",
+        "wrist_limit",
+        "unreachable",
+        "shelf_reach",
+        "shelf_retreat",
+    ],
+)
+def test_the_cameras_map_keeps_every_scene_free_of_contact(scene: str) -> None:
+    """Unseen space counts as an obstacle: no contact, outcomes as declared."""
+    _, camera = _run(scene, "depth_camera")
+    _, declared = _run(scene)
+    assert camera["peak_contact_force_n"] == 0.0, camera
+    assert camera["reached"] == declared["reached"]
