@@ -29,6 +29,8 @@ class Engine:
         problem: the QP of the last step, for inspection.
         recovery: how the last step's QP was eased to be solvable (None: it
             was solved as assembled); see :meth:`step`.
+        recovery_changed: whether :attr:`recovery` differs from that of the
+            solved step before (so a run reports each change once).
     """
 
     def __init__(
@@ -53,6 +55,8 @@ class Engine:
         self.state = RobotState(robot)
         self.problem: QPProblem | None = None
         self.recovery: str | None = None
+        self.recovery_changed = False
+        self._solved_recovery: str | None = None
         self._by_name = {e.name: e for e in self.entries}
         # Plugins that latch something at the start of a step (the others keep
         # the base class's empty prepare and are not called for it).
@@ -92,6 +96,8 @@ class Engine:
             x = self.solver.solve(problem)
         except SolveError as exc:
             x = self._recover(problem, exc)
+        self.recovery_changed = self.recovery != self._solved_recovery
+        self._solved_recovery = self.recovery
         return x[: self.robot.nv]
 
     def _recover(self, problem: QPProblem, error: SolveError) -> FloatArray:

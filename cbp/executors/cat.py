@@ -67,9 +67,8 @@ class CatPlanner:
                 note = f"QP step failed, path ends here: {exc}"
                 run.event(run.sim.t, note)
                 break
-            if engine.recovery is not None and engine.recovery != run.last_recovery:
+            if engine.recovery_changed and engine.recovery is not None:
                 run.event(run.sim.t, f"QP eased: {engine.recovery}")
-            run.last_recovery = engine.recovery
             q_next = robot.integrate(q, dq)
             if world is not None:
                 check = world.try_step(q_next, depth)

@@ -49,7 +49,6 @@ def run_kinematic(scenario: Scenario) -> KinematicTrace:
         k: [] for k in ("t", "q", "ee", "goal", "perr", "rerr", "time")
     }
     events: list[tuple[float, str]] = []
-    recovery: str | None = None
     world = scenario.collision_world() if scenario.needs_collision_world else None
     depth: list[float] = []
     rejected = 0
@@ -73,9 +72,8 @@ def run_kinematic(scenario: Scenario) -> KinematicTrace:
             events.append((t, f"step not solved, robot held: {exc}"))
             log.warning("t=%.3f s: %s", t, exc)
         else:
-            if engine.recovery is not None and engine.recovery != recovery:
+            if engine.recovery_changed and engine.recovery is not None:
                 events.append((t, f"QP eased: {engine.recovery}"))
-            recovery = engine.recovery
         elapsed = time.perf_counter() - start
         placement = engine.state.frame_placement(frame_id)
         rows["t"].append(t)

@@ -93,8 +93,6 @@ class SimulatedRun:
         self.goal_task: GoalReceiver | None = scenario.goal_task()
         self.events: list[tuple[float, str]] = []
         self.periods: list[PeriodRecord] = []
-        self.last_recovery: str | None = None
-        """The engine's last easing of an infeasible QP (reported once a change)."""
         self._goal = _Goal()
         self._goal_space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
         self._goal_blocked = False

@@ -52,7 +52,6 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> VelocityTrace:
     values: dict[str, list[FloatArray]] = {names[id(p)]: [] for p, _ in inputs}
     events: list[tuple[float, str]] = []
     failing = 0
-    recovery: str | None = None
     reporters = [
         e.plugin for e in scenario.entries if isinstance(e.plugin, ReportsSignals)
     ]
@@ -91,9 +90,8 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> VelocityTrace:
                 if failing:
                     events.append((t, f"solved again after {failing} failed ticks"))
                 failing = 0
-                if engine.recovery is not None and engine.recovery != recovery:
+                if engine.recovery_changed and engine.recovery is not None:
                     events.append((t, f"QP eased: {engine.recovery}"))
-                recovery = engine.recovery
             elapsed = time.perf_counter() - start
             # What the plugins report, at the tick's measured configuration and
             # with the inputs in effect (no kinematics when nothing reports).

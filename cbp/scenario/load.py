@@ -95,6 +95,7 @@ def load_scenario(
         if spec is not INVALID:
             _check_goal(doc, spec, entries, root, path.parent)
             _check_inputs(doc, spec, entries, root)
+            _check_cameras(doc, spec, robot, root)
         names = [e.name for e in entries]
         for name in sorted({n for n in names if names.count(n) > 1}):
             doc.report(
@@ -164,6 +165,28 @@ def _check_initial_contact(doc: Document, scenario: Scenario, root: yaml.Node) -
             "robot.allow_initial_contact: true to start in contact (the arm then "
             "backs out)",
         )
+
+
+def _check_cameras(
+    doc: Document, spec: ScenarioSpec, robot: RobotModel, root: yaml.Node
+) -> None:
+    """A mounted camera's ``parent`` must be a frame of the robot."""
+    key = "cameras" if spec.perception.cameras else "camera"
+    node = _key_node(root, "perception", key)
+    for i, camera in enumerate(spec.perception.all_cameras):
+        if camera.parent is None:
+            continue
+        try:
+            robot.frame_id(camera.parent)
+        except ConfigError as exc:
+            item = node.value[i] if isinstance(node, yaml.SequenceNode) else node
+            where = (
+                join_path("perception.cameras", i)
+                if key == "cameras"
+                else "perception.camera"
+            )
+            parent = _key_node(item, "parent") if item is not None else None
+            doc.report(parent or item, f"{where}.parent", exc.message)
 
 
 def _robot_spec_quietly(doc: Document, root: yaml.Node) -> Any:

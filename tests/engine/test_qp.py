@@ -375,11 +375,16 @@ def test_rows_asking_for_more_than_the_limits_allow_are_eased(robots) -> None:
     dt = 0.01
     dq = engine.step(q, dt)
     assert engine.recovery is not None
+    assert engine.recovery_changed
     assert "limits" in engine.recovery
     assert "eased" in engine.recovery
     bound = robot.velocity_limits[3] * dt
     # Backing out (toward the range), at half the bound, and no further than it.
     assert 0.5 * bound - 1e-9 <= dq[3] <= bound + 1e-9
+    engine.step(q, dt)  # the same easing again: not news
+    assert engine.recovery is not None
+    assert not engine.recovery_changed
     # Within the range again, the step is solved as assembled.
     engine.step(robot.home(), dt)
     assert engine.recovery is None
+    assert engine.recovery_changed

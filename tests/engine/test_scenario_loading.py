@@ -175,3 +175,23 @@ world:
     )
     path.write_text(allowed)
     assert load_scenario(path).spec.robot.allow_initial_contact
+
+
+def test_a_camera_on_an_unknown_frame_is_refused_at_its_line(tmp_path) -> None:
+    path = tmp_path / "camera.yaml"
+    path.write_text(
+        "name: c\n"
+        "robot: {name: franka_panda}\n"
+        "duration: 1.0\n"
+        "perception:\n"
+        "  source: depth_camera\n"
+        "  cameras:\n"
+        "    - {name: head, position: [0, 0, 1], target: [1, 0, 0]}\n"
+        "    - name: wrist\n"
+        "      parent: panda_hnd\n"
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    text = str(info.value)
+    assert "line 9: perception.cameras[1].parent: no frame 'panda_hnd'" in text
+    assert "panda_hand" in text
