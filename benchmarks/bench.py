@@ -446,16 +446,15 @@ def _parts_rows(cfg: BenchConfig) -> list[Row]:
 
 def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
     """The octree contact query inside the shelf, part by part."""
-    from cbp.collision.cells import ShapeTable
+    from cbp.collision.shape_table import ShapeTable
     from cbp.state import RobotState
 
     world, q = _shelf_octree_world()
     world.check(q)
     env = world.environment
-    placements = world.shape_placements(RobotState(world.geometry.robot, q))
-    shapes = world.geometry.shapes
+    robot = world.placed(RobotState(world.geometry.robot, q))
+    shapes, placements = robot.shapes, robot.placements
     margin = world.margin(env)
-    centres, halves = world.shape_bounds(placements)
     table = ShapeTable.for_shapes(shapes, margin + env.resolution)
     pair = (q, q + 1e-9)
     per_shape = world.settings.contacts_per_link
@@ -467,9 +466,7 @@ def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
         ),
         (
             "octree: environment query (compiled pass, reduction, refinement)",
-            lambda i: env.query(
-                shapes, placements, centres, world.geometry.radii, margin, per_shape
-            ),
+            lambda i: env.query(robot, margin, per_shape),
         ),
         (
             "octree: of which the compiled pass over the cells near each shape",
@@ -477,7 +474,7 @@ def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
         ),
         (
             "self pairs (coal distance calls from Python)",
-            lambda i: world.self_contacts(placements, centres, halves),
+            lambda i: world.self_contacts(robot),
         ),
     ]
 
@@ -547,7 +544,7 @@ def _cat_step(
 
 
 def _cat_rows(cfg: BenchConfig) -> list[Row]:
-    from cbp.collision.environment import OccupancyEnvironment
+    from cbp.collision import OccupancyEnvironment
     from cbp.scenario import load_scenario
 
     n, w = max(cfg.repetitions // 4, 3), min(cfg.warmup, 50)
@@ -591,7 +588,7 @@ def _cat_rows(cfg: BenchConfig) -> list[Row]:
 
 def _shelf_octree_world() -> tuple[Any, np.ndarray]:
     """A collision world of the shelf scene's octree (1 cm), and a pose inside."""
-    from cbp.collision.environment import MetaballRefiner, OccupancyEnvironment
+    from cbp.collision import MetaballRefiner, OccupancyEnvironment
     from cbp.scenario import load_scenario
 
     shelf = load_scenario(SCENARIOS / "cat_shelf_retreat.yaml")  # starts inside
@@ -672,7 +669,7 @@ def _sample_objects(scenario: Any, cell: float) -> np.ndarray:
 
 
 def _scaling_rows(cfg: BenchConfig) -> list[Row]:
-    from cbp.collision.world import ContactSet
+    from cbp.collision.contacts import ContactSet
     from cbp.scenario import load_scenario
     from cbp.state import RobotState
 
@@ -720,7 +717,7 @@ def _far_cells(count: int, cell: float) -> np.ndarray:
 
 def _world_scaling_rows(cfg: BenchConfig) -> list[Row]:
     """The CAT step as the scene and the map grow far from the robot."""
-    from cbp.collision.environment import (
+    from cbp.collision import (
         EnvironmentObject,
         OccupancyEnvironment,
         PrimitiveEnvironment,

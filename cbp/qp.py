@@ -247,7 +247,7 @@ class QPAssembler:
 
         The plugins are called from Python, block by block; the arithmetic that
         turns their outputs into H, g, A and the bounds is one compiled pass
-        (:func:`_fill_qp`), which also checks every output for NaN and inf.
+        (:func:`fill_qp`), which also checks every output for NaN and inf.
         """
         soft, constant, block = self._soft, self._constant, self._rows
         if constant.m:
@@ -270,11 +270,11 @@ class QPAssembler:
         return self._problem
 
     def _fill(self) -> int:
-        """Run :func:`_fill_qp` on the blocks' current outputs; return its status."""
+        """Run :func:`fill_qp` on the blocks' current outputs; return its status."""
         soft, block = self._soft, self._rows
         constant_step, constant_scale = self._constant_step
         return int(
-            _fill_qp(
+            fill_qp(
                 self.nv,
                 self._H_base,
                 self._H,
@@ -301,7 +301,7 @@ class QPAssembler:
         )
 
     def _raise(self, status: int) -> None:
-        """Name the entry behind a non-finite output that :func:`_fill_qp` found."""
+        """Name the entry behind a non-finite output that :func:`fill_qp` found."""
         if status & _COST_NOT_FINITE:
             self._soft.raise_non_finite()
             self._constant.raise_non_finite()
@@ -443,14 +443,14 @@ class _Block:
                 )
 
 
-# Bits of the status returned by _fill_qp.
+# Bits of the status returned by fill_qp.
 _COST_NOT_FINITE = 1
 _ROWS_NOT_FINITE = 2
 _BOUNDS_NAN = 4
 
 
 @numba.njit(cache=True, nogil=True)
-def _fill_qp(
+def fill_qp(
     nv: int,
     H_base: FloatArray,
     H: FloatArray,

@@ -1,19 +1,19 @@
 # SPDX-License-Identifier: Apache-2.0
 """Collision checking with coal: robot geometry, environments, contacts, validation."""
 
-from cbp.collision.environment import (
-    Environment,
-    EnvironmentObject,
-    Hits,
-    MetaballRefiner,
-    OccupancyEnvironment,
-    PrimitiveEnvironment,
+from cbp.collision.contacts import ContactSet
+from cbp.collision.environment import Environment
+from cbp.collision.geometry import (
+    LinkShape,
+    PlacedShapes,
+    RobotGeometry,
+    find_ignorable_pairs,
 )
-from cbp.collision.geometry import LinkShape, RobotGeometry, find_ignorable_pairs
+from cbp.collision.map_environment import MetaballRefiner, OccupancyEnvironment
+from cbp.collision.objects import EnvironmentObject, PrimitiveEnvironment
 from cbp.collision.world import (
     CollisionSettings,
     CollisionWorld,
-    ContactSet,
     StepCheck,
 )
 
@@ -23,10 +23,10 @@ __all__ = [
     "ContactSet",
     "Environment",
     "EnvironmentObject",
-    "Hits",
     "LinkShape",
     "MetaballRefiner",
     "OccupancyEnvironment",
+    "PlacedShapes",
     "PrimitiveEnvironment",
     "RobotGeometry",
     "StepCheck",

@@ -59,6 +59,26 @@ class ShapePlacements(list[pin.SE3]):
 
 
 @dataclass(frozen=True)
+class PlacedShapes:
+    """A robot's shapes at one configuration, as environments query them.
+
+    Attributes:
+        shapes: the shapes (:attr:`RobotGeometry.shapes`).
+        placements: their world placements, also stacked.
+        centres: their bounding-sphere centres in the world (n, 3) [m].
+        radii: their bounding-sphere radii (n,) [m].
+        halves: half extents of world-aligned boxes around the shapes about
+            ``centres`` (n, 3) [m], for a tighter broad phase.
+    """
+
+    shapes: list[LinkShape]
+    placements: ShapePlacements
+    centres: FloatArray
+    radii: FloatArray
+    halves: FloatArray
+
+
+@dataclass(frozen=True)
 class LinkShape:
     """One convex collision shape fixed on a frame of the robot.
 

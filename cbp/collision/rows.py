@@ -22,8 +22,8 @@ import numba
 import numpy as np
 import pinocchio as pin
 
+from cbp.collision.contacts import ContactSet
 from cbp.collision.geometry import RobotGeometry
-from cbp.collision.world import ContactSet
 from cbp.robot import FloatArray, IntArray
 from cbp.state import RobotState
 

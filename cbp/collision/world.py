@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import coal
 import numpy as np
@@ -21,206 +20,20 @@ import pinocchio as pin
 
 from cbp.collision.broad import shape_bounds
 from cbp.collision.checker import FreeSpaceChecker
-from cbp.collision.environment import (
-    Environment,
-    Hits,
-    PrimitiveEnvironment,
-    signed_distance,
-)
-from cbp.collision.geometry import RobotGeometry, ShapePlacements
+from cbp.collision.contacts import ContactRow, ContactSet
+from cbp.collision.environment import Environment, signed_distance
+from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
+from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.settings import CollisionSettings
-from cbp.robot import FloatArray, IntArray
+from cbp.robot import FloatArray
 from cbp.state import RobotState
 
 __all__ = [
     "CollisionSettings",
     "CollisionWorld",
     "ContactSet",
-    "SelfContact",
     "StepCheck",
 ]
-
-
-class SelfContact(NamedTuple):
-    """A contact between two robot shapes (:meth:`CollisionWorld.self_contacts`)."""
-
-    shape: int
-    """The shape the normal points toward."""
-    other_shape: int
-    """The other shape."""
-    point: FloatArray
-    """Witness point on ``shape`` (3,)."""
-    other_point: FloatArray
-    """Witness point on ``other_shape`` (3,)."""
-    normal: FloatArray
-    """Unit normal from ``other_shape`` toward ``shape`` (3,)."""
-    distance: float
-    """Signed distance of the padded shapes [m]."""
-
-
-@dataclass
-class ContactSet:
-    """Contacts of one configuration, environment and self, in the world frame.
-
-    Distances are those of the padded shapes. The ``other`` side is an obstacle
-    (``other_shape == -1``) or a second robot shape (self-collision); the normal
-    points from the other side toward ``shape``, so moving ``shape``'s point along
-    it increases the distance.
-
-    Attributes:
-        shape: robot shape index, (K,).
-        other_shape: the second robot shape for self contacts, else -1, (K,).
-        point: witness point on ``shape`` (unpadded surface), (K, 3).
-        other_point: witness point on the other side, (K, 3).
-        normal: unit normal from the other side toward ``shape``, (K, 3).
-        distance: signed distance of the padded shapes [m], (K,).
-    """
-
-    shape: IntArray
-    other_shape: IntArray
-    point: FloatArray
-    other_point: FloatArray
-    normal: FloatArray
-    distance: FloatArray
-    _split: tuple[ContactSet, ContactSet] | None = field(
-        default=None, repr=False, compare=False
-    )
-
-    @classmethod
-    def empty(cls) -> ContactSet:
-        """No contacts."""
-        z = np.zeros(0, dtype=np.intp)
-        return cls(
-            z, z, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
-        )
-
-    @classmethod
-    def concatenate(cls, sets: list[ContactSet]) -> ContactSet:
-        """All contacts of several sets."""
-        sets = [s for s in sets if len(s)]
-        if not sets:
-            return cls.empty()
-        if len(sets) == 1:  # the arrays are shared, never modified
-            one = sets[0]
-            return cls(
-                one.shape,
-                one.other_shape,
-                one.point,
-                one.other_point,
-                one.normal,
-                one.distance,
-            )
-        return cls(
-            *(
-                np.concatenate([getattr(s, f) for s in sets])
-                for f in (
-                    "shape",
-                    "other_shape",
-                    "point",
-                    "other_point",
-                    "normal",
-                    "distance",
-                )
-            )
-        )
-
-    @classmethod
-    def stack(cls, hits: Hits, padding: float, own: list[SelfContact]) -> ContactSet:
-        """The obstacle contacts, then the self contacts, with both parts.
-
-        Each field is built by one numpy call, and the parts are views of it.
-
-        Args:
-            hits: an environment's contacts, distances of the unpadded shapes.
-            padding: subtracted from the obstacle distances [m].
-            own: the self contacts (distances already padded).
-        """
-        n = len(hits)
-        if own:
-            i, j, point, other, normal, distance = zip(*own, strict=True)
-            arrays = (
-                np.concatenate((hits.shape, np.array(i, dtype=np.intp))),
-                np.concatenate((np.full(n, -1, dtype=np.intp), j)).astype(np.intp),
-                np.concatenate((hits.robot_point.reshape(-1, 3), point)),
-                np.concatenate((hits.obstacle_point.reshape(-1, 3), other)),
-                np.concatenate((hits.normal.reshape(-1, 3), normal)),
-                np.concatenate((hits.distance - padding, distance)),
-            )
-        else:
-            arrays = (
-                hits.shape,
-                np.full(n, -1, dtype=np.intp),
-                hits.robot_point,
-                hits.obstacle_point,
-                hits.normal,
-                hits.distance - padding,
-            )
-        # The parts are views of the same arrays (the set itself would be a cycle).
-        shape, other_shape, point_, other_point, normal_, distance_ = arrays
-
-        def part(rows: slice) -> ContactSet:
-            return cls(
-                shape[rows],
-                other_shape[rows],
-                point_[rows],
-                other_point[rows],
-                normal_[rows],
-                distance_[rows],
-            )
-
-        return cls(
-            shape,
-            other_shape,
-            point_,
-            other_point,
-            normal_,
-            distance_,
-            _split=(part(slice(0, n)), part(slice(n, None))),
-        )
-
-    def select(self, mask: np.ndarray | slice) -> ContactSet:
-        """The contacts where ``mask`` is true, at the given indices, or in a slice.
-
-        A slice gives views of this set's arrays; the others, copies.
-        """
-        return ContactSet(
-            self.shape[mask],
-            self.other_shape[mask],
-            self.point[mask],
-            self.other_point[mask],
-            self.normal[mask],
-            self.distance[mask],
-        )
-
-    @property
-    def is_self(self) -> np.ndarray:
-        """Which contacts are between two robot shapes."""
-        return np.asarray(self.other_shape >= 0)
-
-    def environment_part(self) -> ContactSet:
-        """The contacts with obstacles (computed once per set)."""
-        return self._parts()[0]
-
-    def self_part(self) -> ContactSet:
-        """The contacts between two robot shapes (computed once per set)."""
-        return self._parts()[1]
-
-    def _parts(self) -> tuple[ContactSet, ContactSet]:
-        parts = self._split
-        if parts is None:
-            is_self = self.is_self
-            parts = (self.select(~is_self), self.select(is_self))
-            self._split = parts
-        return parts
-
-    @property
-    def penetration(self) -> float:
-        """Deepest penetration of the padded shapes [m]; 0 when nothing overlaps."""
-        return float(max(0.0, -self.distance.min())) if len(self) else 0.0
-
-    def __len__(self) -> int:
-        """Number of contacts."""
-        return int(self.shape.size)
 
 
 @dataclass(frozen=True)
@@ -437,37 +250,35 @@ class CollisionWorld:
         computes when its cache misses.
         """
         environment = environment or self._environment
-        placements = self.shape_placements(state)
-        centres, halves = self.shape_bounds(placements)
-        hits = environment.query(
-            self.geometry.shapes,
-            placements,
-            centres,
-            self.geometry.radii,
-            self.margin(environment),
-            self.settings.contacts_per_link,
-            halves,
+        robot = self.placed(state)
+        obstacles = environment.query(
+            robot, self.margin(environment), self.settings.contacts_per_link
         )
-        own = (
-            self.self_contacts(placements, centres, halves)
-            if self.settings.self_collision
-            else []
-        )
+        own = self.self_rows(robot) if self.settings.self_collision else []
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles
         # are inflated by that much (and step validation tolerates as much more).
-        return ContactSet.stack(hits, self.padding + environment.resolution, own)
+        return ContactSet.stack(obstacles, self.padding + environment.resolution, own)
 
-    def self_contacts(
-        self, placements: ShapePlacements, centres: FloatArray, halves: FloatArray
-    ) -> list[SelfContact]:
-        """The contacts between the robot's own shapes, at ``placements``.
+    def placed(self, state: RobotState) -> PlacedShapes:
+        """The robot's shapes at ``state``: world placements and bounds."""
+        placements = self.shape_placements(state)
+        centres, halves = self.shape_bounds(placements)
+        return PlacedShapes(
+            self.geometry.shapes, placements, centres, self.geometry.radii, halves
+        )
+
+    def self_contacts(self, robot: PlacedShapes) -> ContactSet:
+        """The contacts between the robot's own shapes (padded distances).
 
         Args:
-            placements: from :meth:`shape_placements`.
-            centres: from :meth:`shape_bounds`.
-            halves: from :meth:`shape_bounds`.
+            robot: the shapes at a configuration (:meth:`placed`).
         """
+        return ContactSet.from_rows(self.self_rows(robot))
+
+    def self_rows(self, robot: PlacedShapes) -> list[ContactRow]:
+        """:meth:`self_contacts` as rows, for a query to stack in one call."""
         shapes = self.geometry.shapes
+        placements, centres, halves = robot.placements, robot.centres, robot.halves
         pad2 = 2.0 * self.padding
         margin = self.settings.activation_distance + pad2
         rows = []
@@ -485,7 +296,7 @@ class CollisionWorld:
                 result,
             )
             if d < margin:
-                rows.append(SelfContact(i, j, point, other, normal, d - pad2))
+                rows.append((i, j, point, other, normal, d - pad2))
         return rows
 
     def __repr__(self) -> str:

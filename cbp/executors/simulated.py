@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from cbp.collision.environment import PrimitiveEnvironment
 from cbp.collision.geometry import RobotGeometry
+from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.errors import InvalidTargetError
 from cbp.perception.camera import DepthCamera, DepthFrame

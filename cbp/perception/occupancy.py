@@ -30,13 +30,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import minimum_filter
 
-from cbp.collision.cells import BRICK, MAX_BRICKS, CellIndex
-from cbp.collision.environment import (
+from cbp.collision.cell_index import BRICK, MAX_BRICKS, CellIndex
+from cbp.collision.geometry import RobotGeometry, points_inside
+from cbp.collision.map_environment import (
     BlockedGrid,
     MetaballRefiner,
     OccupancyEnvironment,
 )
-from cbp.collision.geometry import RobotGeometry, points_inside
 from cbp.perception.camera import DepthFrame
 from cbp.perception.kernels import (
     FREE,

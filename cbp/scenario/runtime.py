@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from cbp.collision.environment import EnvironmentObject, PrimitiveEnvironment
 from cbp.collision.geometry import RobotGeometry
+from cbp.collision.objects import EnvironmentObject, PrimitiveEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.engine import Engine
 from cbp.expressions import TimeFunction, compile_time_function

@@ -6,8 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from cbp.collision.contacts import ContactSet
 from cbp.collision.rows import LatchedContacts
-from cbp.collision.world import CollisionWorld, ContactSet
+from cbp.collision.world import CollisionWorld
 from cbp.errors import ConfigError, TargetNotSetError
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel

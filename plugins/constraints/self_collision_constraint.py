@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from cbp.collision.world import CollisionWorld, ContactSet
+from cbp.collision.contacts import ContactSet
+from cbp.collision.world import CollisionWorld
 from cbp.errors import ConfigError
 
 from .contact_normals_constraint import ContactNormalsConstraint

@@ -17,8 +17,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from cbp.collision.environment import MetaballRefiner, OccupancyEnvironment
-from cbp.collision.geometry import LinkShape
+from cbp.collision import MetaballRefiner, OccupancyEnvironment
+from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
 from cbp.robot import FloatArray
 
 __all__ = ["angle_errors", "tilted_plane", "yawed_box"]
@@ -97,7 +97,14 @@ def angle_errors(
             np.array([0.0, 0.0, 1.0]), axis
         ).matrix()
         placement = pin.SE3(rotation, centre)
-        hits = env.query([shape], [placement], centre[None], np.array([0.07]), 0.0, 1)
+        robot = PlacedShapes(
+            [shape],
+            ShapePlacements([placement]),
+            centre[None],
+            np.array([0.07]),
+            np.full((1, 3), np.inf),
+        )
+        hits = env.query(robot, 0.0, 1)
         if len(hits):
             cos = float(np.clip(hits.normal[0].dot(normal), -1.0, 1.0))
             errors.append(np.degrees(np.arccos(cos)))

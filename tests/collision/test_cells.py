@@ -9,15 +9,17 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from cbp.collision import MetaballRefiner, OccupancyEnvironment, RobotGeometry
-from cbp.collision.cells import (
-    DIRECTIONS,
-    CellIndex,
-    ShapeTable,
-    cell_hits,
-    spread_contacts,
+from cbp.collision import (
+    CollisionWorld,
+    MetaballRefiner,
+    OccupancyEnvironment,
+    RobotGeometry,
 )
+from cbp.collision.cell_index import CellIndex
+from cbp.collision.cell_kernels import VALUE_UNIT, cell_hits, spread_contacts
+from cbp.collision.contacts import ContactSet
 from cbp.collision.geometry import LinkShape
+from cbp.collision.shape_table import DIRECTIONS, ShapeTable
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
 
@@ -126,8 +128,6 @@ def test_face_grid_gives_the_largest_excess_within_a_bound(geometry) -> None:
 
 def test_grid_values_bound_the_excess_from_below(geometry) -> None:
     """The quick reject's values: the excess at each grid point, rounded down."""
-    from cbp.collision.cells import VALUE_UNIT
-
     table = ShapeTable.build(geometry.shapes, 0.065)
     for s, shape in enumerate(geometry.shapes):
         if table.kind[s] != 0:
@@ -191,7 +191,7 @@ def test_far_cells_change_nothing(geometry, robots) -> None:
     assert large.brick > small.brick  # the table had to grow its bricks
     a = table.candidates(small, placements, 0.06)
     b = table.candidates(large, placements, 0.06)
-    assert len(a[0]) > 0
+    assert len(a.shape) > 0
     # Cells tied in distance may be visited in another order: compare distances.
     sa, sb = np.lexsort((a[3], a[0])), np.lexsort((b[3], b[0]))
     np.testing.assert_array_equal(a[0][sa], b[0][sb])
@@ -235,9 +235,7 @@ def test_spread_contacts_keeps_distinct_directions() -> None:
 
 
 def test_cell_hits_reduce_as_the_general_contact_reduction(geometry, robots) -> None:
-    """The compiled reduction of cell candidates keeps what _keep_closest keeps."""
-    from cbp.collision.environment import Hits, _keep_closest
-
+    """The compiled reduction of cell candidates keeps what keep_closest keeps."""
     margin, half = 0.06, 0.5 * CELL
     compared = 0
     for _, found in _candidates_at_random_poses(
@@ -245,29 +243,17 @@ def test_cell_hits_reduce_as_the_general_contact_reduction(geometry, robots) -> 
     ):
         shape, centre, outward, distance = found
         for per_shape, angle, spacing in ((3, 25.0, 2 * CELL), (1, 0.0, 0.0)):
-            expected = _keep_closest(
-                Hits(
-                    shape,
-                    centre - (distance + half)[:, None] * outward,
-                    centre - half * outward,
-                    -outward,
-                    distance,
-                ),
-                per_shape,
-                angle,
-                spacing,
-            )
-            got = cell_hits(
+            expected = ContactSet.obstacles(
                 shape,
-                centre,
-                outward,
+                centre - (distance + half)[:, None] * outward,
+                centre - half * outward,
+                -outward,
                 distance,
-                half,
-                per_shape,
-                math.cos(math.radians(angle)),
-                spacing**2,
+            ).keep_closest(per_shape, angle, spacing)
+            got = cell_hits(
+                found, half, per_shape, math.cos(math.radians(angle)), spacing**2
             )
-            fields = ("shape", "robot_point", "obstacle_point", "normal", "distance")
+            fields = ("shape", "point", "other_point", "normal", "distance")
             for name, array in zip(fields, got, strict=True):
                 np.testing.assert_allclose(
                     array, getattr(expected, name), atol=1e-12, err_msg=name
@@ -290,23 +276,11 @@ def test_occupancy_query_uses_every_shape_kind(robots) -> None:
         below = M.translation - [0.0, 0.0, hand.radius + 0.03]
         cells = _shell(below - [0, 0, 0.1], 0.1)
         env = OccupancyEnvironment(cells, CELL)
-        hits = env.query(
-            geometry.shapes,
-            [s.world_placement(state) for s in geometry.shapes],
-            np.array(
-                [
-                    s.world_placement(state).act(s.placement.actInv(s.centre))
-                    for s in geometry.shapes
-                ]
-            ),
-            geometry.radii,
-            0.08,
-            3,
-        )
+        hits = env.query(CollisionWorld(geometry).placed(state), 0.08, 3)
         assert len(hits) > 0
         assert np.all(hits.distance < 0.08)
         # Witness points are one distance apart, along the normal.
-        gap = hits.robot_point - hits.obstacle_point
+        gap = hits.point - hits.other_point
         np.testing.assert_allclose(
             np.einsum("ij,ij->i", gap, hits.normal), hits.distance, atol=1e-9
         )
@@ -314,18 +288,16 @@ def test_occupancy_query_uses_every_shape_kind(robots) -> None:
 
 def test_a_world_prepares_the_snapshots_it_takes(robots) -> None:
     """Packing and compiling happen in set_environment, not in the first query."""
-    from cbp.collision import CollisionWorld
-    from cbp.collision import cells as module
+    from cbp.collision.cell_kernels import candidates
 
     geometry = RobotGeometry(robots["panda"])  # new shapes: nothing cached yet
     world = CollisionWorld(geometry)
     env = OccupancyEnvironment(_shell(np.array([0.5, 0.0, 0.3]), 0.05), CELL)
     key = (tuple(id(s) for s in geometry.shapes), world.margin(env) + 0.5 * CELL)
-    assert key not in module._TABLES
+    assert ShapeTable.kept(geometry.shapes, key[1]) is None
     world.set_environment(env)
-    assert key in module._TABLES
-    assert module._COMPILED
-    assert module._candidates.signatures  # compiled, or loaded from the cache
+    assert ShapeTable.kept(geometry.shapes, key[1]) is not None
+    assert candidates.signatures  # compiled, or loaded from the cache
 
 
 def test_queries_run_the_kernels_compiled_beforehand() -> None:
@@ -338,12 +310,13 @@ def test_queries_run_the_kernels_compiled_beforehand() -> None:
     import sys
 
     script = """
-from cbp.collision import broad, cells
+from cbp.collision import broad, cell_kernels as cells
+from cbp.collision.shape_table import compile_kernels
 from benchmarks.bench import _cat_step, _near_board, _shelf_octree_world, SCENARIOS
 from cbp.scenario import load_scenario
-cells.compile_kernels()
-kernels = [cells._candidates, cells.metaball_normals, cells.spread_contacts,
-           cells._cell_hits, broad.shape_bounds, broad.near_objects,
+compile_kernels()
+kernels = [cells.candidates, cells.metaball_normals, cells.spread_contacts,
+           cells.reduce_cells, broad.shape_bounds, broad.near_objects,
            broad.near_pairs]
 before = [len(k.signatures) for k in kernels]
 boards = load_scenario(SCENARIOS / "cat_boards.yaml")
@@ -357,16 +330,16 @@ after = [len(k.signatures) for k in kernels]
 assert before == after, (before, after)
 # Compiled when an engine and a contact constraint are built: one layout each,
 # whatever the environment the contacts come from.
-from cbp.collision.environment import OccupancyEnvironment
+from cbp.collision import OccupancyEnvironment
 from cbp.collision.rows import contact_jacobian_rows
-from cbp.qp import _fill_qp
+from cbp.qp import fill_qp
 shelf = load_scenario(SCENARIOS / "cat_shelf_retreat.yaml")
 shelf.collision_world().set_environment(octree.environment)
 step, world = _cat_step(shelf)
 for i in range(10):
     step(i)
 assert len(world.check(shelf.q0).contacts) > 0
-assert len(_fill_qp.signatures) == 1, _fill_qp.signatures
+assert len(fill_qp.signatures) == 1, fill_qp.signatures
 from cbp.spatial import pose_error_into
 assert len(pose_error_into.signatures) == 1, pose_error_into.signatures
 assert len(contact_jacobian_rows.signatures) == 1, contact_jacobian_rows.signatures

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import coal
 import numpy as np
 import pinocchio as pin
@@ -18,7 +20,7 @@ from cbp.collision import (
     RobotGeometry,
 )
 from cbp.collision.environment import signed_distance
-from cbp.collision.geometry import ShapePlacements
+from cbp.collision.geometry import PlacedShapes, ShapePlacements
 from cbp.sim.scene import PybulletScene
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
@@ -65,13 +67,13 @@ def test_box_sphere_and_octree_agree_on_distance_and_normal(
         (PrimitiveEnvironment([sphere]), 1e-3, 3.0),
         (octree, 1e-3, 2.0),
     ):
-        hits = env.query([hand], [M], centres, radii, margin=0.05, per_shape=3)
+        hits = env.query(_placed([hand], [M], centres, radii), 0.05, 3)
         k = int(np.argmin(hits.distance))
         d, n = hits.distance[k], hits.normal[k]
         assert d == pytest.approx(gap, abs=tol), type(env).__name__
         assert np.degrees(np.arccos(np.clip(n[2], -1, 1))) < max_deg, n
         # Witness points: robot side on the hand, at the stated signed distance.
-        p, o = hits.robot_point[k], hits.obstacle_point[k]
+        p, o = hits.point[k], hits.other_point[k]
         assert (p - o).dot(n) == pytest.approx(d, abs=tol)
         assert p[2] == pytest.approx(lowest[2], abs=tol + 1e-3)
 
@@ -144,10 +146,10 @@ def test_far_objects_change_nothing(geometry, robots, rng, monkeypatch, tree) ->
     Both broad phases: the compiled one, and the k-d tree that takes over above
     ``TREE_MIN_OBJECTS`` (lowered here so that a hundred objects use it).
     """
-    from cbp.collision import environment
+    from cbp.collision import objects as module
 
     if tree:
-        monkeypatch.setattr(environment, "TREE_MIN_OBJECTS", 16)
+        monkeypatch.setattr(module, "TREE_MIN_OBJECTS", 16)
     robot = robots["panda"]
     near = [
         EnvironmentObject.primitive(
@@ -213,14 +215,15 @@ def test_capsule_links_are_measured_exactly_against_cells(robots, gap) -> None:
     )
     centres = np.array([M.act(np.zeros(3))])
     radii = np.array([hand.radius])
-    exact = PrimitiveEnvironment([box]).query([hand], [M], centres, radii, 0.05, 1)
-    cells = layer.query([hand], [M], centres, radii, 0.05, 3)
+    robot = _placed([hand], [M], centres, radii)
+    exact = PrimitiveEnvironment([box]).query(robot, 0.05, 1)
+    cells = layer.query(robot, 0.05, 3)
     k = int(np.argmin(cells.distance))
     assert cells.distance[k] == pytest.approx(exact.distance[0], abs=1e-3)
     assert cells.distance[k] == pytest.approx(gap, abs=1e-3)
     assert np.degrees(np.arccos(np.clip(cells.normal[k][2], -1, 1))) < 2.0
     # The robot witness lies on the capsule's surface.
-    p = cells.robot_point[k] - M.translation
+    p = cells.point[k] - M.translation
     along = np.clip(
         p.dot(M.rotation[:, 2]), -hand.shape.halfLength, hand.shape.halfLength
     )
@@ -244,12 +247,25 @@ def test_a_non_finite_configuration_is_never_accepted(geometry, robots, bad) -> 
         assert world.check(robot.home()).accepted
 
 
-def _shapes_at(
-    world: CollisionWorld, q: np.ndarray
-) -> tuple[ShapePlacements, np.ndarray, np.ndarray]:
-    """The world's shape placements at q, with their bounding centres and boxes."""
-    placements = world.shape_placements(RobotState(world.geometry.robot, q))
-    return (placements, *world.shape_bounds(placements))
+def _shapes_at(world: CollisionWorld, q: np.ndarray) -> PlacedShapes:
+    """The world's shapes at q, with their bounding centres and boxes."""
+    return world.placed(RobotState(world.geometry.robot, q))
+
+
+def _spheres_only(robot: PlacedShapes) -> PlacedShapes:
+    """The same shapes with boxes that bound nothing: the spheres' broad phase."""
+    return replace(robot, halves=np.full_like(robot.centres, np.inf))
+
+
+def _placed(shapes, placements, centres, radii) -> PlacedShapes:
+    """Shapes placed by hand, with the spheres' broad phase only."""
+    return PlacedShapes(
+        list(shapes),
+        ShapePlacements(placements),
+        np.asarray(centres, dtype=float),
+        np.asarray(radii, dtype=float),
+        np.full((len(shapes), 3), np.inf),
+    )
 
 
 def test_box_broad_phase_loses_no_contact(geometry, robots, rng) -> None:
@@ -273,9 +289,10 @@ def test_box_broad_phase_loses_no_contact(geometry, robots, rng) -> None:
     margin = world.margin(env)
     found = dropped = 0
     for q in sample_configurations(robot, rng, n=60):
-        placements, centres, halves = _shapes_at(world, q)
-        args = (geometry.shapes, placements, centres, geometry.radii, margin, 99)
-        spheres, boxes = env.query(*args), env.query(*args, halves)
+        robot = _shapes_at(world, q)
+        placements, centres, halves = robot.placements, robot.centres, robot.halves
+        spheres = env.query(_spheres_only(robot), margin, 99)
+        boxes = env.query(robot, margin, 99)
         np.testing.assert_array_equal(spheres.shape, boxes.shape)
         np.testing.assert_allclose(spheres.distance, boxes.distance)
         own_margin = world.settings.activation_distance + 2 * world.padding
@@ -322,10 +339,9 @@ def test_broad_phase_keeps_every_pair_within_the_margin(geometry, robots, rng) -
     request, result = coal.DistanceRequest(), coal.DistanceResult()
     found = 0
     for q in sample_configurations(robot, rng, n=30):
-        placements, centres, halves = _shapes_at(world, q)
-        hits = env.query(
-            geometry.shapes, placements, centres, geometry.radii, margin, 99, halves
-        )
+        robot = _shapes_at(world, q)
+        placements = robot.placements
+        hits = env.query(robot, margin, 99)
         expected = sorted(
             (s, d)
             for s, shape in enumerate(geometry.shapes)

@@ -343,7 +343,7 @@ def test_non_finite_constraint_output_is_named(robots, broken) -> None:
 
 def test_assembly_pass_compiles_once(robots, rng) -> None:
     """Every layout of blocks (empty or not, slacks or not) shares one signature."""
-    from cbp.qp import _fill_qp
+    from cbp.qp import fill_qp
 
     robot = robots["panda"]
     q = robot.home()
@@ -354,7 +354,7 @@ def test_assembly_pass_compiles_once(robots, rng) -> None:
     Engine(robot, [Entry.make(PostureTask(PostureParams(), robot))]).step(q, 0.01)
     limits = JointLimitsConstraint(JointLimitsParams(), robot)
     Engine(robot, [Entry.make(limits)]).step(q, 0.01)
-    assert len(_fill_qp.signatures) == 1
+    assert len(fill_qp.signatures) == 1
 
 
 def test_rows_asking_for_more_than_the_limits_allow_are_eased(robots) -> None:

@@ -1,0 +1,113 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Occupied cells indexed by brick, for queries whose cost follows the robot.
+
+An occupancy map's cells lie on a regular grid, so they are indexed by the block
+("brick") of 4 x 4 x 4 cells they fall in: a dense table over the map's bounding
+box gives each brick's run of cells in one lookup, and a query reads only the
+bricks near a shape's box. The cost grows with the cells near the robot, not with
+the size of the map (a map spread over a very large box gets larger bricks, to
+keep the table small).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from cbp.collision.cell_kernels import Bricks, metaball_normals
+from cbp.robot import FloatArray, IntArray
+
+__all__ = ["BRICK", "MAX_BRICKS", "CellIndex"]
+
+#: Cells per brick side.
+BRICK = 4
+#: The brick table is kept under this many entries; larger maps get larger bricks.
+MAX_BRICKS = 1 << 22
+
+
+class CellIndex:
+    """Occupied cell centres sorted by brick, with each brick's run of cells.
+
+    Args:
+        centres: occupied cell centres (N, 3) [m], on a grid of step ``cell``.
+        cell: cell size [m].
+    """
+
+    def __init__(self, centres: FloatArray, cell: float) -> None:
+        """Sort the centres by brick and build the brick table."""
+        centres = np.ascontiguousarray(centres, dtype=float).reshape(-1, 3)
+        self.cell = float(cell)
+        lowest = centres.min(axis=0) if len(centres) else np.zeros(3)
+        self.origin = lowest - 0.5 * self.cell  # a corner of the first cell
+        ijk = np.floor((centres - self.origin) / self.cell).astype(np.int64)
+        extent = ijk.max(axis=0) + 1 if len(centres) else np.ones(3, dtype=np.int64)
+        brick = BRICK
+        while np.prod(-(-extent // brick)) > MAX_BRICKS:
+            brick *= 2
+        self.brick = brick
+        self.dims = (-(-extent // brick)).astype(np.int64)
+        b = ijk // brick
+        key = (b[:, 0] * self.dims[1] + b[:, 1]) * self.dims[2] + b[:, 2]
+        order = np.argsort(key, kind="stable")
+        self.centres = np.ascontiguousarray(centres[order])
+        """Centres sorted by brick (N, 3)."""
+        counts = np.bincount(key, minlength=int(np.prod(self.dims)))
+        self.start = np.zeros(counts.size + 1, dtype=np.int64)
+        np.cumsum(counts, out=self.start[1:])
+
+    @classmethod
+    def from_bricks(
+        cls,
+        centres: FloatArray,
+        start: IntArray,
+        origin: FloatArray,
+        cell: float,
+        brick: int,
+        dims: IntArray,
+    ) -> CellIndex:
+        """An index of centres already sorted by brick (a map's compiled pass).
+
+        Args:
+            centres: cell centres (N, 3), brick by brick.
+            start: brick b's cells are ``centres[start[b]:start[b + 1]]``.
+            origin: the corner of the grid the bricks are counted from [m].
+            cell: cell size [m].
+            brick: cells per brick side.
+            dims: bricks along x, y and z; bricks are numbered in C order.
+        """
+        index = cls.__new__(cls)
+        index.cell = float(cell)
+        index.origin = np.asarray(origin, dtype=float)
+        index.brick = int(brick)
+        index.dims = np.asarray(dims, dtype=np.int64)
+        index.centres = np.ascontiguousarray(centres, dtype=float)
+        index.start = np.ascontiguousarray(start, dtype=np.int64)
+        return index
+
+    def __len__(self) -> int:
+        """Number of cells."""
+        return len(self.centres)
+
+    @functools.cached_property
+    def bricks(self) -> Bricks:
+        """The arrays as the compiled queries read them."""
+        return Bricks(
+            self.centres, self.start, self.origin, self.cell * self.brick, self.dims
+        )
+
+    def metaball_normals(
+        self, at: FloatArray, radius: float, normals: FloatArray
+    ) -> None:
+        """Point ``normals`` (k, 3) down a metaball field's gradient, in place.
+
+        The field over the cells within ``radius`` [m] of each point of ``at``
+        (:func:`metaball_normals`); a normal is kept where it has no gradient.
+        ``normals`` must be a C-contiguous float array.
+        """
+        metaball_normals(
+            self.bricks,
+            np.ascontiguousarray(at, dtype=float),
+            float(radius),
+            normals,
+        )

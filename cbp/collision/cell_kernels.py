@@ -1,0 +1,611 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The compiled loops of cell queries: robot shapes against occupied cells.
+
+A hull's signed distance to a point is measured as in the k-d tree version this
+replaced (``benchmarks/RESULTS.md``): the point's largest excess over the face
+planes. Instead of all faces (200-500 per Panda link), a per-shape grid in the
+shape's frame stores which face is largest at each grid point, and a cell is
+measured against the faces of the eight grid points around it. That is exact
+wherever one of those faces is the largest at the cell, which is everywhere but
+within a grid step of a ridge between small faces; there the excess of a
+neighbouring face is taken, a slightly smaller value (a test bounds it).
+
+The loops are compiled with numba (the per-cell work is a few dozen flops, which
+numpy can only batch at the cost of many temporary arrays); they release the GIL.
+They take their arrays grouped in named tuples: :class:`Bricks` (an index's,
+:class:`~cbp.collision.cell_index.CellIndex`), :class:`Shapes` (a table's,
+:class:`~cbp.collision.shape_table.ShapeTable`), :class:`Candidates` and
+:class:`Contacts` (results).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+from cbp.robot import FloatArray, IntArray
+
+__all__ = [
+    "CAPSULE",
+    "HULL",
+    "VALUE_UNIT",
+    "Bricks",
+    "Candidates",
+    "Contacts",
+    "Shapes",
+    "candidates",
+    "cell_hits",
+    "hull_excesses",
+    "metaball_normals",
+    "reduce_cells",
+    "spread_contacts",
+]
+
+#: Shape kinds in :attr:`Shapes.kind`.
+HULL, CAPSULE = 0, 1
+#: The unit of the face grids' values [m].
+VALUE_UNIT = 1e-3
+
+
+class Bricks(NamedTuple):
+    """Cell centres sorted by brick, with each brick's run of cells.
+
+    Brick b's cells are ``centres[start[b]:start[b + 1]]``; bricks of side
+    ``size`` [m] are counted from the corner ``origin``, ``dims`` along x, y and
+    z, numbered in C order.
+    """
+
+    centres: FloatArray
+    start: npt.NDArray[np.int64]
+    origin: FloatArray
+    size: float
+    dims: npt.NDArray[np.int64]
+
+
+class Shapes(NamedTuple):
+    """Robot shapes packed for :func:`candidates` (fields as in ShapeTable)."""
+
+    kind: npt.NDArray[np.int64]
+    to_frame: FloatArray
+    lower: FloatArray
+    upper: FloatArray
+    capsule: FloatArray
+    planes: FloatArray
+    plane_start: npt.NDArray[np.int64]
+    grid_origin: FloatArray
+    grid_dims: npt.NDArray[np.int64]
+    grid_start: npt.NDArray[np.int64]
+    faces: npt.NDArray[np.int16]
+    values: npt.NDArray[np.uint8]
+    step: float
+
+
+class Candidates(NamedTuple):
+    """Cells near robot shapes.
+
+    The shape (K,), the cell's centre (K, 3), the shape's outward unit normal
+    toward it (K, 3), and the distance (K,) [m].
+    """
+
+    shape: IntArray
+    centre: FloatArray
+    outward: FloatArray
+    distance: FloatArray
+
+    def head(self, count: int) -> Candidates:
+        """The first ``count`` candidates (views)."""
+        return Candidates(
+            self.shape[:count],
+            self.centre[:count],
+            self.outward[:count],
+            self.distance[:count],
+        )
+
+
+class Contacts(NamedTuple):
+    """Contacts with cells.
+
+    The shape (K,), the point on its surface (K, 3), the point on the cell
+    (K, 3), the unit normal from the cell toward the shape (K, 3), and the
+    distance (K,) [m].
+    """
+
+    shape: IntArray
+    robot: FloatArray
+    obstacle: FloatArray
+    normal: FloatArray
+    distance: FloatArray
+
+    def head(self, count: int) -> Contacts:
+        """The first ``count`` contacts (views)."""
+        return Contacts(
+            self.shape[:count],
+            self.robot[:count],
+            self.obstacle[:count],
+            self.normal[:count],
+            self.distance[:count],
+        )
+
+
+@numba.njit(cache=True, nogil=True)
+def _brick_range(
+    lo: float, hi: float, origin: float, size: float, dim: int
+) -> tuple[int, int]:
+    first = max(math.floor((lo - origin) / size), 0)
+    last = min(math.floor((hi - origin) / size), dim - 1)
+    return first, last
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _hull_excess(
+    x: float,
+    y: float,
+    z: float,
+    planes: FloatArray,
+    faces: npt.NDArray[np.int16],
+    values: npt.NDArray[np.uint8],
+    gx: float,
+    gy: float,
+    gz: float,
+    ny: int,
+    nz: int,
+    last: tuple[int, int, int],
+    inv_step: float,
+    cutoff: float,
+) -> tuple[float, int]:
+    """A point's excess over a hull's faces (in its frame), and the face.
+
+    ``planes``, ``faces`` and ``values`` are the hull's; its grid starts at
+    (gx, gy, gz) with ``ny`` x ``nz`` points per x slab, and ``last`` the largest
+    first index of a grid cell per axis. The excess is the largest over the faces
+    stored at the eight grid points around the point; it is ``inf`` (face -1)
+    when the nearest grid point's value shows the excess is at least ``cutoff``
+    (both in ``VALUE_UNIT``) less the distance to that point (the excess changes
+    by at most the distance moved).
+    """
+    fx = (x - gx) * inv_step
+    fy = (y - gy) * inv_step
+    fz = (z - gz) * inv_step
+    # The nearest grid point first: most cells stop there.
+    near = (
+        min(max(int(fx + 0.5), 0), last[0] + 1) * ny
+        + min(max(int(fy + 0.5), 0), last[1] + 1)
+    ) * nz + min(max(int(fz + 0.5), 0), last[2] + 1)
+    if values[near] >= cutoff:  # in VALUE_UNIT
+        return np.inf, -1
+    ix = min(max(int(fx), 0), last[0])
+    iy = min(max(int(fy), 0), last[1])
+    iz = min(max(int(fz), 0), last[2])
+    depth = -np.inf
+    face = 0
+    for cx in range(2):
+        for cy in range(2):
+            base = ((ix + cx) * ny + iy + cy) * nz + iz
+            for cz in range(2):
+                f = int(faces[base + cz])
+                v = (
+                    planes[f, 0] * x
+                    + planes[f, 1] * y
+                    + planes[f, 2] * z
+                    - planes[f, 3]
+                )
+                if v > depth:
+                    depth = v
+                    face = f
+    return depth, face
+
+
+@numba.njit(cache=True, nogil=True)
+def hull_excesses(
+    shapes: Shapes, s: int, points: FloatArray, depth: FloatArray, face: IntArray
+) -> None:
+    """Points' excess over hull ``s``'s faces (points in its frame), and the face."""
+    planes = shapes.planes[shapes.plane_start[s] : shapes.plane_start[s + 1]]
+    faces = shapes.faces[shapes.grid_start[s] : shapes.grid_start[s + 1]]
+    values = shapes.values[shapes.grid_start[s] : shapes.grid_start[s + 1]]
+    origin, dims = shapes.grid_origin[s], shapes.grid_dims[s]
+    last = (dims[0] - 2, dims[1] - 2, dims[2] - 2)
+    inv_step = 1.0 / shapes.step
+    for k in range(len(points)):
+        depth[k], face[k] = _hull_excess(
+            points[k, 0],
+            points[k, 1],
+            points[k, 2],
+            planes,
+            faces,
+            values,
+            origin[0],
+            origin[1],
+            origin[2],
+            dims[1],
+            dims[2],
+            last,
+            inv_step,
+            np.inf,
+        )
+
+
+@numba.njit(cache=True, nogil=True)
+def candidates(
+    bricks: Bricks,
+    shapes: Shapes,
+    frames: FloatArray,
+    half: float,
+    directions: FloatArray,
+    margin: float,
+    out: Candidates,
+) -> int:
+    """The closest cell per shape and group, within ``margin`` of each shape.
+
+    Per shape (placed by ``frames`` (S, 4, 4)): the bricks near its box, the
+    cells inside its box, each cell's distance and group (a hull's face, or the
+    capsule direction of ``directions`` closest to the cell), the closest cell
+    per group. Writes to ``out`` and returns the number written.
+    """
+    centres, start, origin, size, dims = bricks
+    kind, to_frame, lower, upper, capsule = (
+        shapes.kind,
+        shapes.to_frame,
+        shapes.lower,
+        shapes.upper,
+        shapes.capsule,
+    )
+    planes, plane_start, faces, values = (
+        shapes.planes,
+        shapes.plane_start,
+        shapes.faces,
+        shapes.values,
+    )
+    grid_origin, grid_dims, grid_start, step = (
+        shapes.grid_origin,
+        shapes.grid_dims,
+        shapes.grid_start,
+        shapes.step,
+    )
+    out_shape, out_centre, out_outward, out_distance = out
+    most = len(directions)
+    for s in range(len(kind)):
+        most = max(most, plane_start[s + 1] - plane_start[s])
+    best = np.full(most, np.inf)
+    best_cell = np.full(most, -1, dtype=np.int64)
+    best_out = np.zeros((most, 3))
+    touched = np.empty(most, dtype=np.int64)
+    M = np.empty((4, 4))
+    brick_radius = 0.5 * math.sqrt(3.0) * size
+    slack = 0.5 * math.sqrt(3.0) * step  # a point's distance to its grid point
+    inv_step = 1.0 / step
+    count = 0
+    for s in range(len(kind)):
+        # The shape's frame in the world: placement x to_frame.
+        for i in range(4):
+            for j in range(4):
+                M[i, j] = (
+                    frames[s, i, 0] * to_frame[s, 0, j]
+                    + frames[s, i, 1] * to_frame[s, 1, j]
+                    + frames[s, i, 2] * to_frame[s, 2, j]
+                    + frames[s, i, 3] * to_frame[s, 3, j]
+                )
+        r00, r01, r02 = M[0, 0], M[0, 1], M[0, 2]
+        r10, r11, r12 = M[1, 0], M[1, 1], M[1, 2]
+        r20, r21, r22 = M[2, 0], M[2, 1], M[2, 2]
+        tx, ty, tz = M[0, 3], M[1, 3], M[2, 3]
+        # The shape's box, grown by the reach (margin + half a cell).
+        lx, ly, lz = lower[s, 0], lower[s, 1], lower[s, 2]
+        ux, uy, uz = upper[s, 0], upper[s, 1], upper[s, 2]
+        # The bricks that overlap the world box around that box.
+        cx, cy, cz = 0.5 * (lx + ux), 0.5 * (ly + uy), 0.5 * (lz + uz)
+        ex, ey, ez = 0.5 * (ux - lx), 0.5 * (uy - ly), 0.5 * (uz - lz)
+        mx = r00 * cx + r01 * cy + r02 * cz + tx
+        my = r10 * cx + r11 * cy + r12 * cz + ty
+        mz = r20 * cx + r21 * cy + r22 * cz + tz
+        wx = abs(r00) * ex + abs(r01) * ey + abs(r02) * ez
+        wy = abs(r10) * ex + abs(r11) * ey + abs(r12) * ez
+        wz = abs(r20) * ex + abs(r21) * ey + abs(r22) * ez
+        bx0, bx1 = _brick_range(mx - wx, mx + wx, origin[0], size, dims[0])
+        by0, by1 = _brick_range(my - wy, my + wy, origin[1], size, dims[1])
+        bz0, bz1 = _brick_range(mz - wz, mz + wz, origin[2], size, dims[2])
+        is_capsule = kind[s] == CAPSULE
+        radius, half_length = capsule[s, 0], capsule[s, 1]
+        p0 = plane_start[s]
+        # The hull's part of the stacked tables (empty for a capsule).
+        hull_planes = planes[p0 : plane_start[s + 1]]
+        hull_faces = faces[grid_start[s] : grid_start[s + 1]]
+        hull_values = values[grid_start[s] : grid_start[s + 1]]
+        gx, gy, gz = grid_origin[s, 0], grid_origin[s, 1], grid_origin[s, 2]
+        ny, nz = grid_dims[s, 1], grid_dims[s, 2]
+        last = (grid_dims[s, 0] - 2, ny - 2, nz - 2)  # a grid cell's first point
+        # A cell is rejected when its grid point's value (a lower bound, in
+        # VALUE_UNIT) shows it further than the margin even after the slack.
+        cutoff = (slack + half + margin) / VALUE_UNIT
+        n_touched = 0
+        for bx in range(bx0, bx1 + 1):
+            for by in range(by0, by1 + 1):
+                row = (bx * dims[1] + by) * dims[2]
+                for bz in range(bz0, bz1 + 1):
+                    b = row + bz
+                    if start[b] == start[b + 1]:
+                        continue
+                    # Skip a brick whose bounding sphere misses the box.
+                    dx = origin[0] + (bx + 0.5) * size - tx
+                    dy = origin[1] + (by + 0.5) * size - ty
+                    dz = origin[2] + (bz + 0.5) * size - tz
+                    x = r00 * dx + r10 * dy + r20 * dz
+                    y = r01 * dx + r11 * dy + r21 * dz
+                    z = r02 * dx + r12 * dy + r22 * dz
+                    if (
+                        x < lx - brick_radius
+                        or x > ux + brick_radius
+                        or y < ly - brick_radius
+                        or y > uy + brick_radius
+                        or z < lz - brick_radius
+                        or z > uz + brick_radius
+                    ):
+                        continue
+                    for k in range(start[b], start[b + 1]):
+                        # R^T (c - t): the cell in the shape's frame.
+                        dx = centres[k, 0] - tx
+                        dy = centres[k, 1] - ty
+                        dz = centres[k, 2] - tz
+                        x = r00 * dx + r10 * dy + r20 * dz
+                        y = r01 * dx + r11 * dy + r21 * dz
+                        z = r02 * dx + r12 * dy + r22 * dz
+                        # One branch, not six: which cells fall inside is
+                        # unpredictable, and mispredictions cost more than this.
+                        if not (
+                            (x > lx)
+                            & (x < ux)
+                            & (y > ly)
+                            & (y < uy)
+                            & (z > lz)
+                            & (z < uz)
+                        ):
+                            continue
+                        if is_capsule:
+                            on_axis = min(max(z, -half_length), half_length)
+                            ox, oy, oz = x, y, z - on_axis
+                            length = math.sqrt(ox * ox + oy * oy + oz * oz)
+                            if length < 1e-12:  # on the axis: take x
+                                ox, oy, oz, length = 1.0, 0.0, 0.0, 1.0
+                            depth = length - radius
+                            if depth - half >= margin:
+                                continue
+                            ox, oy, oz = ox / length, oy / length, oz / length
+                            group = 0
+                            top = -np.inf
+                            for g in range(len(directions)):
+                                v = (
+                                    directions[g, 0] * ox
+                                    + directions[g, 1] * oy
+                                    + directions[g, 2] * oz
+                                )
+                                if v > top:
+                                    top, group = v, g
+                        else:
+                            depth, group = _hull_excess(
+                                x,
+                                y,
+                                z,
+                                hull_planes,
+                                hull_faces,
+                                hull_values,
+                                gx,
+                                gy,
+                                gz,
+                                ny,
+                                nz,
+                                last,
+                                inv_step,
+                                cutoff,
+                            )
+                            if depth - half >= margin:
+                                continue
+                            ox = hull_planes[group, 0]
+                            oy = hull_planes[group, 1]
+                            oz = hull_planes[group, 2]
+                        if depth < best[group]:
+                            if best_cell[group] < 0:
+                                touched[n_touched] = group
+                                n_touched += 1
+                            best[group] = depth
+                            best_cell[group] = k
+                            best_out[group, 0] = ox
+                            best_out[group, 1] = oy
+                            best_out[group, 2] = oz
+        for i in range(n_touched):
+            g = touched[i]
+            k = best_cell[g]
+            ox, oy, oz = best_out[g, 0], best_out[g, 1], best_out[g, 2]
+            out_shape[count] = s
+            out_centre[count, 0] = centres[k, 0]
+            out_centre[count, 1] = centres[k, 1]
+            out_centre[count, 2] = centres[k, 2]
+            out_outward[count, 0] = r00 * ox + r01 * oy + r02 * oz
+            out_outward[count, 1] = r10 * ox + r11 * oy + r12 * oz
+            out_outward[count, 2] = r20 * ox + r21 * oy + r22 * oz
+            out_distance[count] = best[g] - half
+            count += 1
+            best[g] = np.inf
+            best_cell[g] = -1
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def metaball_normals(
+    bricks: Bricks, at: FloatArray, radius: float, normals: FloatArray
+) -> None:
+    """Replace ``normals`` by -grad F / |grad F| at ``at`` where F has a gradient.
+
+    F is the metaball field of :class:`~cbp.collision.environment.MetaballRefiner`
+    over the cells within ``radius`` of each point.
+    """
+    centres, start, origin, size, dims = bricks
+    r2 = radius * radius
+    ranges = np.empty((3, 2), dtype=np.int64)
+    for i in range(len(at)):
+        for a in range(3):
+            ranges[a, 0], ranges[a, 1] = _brick_range(
+                at[i, a] - radius, at[i, a] + radius, origin[a], size, dims[a]
+            )
+        gx = gy = gz = 0.0
+        for bx in range(ranges[0, 0], ranges[0, 1] + 1):
+            for by in range(ranges[1, 0], ranges[1, 1] + 1):
+                row = (bx * dims[1] + by) * dims[2]
+                for bz in range(ranges[2, 0], ranges[2, 1] + 1):
+                    b = row + bz
+                    for k in range(start[b], start[b + 1]):
+                        dx = at[i, 0] - centres[k, 0]
+                        dy = at[i, 1] - centres[k, 1]
+                        dz = at[i, 2] - centres[k, 2]
+                        d2 = dx * dx + dy * dy + dz * dz
+                        if d2 <= r2:
+                            s = 1.0 - d2 / r2
+                            w = s * s  # dF/dx = -6 s^2 (x - c) / R^2: scale later
+                            gx += w * dx
+                            gy += w * dy
+                            gz += w * dz
+        norm = math.sqrt(gx * gx + gy * gy + gz * gz)
+        if norm > 1e-12:  # the normal is -grad F, along +sum s^2 (x - c)
+            normals[i, 0] = gx / norm
+            normals[i, 1] = gy / norm
+            normals[i, 2] = gz / norm
+
+
+@numba.njit(cache=True, nogil=True)
+def spread_contacts(
+    order: IntArray,
+    shape: IntArray,
+    normal: FloatArray,
+    point: FloatArray,
+    per_shape: int,
+    cos_max: float,
+    spacing2: float,
+    keep: IntArray,
+) -> int:
+    """Keep up to ``per_shape`` contacts per shape, spread over directions.
+
+    Contacts are visited in ``order`` (by shape, then distance); one is kept unless
+    its shape has ``per_shape`` already, or a kept one of its shape has a normal
+    within the angle (cosine above ``cos_max``) and a point within the spacing
+    (squared distance below ``spacing2``). Writes the kept indices to ``keep``
+    and returns their number.
+    """
+    n = 0
+    first = 0  # the current shape's first entry in ``keep``
+    current = -1
+    for k in order:
+        if shape[k] != current:
+            current = shape[k]
+            first = n
+        if n - first >= per_shape:
+            continue
+        similar = False
+        for i in range(first, n):
+            m = keep[i]
+            dot = (
+                normal[k, 0] * normal[m, 0]
+                + normal[k, 1] * normal[m, 1]
+                + normal[k, 2] * normal[m, 2]
+            )
+            if dot > cos_max:
+                dx = point[k, 0] - point[m, 0]
+                dy = point[k, 1] - point[m, 1]
+                dz = point[k, 2] - point[m, 2]
+                if dx * dx + dy * dy + dz * dz < spacing2:
+                    similar = True
+                    break
+        if not similar:
+            keep[n] = k
+            n += 1
+    return n
+
+
+def cell_hits(
+    found: Candidates, half: float, per_shape: int, cos_max: float, spacing2: float
+) -> Contacts:
+    """Contacts from :func:`candidates`' cells, reduced per shape.
+
+    Per shape (the candidates come shape by shape), the closest cell first, then
+    the next closest unless a kept one has a normal within the angle (cosine
+    above ``cos_max``) and a robot point within the spacing (squared distance
+    below ``spacing2``), up to ``per_shape``: :func:`spread_contacts` on cells.
+
+    Returns:
+        The contacts by shape and then distance: the point on the shape's surface,
+        the point on the cell toward the shape, the unit normal from the cell
+        toward the shape.
+    """
+    n = len(found.shape)
+    out = Contacts(
+        np.empty(n, dtype=np.intp),
+        np.empty((n, 3)),
+        np.empty((n, 3)),
+        np.empty((n, 3)),
+        np.empty(n),
+    )
+    count = reduce_cells(found, half, per_shape, cos_max, spacing2, out)
+    return out.head(count)
+
+
+@numba.njit(cache=True, nogil=True)
+def reduce_cells(
+    found: Candidates,
+    half: float,
+    per_shape: int,
+    cos_max: float,
+    spacing2: float,
+    out: Contacts,
+) -> int:
+    """The loop of :func:`cell_hits`: writes to ``out``, returns the count."""
+    shape, centre, outward, distance = found
+    out_shape, robot, obstacle, normal, out_distance = out
+    n = shape.size
+    keep = np.empty(max(per_shape, 1), dtype=np.int64)
+    count = 0
+    start = 0
+    while start < n:
+        end = start
+        while end < n and shape[end] == shape[start]:
+            end += 1
+        # Stable, as np.lexsort: equal distances keep the candidates' order.
+        order = np.argsort(distance[start:end], kind="mergesort") + start
+        kept = 0
+        for k in order:
+            if kept >= per_shape:
+                break
+            reach_k = distance[k] + half
+            similar = False
+            for i in range(kept):
+                m = keep[i]
+                dot = (
+                    outward[k, 0] * outward[m, 0]
+                    + outward[k, 1] * outward[m, 1]
+                    + outward[k, 2] * outward[m, 2]
+                )
+                if dot > cos_max:
+                    reach_m = distance[m] + half
+                    d2 = 0.0
+                    for a in range(3):
+                        d = (centre[k, a] - reach_k * outward[k, a]) - (
+                            centre[m, a] - reach_m * outward[m, a]
+                        )
+                        d2 += d * d
+                    if d2 < spacing2:
+                        similar = True
+                        break
+            if similar:
+                continue
+            keep[kept] = k
+            kept += 1
+            out_shape[count] = shape[k]
+            for a in range(3):
+                robot[count, a] = centre[k, a] - reach_k * outward[k, a]
+                obstacle[count, a] = centre[k, a] - half * outward[k, a]
+                normal[count, a] = -outward[k, a]
+            out_distance[count] = distance[k]
+            count += 1
+        start = end
+    return count

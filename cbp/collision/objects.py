@@ -1,0 +1,222 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Declared obstacles: coal shapes at world placements, the ground truth.
+
+Queries measure exact distances with coal, for the (shape, object) pairs that a
+compiled broad phase keeps (:mod:`cbp.collision.broad`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+import trimesh
+from scipy.spatial import cKDTree
+
+from cbp.collision.broad import near_objects
+from cbp.collision.contacts import ContactRow, ContactSet
+from cbp.collision.environment import Environment, signed_distance
+from cbp.collision.geometry import LinkShape, PlacedShapes
+from cbp.collision.shape_table import compile_kernels
+from cbp.errors import ConfigError
+from cbp.robot import FloatArray, IntArray
+
+__all__ = ["TREE_MIN_OBJECTS", "EnvironmentObject", "PrimitiveEnvironment"]
+
+
+@dataclass(frozen=True)
+class EnvironmentObject:
+    """One declared obstacle: a coal shape at a world placement.
+
+    Attributes:
+        name: object name (from the scenario).
+        shape: the coal shape (Box, Sphere, Cylinder, Convex or BVH mesh).
+        placement: world placement of the shape's frame.
+        lower: world AABB lower corner, (3,).
+        upper: world AABB upper corner, (3,).
+    """
+
+    name: str
+    shape: coal.CollisionGeometry
+    placement: pin.SE3
+    lower: FloatArray
+    upper: FloatArray
+
+    @classmethod
+    def make(
+        cls, name: str, shape: coal.CollisionGeometry, placement: pin.SE3
+    ) -> EnvironmentObject:
+        """Wrap a shape, computing its world bounding box."""
+        shape.computeLocalAABB()
+        lo = np.asarray(shape.aabb_local.min_, dtype=float)
+        hi = np.asarray(shape.aabb_local.max_, dtype=float)
+        corners = np.array(
+            [
+                [x, y, z]
+                for x in (lo[0], hi[0])
+                for y in (lo[1], hi[1])
+                for z in (lo[2], hi[2])
+            ]
+        )
+        world = corners.dot(placement.rotation.T) + placement.translation
+        return cls(name, shape, placement, world.min(axis=0), world.max(axis=0))
+
+    @classmethod
+    def primitive(
+        cls, name: str, kind: str, size: tuple[float, ...], placement: pin.SE3
+    ) -> EnvironmentObject:
+        """A box (edges x, y, z), sphere (radius) or cylinder (radius, length)."""
+        if kind == "box":
+            shape = coal.Box(*size)
+        elif kind == "sphere":
+            shape = coal.Sphere(size[0])
+        elif kind == "cylinder":
+            shape = coal.Cylinder(size[0], size[1])
+        else:
+            raise ConfigError(
+                f"unknown primitive '{kind}'; expected box, sphere or cylinder"
+            )
+        return cls.make(name, shape, placement)
+
+    @classmethod
+    def mesh(
+        cls, name: str, path: Path, scale: FloatArray, placement: pin.SE3
+    ) -> EnvironmentObject:
+        """A triangle mesh file (any format trimesh reads), kept non-convex."""
+        try:
+            mesh = trimesh.load(str(path), force="mesh")
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"cannot read mesh {path}: {exc}") from exc
+        mesh.apply_scale(scale)
+        model = coal.BVHModelOBBRSS()
+        model.beginModel(len(mesh.faces), len(mesh.vertices))
+        model.addSubModel(
+            np.asarray(mesh.vertices, dtype=float),
+            np.asarray(mesh.faces, dtype=np.int64),
+        )
+        model.endModel()
+        return cls.make(name, model, placement)
+
+
+TREE_MIN_OBJECTS = 32768
+"""Above this many declared objects, a k-d tree picks those near the robot first.
+Below it the compiled broad phase tests each object against the box around the
+robot, which costs less (4,000 far objects add 4 us to a query; the tree query
+alone takes 14 us)."""
+
+
+class PrimitiveEnvironment(Environment):
+    """Declared objects (ground truth), with a bounding-box broad phase.
+
+    Only the (shape, object) pairs whose bounding sphere and box are within the
+    margin reach coal, so the cost grows with the objects near the robot.
+    """
+
+    def __init__(self, objects: list[EnvironmentObject]) -> None:
+        """Index the objects' bounding boxes."""
+        self.objects = list(objects)
+        self._lower = np.array([o.lower for o in objects]).reshape(-1, 3)
+        self._upper = np.array([o.upper for o in objects]).reshape(-1, 3)
+        # Objects far from the whole robot are skipped with one k-d tree query
+        # on their box centres, so the cost grows with the objects nearby.
+        self._box_centres = 0.5 * (self._lower + self._upper)
+        self._box_reach = (
+            float(np.linalg.norm(self._upper - self._lower, axis=1).max()) / 2
+            if objects
+            else 0.0
+        )
+        self._tree = cKDTree(self._box_centres)
+        self._all = np.arange(len(objects), dtype=np.intp)
+        self._request = coal.DistanceRequest()
+        self._result = coal.DistanceResult()
+
+    def prepare(self, shapes: list[LinkShape], margin: float) -> None:
+        """Compile the contact reduction (once per process)."""
+        del shapes, margin
+        compile_kernels()
+
+    def query(self, robot: PlacedShapes, margin: float, per_shape: int) -> ContactSet:
+        """Exact distances of the candidate pairs; one contact per pair.
+
+        Candidates: the objects whose bounding box is within ``margin`` of a
+        shape's bounding sphere and (given ``halves``) of its box.
+        """
+        if not self.objects:
+            return ContactSet.empty()
+        centres, radii, halves = robot.centres, robot.radii, robot.halves
+        candidates = self._near_robot(centres, radii, margin)
+        if not candidates.size:
+            return ContactSet.empty()
+        capacity = len(centres) * len(candidates)
+        shape_index = np.empty(capacity, dtype=np.intp)
+        object_index = np.empty(capacity, dtype=np.intp)
+        count = near_objects(
+            centres,
+            halves,
+            radii,
+            self._lower,
+            self._upper,
+            candidates,
+            margin,
+            shape_index,
+            object_index,
+        )
+        rows: list[ContactRow] = []
+        request, result = self._request, self._result
+        for i, k in zip(
+            shape_index[:count].tolist(), object_index[:count].tolist(), strict=True
+        ):
+            obj = self.objects[k]
+            d, point, other, normal = signed_distance(
+                obj.shape,
+                obj.placement,
+                robot.shapes[i].shape,
+                robot.placements[i],
+                request,
+                result,
+            )
+            if d < margin:
+                rows.append((i, -1, point, other, normal, d))
+        contacts = ContactSet.from_rows(rows)
+        if len(rows) <= per_shape:  # no shape can have too many (counted in Python)
+            return contacts
+        return contacts.keep_closest(per_shape, min_angle_deg=0.0, min_spacing=0.0)
+
+    def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
+        """Every declared object."""
+        return [(o.name, o.shape, o.placement) for o in self.objects]
+
+    def _near_robot(
+        self, centres: FloatArray, radii: FloatArray, margin: float
+    ) -> IntArray:
+        """Indices of the objects that may be within ``margin`` of the robot."""
+        if len(self.objects) <= TREE_MIN_OBJECTS:
+            return self._all
+        # The boxes whose centres are near the robot's bounding sphere (around
+        # the spheres of all its shapes).
+        middle = 0.5 * (centres.min(axis=0) + centres.max(axis=0))
+        offset = centres - middle
+        reach = float((np.sqrt(np.einsum("ij,ij->i", offset, offset)) + radii).max())
+        found = self._tree.query_ball_point(middle, reach + margin + self._box_reach)
+        return np.array(found, dtype=np.intp)
+
+    def clearance(self, points: FloatArray) -> FloatArray:
+        """Exact distance from each point to the nearest object."""
+        probe = coal.Sphere(1e-9)
+        out = np.full(len(points), np.inf)
+        for k, p in enumerate(points):
+            for obj in self.objects:
+                self._result.clear()
+                d = coal.distance(
+                    obj.shape,
+                    obj.placement,
+                    probe,
+                    pin.SE3(np.eye(3), p),
+                    self._request,
+                    self._result,
+                )
+                out[k] = min(out[k], d)
+        return out

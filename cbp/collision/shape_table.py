@@ -1,0 +1,347 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Robot shapes packed for the compiled cell queries, with their face grids.
+
+A :class:`ShapeTable` holds a robot's hulls (face planes, and a grid in each
+hull's frame of the largest face at each point: see
+:mod:`cbp.collision.cell_kernels`) and capsules, for one reach around them.
+Tables and face grids are built once and kept (robots loaded again reuse them).
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from cbp.collision.broad import compile_broad_phase
+from cbp.collision.cell_index import CellIndex
+from cbp.collision.cell_kernels import (
+    CAPSULE,
+    HULL,
+    VALUE_UNIT,
+    Candidates,
+    Shapes,
+    candidates,
+    cell_hits,
+    hull_excesses,
+    spread_contacts,
+)
+from cbp.collision.geometry import LinkShape, ShapePlacements
+from cbp.robot import FloatArray, IntArray
+
+__all__ = ["DIRECTIONS", "FACE_GRID_STEP", "ShapeTable", "compile_kernels"]
+
+#: Face-grid step [m]: fine enough that a ridge's neighbourhood is a few mm wide.
+FACE_GRID_STEP = 0.0075
+#: Guards the module's caches of face grids and shape tables.
+_CACHE_LOCK = threading.Lock()
+
+#: Directions that group a capsule's contacts: the 26 of a 3x3x3 grid's cells.
+DIRECTIONS = np.array(
+    [
+        (x, y, z)
+        for x in (-1, 0, 1)
+        for y in (-1, 0, 1)
+        for z in (-1, 0, 1)
+        if (x, y, z) != (0, 0, 0)
+    ],
+    dtype=float,
+)
+
+
+@dataclass(frozen=True)
+class ShapeTable:
+    """Robot shapes packed for the compiled query, for one reach around them.
+
+    Attributes:
+        kind: 0 for a hull (face planes), 1 for a capsule, per shape.
+        to_frame: the transform from a shape's placement to the frame its planes
+            and box are given in (4, 4) per shape: the inverse of the shape's
+            placement on its link for hulls, identity for capsules.
+        lower: the box around the shape grown by the reach, in that frame.
+        upper: its opposite corner.
+        capsule: (radius, half length) of capsules, zeros for hulls.
+        planes: all hulls' planes (n, d), stacked; ``plane_start`` delimits them.
+        plane_start: each shape's first plane, and the total at the end.
+        grid_origin: the corner of each hull's face grid, in its frame.
+        grid_dims: the face grid's points per axis.
+        grid_start: each shape's first entry in ``faces``.
+        faces: the index (within its hull) of the largest face at each grid point.
+        values: that face's excess at the grid point in whole ``VALUE_UNIT``
+            (1 mm), rounded down and clipped to [0, 255]: a lower bound that
+            rejects the cells far outside a hull with one byte read (the grids
+            of an arm's hulls then fit a core's cache).
+        groups: contact groups per shape (faces, or 26 directions for capsules).
+        reach: the distance the boxes are grown by [m]: a query's margin plus
+            half a cell.
+        step: the face grids' step [m].
+    """
+
+    kind: npt.NDArray[np.int64]
+    to_frame: FloatArray
+    lower: FloatArray
+    upper: FloatArray
+    capsule: FloatArray
+    planes: FloatArray
+    plane_start: npt.NDArray[np.int64]
+    grid_origin: FloatArray
+    grid_dims: npt.NDArray[np.int64]
+    grid_start: npt.NDArray[np.int64]
+    faces: npt.NDArray[np.int16]
+    values: npt.NDArray[np.uint8]
+    groups: npt.NDArray[np.int64]
+    reach: float
+    step: float
+
+    @functools.cached_property
+    def arrays(self) -> Shapes:
+        """The arrays as the compiled queries read them."""
+        return Shapes(
+            self.kind,
+            self.to_frame,
+            self.lower,
+            self.upper,
+            self.capsule,
+            self.planes,
+            self.plane_start,
+            self.grid_origin,
+            self.grid_dims,
+            self.grid_start,
+            self.faces,
+            self.values,
+            self.step,
+        )
+
+    @functools.cached_property
+    def capacity(self) -> int:
+        """The most candidates a query can return: one per shape and group."""
+        return int(self.groups.sum())
+
+    @classmethod
+    def for_shapes(cls, shapes: list[LinkShape], reach: float) -> ShapeTable:
+        """The table of ``shapes`` for ``reach``, built once and kept.
+
+        A few tables are kept, with their shapes (so the key, the shapes'
+        identities, cannot be reused by other objects while a table is kept).
+        """
+        key = (tuple(id(shape) for shape in shapes), float(reach))
+        found = _TABLES.get(key)
+        if found is None:
+            found = (list(shapes), cls.build(shapes, reach))
+            with _CACHE_LOCK:  # the map thread and the control loop both look
+                if len(_TABLES) >= _TABLE_CACHE:
+                    _TABLES.pop(next(iter(_TABLES)))
+                _TABLES[key] = found
+        return found[1]
+
+    @classmethod
+    def kept(cls, shapes: list[LinkShape], reach: float) -> ShapeTable | None:
+        """The table :meth:`for_shapes` keeps for ``shapes`` and ``reach``, if any."""
+        found = _TABLES.get((tuple(id(shape) for shape in shapes), float(reach)))
+        return None if found is None else found[1]
+
+    @classmethod
+    def build(
+        cls, shapes: list[LinkShape], reach: float, step: float = FACE_GRID_STEP
+    ) -> ShapeTable:
+        """Pack ``shapes`` for queries up to ``reach`` from their surface."""
+        n = len(shapes)
+        kind = np.zeros(n, dtype=np.int64)
+        to_frame = np.tile(np.eye(4), (n, 1, 1))
+        lower, upper = np.zeros((n, 3)), np.zeros((n, 3))
+        capsule = np.zeros((n, 2))
+        planes, plane_start = [], [0]
+        grid_origin, grid_dims = np.zeros((n, 3)), np.ones((n, 3), dtype=np.int64)
+        faces, values, grid_start = [], [], [0]
+        groups = np.zeros(n, dtype=np.int64)
+        for s, shape in enumerate(shapes):
+            geometry = shape.shape
+            if isinstance(geometry, coal.Capsule):
+                kind[s] = CAPSULE
+                r, h = float(geometry.radius), float(geometry.halfLength)
+                capsule[s] = r, h
+                lower[s], upper[s] = (-r, -r, -h - r), (r, r, h + r)
+                groups[s] = len(DIRECTIONS)
+                grid, value = np.zeros(1, dtype=np.int16), np.zeros(1, np.uint8)
+            else:
+                if len(shape.planes) > np.iinfo(np.int16).max:
+                    raise ValueError(
+                        f"{shape.name}: a hull of {len(shape.planes)} faces; the "
+                        f"face grids index at most {np.iinfo(np.int16).max}"
+                    )
+                to_frame[s] = shape.placement.inverse().homogeneous
+                lower[s], upper[s] = shape.lower, shape.upper
+                planes.append(shape.planes)
+                groups[s] = len(shape.planes)
+                grid_origin[s] = lower[s] - reach - step
+                grid_dims[s] = np.ceil((upper[s] - lower[s] + 2 * reach) / step) + 3
+                grid, excess = _largest_faces(shape, grid_origin[s], grid_dims[s], step)
+                value = np.clip(np.floor(excess / VALUE_UNIT), 0, 255).astype(np.uint8)
+            lower[s] -= reach
+            upper[s] += reach
+            plane_start.append(plane_start[-1] + (groups[s] if kind[s] == HULL else 0))
+            faces.append(grid)
+            values.append(value)
+            grid_start.append(grid_start[-1] + grid.size)
+        return cls(
+            kind=kind,
+            to_frame=to_frame,
+            lower=lower,
+            upper=upper,
+            capsule=capsule,
+            planes=np.ascontiguousarray(
+                np.concatenate(planes) if planes else np.zeros((0, 4))
+            ),
+            plane_start=np.array(plane_start, dtype=np.int64),
+            grid_origin=grid_origin,
+            grid_dims=grid_dims,
+            grid_start=np.array(grid_start, dtype=np.int64),
+            faces=np.concatenate(faces),
+            values=np.concatenate(values),
+            groups=groups,
+            reach=float(reach),
+            step=float(step),
+        )
+
+    def candidates(
+        self, index: CellIndex, placements: list[pin.SE3], margin: float
+    ) -> Candidates:
+        """The closest cell per shape and group within ``margin`` of each shape.
+
+        Distances are to the cells' centres less half a cell (cells are cubes);
+        the groups are a hull's faces and a capsule's 26 directions.
+
+        Args:
+            index: the occupied cells.
+            placements: the shapes' placements in the world, in table order.
+            margin: the largest distance reported [m]; with half a cell, at most
+                the table's reach.
+
+        Returns:
+            The shape index (K,), the cell's centre (K, 3), the shape's outward
+            unit normal toward the cell (K, 3), the distance from the shape to the
+            cell (K,).
+        """
+        half = 0.5 * index.cell
+        if margin + half > self.reach + 1e-9:
+            raise ValueError(
+                f"margin {margin} + half a cell {half} exceeds the table's reach "
+                f"{self.reach}"
+            )
+        frames = (
+            placements.homogeneous
+            if isinstance(placements, ShapePlacements)
+            else np.array([M.homogeneous for M in placements]).reshape(-1, 4, 4)
+        )
+        capacity = self.capacity
+        out = Candidates(
+            np.empty(capacity, dtype=np.intp),
+            np.empty((capacity, 3)),
+            np.empty((capacity, 3)),
+            np.empty(capacity),
+        )
+        count = candidates(
+            index.bricks, self.arrays, frames, half, DIRECTIONS, float(margin), out
+        )
+        return out.head(count)
+
+    def hull_excess(self, s: int, points: FloatArray) -> tuple[FloatArray, IntArray]:
+        """Points' excess over hull ``s``'s face planes, as queries measure it.
+
+        Args:
+            s: a hull's index in the table.
+            points: points in the hull's frame, inside its grown box (n, 3).
+
+        Returns:
+            (the excess [m] (n,), the face it is measured on (n,)).
+        """
+        if self.kind[s] != HULL:
+            raise ValueError(f"shape {s} is not a hull")
+        points = np.ascontiguousarray(points, dtype=float).reshape(-1, 3)
+        depth = np.empty(len(points))
+        face = np.empty(len(points), dtype=np.intp)
+        hull_excesses(self.arrays, s, points, depth, face)
+        return depth, face
+
+
+#: Tables by shapes and reach, oldest first, with the shapes they were built for.
+_TABLES: dict[tuple[tuple[int, ...], float], tuple[list[LinkShape], ShapeTable]] = {}
+_TABLE_CACHE = 8
+
+
+def _largest_faces(
+    shape: LinkShape, origin: FloatArray, dims: npt.NDArray[np.int64], step: float
+) -> tuple[npt.NDArray[np.int16], npt.NDArray[np.float32]]:
+    """The largest face's index and excess at every point of a grid (x major).
+
+    Cached by the hull and the grid: robots loaded again reuse their grids.
+    """
+    key = (
+        shape.planes.tobytes(),
+        origin.tobytes(),
+        dims.tobytes(),
+        float(step),
+    )
+    found = _FACE_GRIDS.get(key)
+    if found is None:
+        axes = [origin[k] + step * np.arange(dims[k]) for k in range(3)]
+        yz = np.stack(np.meshgrid(axes[1], axes[2], indexing="ij"), -1).reshape(-1, 2)
+        faces = np.empty((int(dims[0]), len(yz)), dtype=np.int16)
+        values = np.empty((int(dims[0]), len(yz)), dtype=np.float32)
+        points = np.empty((len(yz), 3), dtype=np.float32)
+        points[:, 1:] = yz
+        rows = np.arange(len(yz))
+        for i, x in enumerate(axes[0]):  # one slab at a time: bounded memory
+            points[:, 0] = x
+            excess = points.dot(shape.plane_normals_t) - shape.plane_offsets
+            faces[i] = excess.argmax(axis=1)
+            values[i] = excess[rows, faces[i]]
+        found = faces.reshape(-1), values.reshape(-1)
+        with _CACHE_LOCK:
+            if len(_FACE_GRIDS) >= _FACE_GRID_CACHE:
+                _FACE_GRIDS.pop(next(iter(_FACE_GRIDS)))
+            _FACE_GRIDS[key] = found
+    return found
+
+
+#: Face grids by hull and grid, oldest first.
+_FACE_GRIDS: dict[
+    tuple[bytes, bytes, bytes, float],
+    tuple[npt.NDArray[np.int16], npt.NDArray[np.float32]],
+] = {}
+_FACE_GRID_CACHE = 64
+
+
+def compile_kernels() -> None:
+    """Compile the loops, or load them from numba's cache, once per process.
+
+    The loops of :mod:`cbp.collision.cell_kernels` and
+    :mod:`cbp.collision.broad`. A first compilation takes seconds; it must not
+    happen in a control loop's first query, so environments call this when a
+    world takes them (:meth:`~cbp.collision.environment.Environment.prepare`).
+    """
+    global _COMPILED
+    if _COMPILED:
+        return
+    compile_broad_phase()
+    probes = [
+        LinkShape.probe("box", coal.Box(0.1, 0.1, 0.1)),
+        LinkShape.probe("capsule", coal.Capsule(0.05, 0.1)),
+    ]
+    table = ShapeTable.build(probes, 0.02, step=0.01)
+    index = CellIndex(np.array([[0.0, 0.0, 0.06], [0.0, 0.0, -0.06]]), 0.01)
+    found = table.candidates(index, [pin.SE3.Identity()] * 2, 0.01)
+    keep = np.empty(len(found.shape), dtype=np.intp)
+    order = np.lexsort((found.distance, found.shape))
+    spread_contacts(order, found.shape, found.outward, found.centre, 1, 0.9, 1e-4, keep)
+    index.metaball_normals(found.centre, 0.03, np.ascontiguousarray(found.outward))
+    cell_hits(found, 0.005, 1, 0.9, 1e-4)
+    _COMPILED = True
+
+
+_COMPILED = False
