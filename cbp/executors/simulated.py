@@ -44,6 +44,9 @@ log = logging.getLogger(__name__)
 CLEARANCE_PERIOD = 0.02
 #: Clearances beyond this are reported as this [m].
 CLEARANCE_RANGE = 0.3
+#: Declared objects that appear or move reach the collision world this often
+#: (simulated time) [s]: as a tracker of known objects would report them.
+OBJECT_UPDATE = 0.01
 
 
 @dataclass
@@ -97,6 +100,12 @@ class SimulatedRun:
         self._goal_space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
         self._goal_blocked = False
         use_camera = spec.perception.source == "depth_camera"
+        #: Declared objects that appear or move: the declared world follows them
+        #: (with cameras, the map does).
+        self._dynamic = (
+            [] if use_camera else [o for o in spec.world.objects if o.dynamic]
+        )
+        self._declared_key = self._object_key(0.0)
         self.world: CollisionWorld | None = None
         if needs_world or scenario.needs_collision_world or use_camera:
             self.world = scenario.collision_world()
@@ -220,8 +229,43 @@ class SimulatedRun:
 
     def advance(self, t: float) -> None:
         """Simulate (and perceive) until ``t``."""
+        if self._dynamic and self.world is not None:
+            # Declared objects that appear or move: the world is brought up to
+            # date every OBJECT_UPDATE of simulated time.
+            while self.sim.t + OBJECT_UPDATE < t:
+                self.perceive_until(self.sim.t + OBJECT_UPDATE)
+                self.sim.run_until(self.sim.t + OBJECT_UPDATE)
+                self.update_declared(self.sim.t)
         self.perceive_until(t)
         self.sim.run_until(t)
+        if self._dynamic:
+            self.update_declared(self.sim.t)
+
+    def _object_key(self, t: float) -> tuple[tuple[bool, tuple[float, ...]], ...]:
+        """Which dynamic objects are present at ``t``, and where."""
+        return tuple(
+            (o.present(t), tuple(o.placement_at(t).translation)) for o in self._dynamic
+        )
+
+    def update_declared(self, t: float) -> None:
+        """Give the world the declared objects as they are at ``t``."""
+        if self.world is None:
+            return
+        key = self._object_key(t)
+        if key == self._declared_key:
+            return
+        before = self._declared_key or key
+        appeared = [
+            obj.name
+            for obj, now, then in zip(self._dynamic, key, before, strict=True)
+            if now[0] and not then[0]
+        ]
+        self._declared_key = key
+        self.world.set_environment(
+            PrimitiveEnvironment(self.scenario.environment_objects(t))
+        )
+        for name in appeared:
+            self.event(t, f"object '{name}' appeared")
 
     # ------------------------------------------------------------------ results
 
@@ -276,20 +320,41 @@ class SimulatedRun:
         return self.scenario.ee_frame
 
     def _clearance(self, t: FloatArray, q: FloatArray) -> FloatArray:
-        """Unpadded links to declared objects, every CLEARANCE_PERIOD [m]."""
+        """Unpadded links to declared objects, every CLEARANCE_PERIOD [m].
+
+        Against the objects as they were at each sample's time.
+        """
         out = np.full(t.size, np.nan)
-        objects = self.scenario.environment_objects()
-        if not objects:
+        declared = self.scenario.spec.world.objects
+        if not declared:
             out[:] = np.inf
             return out
+        dynamic = [o for o in declared if o.dynamic]
         geometry = RobotGeometry(self.robot, padding=0.0)
         settings = CollisionSettings(
             activation_distance=CLEARANCE_RANGE, self_collision=False, padding=0.0
         )
-        world = CollisionWorld(geometry, PrimitiveEnvironment(objects), settings)
+        world = CollisionWorld(
+            geometry,
+            PrimitiveEnvironment(self.scenario.environment_objects(0.0)),
+            settings,
+        )
         sample = float(np.median(np.diff(t))) if t.size > 1 else CLEARANCE_PERIOD
         stride = max(1, round(CLEARANCE_PERIOD / max(sample, 1e-6)))
+        key: tuple[object, ...] = ()
         for i in range(0, t.size, stride):
+            if dynamic:
+                now = tuple(
+                    (o.present(t[i]), tuple(o.placement_at(t[i]).translation))
+                    for o in dynamic
+                )
+                if now != key:
+                    key = now
+                    world.set_environment(
+                        PrimitiveEnvironment(
+                            self.scenario.environment_objects(float(t[i]))
+                        )
+                    )
             contacts = world.check(q[i]).contacts
             out[i] = (
                 min(float(np.min(contacts.distance)), CLEARANCE_RANGE)

@@ -53,11 +53,17 @@ class Scenario:
         """Whether some entry reads contacts."""
         return any(isinstance(e.plugin, UsesCollisionWorld) for e in self.entries)
 
-    def environment_objects(self) -> list[EnvironmentObject]:
-        """The declared objects as collision objects (mesh files resolved)."""
+    def environment_objects(self, t: float = 0.0) -> list[EnvironmentObject]:
+        """The declared objects as collision objects (mesh files resolved).
+
+        Those in the scene at time ``t`` [s], where they are then
+        (``appear_at``, ``motion``).
+        """
         objects = []
         for obj in self.spec.world.objects:
-            placement = obj.pose.to_se3()
+            if not obj.present(t):
+                continue
+            placement = obj.placement_at(t)
             if obj.shape == "mesh":
                 objects.append(
                     EnvironmentObject.mesh(

@@ -67,8 +67,10 @@ class PybulletScene:
                     physicsClientId=self.client,
                 )
         self.object_ids: dict[str, int] = {}
+        self.folder = folder or Path.cwd()
         for obj in objects:
-            self.add_object(obj, folder or Path.cwd())
+            if obj.present(0.0):
+                self.add_object(obj, self.folder, obj.placement_at(0.0))
 
     def joint_index(self, name: str) -> int:
         """PyBullet index of the joint called ``name``."""
@@ -77,8 +79,13 @@ class PybulletScene:
         except KeyError:
             raise ValueError(f"no joint '{name}' in the simulated robot") from None
 
-    def add_object(self, obj: ObjectSpec, folder: Path) -> int:
-        """Create a static body for ``obj``; returns its id."""
+    def add_object(
+        self, obj: ObjectSpec, folder: Path, placement: pin.SE3 | None = None
+    ) -> int:
+        """Create a static body for ``obj`` (at ``placement``, default its pose).
+
+        Returns its body id.
+        """
         c = self.client
         if obj.shape == "box":
             half = [0.5 * s for s in obj.size]
@@ -116,7 +123,7 @@ class PybulletScene:
                 meshScale=list(obj.scale),
                 physicsClientId=c,
             )
-        M = obj.pose.to_se3()
+        M = placement if placement is not None else obj.pose.to_se3()
         quat = _xyzw(M.rotation)
         body = pb.createMultiBody(
             baseMass=0.0,
@@ -128,6 +135,15 @@ class PybulletScene:
         )
         self.object_ids[obj.name] = body
         return int(body)
+
+    def move_object(self, name: str, placement: pin.SE3) -> None:
+        """Put an object at ``placement`` (kinematically: it pushes what it hits)."""
+        pb.resetBasePositionAndOrientation(
+            self.object_ids[name],
+            placement.translation.tolist(),
+            _xyzw(placement.rotation),
+            physicsClientId=self.client,
+        )
 
     def remove_object(self, name: str) -> None:
         """Remove an object from the simulation (it stays in the declarations)."""

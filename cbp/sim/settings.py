@@ -3,13 +3,51 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
+
+import numpy as np
+import pinocchio as pin
 
 from cbp.errors import ConfigError, require
 from cbp.spatial import Pose
 
-__all__ = ["ObjectSpec", "SimulationSettings"]
+__all__ = ["ObjectMotion", "ObjectSpec", "SimulationSettings"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectMotion:
+    """A straight-line motion of an object during a run (``motion:``).
+
+    The object moves at ``velocity`` from ``start`` to ``stop`` and rests
+    before and after: a scripted disturbance (an obstacle pushed into the arm,
+    a box sliding into its way). The simulator moves it kinematically, whatever
+    it hits.
+    """
+
+    velocity: tuple[float, float, float]
+    """World-frame velocity [m/s]."""
+    start: float = 0.0
+    """When it starts moving [s]."""
+    stop: float
+    """When it stops [s]."""
+
+    def __post_init__(self) -> None:
+        """Times are ordered and finite; the velocity is finite."""
+        if not 0.0 <= self.start < self.stop < math.inf:
+            raise ConfigError(
+                f"needs 0 <= start < stop < inf, got start {self.start}, "
+                f"stop {self.stop}",
+                "stop",
+            )
+        if not all(math.isfinite(v) for v in self.velocity):
+            raise ConfigError(f"must be finite, got {list(self.velocity)}", "velocity")
+
+    def offset(self, t: float) -> np.ndarray:
+        """Displacement from the declared pose at time ``t`` [m]."""
+        moved = min(max(t - self.start, 0.0), self.stop - self.start)
+        return moved * np.asarray(self.velocity, dtype=float)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -32,9 +70,34 @@ class ObjectSpec:
     """Mesh scale per axis (mesh only)."""
     pose: Pose
     """Pose of the object's frame (a primitive's centre), world frame."""
+    appear_at: float = 0.0
+    """When the object enters the scene [s]: 0, there from the start; later, it
+    appears then (for an obstacle that cameras must discover during a run)."""
+    motion: ObjectMotion | None = None
+    """A straight-line motion during the run; none: it stays at ``pose``."""
+
+    @property
+    def dynamic(self) -> bool:
+        """The object appears or moves during the run."""
+        return self.appear_at > 0.0 or self.motion is not None
+
+    def present(self, t: float) -> bool:
+        """The object is in the scene at time ``t``."""
+        return t >= self.appear_at
+
+    def placement_at(self, t: float) -> pin.SE3:
+        """The object's world placement at time ``t``."""
+        placement = self.pose.to_se3()
+        if self.motion is not None:
+            placement.translation = placement.translation + self.motion.offset(t)
+        return placement
 
     def __post_init__(self) -> None:
         """The size matches the shape and is positive; meshes name a file."""
+        if not 0.0 <= self.appear_at < math.inf:
+            raise ConfigError(
+                f"must be >= 0 and finite, got {self.appear_at}", "appear_at"
+            )
         if self.shape == "mesh":
             if not self.file:
                 raise ConfigError("a mesh needs 'file:'", "file")

@@ -106,6 +106,8 @@ class Simulation:
         self.robot = robot
         self.settings = settings or SimulationSettings()
         self.scene = PybulletScene(robot, objects, folder, gui)
+        #: Objects that appear or move during the run, handled every step.
+        self._dynamic = [obj for obj in objects if obj.dynamic]
         c = self.scene.client
         self.client = c
         self.dt = 1.0 / self.settings.rate_hz
@@ -211,6 +213,8 @@ class Simulation:
         pb.setJointMotorControlArray(
             body, self._indices, pb.TORQUE_CONTROL, forces=tau, physicsClientId=c
         )
+        if self._dynamic:
+            self._update_objects(self.t + self.dt)
         pb.stepSimulation(physicsClientId=c)
         self.t = (self.steps + 1) * self.dt
         self.steps += 1
@@ -230,6 +234,23 @@ class Simulation:
             rec.penetration.append(interval.penetration)
             rec.wrist.append(interval.wrist_force)
             self._interval = ContactSample()
+
+    def _update_objects(self, t: float) -> None:
+        """Add the objects due by ``t``; put the moving ones where they are then."""
+        scene = self.scene
+        for obj in self._dynamic:
+            if not obj.present(t):
+                continue
+            if obj.name not in scene.object_ids:
+                body = scene.add_object(obj, scene.folder, obj.placement_at(t))
+                pb.changeDynamics(
+                    body,
+                    -1,
+                    lateralFriction=self.settings.friction,
+                    physicsClientId=self.client,
+                )
+            elif obj.motion is not None:
+                scene.move_object(obj.name, obj.placement_at(t))
 
     @property
     def q(self) -> FloatArray:

@@ -1,0 +1,205 @@
+"""Obstacles that appear, move into the arm, or start in contact with it.
+
+Issue 16's recovery checks, run in PyBullet with CAT: a wall that appears in the
+moving arm's way, a box pushed into the standing hand, and a start 5 mm inside
+a box (``robot.allow_initial_contact``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from cbp.collision import (
+    CollisionSettings,
+    CollisionWorld,
+    EnvironmentObject,
+    PrimitiveEnvironment,
+    RobotGeometry,
+)
+from cbp.errors import ScenarioError
+from cbp.executors.cat import run_cat
+from cbp.metrics import run_metrics
+from cbp.scenario import load_scenario
+from cbp.sim.settings import ObjectSpec
+from cbp.state import RobotState
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+
+
+def _unpadded_distance(scenario, obj: ObjectSpec, t: float, q: np.ndarray) -> float:
+    """Distance from the unpadded arm at ``q`` to ``obj`` as it is at ``t`` [m]."""
+    placement = obj.placement_at(t)
+    shape = EnvironmentObject.primitive(obj.name, obj.shape, obj.size, placement)
+    world = CollisionWorld(
+        RobotGeometry(scenario.robot, padding=0.0),
+        PrimitiveEnvironment([shape]),
+        CollisionSettings(activation_distance=1.0, self_collision=False, padding=0.0),
+    )
+    contacts = world.check(q).contacts
+    return float(contacts.distance.min()) if len(contacts) else np.inf
+
+
+def _object(scenario, name: str) -> ObjectSpec:
+    return next(o for o in scenario.spec.world.objects if o.name == name)
+
+
+def test_a_motion_must_stop_after_it_starts(tmp_path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(
+        (SCENARIOS / "cat_pushed_obstacle.yaml")
+        .read_text()
+        .replace("include: configs/cat.yaml", f"include: {SCENARIOS}/configs/cat.yaml")
+        .replace("start: 0.5, stop: 4.5", "start: 3.0, stop: 2.0")
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert "world.objects[1].motion.stop: needs 0 <= start < stop" in str(info.value)
+
+
+def test_objects_are_where_their_timeline_puts_them() -> None:
+    wall = _object(load_scenario(SCENARIOS / "cat_appearing_obstacle.yaml"), "wall")
+    assert not wall.present(1.0)
+    assert wall.present(wall.appear_at)
+    pushed = load_scenario(SCENARIOS / "cat_pushed_obstacle.yaml")
+    box = _object(pushed, "box")
+    start = box.pose.to_se3().translation
+    np.testing.assert_allclose(box.placement_at(0.2).translation, start)
+    np.testing.assert_allclose(
+        box.placement_at(2.5).translation, start + np.array([0.0, -0.1, 0.0])
+    )
+    np.testing.assert_allclose(  # rests where it stopped
+        box.placement_at(9.0).translation, start + np.array([0.0, -0.2, 0.0])
+    )
+    names = [o.name for o in pushed.environment_objects(3.0)]
+    assert names == ["table", "box"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("source", ["ground_truth", "depth_camera"])
+def test_a_wall_that_appears_ahead_of_the_arm_is_avoided(source) -> None:
+    """It appears >= 15 cm ahead of the arm and is never touched."""
+    scenario = load_scenario(
+        SCENARIOS / "cat_appearing_obstacle.yaml",
+        overrides={"perception.source": source},
+    )
+    wall = _object(scenario, "wall")
+    trace = run_cat(scenario)
+    k = int(np.searchsorted(trace.t, wall.appear_at))
+    ahead = _unpadded_distance(scenario, wall, wall.appear_at, trace.q[k])
+    assert ahead >= 0.15, ahead
+    m = run_metrics(trace)
+    assert m["peak_contact_force_n"] == 0.0, m
+    assert np.nanmin(trace.clearance) > 0.0
+    if source == "ground_truth":
+        assert any("'wall' appeared" in message for _, message in trace.events)
+
+
+@pytest.mark.slow
+def test_a_box_pushed_into_the_standing_hand_makes_the_arm_yield() -> None:
+    """CAT backs away; IK, which holds the goal, is pressed into the box.
+
+    The box slides 20 cm, ending 2 cm or more deep into where the arm stood.
+    The arm must move out of its way (clear of the box at the end) and press on
+    it with a small fraction of the force of an arm that holds its pose.
+    """
+    path = SCENARIOS / "cat_pushed_obstacle.yaml"
+    cat = load_scenario(path)
+    trace = run_cat(cat)
+    holding = run_metrics(run_with("ik", path))  # the goal held by IK
+    m = run_metrics(trace)
+    box = _object(cat, "box")
+    end = trace.t[-1]
+    assert _unpadded_distance(cat, box, end, cat.q0) < -0.02  # had it stood still
+    assert _unpadded_distance(cat, box, end, trace.q[-1]) > 0.0
+    assert holding["peak_contact_force_n"] > 100.0, holding
+    assert m["peak_contact_force_n"] < 0.15 * holding["peak_contact_force_n"], m
+
+
+def run_with(method: str, path: Path):
+    """Run ``path`` with another executor through the executor registry."""
+    from cbp.executors import EXECUTORS
+
+    scenario = load_scenario(path, overrides={"method.name": method})
+    return EXECUTORS[method].load().run(scenario)
+
+
+@pytest.mark.slow
+def test_a_start_inside_a_box_backs_out_and_never_goes_deeper(tmp_path) -> None:
+    """5 mm into a box with allow_initial_contact: out within 0.5 s."""
+    base = load_scenario(SCENARIOS / "cat_pushed_obstacle.yaml")
+    state = RobotState(base.robot, base.q0)
+    # The box's top 5 mm into the arm's lowest point (a bisection on coal's
+    # signed distance).
+    box = ObjectSpec(
+        name="box",
+        shape="box",
+        size=(0.2, 0.2, 0.1),
+        pose=_pose_under_hand(base, state, depth=0.005),
+    )
+    text = (
+        (SCENARIOS / "cat_pushed_obstacle.yaml")
+        .read_text()
+        .replace("include: configs/cat.yaml", f"include: {SCENARIOS}/configs/cat.yaml")
+    )
+    head, _, _ = text.partition("    - name: box")
+    z = box.pose.position[2]
+    x, y = box.pose.position[0], box.pose.position[1]
+    head += (
+        f"    - {{name: box, shape: box, size: [0.2, 0.2, 0.1], "
+        f"pose: {{position: [{x}, {y}, {z}]}}}}\n"
+    )
+    head = head.replace("duration: 6.0", "duration: 2.0")
+    refused = tmp_path / "inside.yaml"
+    refused.write_text(head)
+    with pytest.raises(ScenarioError, match="mm deep into 'box'"):
+        load_scenario(refused)
+    allowed = tmp_path / "allowed.yaml"
+    allowed.write_text(
+        head.replace("  initial:", "  allow_initial_contact: true\n  initial:", 1)
+    )
+    scenario = load_scenario(allowed)
+    start = _unpadded_distance(scenario, box, 0.0, scenario.q0)
+    assert start == pytest.approx(-0.005, abs=1e-3)
+    trace = run_cat(scenario)
+    depth = np.array([_unpadded_distance(scenario, box, 0.0, q) for q in trace.q[::10]])
+    times = trace.t[::10]
+    assert depth.min() >= start - 1e-3  # never deeper
+    assert np.all(depth[times >= 0.5] >= 0.0), depth[times >= 0.5].min()
+
+
+def _pose_under_hand(scenario, state: RobotState, depth: float):
+    """A pose for a 10 cm high box whose top is ``depth`` into the arm."""
+    from cbp.spatial import Pose
+
+    geometry = RobotGeometry(scenario.robot, padding=0.0)
+    world = CollisionWorld(
+        geometry,
+        PrimitiveEnvironment([]),
+        CollisionSettings(activation_distance=1.0, self_collision=False, padding=0.0),
+    )
+    hand = state.data.oMf[scenario.robot.frame_id("panda_hand")].translation
+
+    def gap(top: float) -> float:
+        slab = EnvironmentObject.primitive(
+            "box",
+            "box",
+            (0.2, 0.2, 0.1),
+            pin.SE3(np.eye(3), np.array([hand[0], hand[1], top - 0.05])),
+        )
+        world.set_environment(PrimitiveEnvironment([slab]))
+        contacts = world.check(state.q).contacts
+        return float(contacts.distance.min()) if len(contacts) else 1.0
+
+    low, high = hand[2] - 0.5, hand[2]  # gap(low) > 0 > gap(high)
+    for _ in range(50):
+        mid = 0.5 * (low + high)
+        if gap(mid) > -depth:
+            low = mid
+        else:
+            high = mid
+    top = 0.5 * (low + high)
+    return Pose(position=(float(hand[0]), float(hand[1]), float(top - 0.05)))
