@@ -3,11 +3,18 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
-from cbp.errors import ConfigError, SolveError, suggestion
+from cbp.errors import (
+    ConfigError,
+    InvalidStateError,
+    SolveError,
+    UnsafeStepError,
+    suggestion,
+)
 from cbp.plugin import AnyPlugin, Plugin
 from cbp.qp import Entry, QPAssembler, QPProblem
 from cbp.robot import FloatArray, RobotModel
@@ -23,6 +30,10 @@ class Engine:
         entries: tasks and constraints with their engine-level settings.
         solver: a backend name (``daqp``, ``piqp``, ``cvxpy``) or instance.
         regularization: added to the diagonal of the QP's cost matrix.
+        limit_tolerance: how far beyond a joint's position limit the step guard
+            lets a step end [rad or m] (solvers meet bounds to about 1e-9).
+        max_step: the largest step of a joint that has no velocity limit, per
+            second of the step's duration [rad/s or m/s].
 
     Attributes:
         state: the state of the last step (kinematics at its start).
@@ -39,6 +50,8 @@ class Engine:
         entries: Sequence[Entry],
         solver: str | QPSolver = "daqp",
         regularization: float = 1e-9,
+        limit_tolerance: float = 1e-4,
+        max_step: float = 10.0,
     ) -> None:
         """Lay out the QP and pick the backend."""
         names = [e.name for e in entries]
@@ -53,7 +66,20 @@ class Engine:
         self.solver = make_solver(solver) if isinstance(solver, str) else solver
         self.assembler = QPAssembler(self.entries, robot.nv, regularization)
         self.state = RobotState(robot)
+        self.limit_tolerance = float(limit_tolerance)
+        velocity = np.asarray(robot.velocity_limits, dtype=float)
+        #: The guard's speed bound per joint (nv) [per s]: the velocity limit
+        #: with 1 % for the solver's tolerance; ``max_step`` where there is none.
+        self.speed_bound = np.where(
+            np.isfinite(velocity), 1.01 * velocity + 1e-9, float(max_step)
+        )
+        self._bounded = np.flatnonzero(
+            np.isfinite(robot.lower_limits) | np.isfinite(robot.upper_limits)
+        )
         self.problem: QPProblem | None = None
+        #: How many times too fast the last step was before the guard slowed it
+        #: to the velocity limits (1.0: it was not).
+        self.slowed = 1.0
         self.recovery: str | None = None
         self.recovery_changed = False
         self._solved_recovery: str | None = None
@@ -81,10 +107,19 @@ class Engine:
         joint past its limit), those rows are eased and the step solved again
         (:meth:`_recover`); :attr:`recovery` then says how.
 
+        Every answer passes the step guard (:meth:`guard_step`) before it is
+        returned: what reaches a robot is finite, within the velocity limits for
+        ``dt`` (slowed down uniformly to them, :attr:`slowed`, when a
+        configuration has no velocity constraint) and within the joint limits.
+
         Raises:
             SolveError: the QP is infeasible or the backend failed; nothing moved.
+            UnsafeStepError: (a SolveError) the answer failed the step guard.
             PluginOutputError: a plugin returned a malformed or non-finite output.
+            InvalidStateError: ``q`` is not a finite configuration of the robot,
+                or ``dt`` is not a finite positive duration.
         """
+        q = self._checked(q, dt)
         state = self.state
         state.update(q)
         for plugin in self._latching:
@@ -96,9 +131,97 @@ class Engine:
             x = self.solver.solve(problem)
         except SolveError as exc:
             x = self._recover(problem, exc)
+        dq = self.guard_step(q, x[: self.robot.nv], dt)
         self.recovery_changed = self.recovery != self._solved_recovery
         self._solved_recovery = self.recovery
-        return x[: self.robot.nv]
+        return dq
+
+    def guard_step(self, q: FloatArray, dq: FloatArray, dt: float) -> FloatArray:
+        """The step guard: ``dq`` if it is safe, slowed if only too fast.
+
+        Safe: finite; no joint faster than its velocity limit over ``dt`` (with
+        1 % for solver tolerances; :attr:`speed_bound`); ``q`` ⊕ ``dq`` within
+        the position limits by :attr:`limit_tolerance`, or, for a joint that
+        starts beyond its limit, no further beyond than it starts. A step up to
+        :data:`GARBAGE_RATIO` times too fast is scaled down as a whole to the
+        limits (same direction: it still meets every row it met whose bound
+        allows standing still) and :attr:`slowed` says by how much; a faster
+        one is garbage and rejected.
+
+        Raises:
+            UnsafeStepError: the step is not finite, is garbage, or ends beyond
+                a joint limit; the message names the joint and the amount.
+        """
+        robot = self.robot
+        self.slowed = 1.0
+        if dq.shape != (robot.nv,) or not np.all(np.isfinite(dq)):
+            raise UnsafeStepError(
+                f"step rejected: the solver's answer is not finite ({dq})"
+            )
+        ratio = np.abs(dq) / (self.speed_bound * dt)
+        worst = float(ratio.max(initial=0.0))
+        if worst > GARBAGE_RATIO:
+            i = int(np.argmax(ratio))
+            raise UnsafeStepError(
+                f"step rejected: {self._velocity_name(i)} would move "
+                f"{abs(dq[i]):.4g} in {dt:.4g} s, {worst:.3g} times its limit "
+                f"({self.speed_bound[i]:.4g}/s)"
+            )
+        if worst > 1.0:
+            dq = dq / worst
+            self.slowed = worst
+        if not self._bounded.size:
+            return dq
+        b = self._bounded
+        q_next = robot.integrate(q, dq)[b]
+        lower, upper = robot.lower_limits[b], robot.upper_limits[b]
+        tol = self.limit_tolerance
+        # How far beyond its limit each bounded coordinate ends, and started.
+        beyond = np.maximum(lower - q_next, q_next - upper)
+        before = np.maximum(lower - q[b], q[b] - upper)
+        bad = (beyond > tol) & (beyond > before + 1e-12)
+        if np.any(bad):
+            k = int(np.flatnonzero(bad)[np.argmax(beyond[bad])])
+            raise UnsafeStepError(
+                f"step rejected: coordinate {self._position_name(int(b[k]))} would "
+                f"end {beyond[k]:.4g} beyond its limits [{lower[k]:.4g}, "
+                f"{upper[k]:.4g}]"
+            )
+        return dq
+
+    def _checked(self, q: FloatArray, dt: float) -> FloatArray:
+        """``q`` as a float array, after checking it and ``dt``."""
+        if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt)):
+            raise InvalidStateError(f"dt must be a finite number, got {dt!r}")
+        if dt <= 0.0:
+            raise InvalidStateError(f"dt must be > 0, got {dt}")
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.robot.nq,):
+            raise InvalidStateError(
+                f"q must have shape ({self.robot.nq},) for '{self.robot.name}', "
+                f"got {q.shape}"
+            )
+        if not np.all(np.isfinite(q)):
+            raise InvalidStateError(f"q must be finite, got {q}")
+        return q
+
+    def _velocity_name(self, i: int) -> str:
+        """The joint that tangent coordinate ``i`` belongs to."""
+        model = self.robot.model
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            if joint.idx_v <= i < joint.idx_v + joint.nv:
+                return f"joint '{model.names[j]}'"
+        return f"coordinate {i}"
+
+    def _position_name(self, i: int) -> str:
+        """The joint that configuration coordinate ``i`` belongs to."""
+        model = self.robot.model
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            if joint.idx_q <= i < joint.idx_q + joint.nq:
+                return f"'{model.names[j]}'"
+        return str(i)
 
     def _recover(self, problem: QPProblem, error: SolveError) -> FloatArray:
         """Solve again with the hard rows that ask for motion eased; else re-raise.
@@ -149,6 +272,10 @@ class Engine:
         lower[rows], upper[rows] = given
         raise error
 
+
+#: A step more than this many times faster than a joint's velocity limit allows
+#: is garbage (a solver fault), not a step to slow down: the guard rejects it.
+GARBAGE_RATIO = 10.0
 
 #: A hard row's bound within this of zero does not count as asking for motion.
 _EASE_TOL = 1e-12

@@ -158,5 +158,19 @@ class SolveError(CbpError):
         super().__init__(message)
 
 
+class UnsafeStepError(SolveError):
+    """The QP's answer is not a step the robot may take (the step guard).
+
+    Raised like a failed solve, so every executor holds the robot: the step is
+    non-finite, faster than a joint's velocity limit allows for the step's
+    duration, or takes a joint beyond its limit. The message says which joint
+    and by how much.
+    """
+
+
+class InvalidStateError(CbpError, ValueError):
+    """An engine was given a configuration or duration it cannot step from."""
+
+
 class JacobianMismatchError(CbpError, AssertionError):
     """A plugin's analytic Jacobian disagrees with finite differences."""
