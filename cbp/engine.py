@@ -195,31 +195,28 @@ class Engine:
             raise InvalidStateError(f"dt must be a finite number, got {dt!r}")
         if dt <= 0.0:
             raise InvalidStateError(f"dt must be > 0, got {dt}")
-        q = np.asarray(q, dtype=float)
-        if q.shape != (self.robot.nq,):
-            raise InvalidStateError(
-                f"q must have shape ({self.robot.nq},) for '{self.robot.name}', "
-                f"got {q.shape}"
-            )
-        if not np.all(np.isfinite(q)):
-            raise InvalidStateError(f"q must be finite, got {q}")
-        return q
+        try:
+            return self.robot.check_configuration(q)
+        except ConfigError as exc:
+            raise InvalidStateError(str(exc)) from None
 
     def _velocity_name(self, i: int) -> str:
         """The joint that tangent coordinate ``i`` belongs to."""
-        model = self.robot.model
-        for j in range(1, model.njoints):
-            joint = model.joints[j]
-            if joint.idx_v <= i < joint.idx_v + joint.nv:
-                return f"joint '{model.names[j]}'"
-        return f"coordinate {i}"
+        return f"joint {self._joint_of(i, 'v')}"
 
     def _position_name(self, i: int) -> str:
         """The joint that configuration coordinate ``i`` belongs to."""
+        return self._joint_of(i, "q")
+
+    def _joint_of(self, i: int, space: str) -> str:
+        """The quoted name of the joint whose ``space`` (q or v) holds index i."""
         model = self.robot.model
         for j in range(1, model.njoints):
             joint = model.joints[j]
-            if joint.idx_q <= i < joint.idx_q + joint.nq:
+            first, size = (
+                (joint.idx_q, joint.nq) if space == "q" else (joint.idx_v, joint.nv)
+            )
+            if first <= i < first + size:
                 return f"'{model.names[j]}'"
         return str(i)
 
