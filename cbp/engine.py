@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numba
 import numpy as np
 
 from cbp.errors import (
@@ -154,14 +155,15 @@ class Engine:
         """
         robot = self.robot
         self.slowed = 1.0
-        if dq.shape != (robot.nv,) or not np.all(np.isfinite(dq)):
+        dq = np.ascontiguousarray(dq, dtype=float)
+        if dq.shape != (robot.nv,):
+            raise UnsafeStepError(f"step rejected: {dq.shape} values, not {robot.nv}")
+        i, worst = _speed_ratio(dq, self.speed_bound, float(dt))
+        if i < 0:
             raise UnsafeStepError(
                 f"step rejected: the solver's answer is not finite ({dq})"
             )
-        ratio = np.abs(dq) / (self.speed_bound * dt)
-        worst = float(ratio.max(initial=0.0))
         if worst > GARBAGE_RATIO:
-            i = int(np.argmax(ratio))
             raise UnsafeStepError(
                 f"step rejected: {self._velocity_name(i)} would move "
                 f"{abs(dq[i]):.4g} in {dt:.4g} s, {worst:.3g} times its limit "
@@ -172,19 +174,13 @@ class Engine:
             self.slowed = worst
         if not self._bounded.size:
             return dq
-        b = self._bounded
-        q_next = robot.integrate(q, dq)[b]
-        lower, upper = robot.lower_limits[b], robot.upper_limits[b]
-        tol = self.limit_tolerance
-        # How far beyond its limit each bounded coordinate ends, and started.
-        beyond = np.maximum(lower - q_next, q_next - upper)
-        before = np.maximum(lower - q[b], q[b] - upper)
-        bad = (beyond > tol) & (beyond > before + 1e-12)
-        if np.any(bad):
-            k = int(np.flatnonzero(bad)[np.argmax(beyond[bad])])
+        q_next = q + dq if robot.is_euclidean else robot.integrate(q, dq)
+        lower, upper = robot.lower_limits, robot.upper_limits
+        k, beyond = _past_limits(q, q_next, lower, upper, self.limit_tolerance)
+        if k >= 0:
             raise UnsafeStepError(
-                f"step rejected: coordinate {self._position_name(int(b[k]))} would "
-                f"end {beyond[k]:.4g} beyond its limits [{lower[k]:.4g}, "
+                f"step rejected: coordinate {self._position_name(k)} would "
+                f"end {beyond:.4g} beyond its limits [{lower[k]:.4g}, "
                 f"{upper[k]:.4g}]"
             )
         return dq
@@ -195,6 +191,14 @@ class Engine:
             raise InvalidStateError(f"dt must be a finite number, got {dt!r}")
         if dt <= 0.0:
             raise InvalidStateError(f"dt must be > 0, got {dt}")
+        nq = self.robot.nq
+        if (
+            type(q) is np.ndarray
+            and q.dtype == np.float64
+            and q.shape == (nq,)
+            and _all_finite(q)
+        ):
+            return q  # the common case, checked in one compiled pass
         try:
             return self.robot.check_configuration(q)
         except ConfigError as exc:
@@ -268,6 +272,42 @@ class Engine:
             return x
         lower[rows], upper[rows] = given
         raise error
+
+
+@numba.njit(cache=True, nogil=True)
+def _all_finite(x: FloatArray) -> bool:
+    """Whether every entry of ``x`` is finite."""
+    return bool(np.isfinite(x).all())
+
+
+@numba.njit(cache=True, nogil=True)
+def _speed_ratio(dq: FloatArray, bound: FloatArray, dt: float) -> tuple[int, float]:
+    """(the fastest coordinate, its |dq| / (bound dt)); (-1, nan) if not finite."""
+    worst, at = 0.0, 0
+    for i in range(dq.size):
+        if not math.isfinite(dq[i]):
+            return -1, math.nan
+        ratio = abs(dq[i]) / (bound[i] * dt)
+        if ratio > worst:
+            worst, at = ratio, i
+    return at, worst
+
+
+@numba.njit(cache=True, nogil=True)
+def _past_limits(
+    q: FloatArray, q_next: FloatArray, lower: FloatArray, upper: FloatArray, tol: float
+) -> tuple[int, float]:
+    """The coordinate that ends furthest past its limits, and how far.
+
+    Only by more than ``tol`` and further than it starts; (-1, 0) if none.
+    """
+    worst, at = 0.0, -1
+    for i in range(q.size):
+        beyond = max(lower[i] - q_next[i], q_next[i] - upper[i])
+        started = max(lower[i] - q[i], q[i] - upper[i])
+        if beyond > max(tol, started + 1e-12, worst):
+            worst, at = beyond, i
+    return at, worst
 
 
 #: A step more than this many times faster than a joint's velocity limit allows
