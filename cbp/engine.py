@@ -74,8 +74,9 @@ class Engine:
         self.speed_bound = np.where(
             np.isfinite(velocity), 1.01 * velocity + 1e-9, float(max_step)
         )
-        self._bounded = np.flatnonzero(
-            np.isfinite(robot.lower_limits) | np.isfinite(robot.upper_limits)
+        self._has_limits = bool(
+            np.isfinite(robot.lower_limits).any()
+            or np.isfinite(robot.upper_limits).any()
         )
         self.problem: QPProblem | None = None
         #: How many times too fast the last step was before the guard slowed it
@@ -172,7 +173,7 @@ class Engine:
         if worst > 1.0:
             dq = dq / worst
             self.slowed = worst
-        if not self._bounded.size:
+        if not self._has_limits:
             return dq
         q_next = q + dq if robot.is_euclidean else robot.integrate(q, dq)
         lower, upper = robot.lower_limits, robot.upper_limits

@@ -31,6 +31,7 @@ from cbp.plugin import GoalReceiver
 from cbp.report import write_runs
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
+from cbp.sim.settings import ObjectSpec
 from cbp.sim.simulation import Simulation
 from cbp.spatial import checked_se3
 from cbp.state import RobotState
@@ -47,6 +48,15 @@ CLEARANCE_RANGE = 0.3
 #: Declared objects that appear or move reach the collision world this often
 #: (simulated time) [s]: as a tracker of known objects would report them.
 OBJECT_UPDATE = 0.01
+
+
+#: Which of some objects are in the scene at a time, and where.
+ObjectKey = tuple[tuple[bool, tuple[float, ...]], ...]
+
+
+def _object_key(objects: list[ObjectSpec], t: float) -> ObjectKey:
+    """Which of ``objects`` are present at ``t``, and where (equal: no change)."""
+    return tuple((o.present(t), tuple(o.placement_at(t).translation)) for o in objects)
 
 
 @dataclass
@@ -105,7 +115,7 @@ class SimulatedRun:
         self._dynamic = (
             [] if use_camera else [o for o in spec.world.objects if o.dynamic]
         )
-        self._declared_key = self._object_key(0.0)
+        self._declared_key = _object_key(self._dynamic, 0.0)
         self.world: CollisionWorld | None = None
         if needs_world or scenario.needs_collision_world or use_camera:
             self.world = scenario.collision_world()
@@ -241,23 +251,18 @@ class SimulatedRun:
         if self._dynamic:
             self.update_declared(self.sim.t)
 
-    def _object_key(self, t: float) -> tuple[tuple[bool, tuple[float, ...]], ...]:
-        """Which dynamic objects are present at ``t``, and where."""
-        return tuple(
-            (o.present(t), tuple(o.placement_at(t).translation)) for o in self._dynamic
-        )
-
     def update_declared(self, t: float) -> None:
         """Give the world the declared objects as they are at ``t``."""
         if self.world is None:
             return
-        key = self._object_key(t)
+        key = _object_key(self._dynamic, t)
         if key == self._declared_key:
             return
-        before = self._declared_key or key
         appeared = [
             obj.name
-            for obj, now, then in zip(self._dynamic, key, before, strict=True)
+            for obj, now, then in zip(
+                self._dynamic, key, self._declared_key, strict=True
+            )
             if now[0] and not then[0]
         ]
         self._declared_key = key
@@ -341,13 +346,10 @@ class SimulatedRun:
         )
         sample = float(np.median(np.diff(t))) if t.size > 1 else CLEARANCE_PERIOD
         stride = max(1, round(CLEARANCE_PERIOD / max(sample, 1e-6)))
-        key: tuple[object, ...] = ()
+        key: ObjectKey = ()
         for i in range(0, t.size, stride):
             if dynamic:
-                now = tuple(
-                    (o.present(t[i]), tuple(o.placement_at(t[i]).translation))
-                    for o in dynamic
-                )
+                now = _object_key(dynamic, float(t[i]))
                 if now != key:
                     key = now
                     world.set_environment(

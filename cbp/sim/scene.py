@@ -70,7 +70,7 @@ class PybulletScene:
         self.folder = folder or Path.cwd()
         for obj in objects:
             if obj.present(0.0):
-                self.add_object(obj, self.folder, obj.placement_at(0.0))
+                self.add_object(obj, obj.placement_at(0.0))
 
     def joint_index(self, name: str) -> int:
         """PyBullet index of the joint called ``name``."""
@@ -79,12 +79,10 @@ class PybulletScene:
         except KeyError:
             raise ValueError(f"no joint '{name}' in the simulated robot") from None
 
-    def add_object(
-        self, obj: ObjectSpec, folder: Path, placement: pin.SE3 | None = None
-    ) -> int:
-        """Create a static body for ``obj`` (at ``placement``, default its pose).
+    def add_object(self, obj: ObjectSpec, placement: pin.SE3) -> int:
+        """Create a static body for ``obj`` at ``placement``; returns its id.
 
-        Returns its body id.
+        Mesh files are resolved from :attr:`folder`.
         """
         c = self.client
         if obj.shape == "box":
@@ -109,7 +107,7 @@ class PybulletScene:
                 pb.GEOM_CYLINDER, radius=r, length=length, physicsClientId=c
             )
         else:
-            path = str(folder / obj.file)
+            path = str(self.folder / obj.file)
             col = pb.createCollisionShape(
                 pb.GEOM_MESH,
                 fileName=path,
@@ -123,13 +121,12 @@ class PybulletScene:
                 meshScale=list(obj.scale),
                 physicsClientId=c,
             )
-        M = placement if placement is not None else obj.pose.to_se3()
-        quat = _xyzw(M.rotation)
+        quat = _xyzw(placement.rotation)
         body = pb.createMultiBody(
             baseMass=0.0,
             baseCollisionShapeIndex=col,
             baseVisualShapeIndex=vis,
-            basePosition=M.translation.tolist(),
+            basePosition=placement.translation.tolist(),
             baseOrientation=quat,
             physicsClientId=c,
         )

@@ -242,7 +242,7 @@ class Simulation:
             if not obj.present(t):
                 continue
             if obj.name not in scene.object_ids:
-                body = scene.add_object(obj, scene.folder, obj.placement_at(t))
+                body = scene.add_object(obj, obj.placement_at(t))
                 pb.changeDynamics(
                     body,
                     -1,
