@@ -178,9 +178,11 @@ def _run(
         print(exc, file=sys.stderr)
         return 2
     out = out or Path("out") / scenario.spec.name
-    trace = executor.run(scenario, gui)
-    metrics = executor.write(scenario, {name: trace}, out)[name]
-    print(executor.describe(scenario, name, metrics))
+    from cbp.report import summary_line, write_outputs
+
+    trace = executor(scenario, gui)
+    metrics = write_outputs(scenario, {name: trace}, out)[name]
+    print(summary_line(scenario, name, metrics))
     print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
     return 0
 

@@ -4,7 +4,7 @@
 As in the paper, the operator's goal is recorded once (``goal.csv`` in the
 output folder, sampled at the command rate) and replayed to every method; each
 method runs in the simulator from the same initial state. The outputs are those
-of :func:`cbp.report.write_runs`: one ``metrics.json`` with an object per method,
+of :func:`cbp.report.write_outputs`: one ``metrics.json`` with an object per method,
 a table in ``report.md``, and the figures with all methods together.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 from cbp.executors import COMPARABLE, executor_info
 from cbp.goals import write_recorded
 from cbp.scenario import Scenario, load_scenario
-from cbp.trace import RunTrace
+from cbp.trace import Trace
 
 __all__ = ["ComparisonResult", "compare", "record_goal"]
 
@@ -37,7 +37,7 @@ class ComparisonResult:
     """
 
     out: Path
-    traces: dict[str, RunTrace]
+    traces: dict[str, Trace]
     metrics: dict[str, dict[str, Any]]
 
 
@@ -62,13 +62,9 @@ def record_goal(scenario: Scenario, path: Path) -> bool:
     return True
 
 
-def _run_one(path: Path, overrides: Mapping[str, str], method: str) -> RunTrace:
-    trace: RunTrace = (
-        executor_info(method, COMPARABLE)
-        .load()
-        .run(load_scenario(path, overrides=overrides))
-    )
-    return trace
+def _run_one(path: Path, overrides: Mapping[str, str], method: str) -> Trace:
+    run = executor_info(method, COMPARABLE).load()
+    return run(load_scenario(path, overrides=overrides), False)
 
 
 def compare(
@@ -90,7 +86,7 @@ def compare(
             sharing the cores: compare with ``jobs=1`` for timing figures.
         overrides: scenario values to replace (``--set``).
     """
-    from cbp.report import write_runs
+    from cbp.report import write_outputs
 
     for method in methods:
         executor_info(method, COMPARABLE)  # an unknown name fails before any run
@@ -106,7 +102,7 @@ def compare(
             f"{{type: recorded, file: {(out / 'goal.csv').resolve()}, "
             f"rate_hz: {goal.rate_hz}{task}}}"
         )
-    traces: dict[str, RunTrace] = {}
+    traces: dict[str, Trace] = {}
     if jobs <= 1:
         for method in methods:
             traces[method] = _run_one(path, overrides, method)
@@ -114,5 +110,5 @@ def compare(
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             futures = {m: pool.submit(_run_one, path, overrides, m) for m in methods}
             traces = {m: f.result() for m, f in futures.items()}
-    metrics = write_runs(scenario, traces, out)
+    metrics = write_outputs(scenario, traces, out)
     return ComparisonResult(out, traces, metrics)

@@ -10,6 +10,8 @@ CAT paper, one or several methods each (:func:`plot_runs`):
 
 Orbit paper, one run (:func:`plot_orbit`): distance, view error, roll,
 altitude, obstacle distance and velocities over time.
+
+Each figure is drawn when the traces have its columns (:class:`~cbp.trace.Trace`).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from cbp.robot import FloatArray
-from cbp.trace import RunTrace
+from cbp.trace import Trace
 
 __all__ = ["METHOD_COLORS", "plot_orbit", "plot_runs"]
 
@@ -34,17 +36,83 @@ METHOD_COLORS = {
 }
 
 
-def plot_runs(traces: Mapping[str, RunTrace], out: Path, title: str) -> list[Path]:
-    """Write the three figures for ``traces`` (by method) into ``out``."""
+def plot_runs(traces: Mapping[str, Trace], out: Path, title: str) -> list[Path]:
+    """Write the figures ``traces`` (by method) have columns for into ``out``.
+
+    With a goal: ``tracking.png`` and ``errors.png``; with the simulator's
+    contact forces: ``contact_force.png``; with reported signals: the orbit
+    figures (:func:`plot_orbit`); one run without signals: ``joints.png``.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    paths: list[Path] = []
+    if any(trace.has_goal for trace in traces.values()):
+        paths += _plot_tracking(traces, out, title)
+    if any(trace.contact_force is not None for trace in traces.values()):
+        fig, ax = plt.subplots(figsize=(8, 3))
+        for name, trace in traces.items():
+            if trace.contact_force is not None:
+                ax.plot(
+                    trace.t,
+                    trace.contact_force,
+                    color=METHOD_COLORS.get(name),
+                    label=name,
+                )
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("contact force [N]")
+        ax.set_title(f"{title}: contact force, robot and scene")
+        ax.legend()
+        ax.grid(alpha=0.3)
+        paths.append(_save(fig, out / "contact_force.png"))
+    if len(traces) == 1:
+        (trace,) = traces.values()
+        if trace.signals:
+            paths += plot_orbit(trace, out, title)
+        else:
+            paths.append(
+                _plot_columns(
+                    trace.t,
+                    trace.q,
+                    _labels(trace.q_names, trace.q.shape[1], "q"),
+                    "joint position [rad or m]",
+                    f"{title}: joints",
+                    out / "joints.png",
+                )
+            )
+    return paths
+
+
+def _plot_columns(
+    t: FloatArray,
+    values: FloatArray,
+    labels: list[str],
+    ylabel: str,
+    title: str,
+    path: Path,
+) -> Path:
+    """One line per column of ``values`` over ``t``."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for i, label in enumerate(labels):
+        ax.plot(t, values[:, i], label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(ncol=4, fontsize=7)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def _plot_tracking(traces: Mapping[str, Trace], out: Path, title: str) -> list[Path]:
+    """tracking.png (distance from the start pose) and errors.png."""
+    import matplotlib.pyplot as plt
+
     first = next(iter(traces.values()))
     start = first.ee_position[0]
-    paths = []
-
     fig, ax = plt.subplots(figsize=(8, 4))
     goal_distance = np.linalg.norm(first.goal_position - start, axis=1)
     ax.plot(first.t, goal_distance, "k--", label="goal")
@@ -56,7 +124,7 @@ def plot_runs(traces: Mapping[str, RunTrace], out: Path, title: str) -> list[Pat
     ax.set_title(f"{title}: tracking")
     ax.legend()
     ax.grid(alpha=0.3)
-    paths.append(_save(fig, out / "tracking.png"))
+    paths = [_save(fig, out / "tracking.png")]
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
     for name, trace in traces.items():
@@ -71,17 +139,12 @@ def plot_runs(traces: Mapping[str, RunTrace], out: Path, title: str) -> list[Pat
         a.grid(alpha=0.3)
     axes[0].set_title(f"{title}: error to the goal")
     paths.append(_save(fig, out / "errors.png"))
-
-    fig, ax = plt.subplots(figsize=(8, 3))
-    for name, trace in traces.items():
-        ax.plot(trace.t, trace.contact_force, color=METHOD_COLORS.get(name), label=name)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("contact force [N]")
-    ax.set_title(f"{title}: contact force, robot and scene")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    paths.append(_save(fig, out / "contact_force.png"))
     return paths
+
+
+def _labels(names: list[str], n: int, prefix: str) -> list[str]:
+    """Column labels: the names when there is one per column, else q0, q1, ..."""
+    return names if len(names) == n else [f"{prefix}{i}" for i in range(n)]
 
 
 def _save(fig: object, path: Path) -> Path:
@@ -93,25 +156,19 @@ def _save(fig: object, path: Path) -> Path:
     return path
 
 
-def plot_orbit(
-    t: FloatArray,
-    signals: Mapping[str, FloatArray],
-    u: FloatArray,
-    joint_labels: list[str],
-    out: Path,
-    title: str,
-) -> list[Path]:
+def plot_orbit(trace: Trace, out: Path, title: str) -> list[Path]:
     """The orbit paper's figures (Figs. 7-18) for one run, as far as it has them.
 
     ``distance.png`` (r(t) and r_d), ``orientation.png`` (view error),
     ``roll.png``, ``altitude.png`` (h(t) and z_min), ``obstacle.png`` (g(t) and
-    r_r) and ``velocities.png`` (base and joint velocities).
+    r_r) and, with commanded velocities, ``velocities.png``.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    t, signals = trace.t, trace.signals
     panels = [
         ("distance.png", "distance", "distance_desired", "r(t)", "r_d", "[m]"),
         ("orientation.png", "view_error_deg", None, "view error", None, "[deg]"),
@@ -140,13 +197,15 @@ def plot_orbit(
         ax.legend()
         ax.grid(alpha=0.3)
         paths.append(_save(fig, out / name))
-    fig, ax = plt.subplots(figsize=(8, 4))
-    for i, label in enumerate(joint_labels):
-        ax.plot(t, u[:, i], label=label)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("velocity [m/s or rad/s]")
-    ax.set_title(f"{title}: base and joint velocities")
-    ax.legend(ncol=4, fontsize=7)
-    ax.grid(alpha=0.3)
-    paths.append(_save(fig, out / "velocities.png"))
+    if trace.u is not None:
+        paths.append(
+            _plot_columns(
+                t,
+                trace.u,
+                _labels(trace.v_names, trace.u.shape[1], "v"),
+                "velocity [m/s or rad/s]",
+                f"{title}: base and joint velocities",
+                out / "velocities.png",
+            )
+        )
     return paths

@@ -296,6 +296,19 @@ class RobotModel:
         """Names of the model's joints (the universe excluded), in tree order."""
         return list(self._joint_ids)
 
+    def coordinate_names(self, space: Literal["q", "v"] = "q") -> list[str]:
+        """One name per configuration (``q``) or velocity (``v``) coordinate.
+
+        A joint with one coordinate lends it its name; a joint with several (a
+        planar or floating base) numbers them: ``root_0``, ``root_1``, ...
+        """
+        names = []
+        for i, name in enumerate(self.joint_names, start=1):
+            joint = self.model.joints[i]
+            n = int(joint.nq if space == "q" else joint.nv)
+            names += [name] if n == 1 else [f"{name}_{k}" for k in range(n)]
+        return names
+
     @property
     def frame_names(self) -> list[str]:
         """Names of every frame of the model."""

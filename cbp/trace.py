@@ -1,11 +1,21 @@
 # SPDX-License-Identifier: Apache-2.0
-"""What runs record: samples, command periods and events.
+"""What a run records: one :class:`Trace` type for every executor.
 
-Every executor that runs in the simulator (CAT, and the IK, MP and JT methods)
-returns a :class:`RunTrace`; metrics, plots and comparisons read only this. The
-kinematic executor returns a :class:`KinematicTrace` (one row per QP step, no
-simulator) and the velocity executor a :class:`VelocityTrace` (one row per
-tick, with the signals its plugins report).
+A trace is a table of samples (``t``, ``q`` and the end effector's and goal's
+poses, for every executor) with the columns an executor can fill and the others
+leave as ``None``:
+
+* the simulator's ground truth (``q_cmd``, contact forces, physical penetration,
+  clearance to the declared objects): the simulated executors (CAT, IK, MP, JT);
+* the wall time of each sample's computation (``compute_s``): the executors that
+  compute once per sample (kinematic, velocity); the trajectory executors
+  record it per command period (``periods``) instead;
+* commanded velocities, operator inputs and the signals plugins report: the
+  velocity executor.
+
+:func:`cbp.metrics.run_metrics`, :mod:`cbp.plots` and :mod:`cbp.report` read a
+column when it is there, so a new executor gets metrics, plots and a report by
+filling the columns it has.
 """
 
 from __future__ import annotations
@@ -16,13 +26,7 @@ import numpy as np
 
 from cbp.robot import FloatArray
 
-__all__ = [
-    "FULL_PERIOD_NOTE",
-    "KinematicTrace",
-    "PeriodRecord",
-    "RunTrace",
-    "VelocityTrace",
-]
+__all__ = ["FULL_PERIOD_NOTE", "PeriodRecord", "Trace"]
 
 #: The note of a period whose planner used its whole time budget.
 FULL_PERIOD_NOTE = "time budget spent"
@@ -52,111 +56,114 @@ class PeriodRecord:
 
 
 @dataclass
-class RunTrace:
-    """Samples of a simulated run (at the simulator's recording rate).
+class Trace:
+    """The samples of one run (M samples, at the executor's recording rate).
 
     Attributes:
         method: executor name.
         t: sample times (M,) [s].
         q: measured joint positions (M, nq).
-        q_cmd: commanded joint positions (M, nq) (the measured ones under torque
-            control).
         ee_position: end-effector positions (M, 3) [m].
         ee_rotation: end-effector rotations (M, 3, 3).
-        goal_position: the operator's goal in effect (M, 3) [m] (the last valid
-            sample; NaN before the first).
-        goal_rotation: (M, 3, 3).
+        goal_position: the goal in effect (M, 3) [m]: the last accepted one, NaN
+            before the first and in runs without a goal.
+        goal_rotation: (M, 3, 3), NaN likewise.
+        goal_change_time: time of the first change of the goal [s], or None.
+        q_names: a name per configuration coordinate
+            (:meth:`~cbp.robot.RobotModel.coordinate_names`).
+        v_names: a name per velocity coordinate.
+        events: (time, message) of every rejected goal or input, failed solve,
+            rejected step, discarded result.
+        compute_s: wall time of the computation at each sample (M,) [s].
+        q_cmd: commanded joint positions (M, nq) (the measured ones under torque
+            control).
         contact_force: largest sum of contact normal forces between robot and
             scene since the previous sample (M,) [N].
         wrist_force: the hand's share of it (M,) [N].
-        penetration: deepest physical penetration since the previous sample (M,) [m].
+        penetration: deepest physical penetration since the previous sample
+            (M,) [m].
         clearance: ground-truth distance from the unpadded links to the declared
             objects (M,) [m]; NaN where not computed, +inf with no objects.
-        goal_change_time: time of the first change of the goal [s], or None.
+        step_penetration: deepest penetration of the padded shapes where each
+            validated step ended (M,) [m] (the collision model's view).
+        rejected_steps: steps refused by step validation.
         periods: command periods (trajectory executors).
-        events: (time, message) of every rejected goal, failed solve, discarded
-            result.
+        u: commanded velocities (M, nv).
+        inputs: the operator inputs' values at each sample, by entry name (M, k).
+        signals: what the plugins report at each sample, by key (M,)
+            (:class:`~cbp.plugin.ReportsSignals`).
+        transient_s: metrics of the steady behaviour leave out the samples
+            before this time [s].
     """
 
     method: str
     t: FloatArray
     q: FloatArray
-    q_cmd: FloatArray
     ee_position: FloatArray
     ee_rotation: FloatArray
     goal_position: FloatArray
     goal_rotation: FloatArray
-    contact_force: FloatArray
-    wrist_force: FloatArray
-    penetration: FloatArray
-    clearance: FloatArray
-    goal_change_time: float | None
-    periods: list[PeriodRecord] = field(default_factory=list)
+    goal_change_time: float | None = None
+    q_names: list[str] = field(default_factory=list)
+    v_names: list[str] = field(default_factory=list)
     events: list[tuple[float, str]] = field(default_factory=list)
+    compute_s: FloatArray | None = None
+    q_cmd: FloatArray | None = None
+    contact_force: FloatArray | None = None
+    wrist_force: FloatArray | None = None
+    penetration: FloatArray | None = None
+    clearance: FloatArray | None = None
+    step_penetration: FloatArray | None = None
+    rejected_steps: int = 0
+    periods: list[PeriodRecord] = field(default_factory=list)
+    u: FloatArray | None = None
+    inputs: dict[str, FloatArray] = field(default_factory=dict)
+    signals: dict[str, FloatArray] = field(default_factory=dict)
+    transient_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Every column has one row per sample."""
+        m = self.t.shape[0]
+        for name in (
+            "q",
+            "ee_position",
+            "ee_rotation",
+            "goal_position",
+            "goal_rotation",
+            "compute_s",
+            "q_cmd",
+            "contact_force",
+            "wrist_force",
+            "penetration",
+            "clearance",
+            "step_penetration",
+            "u",
+        ):
+            column = getattr(self, name)
+            if column is not None and column.shape[0] != m:
+                raise ValueError(
+                    f"trace column {name} has {column.shape[0]} rows, t has {m}"
+                )
+        for group in (self.inputs, self.signals):
+            for key, column in group.items():
+                if column.shape[0] != m:
+                    raise ValueError(
+                        f"trace column {key} has {column.shape[0]} rows, t has {m}"
+                    )
+
+    @property
+    def has_goal(self) -> bool:
+        """Whether a goal was in effect at any sample."""
+        return bool(np.any(np.isfinite(self.goal_position[:, 0])))
 
     @property
     def position_error(self) -> FloatArray:
-        """End effector to goal distance (M,) [m]."""
+        """End effector to goal distance (M,) [m]; NaN without a goal."""
         return np.asarray(np.linalg.norm(self.ee_position - self.goal_position, axis=1))
 
     @property
     def rotation_error(self) -> FloatArray:
-        """Rotation angle between end effector and goal (M,) [rad]."""
+        """Rotation angle between end effector and goal (M,) [rad]; NaN without."""
         relative = np.einsum("nji,njk->nik", self.ee_rotation, self.goal_rotation)
         cos = 0.5 * (np.trace(relative, axis1=1, axis2=2) - 1.0)
         return np.asarray(np.arccos(np.clip(cos, -1.0, 1.0)))
-
-
-@dataclass
-class KinematicTrace:
-    """What a kinematic run recorded, one row per control step.
-
-    Attributes:
-        t: times [s] (N,).
-        q: configurations (N, nq).
-        ee_position: end-effector position (N, 3) [m].
-        goal_position: goal position (N, 3) [m], NaN without a goal.
-        position_error: end-effector to goal distance (N,) [m].
-        rotation_error: rotation angle between end effector and goal (N,) [rad].
-        solve_time: engine step wall time (N,) [s].
-        events: (time, message) for every goal rejected or step not solved.
-        joint_names: names of the model's joints.
-        penetration: deepest penetration of the padded links at each step (N,)
-            [m]; empty without a collision world.
-        rejected_steps: steps rejected by step validation.
-    """
-
-    t: FloatArray
-    q: FloatArray
-    ee_position: FloatArray
-    goal_position: FloatArray
-    position_error: FloatArray
-    rotation_error: FloatArray
-    solve_time: FloatArray
-    events: list[tuple[float, str]] = field(default_factory=list)
-    joint_names: list[str] = field(default_factory=list)
-    penetration: FloatArray = field(default_factory=lambda: np.zeros(0))
-    rejected_steps: int = 0
-
-
-@dataclass
-class VelocityTrace:
-    """What a velocity-executor run recorded, one row per tick.
-
-    Attributes:
-        t: tick times (N,) [s].
-        q: measured configurations (N, nq).
-        u: commanded velocities (N, nv).
-        compute_s: wall time of each tick's QP (N,) [s].
-        inputs: the inputs' values at each tick, by entry name (N, k).
-        signals: the orbit's quantities over time (see :func:`orbit_signals`).
-        events: (time, message) of refused inputs and failed solves.
-    """
-
-    t: FloatArray
-    q: FloatArray
-    u: FloatArray
-    compute_s: FloatArray
-    inputs: dict[str, FloatArray]
-    signals: dict[str, FloatArray] = field(default_factory=dict)
-    events: list[tuple[float, str]] = field(default_factory=list)

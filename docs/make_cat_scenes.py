@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 from cbp.executors.cat import run_cat
-from cbp.report import write_runs
+from cbp.report import write_outputs
 from cbp.scenario import load_scenario
 
 ROOT = Path(__file__).parents[1]
@@ -47,7 +47,8 @@ def main() -> None:
                 overrides={"perception.source": source},
             )
             trace = run_cat(scenario)
-            m = write_runs(scenario, {"cat": trace}, args.out / source / scene)["cat"]
+            folder = args.out / source / scene
+            m = write_outputs(scenario, {"cat": trace}, folder)["cat"]
             print(
                 f"| {scene} | {source} | {'yes' if m['reached'] else 'no'} | "
                 f"{_f(m['response_time_s'])} | {_f(m['total_time_s'])} | "

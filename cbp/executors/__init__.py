@@ -8,18 +8,22 @@ in a scenario, ``--method`` on the command line), the schema of its settings
 line and ``cbp compare`` all read this table; the modules that run executors
 (PyBullet, OMPL) are imported only when one is used (:meth:`ExecutorInfo.load`).
 
-To add an executor: write ``cbp/executors/<name>.py`` with a module-level
-``EXECUTOR`` object that follows :class:`Executor`, put its settings dataclass in
+Every executor returns a :class:`~cbp.trace.Trace`, so one writer
+(:func:`cbp.report.write_outputs`) gives every method its metrics, figures and
+report.
+
+To add an executor: write ``cbp/executors/<name>.py`` with a function
+``run_<name>(scenario, gui=False)`` (an :data:`Executor`) that returns a
+:class:`~cbp.trace.Trace`, put its settings dataclass in
 :mod:`cbp.executors.settings`, and add a line to the table.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 from cbp.errors import require_choice
 from cbp.executors.settings import (
@@ -33,6 +37,7 @@ from cbp.executors.settings import (
 
 if TYPE_CHECKING:
     from cbp.scenario.runtime import Scenario
+    from cbp.trace import Trace
 
 __all__ = [
     "COMPARABLE",
@@ -40,25 +45,12 @@ __all__ = [
     "Executor",
     "ExecutorInfo",
     "executor_info",
-    "single_run",
 ]
 
 
-class Executor(Protocol):
-    """What an executor module provides (its ``EXECUTOR`` object)."""
-
-    def run(self, scenario: Scenario, gui: bool = False) -> Any:
-        """Run ``scenario`` for its duration; return the executor's trace."""
-
-    def write(
-        self, scenario: Scenario, traces: Mapping[str, Any], out: Path
-    ) -> dict[str, dict[str, Any]]:
-        """Write the outputs of one or more runs into ``out``; metrics by method."""
-
-    def describe(
-        self, scenario: Scenario, method: str, metrics: Mapping[str, Any]
-    ) -> str:
-        """One line that sums up a run, for the terminal."""
+#: Runs a scenario for its duration (``run(scenario, gui)``; ``gui`` opens the
+#: simulator's window where there is one) and returns the trace.
+Executor = Callable[["Scenario", bool], "Trace"]
 
 
 @dataclass(frozen=True)
@@ -68,11 +60,10 @@ class ExecutorInfo:
     Attributes:
         name: the method name.
         settings: the dataclass of its ``method.<name>:`` section.
-        module: the module (under ``cbp.executors``) whose ``EXECUTOR`` runs it.
+        module: the module (under ``cbp.executors``) whose ``run_<name>`` runs it.
         summary: one sentence for help texts and the schema's documentation.
-        comparable: it runs in the simulator and returns a
-            :class:`~cbp.trace.RunTrace`, so ``cbp compare`` can run it beside
-            the others on one recorded goal stream.
+        comparable: it tracks a goal in the simulator, so ``cbp compare`` can
+            run it beside the others on one recorded goal stream.
     """
 
     name: str
@@ -82,9 +73,9 @@ class ExecutorInfo:
     comparable: bool = False
 
     def load(self) -> Executor:
-        """Import the executor's module and return its ``EXECUTOR``."""
+        """Import the executor's module and return its ``run_<name>`` function."""
         module = importlib.import_module(f"cbp.executors.{self.module}")
-        executor: Executor = module.EXECUTOR
+        executor: Executor = getattr(module, f"run_{self.name}")
         return executor
 
 
@@ -155,15 +146,3 @@ def executor_info(name: str, choices: tuple[str, ...] | None = None) -> Executor
     """
     require_choice(name, EXECUTORS if choices is None else choices, "method", "")
     return EXECUTORS[name]
-
-
-def single_run(traces: Mapping[str, Any], executor: str) -> tuple[str, Any]:
-    """The one (method, trace) of ``traces``, for executors that write one run.
-
-    Raises:
-        ValueError: there is more than one.
-    """
-    (method, trace), *more = traces.items()
-    if more:
-        raise ValueError(f"the {executor} executor writes one run at a time")
-    return method, trace

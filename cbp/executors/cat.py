@@ -20,13 +20,13 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from cbp.errors import PluginOutputError, SolveError
 from cbp.executors.settings import CatSettings
-from cbp.executors.simulated import SimulatedExecutor, SimulatedRun
+from cbp.executors.simulated import SimulatedRun
+from cbp.executors.stepping import ValidatedStepper
 from cbp.executors.trajectory import Plan, run_trajectory_executor
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
-from cbp.trace import FULL_PERIOD_NOTE, RunTrace
+from cbp.trace import FULL_PERIOD_NOTE, Trace
 
 __all__ = ["CatPlanner", "run_cat"]
 
@@ -39,7 +39,6 @@ class CatPlanner:
         self.scenario = scenario
         self.settings = settings
         self.engine = scenario.make_engine()
-        self.robot = scenario.robot
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
@@ -49,43 +48,36 @@ class CatPlanner:
         if goal is None:
             return Plan(None, 0, "no goal yet")
         world = run.world if self.scenario.needs_collision_world else None
-        engine, robot = self.engine, self.robot
-        path = [q]
-        steps = rejections = still = 0
+        stepper = ValidatedStepper(
+            self.engine, world, lambda message: run.event(run.sim.t, message)
+        )
         # A step is kept if it penetrates no deeper than the tolerance, or than
         # where it started (so a robot that starts in collision can leave it).
-        depth = world.check(q).penetration if world is not None else 0.0
+        stepper.start(q)
+        path = [q]
+        steps = rejections = still = 0
         note = FULL_PERIOD_NOTE
         deadline = time.perf_counter() + budget_s
         while steps < s.max_steps:
             if time.perf_counter() >= deadline:
                 break
             steps += 1
-            try:
-                dq = engine.step(q, s.step_dt)
-            except (SolveError, PluginOutputError) as exc:
-                note = f"QP step failed, path ends here: {exc}"
+            step = stepper.step(q, s.step_dt)
+            if step.outcome == "failed":
+                note = f"QP step failed, path ends here: {step.reason}"
                 run.event(run.sim.t, note)
                 break
-            if engine.recovery_changed and engine.recovery is not None:
-                run.event(run.sim.t, f"QP eased: {engine.recovery}")
-            q_next = robot.integrate(q, dq)
-            if world is not None:
-                check = world.try_step(q_next, depth)
-                if not check.accepted:
-                    rejections += 1
-                    if rejections >= s.max_rejections:
-                        note = (
-                            f"{rejections} steps rejected in a row "
-                            f"(penetration {check.penetration * 1e3:.1f} mm)"
-                        )
-                        break
-                    continue
-                depth = check.penetration
+            if step.outcome == "rejected":
+                rejections += 1
+                if rejections >= s.max_rejections:
+                    note = f"{rejections} steps rejected in a row ({step.reason})"
+                    break
+                continue
             rejections = 0
-            path.append(q_next)
-            q = q_next
-            if float(np.max(np.abs(dq))) < s.converged_step:
+            q = step.q
+            path.append(q)
+            assert step.dq is not None
+            if float(np.max(np.abs(step.dq))) < s.converged_step:
                 still += 1
                 if still >= 3:
                     note = "converged"
@@ -97,11 +89,8 @@ class CatPlanner:
         return Plan(np.array(path), steps, note)
 
 
-def run_cat(scenario: Scenario, gui: bool = False) -> RunTrace:
+def run_cat(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the CAT executor; return the trace."""
     settings = scenario.spec.method.settings(CatSettings)
     run = SimulatedRun(scenario, "cat", gui)
     return run_trajectory_executor(run, CatPlanner(scenario, settings), settings.timing)
-
-
-EXECUTOR = SimulatedExecutor(run_cat)

@@ -19,11 +19,11 @@ import pinocchio as pin
 
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.settings import IkSettings
-from cbp.executors.simulated import SimulatedExecutor, SimulatedRun
+from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
-from cbp.trace import FULL_PERIOD_NOTE, RunTrace
+from cbp.trace import FULL_PERIOD_NOTE, Trace
 
 __all__ = ["IkPlanner", "run_ik"]
 
@@ -75,13 +75,10 @@ def interpolate_checked(
     return Plan(np.array(path), n, "at the IK solution")
 
 
-def run_ik(scenario: Scenario, gui: bool = False) -> RunTrace:
+def run_ik(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the IK method; return the trace."""
     settings = scenario.spec.method.settings(IkSettings)
     run = SimulatedRun(scenario, "ik", gui, needs_world=True)
     return run_trajectory_executor(
         run, IkPlanner(scenario, run, settings), settings.timing
     )
-
-
-EXECUTOR = SimulatedExecutor(run_ik)

@@ -17,10 +17,10 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.executors.settings import JtSettings
-from cbp.executors.simulated import SimulatedExecutor, SimulatedRun
+from cbp.executors.simulated import SimulatedRun
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
-from cbp.trace import RunTrace
+from cbp.trace import Trace
 
 __all__ = ["JacobianTransposeController", "run_jt"]
 
@@ -73,7 +73,7 @@ def _cap(vector: FloatArray, limit: float) -> FloatArray:
     return vector * (limit / norm) if norm > limit else vector
 
 
-def run_jt(scenario: Scenario, gui: bool = False) -> RunTrace:
+def run_jt(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the JT method; return the trace."""
     run = SimulatedRun(scenario, "jt", gui)
     try:
@@ -82,6 +82,3 @@ def run_jt(scenario: Scenario, gui: bool = False) -> RunTrace:
     finally:
         trace = run.finish()
     return trace
-
-
-EXECUTOR = SimulatedExecutor(run_jt)

@@ -23,11 +23,11 @@ import pinocchio as pin
 
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.settings import MpSettings
-from cbp.executors.simulated import SimulatedExecutor, SimulatedRun
+from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
-from cbp.trace import RunTrace
+from cbp.trace import Trace
 
 __all__ = ["MpPlanner", "run_mp"]
 
@@ -166,7 +166,7 @@ def _always_valid(state: object) -> bool:
     return True
 
 
-def run_mp(scenario: Scenario, gui: bool = False) -> RunTrace:
+def run_mp(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the MP method; return the trace."""
     settings = scenario.spec.method.settings(MpSettings)
     run = SimulatedRun(scenario, "mp", gui, needs_world=True)
@@ -175,6 +175,3 @@ def run_mp(scenario: Scenario, gui: bool = False) -> RunTrace:
         return run_trajectory_executor(run, planner, settings.timing)
     finally:
         planner.close()
-
-
-EXECUTOR = SimulatedExecutor(run_mp)

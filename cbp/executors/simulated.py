@@ -5,17 +5,14 @@
 the operator's goal at the command rate (rejecting malformed samples, keeping the
 previous goal, and saying so), runs the depth camera and the map thread when the
 scenario asks for them, and turns the simulator's recording into a
-:class:`~cbp.trace.RunTrace` with ground-truth clearances.
+:class:`~cbp.trace.Trace` with ground-truth clearances.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -28,16 +25,15 @@ from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.plugin import GoalReceiver
-from cbp.report import write_runs
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.sim.settings import ObjectSpec
 from cbp.sim.simulation import Simulation
 from cbp.spatial import checked_se3
 from cbp.state import RobotState
-from cbp.trace import PeriodRecord, RunTrace
+from cbp.trace import PeriodRecord, Trace
 
-__all__ = ["SimulatedExecutor", "SimulatedRun"]
+__all__ = ["SimulatedRun"]
 
 log = logging.getLogger(__name__)
 
@@ -274,7 +270,7 @@ class SimulatedRun:
 
     # ------------------------------------------------------------------ results
 
-    def finish(self) -> RunTrace:
+    def finish(self) -> Trace:
         """Stop the map and the simulator; return the trace."""
         if self.mapper is not None:
             self.mapper.close()
@@ -301,7 +297,7 @@ class SimulatedRun:
                 goal_p[i] = changes[k][1].translation
                 goal_R[i] = changes[k][1].rotation
         change_time = float(times[1]) if times.size > 1 else None
-        return RunTrace(
+        return Trace(
             method=self.method,
             t=rec["t"],
             q=rec["q"],
@@ -310,6 +306,8 @@ class SimulatedRun:
             ee_rotation=ee_R,
             goal_position=goal_p,
             goal_rotation=goal_R,
+            q_names=robot.coordinate_names("q"),
+            v_names=robot.coordinate_names("v"),
             contact_force=rec["contact_force"],
             wrist_force=rec["wrist_force"],
             penetration=rec["penetration"],
@@ -364,40 +362,3 @@ class SimulatedRun:
                 else CLEARANCE_RANGE
             )
         return out
-
-
-class SimulatedExecutor:
-    """An executor that runs in the simulator and returns a :class:`RunTrace`.
-
-    Its outputs are :func:`cbp.report.write_runs`'s, so ``cbp compare`` can put
-    it beside the others.
-
-    Args:
-        run: runs a scenario (``run(scenario, gui)``).
-    """
-
-    def __init__(self, run: Callable[[Scenario, bool], RunTrace]) -> None:
-        """Keep the run function."""
-        self._run = run
-
-    def run(self, scenario: Scenario, gui: bool = False) -> RunTrace:
-        """Run ``scenario``; return its trace."""
-        return self._run(scenario, gui)
-
-    def write(
-        self, scenario: Scenario, traces: Mapping[str, Any], out: Path
-    ) -> dict[str, dict[str, Any]]:
-        """Trace, metrics, figures and report of one or several methods."""
-        return write_runs(scenario, traces, out)
-
-    def describe(
-        self, scenario: Scenario, method: str, metrics: Mapping[str, Any]
-    ) -> str:
-        """Reached, final error, peak contact force, events."""
-        error = metrics["final_position_error_m"]
-        shown = "n/a" if error is None else f"{error * 1e3:.1f}"
-        return (
-            f"{scenario.spec.name} ({method}): reached {metrics['reached']}, final "
-            f"error {shown} mm, peak contact force "
-            f"{metrics['peak_contact_force_n']:.1f} N, {metrics['events']} events"
-        )

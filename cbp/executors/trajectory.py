@@ -32,7 +32,7 @@ from cbp.executors.settings import ExecutorTiming
 from cbp.executors.simulated import SimulatedRun
 from cbp.robot import FloatArray
 from cbp.sim.trajectory import JointTrajectory, time_parameterize
-from cbp.trace import PeriodRecord, RunTrace
+from cbp.trace import PeriodRecord, Trace
 
 __all__ = ["Plan", "Planner", "run_trajectory_executor"]
 
@@ -68,7 +68,7 @@ class Planner(Protocol):
 
 def run_trajectory_executor(
     run: SimulatedRun, planner: Planner, timing: ExecutorTiming
-) -> RunTrace:
+) -> Trace:
     """Run the scenario with ``planner`` each command period; return the trace."""
     robot = run.robot
     vmax = robot.velocity_limits * timing.velocity_scale

@@ -18,37 +18,37 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cbp.errors import PluginOutputError, SolveError
-from cbp.executors import single_run
 from cbp.executors.settings import VelocitySettings
 from cbp.plugin import ReportsSignals
-from cbp.report import write_velocity_run
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.sim.mobile import MobileSimulation
 from cbp.state import RobotState
-from cbp.trace import VelocityTrace
+from cbp.trace import Trace
 
-__all__ = ["EXECUTOR", "run_velocity"]
+__all__ = ["run_velocity"]
 
 log = logging.getLogger(__name__)
 
 
-def run_velocity(scenario: Scenario, gui: bool = False) -> VelocityTrace:
+def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the velocity executor; return the trace."""
     robot = scenario.robot
-    dt = scenario.spec.method.settings(VelocitySettings).dt
     engine = scenario.make_engine()
     inputs = scenario.inputs()
     names = {id(e.plugin): e.name for e in scenario.entries}
+    settings = scenario.spec.method.settings(VelocitySettings)
+    dt = settings.dt
     steps = math.ceil(scenario.spec.duration / dt)
-    rows: dict[str, list[Any]] = {"t": [], "q": [], "u": [], "time": []}
+    rows: dict[str, list[Any]] = {
+        k: [] for k in ("t", "q", "u", "time", "ee_p", "ee_R")
+    }
+    frame_id = robot.frame_id(scenario.ee_frame)
     values: dict[str, list[FloatArray]] = {names[id(p)]: [] for p, _ in inputs}
     events: list[tuple[float, str]] = []
     failing = 0
@@ -95,8 +95,10 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> VelocityTrace:
             elapsed = time.perf_counter() - start
             # What the plugins report, at the tick's measured configuration and
             # with the inputs in effect (no kinematics when nothing reports).
-            if reporters:
-                state.update(q)
+            state.update(q)
+            placement = state.frame_placement(frame_id)
+            rows["ee_p"].append(placement.translation.copy())
+            rows["ee_R"].append(placement.rotation.copy())
             for reporter in reporters:
                 for key, signal in reporter.signals(state).items():
                     signals.setdefault(key, []).append(signal)
@@ -109,45 +111,21 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> VelocityTrace:
             sim.run_until(t + dt)
     finally:
         sim.close()
-    return VelocityTrace(
-        t=np.array(rows["t"]),
-        q=np.array(rows["q"]),
-        u=np.array(rows["u"]),
-        compute_s=np.array(rows["time"]),
+    m = len(rows["t"])
+    return Trace(
+        method="velocity",
+        t=np.array(rows["t"], dtype=float),
+        q=np.array(rows["q"], dtype=float).reshape(m, robot.nq),
+        ee_position=np.array(rows["ee_p"], dtype=float).reshape(m, 3),
+        ee_rotation=np.array(rows["ee_R"], dtype=float).reshape(m, 3, 3),
+        goal_position=np.full((m, 3), np.nan),
+        goal_rotation=np.full((m, 3, 3), np.nan),
+        q_names=robot.coordinate_names("q"),
+        v_names=robot.coordinate_names("v"),
+        events=events,
+        compute_s=np.array(rows["time"], dtype=float),
+        u=np.array(rows["u"], dtype=float).reshape(m, robot.nv),
         inputs={n: np.array(v) for n, v in values.items()},
         signals={k: np.array(v) for k, v in signals.items()},
-        events=events,
+        transient_s=settings.transient_s,
     )
-
-
-class VelocityExecutor:
-    """The velocity executor's entry in the executor table."""
-
-    def run(self, scenario: Scenario, gui: bool = False) -> VelocityTrace:
-        """Run ``scenario``; return its trace."""
-        return run_velocity(scenario, gui)
-
-    def write(
-        self, scenario: Scenario, traces: Mapping[str, Any], out: Path
-    ) -> dict[str, dict[str, Any]]:
-        """trace.csv, metrics.json, the orbit figures and report.md (one run)."""
-        method, trace = single_run(traces, "velocity")
-        return {method: write_velocity_run(scenario, trace, out, method)}
-
-    def describe(
-        self, scenario: Scenario, method: str, metrics: Mapping[str, Any]
-    ) -> str:
-        """The orbit's worst errors after the transient."""
-
-        def num(value: float | None, scale: float = 1.0) -> str:
-            return "n/a" if value is None else f"{value * scale:.1f}"
-
-        return (
-            f"{scenario.spec.name} ({method}): after {metrics['transient_s']} s, "
-            f"distance error <= {num(metrics['distance_error_max_m'], 1e3)} mm, "
-            f"view error <= {num(metrics['view_error_max_deg'])} deg, "
-            f"{metrics['events']:.0f} events"
-        )
-
-
-EXECUTOR = VelocityExecutor()

@@ -75,5 +75,6 @@ def test_cbp_run_writes_its_outputs(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     for name in ("report.md", "metrics.json", "trace.csv", "tracking.png"):
         assert (tmp_path / name).is_file()
-    metrics = json.loads((tmp_path / "metrics.json").read_text())["metrics"]
-    assert metrics["goal_reached"] is True
+    metrics = json.loads((tmp_path / "metrics.json").read_text())["kinematic"]
+    assert metrics["reached"] is True
+    assert metrics["max_joint_limit_violation_rad"] == 0.0

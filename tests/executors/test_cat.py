@@ -136,7 +136,7 @@ def test_cbp_run_writes_trace_metrics_and_plots(tmp_path: Path) -> None:
     }
     assert keys <= set(metrics["cat"])
     header = (out / "trace.csv").read_text().splitlines()[0].split(",")
-    assert {"t", "goal_x", "ee_x", "q0", "contact_force"} <= set(header)
+    assert {"t", "goal_x", "ee_qw", "q_panda_joint1", "contact_force"} <= set(header)
     for name in ("tracking.png", "errors.png", "contact_force.png", "report.md"):
         assert (out / name).stat().st_size > 0
     bad = run_cbp("run", str(SCENARIOS / "cat_free_step.yaml"), "--method", "catt")

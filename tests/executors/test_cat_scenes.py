@@ -17,7 +17,7 @@ import pytest
 from cbp.executors.cat import run_cat
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
-from cbp.trace import RunTrace
+from cbp.trace import Trace
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
@@ -25,7 +25,7 @@ pytestmark = pytest.mark.slow
 
 
 @cache
-def _run(scene: str, source: str = "ground_truth") -> tuple[RunTrace, dict[str, Any]]:
+def _run(scene: str, source: str = "ground_truth") -> tuple[Trace, dict[str, Any]]:
     scenario = load_scenario(
         SCENARIOS / f"cat_{scene}.yaml", overrides={"perception.source": source}
     )

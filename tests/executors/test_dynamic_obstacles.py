@@ -124,7 +124,7 @@ def run_with(method: str, path: Path):
     from cbp.executors import EXECUTORS
 
     scenario = load_scenario(path, overrides={"method.name": method})
-    return EXECUTORS[method].load().run(scenario)
+    return EXECUTORS[method].load()(scenario, False)
 
 
 @pytest.mark.slow
