@@ -664,6 +664,7 @@ def _query_rows(cfg: BenchConfig) -> list[Row]:
 
 def _near_board(scenario: Any) -> np.ndarray:
     """A configuration of the boards scene with the hand 2 cm above board 1."""
+    from cbp.executors.clock import WallBudget
     from cbp.executors.ik_search import IkSearch
     from cbp.executors.settings import IkSearchSettings
 
@@ -671,7 +672,7 @@ def _near_board(scenario: Any) -> np.ndarray:
     goal = pin.SE3(
         pin.rpy.rpyToMatrix(np.pi, 0.0, np.pi / 2), np.array([0.5, -0.24, 0.19])
     )
-    q = search.solve(goal, scenario.q0, time.perf_counter() + 2.0)
+    q = search.solve(goal, scenario.q0, WallBudget(2.0))
     return scenario.q0 if q is None else q
 
 
@@ -807,6 +808,7 @@ def _world_scaling_rows(cfg: BenchConfig) -> list[Row]:
 def _mp_row(cfg: BenchConfig) -> list[Row]:
     import ompl.util as ou
 
+    from cbp.executors.clock import WallBudget
     from cbp.executors.mp import MpPlanner
     from cbp.executors.settings import MpSettings
     from cbp.executors.simulated import SimulatedRun
@@ -820,10 +822,10 @@ def _mp_row(cfg: BenchConfig) -> list[Row]:
     try:
         planner = MpPlanner(scenario, run, scenario.spec.method.settings(MpSettings))
         goal = _final_goal(scenario)  # in the shelf
-        target = planner.search.solution_for(goal, scenario.q0, time.perf_counter() + 5)
+        target = planner.search.solution_for(goal, scenario.q0, WallBudget(5))
         for _ in range(cfg.mp_seeds):
             start = time.perf_counter()
-            plan = planner.plan(scenario.q0.copy(), goal, 5.0, run)
+            plan = planner.plan(scenario.q0.copy(), goal, WallBudget(5.0), run)
             samples.append(time.perf_counter() - start)
             solved += plan.path is not None
         checks = planner.checks

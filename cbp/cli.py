@@ -88,7 +88,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     scenes.add_argument("--count", type=_positive_int, default=30)
     scenes.add_argument("--seed", type=int, default=0, help="first seed")
     scenes.add_argument("--out", type=Path, default=Path("out/scenes"))
+    sweep = sub.add_parser(
+        "sweep",
+        help="run a sweep file (scenes x methods x settings) on Ray or a process pool",
+    )
+    sweep.add_argument("sweep", type=Path, help="the sweep file (YAML)")
+    sweep.add_argument("--out", type=Path, default=None, help="default out/<name>")
+    sweep.add_argument(
+        "--workers", type=_positive_int, default=None, help="CPUs (default: all)"
+    )
+    sweep.add_argument(
+        "--address", default=None, help="join this Ray cluster (ray start --head)"
+    )
+    sweep.add_argument(
+        "--backend",
+        choices=("auto", "ray", "pool"),
+        default="auto",
+        help="ray, a process pool, or ray if installed (auto)",
+    )
     args = parser.parse_args(argv)
+    if args.command == "sweep":
+        return _sweep(args.sweep, args.out, args.workers, args.address, args.backend)
     if args.command == "run":
         overrides = _overrides(args.set)
         if overrides is None:
@@ -184,6 +204,36 @@ def _run(
     metrics = write_outputs(scenario, {name: trace}, out)[name]
     print(summary_line(scenario, name, metrics))
     print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
+    return 0
+
+
+def _sweep(
+    path: Path, out: Path | None, workers: int | None, address: str | None, backend: str
+) -> int:
+    from cbp.sweep import load_sweep, run_sweep
+
+    try:
+        name = load_sweep(path).name
+        outcome = run_sweep(
+            path,
+            out or Path("out") / name,
+            workers=workers,
+            address=address,
+            progress=sys.stderr.isatty(),
+            backend=backend,
+        )
+    except CbpError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    ran = len(outcome.records) - outcome.skipped
+    print(
+        f"{len(outcome.runs)} runs: {outcome.skipped} already done, {ran} run now "
+        f"({outcome.backend}), {outcome.failed} not ok"
+    )
+    print(f"Report: {outcome.out / 'report.md'}")
+    if outcome.interrupted:
+        print("interrupted: run the same command again to resume", file=sys.stderr)
+        return 130
     return 0
 
 

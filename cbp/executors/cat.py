@@ -15,11 +15,10 @@ CAT is a configuration (``scenarios/configs/cat.yaml``), not code here.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pinocchio as pin
 
+from cbp.executors.clock import Budget
 from cbp.executors.settings import CatSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.executors.stepping import ValidatedStepper
@@ -41,7 +40,7 @@ class CatPlanner:
         self.engine = scenario.make_engine()
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
     ) -> Plan:
         """QP steps from ``q`` until the budget is spent or the motion stops."""
         s = self.settings
@@ -57,12 +56,12 @@ class CatPlanner:
         path = [q]
         steps = rejections = still = 0
         note = FULL_PERIOD_NOTE
-        deadline = time.perf_counter() + budget_s
         while steps < s.max_steps:
-            if time.perf_counter() >= deadline:
+            if budget.spent():
                 break
             steps += 1
             step = stepper.step(q, s.step_dt)
+            budget.charge("qp_step")
             if step.outcome == "failed":
                 note = f"QP step failed, path ends here: {step.reason}"
                 run.event(run.sim.t, note)
@@ -92,5 +91,5 @@ class CatPlanner:
 def run_cat(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the CAT executor; return the trace."""
     settings = scenario.spec.method.settings(CatSettings)
-    run = SimulatedRun(scenario, "cat", gui)
+    run = SimulatedRun(scenario, "cat", gui, clock=settings.timing.clock)
     return run_trajectory_executor(run, CatPlanner(scenario, settings), settings.timing)

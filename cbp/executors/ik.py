@@ -12,11 +12,10 @@ stops, as the paper reports.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pinocchio as pin
 
+from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.settings import IkSettings
 from cbp.executors.simulated import SimulatedRun
@@ -37,17 +36,16 @@ class IkPlanner:
         self.search = IkSearch(scenario.robot, run.ee_frame, run.world, settings.search)
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
     ) -> Plan:
         """Solve (if the goal changed), then interpolate toward the solution."""
         if goal is None:
             return Plan(None, 0, "no goal yet")
-        deadline = time.perf_counter() + budget_s
-        target = self.search.solution_for(goal, q, deadline)
+        target = self.search.solution_for(goal, q, budget)
         if target is None:
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         return interpolate_checked(
-            q, target, self.settings.interpolation_step, self.search, deadline
+            q, target, self.settings.interpolation_step, self.search, budget
         )
 
 
@@ -56,20 +54,21 @@ def interpolate_checked(
     target: FloatArray,
     step: float,
     search: IkSearch,
-    deadline: float,
+    budget: Budget,
 ) -> Plan:
     """A joint-space line from ``q`` toward ``target``, checked at every point.
 
-    Ends before the first configuration in collision, or where time runs out.
+    Ends before the first configuration in collision, or where the budget runs
+    out.
     """
     delta = target - q
     n = max(1, int(np.ceil(np.max(np.abs(delta)) / step)))
     path = [q]
     for k in range(1, n + 1):
-        if time.perf_counter() > deadline:
+        if budget.spent():
             return Plan(np.array(path), k - 1, FULL_PERIOD_NOTE)
         candidate = q + delta * (k / n)
-        if not search.collision_free(candidate):
+        if not search.collision_free(candidate, budget):
             return Plan(np.array(path), k, "collision ahead: the arm stops before it")
         path.append(candidate)
     return Plan(np.array(path), n, "at the IK solution")
@@ -78,7 +77,9 @@ def interpolate_checked(
 def run_ik(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the IK method; return the trace."""
     settings = scenario.spec.method.settings(IkSettings)
-    run = SimulatedRun(scenario, "ik", gui, needs_world=True)
+    run = SimulatedRun(
+        scenario, "ik", gui, needs_world=True, clock=settings.timing.clock
+    )
     return run_trajectory_executor(
         run, IkPlanner(scenario, run, settings), settings.timing
     )

@@ -12,12 +12,11 @@ close to it, so small goal changes give small joint changes.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pinocchio as pin
 
 from cbp.collision.world import CollisionWorld
+from cbp.executors.clock import Budget
 from cbp.executors.settings import IkSearchSettings
 from cbp.robot import FloatArray, RobotModel
 
@@ -57,7 +56,7 @@ class IkSearch:
         self._solution: FloatArray | None = None
 
     def solution_for(
-        self, goal: pin.SE3, q_near: FloatArray, deadline: float
+        self, goal: pin.SE3, q_near: FloatArray, budget: Budget
     ) -> FloatArray | None:
         """:meth:`solve`, remembered while the goal stays the same.
 
@@ -66,17 +65,17 @@ class IkSearch:
         """
         if self._goal is None or not goal.isApprox(self._goal, 1e-9):
             self._goal = goal
-            self._solution = self.solve(goal, q_near, deadline)
+            self._solution = self.solve(goal, q_near, budget)
             if self._solution is None:
                 self._goal = None
         return self._solution
 
     def solve(
-        self, goal: pin.SE3, q_near: FloatArray, deadline: float
+        self, goal: pin.SE3, q_near: FloatArray, budget: Budget
     ) -> FloatArray | None:
-        """A collision-free solution near ``q_near``, or None by ``deadline``.
+        """A collision-free solution near ``q_near``, or None once ``budget`` is spent.
 
-        ``deadline`` is a ``time.perf_counter()`` value.
+        Each iteration and collision check is charged to ``budget``.
         """
         s = self.settings
         j = self.redundant
@@ -90,25 +89,30 @@ class IkSearch:
                     values.append(v)
             k += 1
         for i, value in enumerate(values):
-            if time.perf_counter() > deadline:
+            if budget.spent():
                 return None
             seed = np.clip(q_near, self._lower, self._upper)
             seed[j] = value
             # The nearest solution first lets every joint move; the sweep then
             # fixes the redundant joint at each value.
-            q = self._solve_from(goal, seed, fixed=None if i == 0 else j)
-            if q is not None and self.collision_free(q):
+            q = self._solve_from(goal, seed, None if i == 0 else j, budget)
+            if q is not None and self.collision_free(q, budget):
                 return q
         return None
 
-    def collision_free(self, q: FloatArray) -> bool:
-        """No padded link penetrates an obstacle or another link."""
+    def collision_free(self, q: FloatArray, budget: Budget | None = None) -> bool:
+        """No padded link penetrates an obstacle or another link.
+
+        The check is charged to ``budget`` when one is given.
+        """
         if self.world is None:
             return True
+        if budget is not None:
+            budget.charge("collision_check")
         return self.world.is_free(q)
 
     def _solve_from(
-        self, goal: pin.SE3, q: FloatArray, fixed: int | None
+        self, goal: pin.SE3, q: FloatArray, fixed: int | None, budget: Budget
     ) -> FloatArray | None:
         s = self.settings
         model, data = self.robot.model, self._data
@@ -116,6 +120,7 @@ class IkSearch:
         damping = 1e-6
         for _ in range(s.max_iterations):
             self.solves += 1
+            budget.charge("ik_iteration")
             pin.framesForwardKinematics(model, data, q)
             M = data.oMf[self.frame_id]
             error = goal.actInv(M)

@@ -16,11 +16,11 @@ finish in the budget counts as a miss, so the period grows.
 from __future__ import annotations
 
 import itertools
-import time
 
 import numpy as np
 import pinocchio as pin
 
+from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.settings import MpSettings
 from cbp.executors.simulated import SimulatedRun
@@ -42,6 +42,10 @@ class MpPlanner:
         import ompl.util as ou
 
         ou.setLogLevel(ou.LogLevel.LOG_WARN)
+        if settings.timing.clock == "virtual":
+            # Reproducible sampling: OMPL seeds every sampler from this, if it is
+            # set before the process's first planner (one MP run per process).
+            ou.RNG.setSeed(1)
         self.settings = settings
         robot = scenario.robot
         self.search = IkSearch(robot, run.ee_frame, run.world, settings.search)
@@ -55,19 +59,21 @@ class MpPlanner:
         self._si = ob.SpaceInformation(self._space)
         self._q = np.zeros(n)
         self.checks = 0
+        self._budget: Budget | None = None  # the period's, while it plans
 
         def valid(state: object) -> bool:
             q = self._q
             for i in range(n):
                 q[i] = state[i]  # type: ignore[index]
             self.checks += 1
-            return self.search.collision_free(q)
+            return self.search.collision_free(q, self._budget)
 
         self._valid = valid  # kept alive: OMPL holds only a reference
         self._si.setStateValidityChecker(valid)
         self._si.setStateValidityCheckingResolution(settings.check_resolution)
         self._si.setup()
         self._og = og
+        self._ob = ob
         self._simplifier = og.PathSimplifier(self._si)
         self._start = self._space.allocState()
         self._goal_state = self._space.allocState()
@@ -87,15 +93,22 @@ class MpPlanner:
         self._valid = _always_valid
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
     ) -> Plan:
         """IK for the goal, then plan and simplify within the budget."""
         if goal is None:
             return Plan(None, 0, "no goal yet")
+        self._budget = budget
+        try:
+            return self._plan(q, goal, budget, run)
+        finally:
+            self._budget = None
+
+    def _plan(
+        self, q: FloatArray, goal: pin.SE3, budget: Budget, run: SimulatedRun
+    ) -> Plan:
         s = self.settings
-        start = time.perf_counter()
-        deadline = start + budget_s
-        target = self.search.solution_for(goal, q, deadline)
+        target = self.search.solution_for(goal, q, budget)
         if target is None:
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         if np.max(np.abs(target - q)) < 1e-4:
@@ -104,7 +117,7 @@ class MpPlanner:
             # The trajectory being followed already ends at this goal: replanning
             # would only swap one random path for another.
             return Plan(None, 0, "following the plan to this goal")
-        if not self.search.collision_free(q):
+        if not self.search.collision_free(q, budget):
             return Plan(None, 0, "start in collision: no plan")
         og = self._og
         setup = og.SimpleSetup(self._si)
@@ -117,15 +130,17 @@ class MpPlanner:
             planner.setRange(s.range)
         setup.setPlanner(planner)
         checks = self.checks
-        left = deadline - time.perf_counter()
-        solved = left > 0 and bool(setup.solve(left * (1.0 - s.simplify_fraction)))
+        left = budget.left()
+        solved = left > 0 and bool(
+            setup.solve(self._until(budget, left * (1.0 - s.simplify_fraction)))
+        )
         if not solved or not setup.haveExactSolutionPath():
             return Plan(None, self.checks - checks, "no plan in time", timed_out=True)
-        left = deadline - time.perf_counter()
+        left = budget.left()
         path = setup.getSolutionPath()
         if left > 0:
             if s.simplify == "full":
-                setup.simplifySolution(left)
+                setup.simplifySolution(self._until(budget, left))
                 path = setup.getSolutionPath()
             else:
                 self._simplifier.ropeShortcutPath(path)
@@ -134,11 +149,16 @@ class MpPlanner:
         note = "planned"
         # Resampled points fall between the states OMPL checked; where one of them
         # touches, use OMPL's own interpolation instead: exactly the checked states.
-        if not all(map(self.search.collision_free, points[1:])):
+        if not all(self.search.collision_free(p, budget) for p in points[1:]):
             path.interpolate()
             points = self._states(path, q)
             note = "planned (checked states only: a resampled point touched)"
         return Plan(points, self.checks - checks, note)
+
+    def _until(self, budget: Budget, seconds: float) -> object:
+        """OMPL's termination condition: ``seconds`` more of ``budget`` used."""
+        stop_at = budget.elapsed() + seconds
+        return self._ob.PlannerTerminationCondition(lambda: budget.elapsed() >= stop_at)
 
     @staticmethod
     def _states(path: object, q: FloatArray) -> FloatArray:
@@ -169,7 +189,9 @@ def _always_valid(state: object) -> bool:
 def run_mp(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the MP method; return the trace."""
     settings = scenario.spec.method.settings(MpSettings)
-    run = SimulatedRun(scenario, "mp", gui, needs_world=True)
+    run = SimulatedRun(
+        scenario, "mp", gui, needs_world=True, clock=settings.timing.clock
+    )
     planner = MpPlanner(scenario, run, settings)
     try:
         return run_trajectory_executor(run, planner, settings.timing)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from cbp.errors import ConfigError, require
+from cbp.executors.clock import ClockKind, VirtualCosts
 
 __all__ = [
     "CatSettings",
@@ -40,6 +41,12 @@ class ExecutorTiming:
     """Trajectories use this fraction of the robot's velocity limits."""
     acceleration_scale: float = 0.5
     """... and this fraction of its acceleration limits."""
+    clock: ClockKind = "wall"
+    """How the budget is counted: ``wall`` (wall-clock time, as on a robot) or
+    ``virtual`` (counted work at ``virtual_costs``: the same results on any
+    machine and load, faster than real time; :mod:`cbp.executors.clock`)."""
+    virtual_costs: VirtualCosts = field(default_factory=VirtualCosts)
+    """Seconds charged per unit of work when ``clock`` is ``virtual``."""
 
     def __post_init__(self) -> None:
         """Positive times, sensible factors."""

@@ -21,6 +21,7 @@ from cbp.collision.geometry import RobotGeometry
 from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.errors import InvalidTargetError
+from cbp.executors.clock import ClockKind
 from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
@@ -69,6 +70,10 @@ class SimulatedRun:
         scenario: the loaded scenario.
         method: executor name (recorded in the trace).
         gui: show PyBullet's window.
+        needs_world: build the collision world even if no entry uses it.
+        clock: ``virtual`` integrates depth frames into the map in the control
+            loop (the map a planner sees then depends on simulated time only),
+            ``wall`` in the map thread (never blocking the loop).
 
     Attributes:
         sim: the simulation.
@@ -84,6 +89,7 @@ class SimulatedRun:
         method: str,
         gui: bool = False,
         needs_world: bool = False,
+        clock: ClockKind = "wall",
     ) -> None:
         """Build the simulation; start the map if the scenario has a camera."""
         spec = scenario.spec
@@ -131,7 +137,7 @@ class SimulatedRun:
             first = MapUpdater(grid, self.world, synchronous=True)
             for camera in self.cameras:
                 first.submit(self._capture(camera), self.sim.q.copy())
-            self.mapper = MapUpdater(grid, self.world)
+            self.mapper = MapUpdater(grid, self.world, synchronous=clock == "virtual")
             self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
 
     # ------------------------------------------------------------------ goal input

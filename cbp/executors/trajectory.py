@@ -9,7 +9,9 @@ to the low-level follower (CAT, and the IK and MP methods):
 2. The planning starts from the first point of the current trajectory scheduled
    after t_f (its position, velocity and acceleration), so the robot keeps
    moving while the planner works.
-3. The planner returns a path of configurations within its wall-clock budget.
+3. The planner returns a path of configurations within its budget: wall-clock
+   time, or counted work with ``timing.clock: virtual``
+   (:mod:`cbp.executors.clock`).
 4. The path is time-parameterized so that every joint can stop at its end
    within the velocity and acceleration limits (no inevitable collision state),
    and spliced in at that starting point with continuous position and velocity.
@@ -21,13 +23,13 @@ to the low-level follower (CAT, and the IK and MP methods):
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
 
+from cbp.executors.clock import Budget, make_budget
 from cbp.executors.settings import ExecutorTiming
 from cbp.executors.simulated import SimulatedRun
 from cbp.robot import FloatArray
@@ -60,9 +62,9 @@ class Planner(Protocol):
     """Computes a path each command period (CAT, IK, MP)."""
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget_s: float, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
     ) -> Plan:
-        """Path from ``q`` toward ``goal`` within ``budget_s`` of wall time."""
+        """Path from ``q`` toward ``goal`` within ``budget``, charging its work."""
         ...
 
 
@@ -88,15 +90,18 @@ def run_trajectory_executor(
                 v_s = a_s = np.zeros_like(q_s)
             else:
                 t_s, q_s, v_s, a_s = current.point(i)
-            start = time.perf_counter()
-            plan = planner.plan(q_s.copy(), goal, timing.time_budget * period, run)
+            budget = make_budget(
+                timing.clock, timing.time_budget * period, timing.virtual_costs
+            )
+            plan = planner.plan(q_s.copy(), goal, budget, run)
             new: JointTrajectory | None = None
             note = plan.note
             if plan.path is not None and len(plan.path) > 1:
                 new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)
+                budget.charge("trajectory_point", len(plan.path))
                 if new is None:
                     note = "path too short to stop on; current trajectory kept"
-            compute = time.perf_counter() - start
+            compute = budget.elapsed()
             run.advance(t_f)  # the robot moves on while the result is computed
             missed = compute > period or plan.timed_out
             spliced = False

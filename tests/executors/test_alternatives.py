@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import time
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from cbp.executors.clock import WallBudget
 from cbp.executors.ik import interpolate_checked
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.jt import run_jt
@@ -41,7 +41,7 @@ def test_ik_search_finds_a_near_collision_free_solution(boards: Scenario) -> Non
     goal = pin.SE3(
         pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.35, 0.2])
     )
-    q = search.solve(goal, boards.q0, time.perf_counter() + 1.0)
+    q = search.solve(goal, boards.q0, WallBudget(1.0))
     assert q is not None
     data = boards.robot.model.createData()
     pin.framesForwardKinematics(boards.robot.model, data, q)
@@ -54,12 +54,12 @@ def test_ik_search_finds_a_near_collision_free_solution(boards: Scenario) -> Non
 def test_ik_search_refuses_unreachable_and_colliding_goals(boards: Scenario) -> None:
     search = _search(boards)
     far = pin.SE3(DOWN, np.array([1.5, 0.0, 0.3]))
-    assert search.solve(far, boards.q0, time.perf_counter() + 2.0) is None
+    assert search.solve(far, boards.q0, WallBudget(2.0)) is None
     # The hand inside the middle board.
     inside = pin.SE3(
         pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, 0.0, 0.12])
     )
-    assert search.solve(inside, boards.q0, time.perf_counter() + 2.0) is None
+    assert search.solve(inside, boards.q0, WallBudget(2.0)) is None
 
 
 def test_interpolation_stops_before_a_collision(boards: Scenario) -> None:
@@ -68,11 +68,9 @@ def test_interpolation_stops_before_a_collision(boards: Scenario) -> None:
     beyond = pin.SE3(
         pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.12, 0.15])
     )
-    target = search.solve(beyond, boards.q0, time.perf_counter() + 2.0)
+    target = search.solve(beyond, boards.q0, WallBudget(2.0))
     assert target is not None
-    plan = interpolate_checked(
-        boards.q0, target, 0.02, search, time.perf_counter() + 1.0
-    )
+    plan = interpolate_checked(boards.q0, target, 0.02, search, WallBudget(1.0))
     assert plan.path is not None
     assert plan.note.startswith("collision ahead")
     assert all(search.collision_free(q) for q in plan.path)
@@ -89,7 +87,7 @@ def test_mp_plans_over_the_board(boards: Scenario, simplify: str) -> None:
         goal = pin.SE3(
             pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.12, 0.15])
         )
-        plan = planner.plan(boards.q0.copy(), goal, 2.0, run)
+        plan = planner.plan(boards.q0.copy(), goal, WallBudget(2.0), run)
         planner.close()
     finally:
         run.finish()

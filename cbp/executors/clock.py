@@ -1,0 +1,136 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Planning budgets in wall-clock time or in counted work (``timing.clock``).
+
+Each command period a trajectory executor gives its planner a :class:`Budget`.
+The planner charges its work to it (:meth:`Budget.charge`: a QP step, an IK
+iteration, a collision check, a trajectory point) and stops when
+:meth:`Budget.spent` says so; the loop reads :meth:`Budget.elapsed` as the
+period's computation time (deadline misses, the adaptive period).
+
+* ``wall`` (the default for ``cbp run`` and, later, teleoperation): the budget is
+  wall-clock time, as on a real robot; charges are ignored. Results depend on the
+  machine and its load.
+* ``virtual`` (the default for ``cbp sweep``): time is the sum of the charges,
+  each at the cost :class:`VirtualCosts` assigns to its kind of work. The same
+  scenario gives the same steps, the same trajectory and the same metrics on any
+  machine and under any load, and the run goes as fast as the computer can.
+
+The costs' defaults were measured on the 2-core machines this project is
+developed on (``benchmarks/virtual_clock.py`` measures them again and prints
+the ratio of each to its default).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+from cbp.errors import require
+
+__all__ = [
+    "Budget",
+    "ClockKind",
+    "VirtualBudget",
+    "VirtualCosts",
+    "WallBudget",
+    "Work",
+    "make_budget",
+]
+
+#: How a planning budget is counted.
+ClockKind = Literal["wall", "virtual"]
+#: The kinds of work a planner charges.
+Work = Literal["qp_step", "ik_iteration", "collision_check", "trajectory_point"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class VirtualCosts:
+    """The ``timing.virtual_costs:`` section: seconds charged per unit of work."""
+
+    qp_step: float = 145e-6
+    """One CAT step: the engine's QP, integration and step validation [s]."""
+    ik_iteration: float = 26e-6
+    """One damped-least-squares iteration of the IK search [s]."""
+    collision_check: float = 11e-6
+    """One yes-or-no collision check of a configuration (IK, MP) [s]."""
+    trajectory_point: float = 4e-6
+    """Timing one path point of the spliced trajectory [s]."""
+
+    def __post_init__(self) -> None:
+        """Positive costs."""
+        require(self, "> 0", "qp_step", "ik_iteration", "collision_check")
+        require(self, "> 0", "trajectory_point")
+
+
+class Budget(Protocol):
+    """A period's planning budget (see the module docstring)."""
+
+    def charge(self, work: Work, count: int = 1) -> None:
+        """Count ``count`` units of ``work`` (a virtual budget advances its time)."""
+
+    def spent(self) -> bool:
+        """Whether the budget is used up: the planner returns what it has."""
+
+    def elapsed(self) -> float:
+        """Time used since the period's computation started [s]."""
+
+    def left(self) -> float:
+        """Budget left [s] (negative once overrun)."""
+
+
+class WallBudget:
+    """A budget of wall-clock seconds from now; charges are not needed."""
+
+    def __init__(self, seconds: float) -> None:
+        """Start the clock."""
+        self.start = time.perf_counter()
+        self.seconds = seconds
+
+    def charge(self, work: Work, count: int = 1) -> None:
+        """Wall time counts itself."""
+
+    def spent(self) -> bool:
+        """The wall clock passed the deadline."""
+        return time.perf_counter() - self.start >= self.seconds
+
+    def elapsed(self) -> float:
+        """Wall time since the start [s]."""
+        return time.perf_counter() - self.start
+
+    def left(self) -> float:
+        """Seconds to the deadline."""
+        return self.seconds - self.elapsed()
+
+
+class VirtualBudget:
+    """A budget of counted work, at the costs of :class:`VirtualCosts`."""
+
+    def __init__(self, seconds: float, costs: VirtualCosts) -> None:
+        """Nothing charged yet."""
+        self.seconds = seconds
+        self.costs = costs
+        self.used = 0.0
+
+    def charge(self, work: Work, count: int = 1) -> None:
+        """Advance virtual time by the work's cost."""
+        self.used += getattr(self.costs, work) * count
+
+    def spent(self) -> bool:
+        """The charged work reached the budget."""
+        return self.used >= self.seconds
+
+    def elapsed(self) -> float:
+        """Charged time [s]."""
+        return self.used
+
+    def left(self) -> float:
+        """Budget minus charged time [s]."""
+        return self.seconds - self.used
+
+
+def make_budget(kind: ClockKind, seconds: float, costs: VirtualCosts) -> Budget:
+    """A new budget of ``seconds``, counted as ``kind`` says."""
+    if kind == "virtual":
+        return VirtualBudget(seconds, costs)
+    return WallBudget(seconds)

@@ -1,0 +1,299 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Run a sweep on Ray (local or a cluster), or on a process pool without Ray.
+
+:func:`run_sweep` expands the sweep file, skips the runs whose folder already
+holds a result (a rerun resumes), runs the others as Ray tasks (or pool jobs),
+and writes the results table and report (:mod:`cbp.sweep.results`).
+
+* Without ``address``, Ray starts on this machine with ``workers`` CPUs; with
+  one (``ray start --head`` printed it), the driver joins that cluster and each
+  run takes one CPU wherever Ray places it. Every node needs ``cbp`` installed
+  and the scenario files at the same path (a shared or identical checkout).
+* A worker that dies (killed, out of memory, its node lost) is retried by Ray up
+  to ``retries`` times; then the run is recorded as failed with the reason, in
+  ``DIR/failed/<run id>.json``, and a later rerun tries it again. A run that
+  raises is recorded with its exception and is not retried (it would raise
+  again).
+* Ctrl-C cancels the runs in flight; finished runs are kept and a rerun
+  resumes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cbp.sweep.spec import RunSpec, expand, load_sweep
+from cbp.sweep.worker import execute_run, read_result
+
+__all__ = ["SweepOutcome", "run_sweep"]
+
+#: Results that count as done: a rerun skips them.
+DONE = ("ok", "error")
+
+
+@dataclass
+class SweepOutcome:
+    """What a sweep invocation did.
+
+    Attributes:
+        out: the sweep's folder.
+        runs: every run of the sweep.
+        skipped: runs already done before this invocation.
+        records: the result record of every run, done or failed, by id.
+        backend: ``ray`` or ``process pool``.
+        interrupted: stopped by Ctrl-C before every run was done.
+        startup_s: time to start (or join) the backend [s].
+    """
+
+    out: Path
+    runs: list[RunSpec]
+    skipped: int = 0
+    records: dict[str, dict[str, Any]] = field(default_factory=dict)
+    backend: str = ""
+    interrupted: bool = False
+    startup_s: float = 0.0
+
+    @property
+    def failed(self) -> int:
+        """Runs that did not finish (worker lost) or raised."""
+        return sum(r["status"] != "ok" for r in self.records.values())
+
+
+def run_sweep(
+    path: str | Path,
+    out: str | Path,
+    *,
+    workers: int | None = None,
+    address: str | None = None,
+    progress: bool = True,
+    backend: str = "auto",
+) -> SweepOutcome:
+    """Run the sweep file at ``path`` into ``out``; see the module docstring.
+
+    Args:
+        path: the sweep file.
+        out: its output folder (created).
+        workers: CPUs for a local Ray instance or the pool (default: all).
+        address: a Ray cluster to join (``ray start --head`` prints it).
+        progress: show a progress bar (runs done, failed, time left).
+        backend: ``ray``, ``pool`` or ``auto`` (Ray if installed).
+
+    Raises:
+        ScenarioError: the sweep file, or an override in it, has a problem.
+    """
+    from cbp.sweep.results import write_results
+
+    path, out = Path(path), Path(out)
+    spec = load_sweep(path)
+    out.mkdir(parents=True, exist_ok=True)
+    scenes: list[Path] = []
+    if spec.scenes is not None:
+        from cbp.scenes import write_scenes
+
+        scenes = write_scenes(out / "scenes", spec.scenes.count, spec.scenes.seed)
+    runs = expand(spec, path, scenes)
+    (out / "sweep.json").write_text(
+        json.dumps([asdict(r) for r in runs], indent=1, default=str) + "\n"
+    )
+    outcome = SweepOutcome(out, runs)
+    pending = []
+    for run in runs:
+        record = read_result(out / "runs" / run.id)
+        if record is not None and record.get("status") in DONE:
+            outcome.records[run.id] = record
+            outcome.skipped += 1
+        else:
+            pending.append(run)
+    workers = workers or os.cpu_count() or 1
+    if backend == "auto":
+        backend = "ray" if _has_ray() or address else "pool"
+    outcome.backend = "ray" if backend == "ray" else "process pool"
+    with _Progress(len(runs), outcome.skipped, progress) as bar:
+
+        def done(run: RunSpec, record: dict[str, Any]) -> None:
+            outcome.records[run.id] = record
+            failed_file = out / "failed" / f"{run.id}.json"
+            if record["status"] == "failed":
+                failed_file.parent.mkdir(exist_ok=True)
+                failed_file.write_text(json.dumps(record, indent=2) + "\n")
+            else:
+                failed_file.unlink(missing_ok=True)
+            bar.advance(record["status"] != "ok")
+
+        try:
+            if pending and backend == "ray":
+                outcome.startup_s = _run_ray(
+                    pending, out, workers, address, spec.retries, done
+                )
+            elif pending:
+                outcome.startup_s = _run_pool(pending, out, workers, spec.retries, done)
+        except KeyboardInterrupt:
+            outcome.interrupted = True
+    write_results(outcome, spec, path)
+    return outcome
+
+
+def _has_ray() -> bool:
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _failed(run: RunSpec, reason: str, attempts: int) -> dict[str, Any]:
+    """The record of a run whose worker died every time it was tried."""
+    return {
+        "id": run.id,
+        "scenario_file": run.scenario,
+        "method": run.method,
+        "seed": run.seed,
+        "values": run.values,
+        "status": "failed",
+        "error": reason,
+        "attempts": attempts,
+    }
+
+
+def _run_ray(
+    pending: list[RunSpec],
+    out: Path,
+    workers: int,
+    address: str | None,
+    retries: int,
+    done: Callable[[RunSpec, dict[str, Any]], None],
+) -> float:
+    """Each run a Ray task; returns Ray's start-up time [s]."""
+    import ray
+
+    start = time.perf_counter()
+    options: dict[str, Any] = {
+        "logging_level": "ERROR",
+        "log_to_driver": False,
+        "configure_logging": True,
+    }
+    if address:
+        ray.init(address=address, **options)
+    else:
+        ray.init(num_cpus=workers, include_dashboard=False, **options)
+    startup = time.perf_counter() - start
+    try:
+        options = {"num_cpus": 1, "max_retries": retries, "retry_exceptions": False}
+        task = ray.remote(**options)(execute_run)
+        # OMPL seeds its samplers once per process: an MP run gets a fresh
+        # process so that it is reproducible (cbp.executors.mp).
+        fresh = ray.remote(max_calls=1, **options)(execute_run)
+        refs = {}
+        for run in pending:
+            ref = (fresh if run.method == "mp" else task).remote(asdict(run), str(out))
+            refs[ref] = run
+        try:
+            while refs:
+                ready, _ = ray.wait(list(refs), num_returns=1, timeout=1.0)
+                for ref in ready:
+                    run = refs.pop(ref)
+                    try:
+                        record = ray.get(ref)
+                    except ray.exceptions.RayError as exc:
+                        reason = f"{type(exc).__name__}: {str(exc).splitlines()[0]}"
+                        record = _failed(run, reason, retries + 1)
+                    done(run, record)
+        except KeyboardInterrupt:
+            for ref in refs:
+                ray.cancel(ref, force=True)
+            raise
+    finally:
+        ray.shutdown()
+    return startup
+
+
+def _run_pool(
+    pending: Iterable[RunSpec],
+    out: Path,
+    workers: int,
+    retries: int,
+    done: Callable[[RunSpec, dict[str, Any]], None],
+) -> float:
+    """Without Ray: a process pool; a pool broken by a dead worker is rebuilt."""
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    tries = {run.id: 0 for run in pending}
+    queue = list(pending)
+    while queue:
+        lost: list[RunSpec] = []
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(execute_run, asdict(r), str(out)): r for r in queue}
+            queue = []
+            try:
+                while futures:
+                    finished, _ = wait(futures, return_when=FIRST_COMPLETED)
+                    for future in finished:
+                        run = futures.pop(future)
+                        try:
+                            done(run, future.result())
+                        except BrokenProcessPool as exc:
+                            tries[run.id] += 1
+                            if tries[run.id] > retries:
+                                reason = f"worker process died: {exc}"
+                                done(run, _failed(run, reason, tries[run.id]))
+                            else:
+                                lost.append(run)
+            except KeyboardInterrupt:
+                for future in futures:
+                    future.cancel()
+                raise
+        queue = lost
+    return 0.0
+
+
+class _Progress:
+    """A rich progress bar (runs done, failed, time left), or nothing."""
+
+    def __init__(self, total: int, done: int, show: bool) -> None:
+        self.show = show
+        self.failed = 0
+        self.total, self.done = total, done
+        self._bar: Any = None
+
+    def __enter__(self) -> _Progress:
+        try:
+            import rich  # noqa: F401
+        except ImportError:  # the sweep extra is not installed: no bar
+            self.show = False
+        if self.show:
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeRemainingColumn,
+            )
+
+            self._bar = Progress(
+                TextColumn("sweep"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("[red]{task.fields[failed]} failed"),
+                TimeRemainingColumn(),
+            )
+            self._bar.start()
+            self._task = self._bar.add_task(
+                "runs", total=self.total, completed=self.done, failed=0
+            )
+        return self
+
+    def advance(self, failed: bool) -> None:
+        self.failed += failed
+        if self._bar is not None:
+            self._bar.update(self._task, advance=1, failed=self.failed)
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.stop()

@@ -1,0 +1,239 @@
+"""cbp sweep: strict sweep files, stable run ids, Ray and pool backends, resuming."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from cbp.errors import ScenarioError
+from cbp.sweep import load_sweep, run_sweep
+from cbp.sweep.spec import expand
+from cbp.sweep.worker import execute_run, read_result
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+REACH = SCENARIOS / "panda_reach.yaml"
+
+
+def _sweep(tmp_path: Path, body: str, name: str = "sweep.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(body).format(reach=REACH))
+    return path
+
+
+EIGHT = """\
+    name: eight
+    scenarios: ["{reach}"]
+    methods: [kinematic]
+    set: {{duration: 1.0}}
+    grid:
+      method.kinematic.dt: [0.01, 0.02]
+      solver.name: [daqp, piqp]
+    samples:
+      count: 2
+      seed: 7
+      values:
+        collision.activation_distance: {{uniform: [0.05, 0.1]}}
+    """
+
+
+def test_a_bad_sweep_file_lists_every_problem_located(tmp_path: Path) -> None:
+    path = _sweep(
+        tmp_path,
+        """\
+        name: bad
+        scenarios: ["{reach}"]
+        methods: [cat, catt]
+        grid:
+          duration: []
+        samples:
+          count: 2
+          values:
+            duration: {{normal: [0, 1]}}
+        retrys: 3
+        """,
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_sweep(path)
+    text = str(info.value)
+    assert "line 10" in text
+    assert "retrys" in text
+    assert "'retries'" in text
+    path.write_text(path.read_text().replace("retrys: 3\n", ""))
+    with pytest.raises(ScenarioError) as info:
+        load_sweep(path)
+    text = str(info.value)
+    assert "methods[1]: unknown method 'catt'" in text
+    assert "grid.duration: give at least one value" in text
+    assert "samples.values.duration: expected one of {uniform, log_uniform" in text
+
+
+def test_run_ids_are_stable_and_follow_the_scenario_after_overrides(
+    tmp_path: Path,
+) -> None:
+    path = _sweep(tmp_path, EIGHT)
+    spec = load_sweep(path)
+    runs = expand(spec, path, [])
+    assert len(runs) == 8
+    assert len({r.id for r in runs}) == 8
+    assert [r.id for r in expand(spec, path, [])] == [r.id for r in runs]
+    # The same values reached in another sweep, in another order, give the
+    # same run.
+    distance = runs[0].values["collision.activation_distance"]
+    other = _sweep(
+        tmp_path,
+        f"""\
+        name: other
+        scenarios: ["{{reach}}"]
+        methods: [kinematic]
+        set: {{{{duration: 1.0, solver.name: daqp}}}}
+        grid:
+          collision.activation_distance: [{distance!r}]
+          method.kinematic.dt: [0.01]
+        """,
+        "other.yaml",
+    )
+    (same,) = expand(load_sweep(other), other, [])
+    assert same.id == runs[0].id
+    assert runs[0].values["solver.name"] == "daqp"
+    # An override the scenario does not have is a located error.
+    bad = _sweep(
+        tmp_path,
+        """\
+        name: bad
+        scenarios: ["{reach}"]
+        methods: [kinematic]
+        set: {{method.kinematic.dtt: 0.01}}
+        """,
+        "bad.yaml",
+    )
+    with pytest.raises(ScenarioError, match="dtt"):
+        expand(load_sweep(bad), bad, [])
+
+
+def test_eight_runs_on_local_ray_then_a_rerun_runs_nothing(tmp_path: Path) -> None:
+    path = _sweep(tmp_path, EIGHT)
+    out = tmp_path / "out"
+    first = run_sweep(path, out, workers=2, progress=False, backend="ray")
+    assert first.backend == "ray"
+    assert first.skipped == 0
+    assert first.failed == 0
+    lines = (out / "results.csv").read_text().splitlines()
+    assert len(lines) == 1 + 8
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(out / "results.parquet")
+    assert table.num_rows == 8
+    assert set(table.column("status").to_pylist()) == {"ok"}
+    assert (
+        sorted(table.column("set.solver.name").to_pylist())
+        == ["daqp"] * 4 + ["piqp"] * 4
+    )
+    for run in first.runs:
+        folder = out / "runs" / run.id
+        assert {"result.json", "metrics.json", "trace.csv", "report.md"} <= {
+            p.name for p in folder.iterdir()
+        }
+    assert not [p for p in (out / "runs").iterdir() if p.name.startswith(".tmp")]
+    report = (out / "report.md").read_text()
+    assert "| kinematic | 8 | 8 | 0 | 0 |" in report
+    second = run_sweep(path, out, workers=2, progress=False, backend="ray")
+    assert second.skipped == 8
+    assert second.startup_s == 0.0  # Ray was not even started
+    assert len(second.records) == 8
+
+
+def test_the_pool_backend_and_a_run_that_raises(tmp_path: Path) -> None:
+    path = _sweep(
+        tmp_path,
+        """\
+        name: pool
+        scenarios: ["{reach}"]
+        methods: [kinematic]
+        set: {{duration: 0.5}}
+        grid:
+          method.kinematic.dt: [0.01, 0.05]
+        """,
+    )
+    outcome = run_sweep(
+        path, tmp_path / "out", workers=2, progress=False, backend="pool"
+    )
+    assert outcome.backend == "process pool"
+    assert [r["status"] for r in outcome.records.values()] == ["ok", "ok"]
+    # A run whose scenario cannot be loaded raises in the worker: recorded.
+    record = execute_run(
+        {
+            "id": "broken",
+            "scenario": str(tmp_path / "missing.yaml"),
+            "method": "kinematic",
+            "seed": 0,
+            "overrides": {},
+            "values": {},
+        },
+        str(tmp_path / "out"),
+    )
+    assert record["status"] == "error"
+    assert "missing.yaml" in record["error"]
+    assert read_result(tmp_path / "out" / "runs" / "broken") == json.loads(
+        json.dumps(record, default=str)
+    )
+
+
+@pytest.mark.slow
+def test_a_killed_worker_is_retried_and_its_run_completes(tmp_path: Path) -> None:
+    path = _sweep(
+        tmp_path,
+        """\
+        name: killed
+        scenarios: ["{reach}"]
+        methods: [kinematic]
+        set: {{duration: 40.0}}
+        grid:
+          method.kinematic.dt: [0.005, 0.006]
+        retries: 2
+        """,
+    )
+    out = tmp_path / "out"
+    sweep = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "cbp",
+            "sweep",
+            str(path),
+            "--out",
+            str(out),
+            "--workers",
+            "2",
+            "--backend",
+            "ray",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    running = out / "runs" / ".running"
+    killed = None
+    deadline = time.monotonic() + 120
+    while killed is None and time.monotonic() < deadline:
+        pids = sorted(running.glob("*.pid")) if running.is_dir() else []
+        if pids:
+            run_id = pids[0].stem
+            os.kill(int(pids[0].read_text()), signal.SIGKILL)
+            killed = run_id
+        time.sleep(0.05)
+    assert killed is not None, "no run started"
+    stdout, stderr = sweep.communicate(timeout=300)
+    assert sweep.returncode == 0, stderr
+    record = read_result(out / "runs" / killed)
+    assert record is not None
+    assert record["status"] == "ok"
+    assert record["attempts"] == 2
+    assert "0 not ok" in stdout
