@@ -152,8 +152,10 @@ class Document:
     def override(self, dotted: str, text: str) -> None:
         """Set ``dotted`` (``a.b.c``) to the YAML value ``text``, before building.
 
-        Missing mappings on the way are created. Problems with the value are
-        reported against ``--set a.b.c``.
+        Missing mappings on the way are created. In a list, a key is an index
+        (``constraints.2.gain``) or the ``name`` of an item, or its ``type`` when
+        it has no name (``constraints.contact_normals.gain``). Problems with the
+        value are reported against ``--set a.b.c``.
         """
         label = f"--set {dotted}"
         loader = yaml.SafeLoader(text)
@@ -170,6 +172,17 @@ class Document:
             self.root = yaml.MappingNode("tag:yaml.org,2002:map", [])
         node = self.root
         for i, key in enumerate(keys):
+            if isinstance(node, yaml.SequenceNode) and i < len(keys) - 1:
+                item = _list_item(node, key)
+                if item is None:
+                    where = ".".join(keys[:i])
+                    self.problems.append(
+                        f"{label}: '{where}' has no item {key!r} (an index, or "
+                        "an item's name or type)"
+                    )
+                    return
+                node = item
+                continue
             if not isinstance(node, yaml.MappingNode):
                 where = ".".join(keys[:i])
                 self.problems.append(f"{label}: '{where}' is not a mapping")
@@ -209,6 +222,27 @@ class Document:
     def build(self, tp: Any, node: Node | None, where: str) -> Any:
         """Build a value of annotation ``tp`` from ``node``; INVALID on a problem."""
         return _build(self, tp, node, where)
+
+
+def _list_item(node: yaml.SequenceNode, key: str) -> Node | None:
+    """The item of a YAML list at index ``key``, or named (else typed) ``key``."""
+    if key.isdigit():
+        index = int(key)
+        return node.value[index] if index < len(node.value) else None
+    for field in ("name", "type"):
+        for item in node.value:
+            if not isinstance(item, yaml.MappingNode):
+                continue
+            values = {
+                k.value: v.value
+                for k, v in item.value
+                if isinstance(k, yaml.ScalarNode) and isinstance(v, yaml.ScalarNode)
+            }
+            if field == "type" and "name" in values:
+                continue
+            if values.get(field) == key:
+                return item
+    return None
 
 
 def mapping_items(doc: Document, node: Node, where: str) -> dict[str, Node] | None:

@@ -237,3 +237,23 @@ def test_a_killed_worker_is_retried_and_its_run_completes(tmp_path: Path) -> Non
     assert record["status"] == "ok"
     assert record["attempts"] == 2
     assert "0 not ok" in stdout
+
+
+def test_set_reaches_list_items_by_index_name_or_type() -> None:
+    from cbp.scenario import load_scenario
+
+    boards = SCENARIOS / "cat_boards.yaml"
+    scenario = load_scenario(
+        boards,
+        overrides={
+            "constraints.contact_normals.gain": "0.5",  # by type (no name)
+            "tasks.hand.params.max_step_translation": "0.006",  # by name
+            "constraints.0.params.margin": "0.05",  # by index
+        },
+    )
+    entries = {e.name: e for e in scenario.entries}
+    assert entries["contact_normals"].gain == 0.5
+    assert entries["hand"].plugin.params.max_step_translation == 0.006
+    assert entries["joint_limits"].plugin.params.margin == 0.05
+    with pytest.raises(ScenarioError, match="'constraints' has no item 'nope'"):
+        load_scenario(boards, overrides={"constraints.nope.gain": "0.5"})
