@@ -93,8 +93,8 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
                 if engine.recovery_changed and engine.recovery is not None:
                     events.append((t, f"QP eased: {engine.recovery}"))
             elapsed = time.perf_counter() - start
-            # What the plugins report, at the tick's measured configuration and
-            # with the inputs in effect (no kinematics when nothing reports).
+            # The end effector, and what the plugins report, at the tick's
+            # measured configuration and with the inputs in effect.
             state.update(q)
             placement = state.frame_placement(frame_id)
             rows["ee_p"].append(placement.translation.copy())

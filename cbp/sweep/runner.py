@@ -263,11 +263,9 @@ class _Progress:
         self._bar: Any = None
 
     def __enter__(self) -> _Progress:
+        if not self.show:
+            return self
         try:
-            import rich  # noqa: F401
-        except ImportError:  # the sweep extra is not installed: no bar
-            self.show = False
-        if self.show:
             from rich.progress import (
                 BarColumn,
                 MofNCompleteColumn,
@@ -275,18 +273,19 @@ class _Progress:
                 TextColumn,
                 TimeRemainingColumn,
             )
-
-            self._bar = Progress(
-                TextColumn("sweep"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("[red]{task.fields[failed]} failed"),
-                TimeRemainingColumn(),
-            )
-            self._bar.start()
-            self._task = self._bar.add_task(
-                "runs", total=self.total, completed=self.done, failed=0
-            )
+        except ImportError:  # the sweep extra is not installed: no bar
+            return self
+        self._bar = Progress(
+            TextColumn("sweep"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("[red]{task.fields[failed]} failed"),
+            TimeRemainingColumn(),
+        )
+        self._bar.start()
+        self._task = self._bar.add_task(
+            "runs", total=self.total, completed=self.done, failed=0
+        )
         return self
 
     def advance(self, failed: bool) -> None:
