@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DEV_STAMP := $(VENV)/.installed-dev
 OUT ?= out/demo
 
-.PHONY: demo test test-slow test-all lint bench clean
+.PHONY: demo test test-slow test-all lint bench fuzz clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -37,6 +37,11 @@ test-slow: $(DEV_STAMP)
 
 test-all: lint
 	$(BIN)/python -m pytest -q
+
+# 10,000 fresh random damaged scenarios of each kind (about 20 min); failures
+# are saved in out/fuzz/.
+fuzz: $(DEV_STAMP)
+	CBP_FUZZ_EXAMPLES=10000 $(BIN)/python -m pytest -q tests/engine/test_loader_fuzz.py -k damaged
 
 bench: $(DEV_STAMP)
 	$(BIN)/cbp bench --results benchmarks/RESULTS.md --out benchmarks/results.json

@@ -76,6 +76,18 @@ def require(obj: object, condition: str, *names: str) -> None:
             raise ConfigError(f"must be {condition}, got {value}", name)
 
 
+def require_between(obj: object, lo: float, hi: float, unit: str, *names: str) -> None:
+    """Check fields of a settings object lie in ``[lo, hi]`` (finite, sane ranges).
+
+    Durations, rates and steps use it, so that ``duration: .inf`` or
+    ``dt: 1e-300`` is refused at load instead of giving a run that never ends.
+    """
+    for name in names:
+        value = getattr(obj, name)
+        if not lo <= value <= hi:
+            raise ConfigError(f"must be in [{lo:g}, {hi:g}] {unit}, got {value}", name)
+
+
 def located(lookup: Callable[[A], T], name: A, location: str) -> T:
     """Call ``lookup(name)``; a ConfigError it raises gets ``location`` attached.
 

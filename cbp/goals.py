@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import bisect
 import csv
+import io
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +32,7 @@ import pinocchio as pin
 
 from cbp.errors import ConfigError
 from cbp.expressions import TimeFunction, compile_time_function
+from cbp.files import MAX_TABLE_BYTES, read_text
 from cbp.robot import FloatArray
 from cbp.spatial import Pose
 
@@ -100,8 +102,8 @@ class GoalSpec:
 
     def __post_init__(self) -> None:
         """The fields the type needs are there, and only those."""
-        if not self.rate_hz > 0:
-            raise ConfigError(f"must be > 0, got {self.rate_hz}", "rate_hz")
+        if not 0 < self.rate_hz <= 1000.0:
+            raise ConfigError(f"must be in (0, 1000] Hz, got {self.rate_hz}", "rate_hz")
         needs = {
             "keyframes": "keyframes",
             "step": "keyframes",
@@ -214,10 +216,12 @@ def _read_recorded(
     path: Path,
 ) -> tuple[list[float], list[FloatArray], list[FloatArray]]:
     try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except OSError as exc:
-        raise ConfigError(f"cannot read recorded goal: {exc}", "file") from None
+        text = read_text(path, "recorded goal", MAX_TABLE_BYTES)
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except ConfigError as exc:
+        raise ConfigError(exc.message, "file") from None
+    except csv.Error as exc:
+        raise ConfigError(f"{path}: not a CSV table: {exc}", "file") from None
     if not rows or tuple(c.strip() for c in rows[0]) != RECORDED_COLUMNS:
         raise ConfigError(
             f"{path}: the first line must be {','.join(RECORDED_COLUMNS)}", "file"

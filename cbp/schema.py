@@ -13,6 +13,8 @@ problems of one file are reported together (:class:`~cbp.errors.ScenarioError`).
 from __future__ import annotations
 
 import dataclasses
+import math
+import re
 import types
 import typing
 from collections.abc import Mapping
@@ -22,6 +24,7 @@ from typing import Any, Literal, TypeVar
 import yaml
 
 from cbp.errors import ConfigError, ScenarioError, suggestion
+from cbp.files import read_text
 
 T = TypeVar("T")
 
@@ -58,26 +61,24 @@ class Document:
         """Compose ``text`` into nodes; a syntax error becomes a ScenarioError."""
         self.path = path
         self.problems: list[str] = []
-        self._loader = yaml.SafeLoader(text)
-        self._loader.name = path  # marks (and so error lines) name the file
-        try:
-            self.root: Node | None = self._loader.get_single_node()
-        except yaml.MarkedYAMLError as exc:
-            mark = exc.problem_mark or exc.context_mark
-            line = f"line {mark.line + 1}: " if mark is not None else ""
-            raise ScenarioError(
-                path, [f"{line}malformed YAML: {exc.problem or exc}"]
-            ) from exc
-        except yaml.YAMLError as exc:
-            raise ScenarioError(path, [f"malformed YAML: {exc}"]) from exc
+        self.root: Node | None = _compose(text, path)
+        self._loader = Loader("")
+        self._loader.name = path
+        problems = check_tree(self, self.root)
+        if problems:
+            raise ScenarioError(path, problems)
 
     @classmethod
     def from_file(cls, path: str | Path) -> Document:
-        """Read a YAML file; a missing file is a ScenarioError naming it."""
+        """Read a YAML file; an unreadable one is a ScenarioError naming it.
+
+        Only regular files of at most :data:`~cbp.files.MAX_YAML_BYTES` in UTF-8
+        are read.
+        """
         try:
-            text = Path(path).read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ScenarioError(str(path), [f"cannot read file: {exc}"]) from exc
+            text = read_text(Path(path), "file")
+        except ConfigError as exc:
+            raise ScenarioError(str(path), [exc.message]) from None
         return cls(text, str(path))
 
     def report(self, node: Node | None, where: str, message: str) -> None:
@@ -158,15 +159,19 @@ class Document:
         value are reported against ``--set a.b.c``.
         """
         label = f"--set {dotted}"
-        loader = yaml.SafeLoader(text)
-        loader.name = label
         try:
-            value = loader.get_single_node()
-        except yaml.YAMLError as exc:
-            self.problems.append(f"{label}: malformed YAML value {text!r}: {exc}")
+            value = _compose(text, label)
+        except ScenarioError as exc:
+            self.problems.append(
+                f"{label}: malformed YAML value {text!r}: {'; '.join(exc.problems)}"
+            )
             return
         if value is None:
             value = yaml.ScalarNode("tag:yaml.org,2002:null", "")
+        problems = check_tree(self, value)
+        if problems:
+            self.problems += [f"{label}: {p}" for p in problems]
+            return
         keys = dotted.split(".")
         if self.root is None:
             self.root = yaml.MappingNode("tag:yaml.org,2002:map", [])
@@ -222,6 +227,148 @@ class Document:
     def build(self, tp: Any, node: Node | None, where: str) -> Any:
         """Build a value of annotation ``tp`` from ``node``; INVALID on a problem."""
         return _build(self, tp, node, where)
+
+
+#: Deepest nesting of lists and mappings accepted in a file.
+MAX_DEPTH = 64
+#: Most values in a file, counting each use of an alias as a copy of what it
+#: names (so that a few lines of aliases cannot expand into millions of values).
+MAX_VALUES = 200_000
+
+#: The tags a file may use: the plain values YAML resolves by itself.
+_PLAIN_TAGS = {
+    f"tag:yaml.org,2002:{name}"
+    for name in ("str", "int", "float", "bool", "null", "seq", "map", "timestamp")
+}
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
+class Loader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading ``1e-3`` as a number as YAML 1.2 does.
+
+    YAML 1.1 (PyYAML's default) wants a dot in a float, so ``1e-3`` would be the
+    string "1e-3".
+    """
+
+
+Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)$"),
+    list("-+0123456789"),
+)
+
+
+def _compose(text: str, name: str) -> Node | None:
+    """Parse ``text`` into a node tree; any YAML error is a located ScenarioError."""
+    try:
+        loader = Loader(text)  # refuses control characters here
+        loader.name = name  # marks (and so error lines) name the file
+        return loader.get_single_node()
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = f"line {mark.line + 1}: " if mark is not None else ""
+        raise ScenarioError(
+            name, [f"{line}malformed YAML: {exc.problem or exc}"]
+        ) from None
+    except yaml.YAMLError as exc:
+        message = str(exc).split("\n")[0]
+        raise ScenarioError(name, [f"malformed YAML: {message}"]) from None
+    except RecursionError:
+        raise ScenarioError(
+            name, [f"malformed YAML: nested too deeply (at most {MAX_DEPTH} levels)"]
+        ) from None
+
+
+def check_tree(doc: Document, root: Node | None) -> list[str]:
+    """Problems that stop a node tree from being read at all, each located.
+
+    Tags other than the plain ones (``!custom``, ``!!binary``, ``!!set``, the
+    merge key ``<<``), values their tag cannot build (``!!float abc``, a date
+    that does not exist, an integer of thousands of digits), aliases that
+    contain themselves, nesting deeper than :data:`MAX_DEPTH` and more than
+    :data:`MAX_VALUES` values once aliases are expanded.
+    """
+    if root is None:
+        return []
+    problems: list[str] = []
+
+    def where(node: Node) -> str:
+        return f"line {node.start_mark.line + 1}"
+
+    sizes: dict[int, int] = {}
+    # Depth-first, iteratively (a deep file must not exhaust Python's stack):
+    # (node, depth, children pushed?)
+    stack: list[tuple[Node, int, bool]] = [(root, 1, False)]
+    open_nodes: set[int] = set()
+    while stack:
+        node, depth, expanded = stack.pop()
+        key = id(node)
+        if expanded:
+            open_nodes.discard(key)
+            children = _children(node)
+            sizes[key] = 1 + sum(sizes.get(id(c), 0) for c in children)
+            continue
+        if key in sizes:
+            continue
+        if key in open_nodes:
+            problems.append(
+                f"{where(node)}: an alias refers to a value that contains it"
+            )
+            return problems
+        if depth > MAX_DEPTH:
+            problems.append(f"{where(node)}: nested more than {MAX_DEPTH} levels deep")
+            return problems
+        if node.tag == _MERGE_TAG:
+            problems.append(
+                f"{where(node)}: the merge key '<<' is not supported; write the keys "
+                "out, or put shared sections in a file named by 'include:'"
+            )
+            continue
+        if node.tag not in _PLAIN_TAGS:
+            problems.append(
+                f"{where(node)}: the tag '{node.tag}' is not supported; use plain "
+                "numbers, strings, true/false, null, lists and mappings"
+            )
+            continue
+        if isinstance(node, yaml.ScalarNode):
+            sizes[key] = 1
+            problem = _scalar_problem(doc, node)
+            if problem:
+                problems.append(f"{where(node)}: {problem}")
+            continue
+        open_nodes.add(key)
+        stack.append((node, depth, True))
+        stack.extend((child, depth + 1, False) for child in reversed(_children(node)))
+    if not problems and sizes.get(id(root), 0) > MAX_VALUES:
+        problems.append(
+            f"the file holds {sizes[id(root)]} values once aliases are expanded, "
+            f"more than the {MAX_VALUES} accepted"
+        )
+    return problems
+
+
+def _children(node: Node) -> list[Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
+
+
+def _scalar_problem(doc: Document, node: yaml.ScalarNode) -> str:
+    """Why the scalar cannot be read, or an empty string."""
+    try:
+        value = doc.scalar(node)
+    except (yaml.YAMLError, ValueError, OverflowError) as exc:
+        reason = getattr(exc, "problem", None) or str(exc).split("\n")[0]
+        kind = node.tag.rsplit(":", 1)[-1]
+        return f"cannot read {node.value[:40]!r} as {kind}: {reason}"
+    if isinstance(value, int) and not isinstance(value, bool):
+        try:
+            float(value)
+        except OverflowError:
+            return f"the integer {node.value[:20]}... is too large for a number"
+    return ""
 
 
 def _list_item(node: yaml.SequenceNode, key: str) -> Node | None:
@@ -348,7 +495,10 @@ def _check_scalar(doc: Document, tp: Any, value: Any, node: Node, where: str) ->
         return INVALID
     # bool is a subclass of int: a YAML `yes` must not pass as a number.
     if tp is float and isinstance(value, int | float) and not isinstance(value, bool):
-        return float(value)
+        if math.isfinite(value):
+            return float(value)
+        doc.report(node, where, f"expected a finite number, got {value}")
+        return INVALID
     if tp is int and isinstance(value, int) and not isinstance(value, bool):
         return value
     if tp is str and isinstance(value, str):
@@ -492,7 +642,7 @@ def from_plain(cls: type[T], data: Mapping[str, Any], where: str = "") -> T:
     Raises:
         ScenarioError: listing every problem, located by path.
     """
-    text = yaml.safe_dump(dict(data), sort_keys=False)
+    text = yaml.safe_dump(dict(data), sort_keys=False, allow_unicode=True)
     doc = Document(text, where or f"<{cls.__name__}>")
     value = doc.build(cls, doc.root, "")
     doc.raise_if_problems()

@@ -27,6 +27,7 @@ from scipy.optimize import minimize
 
 from cbp.collision.broad import near_pairs
 from cbp.errors import ConfigError, suggestion
+from cbp.files import load_mesh
 from cbp.robot import Approximation, FloatArray, IntArray, RobotModel
 from cbp.state import RobotState
 
@@ -149,7 +150,7 @@ class LinkShape:
 
 
 def _hull_shape(path: Path, scale: FloatArray) -> tuple[coal.Convex, trimesh.Trimesh]:
-    mesh = trimesh.load(str(path), force="mesh")
+    mesh = load_mesh(path, "collision mesh")
     mesh.apply_scale(scale)
     hull = mesh.convex_hull
     points = coal.StdVec_Vec3s()

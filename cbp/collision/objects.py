@@ -13,7 +13,6 @@ from pathlib import Path
 import coal
 import numpy as np
 import pinocchio as pin
-import trimesh
 from scipy.spatial import cKDTree
 
 from cbp.collision.broad import near_objects
@@ -22,6 +21,7 @@ from cbp.collision.environment import Environment, signed_distance
 from cbp.collision.geometry import LinkShape, PlacedShapes
 from cbp.collision.shape_table import compile_kernels
 from cbp.errors import ConfigError
+from cbp.files import load_mesh
 from cbp.robot import FloatArray, IntArray
 
 __all__ = ["TREE_MIN_OBJECTS", "EnvironmentObject", "PrimitiveEnvironment"]
@@ -86,10 +86,7 @@ class EnvironmentObject:
         cls, name: str, path: Path, scale: FloatArray, placement: pin.SE3
     ) -> EnvironmentObject:
         """A triangle mesh file (any format trimesh reads), kept non-convex."""
-        try:
-            mesh = trimesh.load(str(path), force="mesh")
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"cannot read mesh {path}: {exc}") from exc
+        mesh = load_mesh(path)
         mesh.apply_scale(scale)
         model = coal.BVHModelOBBRSS()
         model.beginModel(len(mesh.faces), len(mesh.vertices))

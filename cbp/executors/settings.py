@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from cbp.errors import ConfigError, require
+from cbp.errors import ConfigError, require, require_between
 from cbp.executors.clock import ClockKind, VirtualCosts
 
 __all__ = [
@@ -19,6 +19,10 @@ __all__ = [
     "MpSettings",
     "VelocitySettings",
 ]
+
+
+#: Shortest and longest control step or tick an executor accepts [s].
+MIN_DT, MAX_DT = 1e-4, 1.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -50,8 +54,10 @@ class ExecutorTiming:
 
     def __post_init__(self) -> None:
         """Positive times, sensible factors."""
-        require(self, "> 0", "period")
+        require_between(self, 1e-3, 10.0, "s", "period")
         lo, hi = self.bounds()
+        if hi > 60.0:
+            raise ConfigError(f"must be at most 60 s, got {hi}", "max_period")
         if not 0 < lo <= self.period <= hi:
             raise ConfigError(
                 f"need 0 < min_period <= period <= max_period, got {lo}, "
@@ -81,8 +87,8 @@ class KinematicSettings:
     """Duration of one control step [s]."""
 
     def __post_init__(self) -> None:
-        """Positive step."""
-        require(self, "> 0", "dt")
+        """A step between 0.1 ms and 1 s."""
+        require_between(self, MIN_DT, MAX_DT, "s", "dt")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -104,7 +110,7 @@ class CatSettings:
 
     def __post_init__(self) -> None:
         """Positive values."""
-        require(self, "> 0", "step_dt")
+        require_between(self, MIN_DT, MAX_DT, "s", "step_dt")
         require(self, ">= 1", "max_steps", "max_rejections")
         require(self, ">= 0", "converged_step")
 
@@ -245,6 +251,6 @@ class VelocitySettings:
     convergence onto the constraints)."""
 
     def __post_init__(self) -> None:
-        """Positive tick, non-negative transient."""
-        require(self, "> 0", "dt")
+        """A tick between 0.1 ms and 1 s, non-negative transient."""
+        require_between(self, MIN_DT, MAX_DT, "s", "dt")
         require(self, ">= 0", "transient_s")

@@ -22,7 +22,8 @@ import yaml
 from cbp.collision.environment import signed_distance
 from cbp.collision.geometry import RobotGeometry
 from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
-from cbp.expressions import compile_time_function
+from cbp.expressions import check_over, compile_time_function, run_times
+from cbp.files import load_mesh
 from cbp.goals import GoalStream
 from cbp.plugin import Plugin, TakesInput
 from cbp.qp import Entry
@@ -93,6 +94,7 @@ def load_scenario(
                 )
         q0 = _initial_configuration(doc, robot_spec, robot, root)
         if spec is not INVALID:
+            _check_meshes(doc, spec, root, path.parent)
             _check_goal(doc, spec, entries, root, path.parent)
             _check_inputs(doc, spec, entries, root)
             _check_cameras(doc, spec, robot, root)
@@ -165,6 +167,26 @@ def _check_initial_contact(doc: Document, scenario: Scenario, root: yaml.Node) -
             "robot.allow_initial_contact: true to start in contact (the arm then "
             "backs out)",
         )
+
+
+def _check_meshes(
+    doc: Document, spec: ScenarioSpec, root: yaml.Node, folder: Path
+) -> None:
+    """Every mesh object's file can be read (regular file, a mesh, triangles)."""
+    node = _key_node(root, "world", "objects")
+    for i, obj in enumerate(spec.world.objects):
+        if obj.shape != "mesh":
+            continue
+        try:
+            load_mesh(folder / obj.file)
+        except ConfigError as exc:
+            item = node.value[i] if isinstance(node, yaml.SequenceNode) else None
+            at = _key_node(item, "file") if item is not None else None
+            doc.report(
+                at or node,
+                join_path(join_path("world.objects", i), "file"),
+                exc.message,
+            )
 
 
 def _check_cameras(
@@ -328,6 +350,17 @@ def _check_goal(
             GoalStream(goal, folder)
         except ConfigError as exc:
             doc.report(_key_node(root, "goal", "file"), "goal.file", exc.message)
+    if goal.function is not None:
+        # Evaluated at every sample the run will take.
+        times = run_times(spec.duration, goal.rate_hz)
+        for name in ("position", "rpy_deg"):
+            for i, text in enumerate(getattr(goal.function, name)):
+                where = f"goal.function.{name}[{i}]"
+                try:
+                    check_over(compile_time_function(text, where), times, where)
+                except ConfigError as exc:
+                    node = _key_node(root, "goal", "function", name)
+                    doc.report(node, where, exc.message)
     receivers = goal_receivers(entries, goal.task)
     if len(receivers) != 1:
         tasks = [e.name for e in goal_receivers(entries, None)]
@@ -374,8 +407,17 @@ def _check_inputs(
                 f"{where}.values",
                 f"'{item.entry}' takes {size} input value(s), got {len(item.values)}",
             )
+        times = run_times(spec.duration, 1.0 / _input_tick(spec))
         for k, value in enumerate(item.values):
+            at = f"{where}.values[{k}]"
             try:
-                compile_time_function(value, f"{where}.values[{k}]")
+                check_over(compile_time_function(value, at), times, at)
             except ConfigError as exc:
                 doc.report(node, exc.location, exc.message)
+
+
+def _input_tick(spec: ScenarioSpec) -> float:
+    """How often the operator inputs are sampled [s]: the velocity executor's tick."""
+    from cbp.executors.settings import VelocitySettings
+
+    return spec.method.settings(VelocitySettings).dt

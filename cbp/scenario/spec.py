@@ -142,6 +142,10 @@ class WorldSpec:
     """Objects, in the world frame."""
 
 
+#: Longest run a scenario may ask for [s] (a day).
+MAX_DURATION = 86400.0
+
+
 @dataclass(frozen=True, kw_only=True)
 class ScenarioSpec:
     """A whole scenario file (tasks and constraints are bound separately)."""
@@ -176,6 +180,8 @@ class ScenarioSpec:
     """Constraint entries (bound by :func:`load_scenario`)."""
 
     def __post_init__(self) -> None:
-        """Positive duration."""
-        if not self.duration > 0:
-            raise ConfigError(f"must be > 0, got {self.duration}", "duration")
+        """A positive duration of at most a day."""
+        if not 0 < self.duration <= MAX_DURATION:
+            raise ConfigError(
+                f"must be in (0, {MAX_DURATION:g}] s, got {self.duration}", "duration"
+            )

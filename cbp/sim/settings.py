@@ -10,7 +10,7 @@ from typing import Literal
 import numpy as np
 import pinocchio as pin
 
-from cbp.errors import ConfigError, require
+from cbp.errors import ConfigError, require, require_between
 from cbp.spatial import Pose
 
 __all__ = ["ObjectMotion", "ObjectSpec", "SimulationSettings"]
@@ -131,7 +131,8 @@ class SimulationSettings:
     """Lateral friction of the robot's links and the scene's objects."""
 
     def __post_init__(self) -> None:
-        """Positive rate, gains and recording stride."""
-        require(self, "> 0", "rate_hz", "stiffness", "damping")
+        """A rate of 100 Hz to 10 kHz, positive gains and recording stride."""
+        require_between(self, 100.0, 10_000.0, "Hz", "rate_hz")
+        require(self, "> 0", "stiffness", "damping")
         require(self, ">= 1", "record_every")
         require(self, ">= 0", "friction")

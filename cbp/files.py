@@ -1,0 +1,184 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Reading the files a scenario names, with limits and errors a user can act on.
+
+Every file ``cbp`` reads on a user's behalf (scenarios and their includes,
+recorded goals, meshes, robot descriptions) goes through :func:`check_file`:
+it must be a regular file (not a folder, a device such as ``/dev/zero``, or a
+pipe) of at most a given size. :func:`read_text` then decodes it as UTF-8 and
+names the line and column of the first byte that is not.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import secrets
+import shutil
+import stat
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cbp.errors import ConfigError
+
+if TYPE_CHECKING:
+    import trimesh
+
+__all__ = [
+    "MAX_MESH_BYTES",
+    "MAX_TABLE_BYTES",
+    "MAX_YAML_BYTES",
+    "OUTPUT_MARKERS",
+    "check_file",
+    "check_output_folder",
+    "load_mesh",
+    "publish_folder",
+    "read_text",
+    "staging_folder",
+]
+
+#: A folder holding one of these is an earlier output that may be replaced.
+OUTPUT_MARKERS = ("metrics.json", "report.md")
+
+#: Largest scenario, include or robot description file [bytes].
+MAX_YAML_BYTES = 4 << 20
+#: Largest recorded goal file [bytes] (about 30 h of a 30 Hz stream).
+MAX_TABLE_BYTES = 256 << 20
+#: Largest mesh file [bytes].
+MAX_MESH_BYTES = 256 << 20
+
+
+def check_file(path: Path, what: str, limit: int) -> int:
+    """Check that ``path`` is a readable regular file of at most ``limit`` bytes.
+
+    Args:
+        path: the file.
+        what: what it is, for the message ("recorded goal", "mesh").
+        limit: largest size accepted [bytes].
+
+    Returns:
+        Its size [bytes].
+
+    Raises:
+        ConfigError: missing, not a regular file, or too large.
+    """
+    try:
+        info = path.stat()
+    except OSError as exc:
+        raise ConfigError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(info.st_mode):
+        kind = "a folder" if stat.S_ISDIR(info.st_mode) else "not a regular file"
+        raise ConfigError(f"{what} {path} is {kind}")
+    if info.st_size > limit:
+        raise ConfigError(
+            f"{what} {path} is {info.st_size / 1e6:.1f} MB, more than the "
+            f"{limit / 1e6:.0f} MB accepted"
+        )
+    return info.st_size
+
+
+def read_text(path: Path, what: str, limit: int = MAX_YAML_BYTES) -> str:
+    """The text of ``path``, checked by :func:`check_file` and decoded as UTF-8.
+
+    Raises:
+        ConfigError: unreadable, not a regular file, too large, or not UTF-8 (the
+            message gives the line and column of the first bad byte).
+    """
+    check_file(path, what, limit)
+    try:
+        data = path.read_bytes()[: limit + 1]
+    except OSError as exc:
+        raise ConfigError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    if len(data) > limit:  # it grew since stat
+        raise ConfigError(f"{what} {path} is larger than {limit / 1e6:.0f} MB")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        before = data[: exc.start]
+        line = before.count(b"\n") + 1
+        column = exc.start - (before.rfind(b"\n") + 1) + 1
+        raise ConfigError(
+            f"{what} {path} is not UTF-8 text: byte 0x{data[exc.start]:02x} at "
+            f"line {line}, column {column}"
+        ) from None
+
+
+def load_mesh(path: Path, what: str = "mesh") -> trimesh.Trimesh:
+    """A triangle mesh file (any format trimesh reads) with at least one face.
+
+    Raises:
+        ConfigError: not a regular file, too large, a format trimesh does not
+            read, no triangles, or coordinates that are not finite.
+    """
+    import trimesh
+
+    check_file(path, what, MAX_MESH_BYTES)
+    try:
+        mesh = trimesh.load(str(path), force="mesh")
+    except Exception as exc:  # trimesh raises many types for files it cannot read
+        reason = str(exc).split("\n")[0] or type(exc).__name__
+        raise ConfigError(f"cannot read {what} {path}: {reason}") from None
+    faces = getattr(mesh, "faces", None)
+    if faces is None or len(faces) == 0:
+        raise ConfigError(f"{what} {path} holds no triangles")
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise ConfigError(f"{what} {path} has coordinates that are not finite")
+    return mesh
+
+
+def check_output_folder(out: Path) -> None:
+    """Check that ``out`` may receive a run's outputs (before the run starts).
+
+    It may be missing, empty, or an earlier output (it holds ``metrics.json``
+    or ``report.md``); anything else is refused rather than replaced.
+
+    Raises:
+        ConfigError: ``out`` is a file, or a folder of something else.
+    """
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise ConfigError(f"output folder {out} is a file")
+    if any(out.iterdir()) and not any((out / m).exists() for m in OUTPUT_MARKERS):
+        raise ConfigError(
+            f"output folder {out} holds files that are not a cbp output; choose an "
+            "empty or new folder (cbp replaces its own outputs only)"
+        )
+
+
+def staging_folder(out: Path) -> Path:
+    """A new, empty folder beside ``out`` to write outputs into before publishing."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = out.parent / f".{out.name}.part-{os.getpid()}-{secrets.token_hex(4)}"
+    staging.mkdir()
+    return staging
+
+
+def publish_folder(staging: Path, out: Path) -> None:
+    """Put the complete folder ``staging`` in place as ``out``.
+
+    An earlier output at ``out`` is replaced as a whole: under a lock on
+    ``out``, it is renamed aside and ``staging`` renamed into its place (both
+    renames are atomic on one file system), so concurrent runs into one
+    folder leave exactly one complete run there, and a reader never sees a
+    mixture.
+
+    Raises:
+        ConfigError: ``out`` is not a cbp output (:func:`check_output_folder`);
+            ``staging`` is kept and the message names it.
+    """
+    lock_path = out.parent / f".{out.name}.lock"
+    old: Path | None = None
+    with open(lock_path, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            check_output_folder(out)
+        except ConfigError as exc:
+            raise ConfigError(f"{exc.message}; the outputs are in {staging}") from None
+        if out.exists():
+            old = out.parent / f".{out.name}.old-{secrets.token_hex(4)}"
+            os.replace(out, old)
+        os.replace(staging, out)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
