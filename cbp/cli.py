@@ -22,6 +22,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="cbp",
         description="Constraint-based robot control: run and check scenarios.",
+        epilog=(
+            "exit status: 0 done; 2 bad input, found before anything ran; 3 a run "
+            "was aborted after repeated faults (its outputs are written, the "
+            "reason is in metrics.json); 130 interrupted."
+        ),
     )
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario headless and write its outputs")
@@ -198,13 +203,24 @@ def _run(
         print(exc, file=sys.stderr)
         return 2
     out = out or Path("out") / scenario.spec.name
+    from cbp.executors.faults import EXIT_ABORTED
+    from cbp.files import check_output_folder
     from cbp.report import summary_line, write_outputs
 
+    try:
+        check_output_folder(out)
+    except CbpError as exc:
+        print(exc, file=sys.stderr)
+        return 2
     trace = executor(scenario, gui)
-    metrics = write_outputs(scenario, {name: trace}, out)[name]
+    try:
+        metrics = write_outputs(scenario, {name: trace}, out)[name]
+    except CbpError as exc:  # the folder changed during the run; outputs kept
+        print(exc, file=sys.stderr)
+        return 1
     print(summary_line(scenario, name, metrics))
     print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
-    return 0
+    return EXIT_ABORTED if trace.aborted else 0
 
 
 def _sweep(
@@ -254,6 +270,12 @@ def _compare(
             f"{_num(m['total_time_s'])} s  peak force {m['peak_contact_force_n']:.1f} N"
         )
     print(f"Report: {result.out / 'report.md'}")
+    from cbp.executors.faults import EXIT_ABORTED
+
+    aborted = [name for name, m in result.metrics.items() if m.get("aborted")]
+    if aborted:
+        print(f"aborted: {', '.join(aborted)} (see the report)", file=sys.stderr)
+        return EXIT_ABORTED
     return 0
 
 

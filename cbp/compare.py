@@ -10,6 +10,7 @@ a table in ``report.md``, and the figures with all methods together.
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from cbp.executors import COMPARABLE, executor_info
+from cbp.files import check_output_folder
 from cbp.goals import write_recorded
 from cbp.scenario import Scenario, load_scenario
 from cbp.trace import Trace
@@ -94,21 +96,27 @@ def compare(
     overrides = dict(overrides or {})
     scenario = load_scenario(path, overrides=overrides)
     out = out or Path("out") / scenario.spec.name
-    out.mkdir(parents=True, exist_ok=True)
-    goal = scenario.spec.goal
-    if goal is not None and record_goal(scenario, out / "goal.csv"):
-        task = f", task: {goal.task}" if goal.task else ""
-        overrides["goal"] = (
-            f"{{type: recorded, file: {(out / 'goal.csv').resolve()}, "
-            f"rate_hz: {goal.rate_hz}{task}}}"
-        )
-    traces: dict[str, Trace] = {}
-    if jobs <= 1:
-        for method in methods:
-            traces[method] = _run_one(path, overrides, method)
-    else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {m: pool.submit(_run_one, path, overrides, m) for m in methods}
-            traces = {m: f.result() for m, f in futures.items()}
-    metrics = write_outputs(scenario, traces, out)
+    check_output_folder(out)
+    with tempfile.TemporaryDirectory(prefix="cbp-compare-") as folder:
+        goal = scenario.spec.goal
+        recorded = Path(folder) / "goal.csv"
+        extra = {}
+        if goal is not None and record_goal(scenario, recorded):
+            task = f", task: {goal.task}" if goal.task else ""
+            overrides["goal"] = (
+                f"{{type: recorded, file: {recorded.resolve()}, "
+                f"rate_hz: {goal.rate_hz}{task}}}"
+            )
+            extra["goal.csv"] = recorded
+        traces: dict[str, Trace] = {}
+        if jobs <= 1:
+            for method in methods:
+                traces[method] = _run_one(path, overrides, method)
+        else:
+            with ProcessPoolExecutor(max_workers=jobs) as pool:
+                futures = {
+                    m: pool.submit(_run_one, path, overrides, m) for m in methods
+                }
+                traces = {m: f.result() for m, f in futures.items()}
+        metrics = write_outputs(scenario, traces, out, extra)
     return ComparisonResult(out, traces, metrics)

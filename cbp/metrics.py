@@ -4,8 +4,9 @@
 :func:`run_metrics` reads a :class:`~cbp.trace.Trace` and reports each group of
 metrics whose columns the trace has, so every method is measured the same way:
 
-* always: ``samples``, ``events``, the computation time per sample or period, and
-  with a robot the largest joint-limit violation;
+* always: ``samples``, ``events``, ``aborted`` (why the run ended early, or
+  None), the computation time per sample or period, and with a robot the
+  largest joint-limit violation;
 * with a goal (the CAT paper's Sec. VI):
 
   - ``reached``: the end effector is within :data:`REACH_POSITION` and
@@ -94,6 +95,7 @@ def run_metrics(trace: Trace, robot: RobotModel | None = None) -> dict[str, Any]
         metrics["max_joint_limit_violation_rad"] = _limit_violation(trace.q, robot)
     metrics["samples"] = int(trace.t.size)
     metrics["events"] = len(trace.events)
+    metrics["aborted"] = trace.aborted
     return metrics
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from cbp.files import publish_folder, staging_folder
 from cbp.metrics import run_metrics
 from cbp.plots import plot_runs
 from cbp.robot import FloatArray
@@ -30,18 +32,43 @@ REPORT_EVENTS = 50
 
 
 def write_outputs(
-    scenario: Scenario, traces: Mapping[str, Trace], out: Path
+    scenario: Scenario,
+    traces: Mapping[str, Trace],
+    out: Path,
+    extra_files: Mapping[str, Path] | None = None,
 ) -> dict[str, dict[str, Any]]:
-    """Write the outputs of one or several runs of ``scenario`` into ``out``.
+    """Write the outputs of one or several runs of ``scenario`` as the folder ``out``.
 
     ``trace.csv`` (``trace_<method>.csv`` when there are several methods),
     ``metrics.json`` (one object per method under its name, with its events),
-    the figures of :func:`cbp.plots.plot_runs` and ``report.md``.
+    the figures of :func:`cbp.plots.plot_runs`, ``report.md``, and copies of
+    ``extra_files`` (by name in the folder). They are written into a folder
+    beside ``out`` and put in its place when complete
+    (:func:`cbp.files.publish_folder`): an earlier output there is replaced as
+    a whole, and concurrent runs never mix their files.
 
     Returns:
         The metrics, by method.
+
+    Raises:
+        ConfigError: ``out`` holds something other than a cbp output (the
+            outputs are kept beside it; the message says where).
     """
-    out.mkdir(parents=True, exist_ok=True)
+    staging = staging_folder(out)
+    try:
+        metrics = _write(scenario, traces, staging)
+        for name, source in (extra_files or {}).items():
+            shutil.copyfile(source, staging / name)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    publish_folder(staging, out)
+    return metrics
+
+
+def _write(
+    scenario: Scenario, traces: Mapping[str, Trace], out: Path
+) -> dict[str, dict[str, Any]]:
     robot = scenario.robot
     metrics = {name: run_metrics(trace, robot) for name, trace in traces.items()}
     for name, trace in traces.items():
@@ -102,6 +129,8 @@ def summary_line(scenario: Scenario, method: str, metrics: Mapping[str, Any]) ->
     if metrics.get("view_error_max_deg") is not None:
         parts.append(f"view error <= {metrics['view_error_max_deg']:.2f} deg,")
     parts.append(f"{metrics['samples']} samples, {metrics['events']} events")
+    if metrics.get("aborted"):
+        parts.append(f"; ABORTED: {metrics['aborted']}")
     return " ".join(parts)
 
 

@@ -94,6 +94,8 @@ class Trace:
             (:class:`~cbp.plugin.ReportsSignals`).
         transient_s: metrics of the steady behaviour leave out the samples
             before this time [s].
+        aborted: why the run ended before its duration
+            (:mod:`cbp.executors.faults`), or None.
     """
 
     method: str
@@ -120,6 +122,7 @@ class Trace:
     inputs: dict[str, FloatArray] = field(default_factory=dict)
     signals: dict[str, FloatArray] = field(default_factory=dict)
     transient_s: float = 0.0
+    aborted: str | None = None
 
     def __post_init__(self) -> None:
         """Every column has one row per sample."""

@@ -20,6 +20,7 @@ from cbp.executors.settings import JtSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
+from cbp.sim.trajectory import JointTrajectory
 from cbp.trace import Trace
 
 __all__ = ["JacobianTransposeController", "run_jt"]
@@ -78,7 +79,18 @@ def run_jt(scenario: Scenario, gui: bool = False) -> Trace:
     run = SimulatedRun(scenario, "jt", gui)
     try:
         run.sim.set_torque_controller(JacobianTransposeController(scenario, run))
-        run.advance(run.duration)
+        # In slices of a command period, so that a failure is an event: the
+        # robot then holds where it is, under the joint impedance.
+        t = 0.0
+        while t < run.duration - 1e-9 and run.faults.aborted is None:
+            t = min(t + 1.0 / 30.0, run.duration)
+            try:
+                run.advance(t)
+            except Exception as exc:
+                run.faults.fault(run.sim.t, "torque control", exc)
+                run.sim.follow(JointTrajectory.hold(run.sim.t, run.sim.q.copy()))
+            else:
+                run.faults.ok()
     finally:
         trace = run.finish()
     return trace

@@ -5,7 +5,9 @@ No simulator: the configuration is integrated with the QP's solution, one QP ste
 per control step of ``method.dt``. The goal stream is sampled at its own rate.
 A goal that is NaN or malformed is ignored (the previous goal stays); a QP that
 cannot be solved holds the robot still for that step. Both are recorded as events
-and the loop goes on.
+and the loop goes on. So is anything else that raises in a step (a plugin, the
+collision world); after :data:`~cbp.executors.faults.MAX_FAULTS_IN_A_ROW` such
+steps in a row the run is aborted and the trace ends there.
 
 When the scenario has contact constraints, every step is validated (CAT Sec.
 IV-C): the new configuration is collision-checked, and a step that penetrates
@@ -23,8 +25,10 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.errors import InvalidTargetError
+from cbp.executors.faults import Faults
 from cbp.executors.settings import KinematicSettings
-from cbp.executors.stepping import ValidatedStepper
+from cbp.executors.stepping import Step, ValidatedStepper
+from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
 
@@ -45,11 +49,13 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
     dt = scenario.spec.method.settings(KinematicSettings).dt
     steps = math.ceil(scenario.spec.duration / dt) + 1
     frame_id = robot.frame_id(scenario.ee_frame)
+    data = robot.model.createData()
     q = scenario.q0.copy()
     events: list[tuple[float, str]] = []
     t = 0.0
     world = scenario.collision_world() if scenario.needs_collision_world else None
     stepper = ValidatedStepper(engine, world, lambda m: events.append((t, m)))
+    faults = Faults(lambda at, m: events.append((at, m)))
     stepper.start(q)
     n = steps
     qs = np.empty((n, robot.nq))
@@ -63,32 +69,40 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
     next_goal_time = 0.0
     for k in range(steps):
         t = k * dt
-        if stream is not None and goal_task is not None and t >= next_goal_time - 1e-9:
-            next_goal_time += stream.period
-            candidate = stream.pose(t)
-            try:
-                goal_task.set_target(candidate.translation, candidate.rotation)
-            except InvalidTargetError as exc:
-                events.append((t, f"goal rejected, previous goal kept: {exc}"))
-            else:
-                if (
-                    change_time is None
-                    and goal is not None
-                    and not goal.isApprox(candidate)
-                ):
-                    change_time = t
-                goal = candidate
         start = time.perf_counter()
-        step = stepper.step(q, dt)
+        try:
+            if (
+                stream is not None
+                and goal_task is not None
+                and t >= next_goal_time - 1e-9
+            ):
+                next_goal_time += stream.period
+                candidate = stream.pose(t)
+                try:
+                    goal_task.set_target(candidate.translation, candidate.rotation)
+                except InvalidTargetError as exc:
+                    events.append((t, f"goal rejected, previous goal kept: {exc}"))
+                else:
+                    if (
+                        change_time is None
+                        and goal is not None
+                        and not goal.isApprox(candidate)
+                    ):
+                        change_time = t
+                    goal = candidate
+            step = stepper.step(q, dt)
+        except Exception as exc:  # anything else: hold the robot, say so
+            step = Step("failed", q, None, stepper.depth, "")
+            faults.fault(t, "control step", exc)
+        else:
+            faults.ok()
         compute[k] = time.perf_counter() - start
-        placement = engine.state.frame_placement(frame_id)
         qs[k] = q
-        ee_p[k] = placement.translation
-        ee_R[k] = placement.rotation
+        ee_p[k], ee_R[k] = _hand(robot, data, frame_id, q)
         if goal is not None:
             goal_p[k] = goal.translation
             goal_R[k] = goal.rotation
-        if step.outcome == "failed":
+        if step.outcome == "failed" and step.reason:
             events.append((t, f"step not solved, robot held: {step.reason}"))
             log.warning("t=%.3f s: %s", t, step.reason)
         elif step.outcome == "rejected":
@@ -96,19 +110,32 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
             events.append((t, f"step rejected: {step.reason}"))
         depth[k] = stepper.depth
         q = step.q
+        if faults.aborted is not None:
+            n = k + 1
+            break
     return Trace(
         method="kinematic",
         t=np.arange(n, dtype=float) * dt,
-        q=qs,
-        ee_position=ee_p,
-        ee_rotation=ee_R,
-        goal_position=goal_p,
-        goal_rotation=goal_R,
+        q=qs[:n],
+        ee_position=ee_p[:n],
+        ee_rotation=ee_R[:n],
+        goal_position=goal_p[:n],
+        goal_rotation=goal_R[:n],
         goal_change_time=change_time,
         q_names=robot.coordinate_names("q"),
         v_names=robot.coordinate_names("v"),
         events=events,
-        compute_s=compute,
-        step_penetration=depth if world is not None else None,
+        compute_s=compute[:n],
+        step_penetration=depth[:n] if world is not None else None,
         rejected_steps=rejected,
+        aborted=faults.aborted,
     )
+
+
+def _hand(
+    robot: RobotModel, data: pin.Data, frame_id: int, q: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The placement (position, rotation) of frame ``frame_id`` at ``q``."""
+    pin.framesForwardKinematics(robot.model, data, q)
+    placement = data.oMf[frame_id]
+    return placement.translation.copy(), placement.rotation.copy()

@@ -22,6 +22,7 @@ from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.errors import InvalidTargetError
 from cbp.executors.clock import ClockKind
+from cbp.executors.faults import Faults
 from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
@@ -107,8 +108,10 @@ class SimulatedRun:
         self.stream = scenario.goal_stream()
         self.goal_task: GoalReceiver | None = scenario.goal_task()
         self.events: list[tuple[float, str]] = []
+        self.faults = Faults(self.event)
         self.periods: list[PeriodRecord] = []
         self._goal = _Goal()
+        self._goal_failing = False
         self._goal_space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
         self._goal_blocked = False
         use_camera = spec.perception.source == "depth_camera"
@@ -125,6 +128,10 @@ class SimulatedRun:
         self.cameras: list[DepthCamera] = []
         self._next_frame: list[float] = []
         self._camera_state = RobotState(self.robot)
+        #: Per camera: time of its last valid frame, and whether it is failing.
+        self._last_valid: list[float] = []
+        self._camera_failing: list[bool] = []
+        self._stale: str | None = None
         if use_camera:
             assert self.world is not None
             self.world.set_environment(PrimitiveEnvironment([]))
@@ -132,11 +139,15 @@ class SimulatedRun:
                 DepthCamera(self.sim.client, camera, self.robot)
                 for camera in spec.perception.all_cameras
             ]
+            self._last_valid = [0.0] * len(self.cameras)
+            self._camera_failing = [False] * len(self.cameras)
             grid = OccupancyGrid(spec.perception, self.world.geometry)
             # The robot looks once before it moves; later frames go to the thread.
             first = MapUpdater(grid, self.world, synchronous=True)
-            for camera in self.cameras:
-                first.submit(self._capture(camera), self.sim.q.copy())
+            for i in range(len(self.cameras)):
+                frame = self._checked_frame(i, 0.0)
+                if frame is not None:
+                    first.submit(frame, self.sim.q.copy())
             self.mapper = MapUpdater(grid, self.world, synchronous=clock == "virtual")
             self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
 
@@ -160,7 +171,20 @@ class SimulatedRun:
         goal = self._goal
         if sample_t > goal.sample_t:
             goal.sample_t = sample_t
-            position, rotation = stream.sample(sample_t)
+            try:
+                position, rotation = stream.sample(sample_t)
+            except Exception as exc:  # a goal source that fails: keep the goal
+                if not self._goal_failing:
+                    self.event(
+                        t,
+                        f"goal input failed ({type(exc).__name__}: {exc}); "
+                        "previous goal kept",
+                    )
+                self._goal_failing = True
+                return goal.pose
+            if self._goal_failing:
+                self.event(t, "goal input works again")
+                self._goal_failing = False
             try:
                 pose = checked_se3(position, rotation, "goal")
             except InvalidTargetError as exc:
@@ -226,11 +250,62 @@ class SimulatedRun:
                 break
             camera = self.cameras[i]
             self.sim.run_until(due[i])
-            self.mapper.submit(self._capture(camera), self.sim.q.copy())
+            frame = self._checked_frame(i, due[i])
+            if frame is not None:
+                self.mapper.submit(frame, self.sim.q.copy())
             if self.mapper.error is not None:
                 error, self.mapper.error = self.mapper.error, None
                 self.event(self.sim.t, f"map update failed, previous map kept: {error}")
             due[i] += 1.0 / camera.spec.rate_hz
+
+    def _checked_frame(self, i: int, t: float) -> DepthFrame | None:
+        """Camera ``i``'s frame at ``t`` if it is valid; else None and an event.
+
+        A frame is valid when at least ``perception.min_valid_fraction`` of its
+        pixels hold a reading (:meth:`DepthFrame.problem`). The first bad frame
+        of a run of them is an event, and so is the first good one after.
+        """
+        camera = self.cameras[i]
+        try:
+            frame = self._capture(camera)
+            problem = frame.problem(self.scenario.spec.perception.min_valid_fraction)
+        except Exception as exc:  # a camera that fails is a camera without frames
+            frame, problem = None, f"capture failed ({type(exc).__name__}: {exc})"
+        if problem is None:
+            if self._camera_failing[i]:
+                self.event(t, f"camera '{camera.name}' gives valid frames again")
+                self._camera_failing[i] = False
+            self._last_valid[i] = t
+            return frame
+        if not self._camera_failing[i]:
+            self.event(t, f"camera '{camera.name}': frame dropped, {problem}")
+            self._camera_failing[i] = True
+        return None
+
+    def hold_reason(self, t: float) -> str | None:
+        """Why the robot must hold at ``t``, or None.
+
+        A camera whose last valid frame is older than
+        ``perception.camera_timeout`` holds the robot until it gives one again
+        (the map would otherwise go stale where the robot is heading). Each
+        change is an event.
+        """
+        timeout = self.scenario.spec.perception.camera_timeout
+        stale = [
+            camera.name
+            for camera, last in zip(self.cameras, self._last_valid, strict=True)
+            if t - last > timeout
+        ]
+        reason = (
+            f"no valid frame from camera {', '.join(repr(n) for n in stale)} for "
+            f"more than {timeout:g} s: robot stopped"
+            if stale
+            else None
+        )
+        if reason != self._stale:
+            self.event(t, reason or "every camera gives valid frames: robot resumes")
+            self._stale = reason
+        return reason
 
     def _capture(self, camera: DepthCamera) -> DepthFrame:
         """One frame of ``camera``; a mounted one from the robot as it is now."""
@@ -321,6 +396,7 @@ class SimulatedRun:
             goal_change_time=change_time,
             periods=self.periods,
             events=self.events,
+            aborted=self.faults.aborted,
         )
 
     @property

@@ -36,7 +36,7 @@ from cbp.robot import FloatArray
 from cbp.sim.trajectory import JointTrajectory, time_parameterize
 from cbp.trace import PeriodRecord, Trace
 
-__all__ = ["Plan", "Planner", "run_trajectory_executor"]
+__all__ = ["Plan", "Planner", "run_trajectory_executor", "stopping_trajectory"]
 
 
 @dataclass
@@ -71,7 +71,16 @@ class Planner(Protocol):
 def run_trajectory_executor(
     run: SimulatedRun, planner: Planner, timing: ExecutorTiming
 ) -> Trace:
-    """Run the scenario with ``planner`` each command period; return the trace."""
+    """Run the scenario with ``planner`` each command period; return the trace.
+
+    A period in which something raises (the planner, the goal input, the
+    simulator) holds the robot: it brakes along the trajectory it is on
+    (:func:`stopping_trajectory`), and the exception is an event. So does a
+    period in which the run says the robot must hold
+    (:meth:`SimulatedRun.hold_reason`: a camera that gives no valid frames).
+    After :data:`~cbp.executors.faults.MAX_FAULTS_IN_A_ROW` failing periods the
+    run is aborted: the robot stops, and the trace ends there with the reason.
+    """
     robot = run.robot
     vmax = robot.velocity_limits * timing.velocity_scale
     amax = robot.acceleration_limits * timing.acceleration_scale
@@ -79,9 +88,9 @@ def run_trajectory_executor(
     period = timing.period
     t = 0.0
     sim = run.sim
+    faults = run.faults
     try:
-        while t < run.duration - 1e-9:
-            goal = run.send_goal(t)
+        while t < run.duration - 1e-9 and faults.aborted is None:
             t_f = t + period
             current = sim.trajectory
             i = current.first_point_after(t_f)
@@ -93,17 +102,37 @@ def run_trajectory_executor(
             budget = make_budget(
                 timing.clock, timing.time_budget * period, timing.virtual_costs
             )
-            plan = planner.plan(q_s.copy(), goal, budget, run)
             new: JointTrajectory | None = None
-            note = plan.note
-            if plan.path is not None and len(plan.path) > 1:
-                new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)
-                budget.charge("trajectory_point", len(plan.path))
-                if new is None:
-                    note = "path too short to stop on; current trajectory kept"
+            failed = False
+            hold: str | None = None
+            try:
+                goal = run.send_goal(t)
+                hold = run.hold_reason(t)
+                if hold is not None:
+                    plan = Plan(None, 0, hold)
+                else:
+                    plan = planner.plan(q_s.copy(), goal, budget, run)
+                note = plan.note
+                if plan.path is not None and len(plan.path) > 1:
+                    new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)
+                    budget.charge("trajectory_point", len(plan.path))
+                    if new is None:
+                        note = "path too short to stop on; current trajectory kept"
+            except Exception as exc:  # any failure: hold the robot, say so
+                failed = True
+                plan = Plan(None, 0, faults.fault(t, "planning", exc))
+                note = plan.note
+            if (failed or hold is not None) and i is not None:
+                new = stopping_trajectory(current, i, vmax, amax)
             compute = budget.elapsed()
-            run.advance(t_f)  # the robot moves on while the result is computed
-            missed = compute > period or plan.timed_out
+            try:
+                run.advance(t_f)  # the robot moves on while the result is computed
+            except Exception as exc:
+                failed = True
+                note = faults.fault(t, "simulation", exc)
+            if not failed:
+                faults.ok()
+            missed = (compute > period or plan.timed_out) and not failed
             spliced = False
             if missed:
                 run.event(
@@ -126,7 +155,41 @@ def run_trajectory_executor(
                 PeriodRecord(t, period, plan.steps, compute, missed, spliced, note)
             )
             t, period = t_f, next_period
-        run.advance(run.duration)
+        if faults.aborted is None:
+            run.advance(run.duration)
+        else:
+            # Let the robot come to rest on the (stopping) trajectory it is on.
+            run.advance(min(max(sim.trajectory.end_time, t) + 0.1, run.duration))
     finally:
         trace = run.finish()
     return trace
+
+
+def stopping_trajectory(
+    current: JointTrajectory, i: int, vmax: FloatArray, amax: FloatArray
+) -> JointTrajectory | None:
+    """Brake along ``current`` from its point ``i``, as soon as the limits allow.
+
+    The path ahead was validated when it was planned; the shortest part of it
+    from point ``i`` on which the robot can stop, timed by
+    :func:`time_parameterize`, replaces the rest. None when the trajectory
+    already stops no later than that (nothing to change).
+    """
+    t_s, _, v_s, a_s = current.point(i)
+    ahead = current.positions[i:]
+    lo, hi = 2, len(ahead)
+    if hi < 2:
+        return None
+    # The shortest prefix that can be stopped on (stoppable prefixes are
+    # upward closed: a longer path leaves more room to brake).
+    if time_parameterize(ahead[:hi], t_s, v_s, a_s, vmax, amax) is None:
+        return None
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if time_parameterize(ahead[:mid], t_s, v_s, a_s, vmax, amax) is None:
+            lo = mid + 1
+        else:
+            hi = mid
+    if hi == len(ahead):
+        return None
+    return time_parameterize(ahead[:hi], t_s, v_s, a_s, vmax, amax)

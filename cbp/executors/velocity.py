@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from cbp.errors import PluginOutputError, SolveError
+from cbp.executors.faults import Faults
 from cbp.executors.settings import VelocitySettings
 from cbp.plugin import ReportsSignals
 from cbp.robot import FloatArray
@@ -65,15 +66,17 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
         scenario.path.parent,
         gui,
     )
+    faults = Faults(lambda at, m: events.append((at, m)))
     try:
         for k in range(steps):
             t = k * dt
             for plugin, functions in inputs:
                 name = names[id(plugin)]
-                value = np.array([f(t) for f in functions])
                 try:
+                    value = np.array([f(t) for f in functions])
                     plugin.set_input(value)
                 except (ValueError, ArithmeticError) as exc:
+                    value = np.full(len(functions), np.nan)
                     events.append((t, f"input to '{name}' refused: {exc}"))
                 values[name].append(value)
             q = sim.q
@@ -86,7 +89,11 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
                 if failing == 1:  # one event per run of failed ticks
                     events.append((t, f"step not solved, robot stopped: {exc}"))
                     log.warning("t=%.3f s: %s", t, exc)
+            except Exception as exc:  # anything else: stop the robot, count it
+                dq = np.zeros(robot.nv)
+                faults.fault(t, "control step", exc)
             else:
+                faults.ok()
                 if failing:
                     events.append((t, f"solved again after {failing} failed ticks"))
                 failing = 0
@@ -100,15 +107,26 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
             rows["ee_p"].append(placement.translation.copy())
             rows["ee_R"].append(placement.rotation.copy())
             for reporter in reporters:
-                for key, signal in reporter.signals(state).items():
+                try:
+                    reported = reporter.signals(state)
+                except Exception as exc:  # a report is not worth stopping for
+                    faults.fault(t, "signal report", exc)
+                    continue
+                for key, signal in reported.items():
                     signals.setdefault(key, []).append(signal)
+            for column in signals.values():  # NaN where a report failed
+                column.extend([np.nan] * (len(rows["t"]) + 1 - len(column)))
             u = dq / dt
+            if faults.aborted is not None:
+                u = np.zeros(robot.nv)
             sim.command(u)
             rows["t"].append(t)
             rows["q"].append(q)
             rows["u"].append(u)
             rows["time"].append(elapsed)
             sim.run_until(t + dt)
+            if faults.aborted is not None:
+                break
     finally:
         sim.close()
     m = len(rows["t"])
@@ -128,4 +146,5 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
         inputs={n: np.array(v) for n, v in values.items()},
         signals={k: np.array(v) for k, v in signals.items()},
         transient_s=settings.transient_s,
+        aborted=faults.aborted,
     )

@@ -56,6 +56,30 @@ class DepthFrame:
         with np.errstate(invalid="ignore"):
             return np.isfinite(z) & (z >= 0.0) & (z <= 1.0)
 
+    def problem(self, min_valid_fraction: float) -> str | None:
+        """Why the frame should not be used, or None.
+
+        A reading is a finite depth in (0, 1]: 1 is the far plane (nothing seen
+        up to it, which the map uses), 0 the near plane exactly, what a failed
+        render or a blinded sensor gives. A frame with fewer than
+        ``min_valid_fraction`` of its pixels reading, or of the wrong shape, is
+        refused.
+        """
+        z = self.depth
+        if z.ndim != 2 or z.size == 0:
+            return f"depth image of shape {z.shape}"
+        if not np.all(np.isfinite(self.view)):
+            return "camera pose not finite"
+        with np.errstate(invalid="ignore"):
+            reading = np.isfinite(z) & (z > 0.0) & (z <= 1.0)
+        fraction = float(np.count_nonzero(reading)) / z.size
+        if fraction < min_valid_fraction:
+            return (
+                f"{fraction:.0%} of its pixels hold a reading "
+                f"(perception.min_valid_fraction: {min_valid_fraction:.0%})"
+            )
+        return None
+
     def ranges(self) -> FloatArray:
         """Metric depth along the optical axis per pixel [m].
 

@@ -120,6 +120,13 @@ class PerceptionSpec:
     """Frames that must see through a cell before it is cleared."""
     robot_margin: float = 0.02
     """Points within the robot's padded shapes plus this margin are filtered [m]."""
+    min_valid_fraction: float = 0.2
+    """A depth frame with fewer pixels holding a reading than this fraction is
+    dropped (an event): all-NaN, all-zero or blinded frames never reach the
+    map."""
+    camera_timeout: float = 0.5
+    """A camera that gives no valid frame for this long stops the robot (it
+    holds until valid frames come again) [s]."""
     refine_normals: bool = True
     """Re-estimate contact normals from a metaball surface (CAT Sec. IV-B)."""
     metaball_radius_cells: float = 3.0
@@ -143,6 +150,18 @@ class PerceptionSpec:
             raise ConfigError(
                 f"camera names must be unique; repeated: {', '.join(repeated)}",
                 "cameras",
+            )
+        if not 0.0 <= self.min_valid_fraction <= 1.0:
+            raise ConfigError(
+                f"must be in [0, 1], got {self.min_valid_fraction}",
+                "min_valid_fraction",
+            )
+        slowest = min((c.rate_hz for c in self.all_cameras), default=1e3)
+        if not 1.0 / slowest < self.camera_timeout <= 60.0:
+            raise ConfigError(
+                f"must be longer than the slowest camera's frame period "
+                f"({1.0 / slowest:g} s) and at most 60 s, got {self.camera_timeout}",
+                "camera_timeout",
             )
         if not 0.001 <= self.cell_size <= 0.2:
             raise ConfigError(

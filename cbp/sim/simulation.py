@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +32,7 @@ import pinocchio as pin
 import pybullet as pb
 
 from cbp.robot import FloatArray, RobotModel
+from cbp.sim.recorder import Recorder
 from cbp.sim.scene import PybulletScene
 from cbp.sim.settings import ObjectSpec, SimulationSettings
 from cbp.sim.trajectory import JointTrajectory
@@ -57,17 +58,6 @@ class ContactSample:
     force: float = 0.0
     penetration: float = 0.0
     wrist_force: float = 0.0
-
-
-@dataclass
-class _Recorder:
-    t: list[float] = field(default_factory=list)
-    q: list[FloatArray] = field(default_factory=list)
-    v: list[FloatArray] = field(default_factory=list)
-    q_cmd: list[FloatArray] = field(default_factory=list)
-    force: list[float] = field(default_factory=list)
-    penetration: list[float] = field(default_factory=list)
-    wrist: list[float] = field(default_factory=list)
 
 
 class Simulation:
@@ -164,7 +154,9 @@ class Simulation:
         self._trajectory = JointTrajectory.hold(0.0, np.asarray(q0, dtype=float))
         self._torque: TorqueController | None = None
         self._last_command = np.asarray(q0, dtype=float).copy()
-        self._record = _Recorder()
+        n = robot.nq
+        # t, q, v, q_cmd, contact force, penetration, wrist force
+        self._record = Recorder(1 + 3 * n + 3)
         self._q, self._v = self._read_state()
         self._interval = ContactSample()
 
@@ -225,14 +217,17 @@ class Simulation:
         interval.penetration = max(interval.penetration, depth)
         interval.wrist_force = max(interval.wrist_force, wrist)
         if self.steps % self.settings.record_every == 0:
-            rec = self._record
-            rec.t.append(self.t)
-            rec.q.append(self._q.copy())
-            rec.v.append(self._v.copy())
-            rec.q_cmd.append(np.array(q_cmd, dtype=float))
-            rec.force.append(interval.force)
-            rec.penetration.append(interval.penetration)
-            rec.wrist.append(interval.wrist_force)
+            row = self._record.row()
+            n = self.robot.nq
+            row[0] = self.t
+            row[1 : 1 + n] = self._q
+            row[1 + n : 1 + 2 * n] = self._v
+            row[1 + 2 * n : 1 + 3 * n] = q_cmd
+            row[1 + 3 * n :] = (
+                interval.force,
+                interval.penetration,
+                interval.wrist_force,
+            )
             self._interval = ContactSample()
 
     def _update_objects(self, t: float) -> None:
@@ -268,16 +263,16 @@ class Simulation:
         Force, penetration and wrist force are the largest values over the
         physics steps since the previous sample.
         """
-        rec = self._record
+        rows = self._record.array()
         n = self.robot.nq
         return {
-            "t": np.array(rec.t, dtype=float),
-            "q": np.array(rec.q, dtype=float).reshape(-1, n),
-            "v": np.array(rec.v, dtype=float).reshape(-1, n),
-            "q_cmd": np.array(rec.q_cmd, dtype=float).reshape(-1, n),
-            "contact_force": np.array(rec.force, dtype=float),
-            "penetration": np.array(rec.penetration, dtype=float),
-            "wrist_force": np.array(rec.wrist, dtype=float),
+            "t": rows[:, 0].copy(),
+            "q": rows[:, 1 : 1 + n].copy(),
+            "v": rows[:, 1 + n : 1 + 2 * n].copy(),
+            "q_cmd": rows[:, 1 + 2 * n : 1 + 3 * n].copy(),
+            "contact_force": rows[:, 1 + 3 * n].copy(),
+            "penetration": rows[:, 2 + 3 * n].copy(),
+            "wrist_force": rows[:, 3 + 3 * n].copy(),
         }
 
     # ------------------------------------------------------------------ internals
@@ -330,8 +325,9 @@ class Simulation:
         return frozenset(links)
 
     def close(self) -> None:
-        """Disconnect from PyBullet."""
+        """Disconnect from PyBullet; delete the recording's spool file."""
         self.scene.close()
+        self._record.close()
 
     def __enter__(self) -> Simulation:
         """Use as a context manager."""
