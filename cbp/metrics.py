@@ -93,6 +93,7 @@ def run_metrics(trace: Trace, robot: RobotModel | None = None) -> dict[str, Any]
         metrics["compute_ms_p95"] = float(np.percentile(compute_ms, 95))
     if robot is not None:
         metrics["max_joint_limit_violation_rad"] = _limit_violation(trace.q, robot)
+    metrics |= trace.counters
     metrics["samples"] = int(trace.t.size)
     metrics["events"] = len(trace.events)
     metrics["aborted"] = trace.aborted

@@ -154,6 +154,25 @@ class QPProblem:
         Ax = self.A.dot(x)
         return float(max(np.max(self.lower - Ax), np.max(Ax - self.upper), 0.0))
 
+    def active_entries(self, dq: FloatArray, tolerance: float = 1e-6) -> set[str]:
+        """Names of the entries with a row at one of its bounds at step ``dq``.
+
+        ``dq`` is the joint displacement (the first ``nv`` variables); a row is
+        active within ``tolerance`` (absolute, plus relative to the bound).
+        """
+        if self.A.shape[0] == 0:
+            return set()
+        Ax = self.A[:, : self.nv].dot(dq)
+        with np.errstate(invalid="ignore"):
+            low = np.isfinite(self.lower) & (
+                np.abs(Ax - self.lower) <= tolerance * (1.0 + np.abs(self.lower))
+            )
+            high = np.isfinite(self.upper) & (
+                np.abs(self.upper - Ax) <= tolerance * (1.0 + np.abs(self.upper))
+            )
+        rows = np.flatnonzero(low | high)
+        return {self.entry_names[i] for i in np.unique(self.row_entry[rows])}
+
 
 class QPAssembler:
     r"""Builds the QP of a fixed list of entries, reusing its buffers every step.

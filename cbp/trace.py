@@ -96,6 +96,8 @@ class Trace:
             before this time [s].
         aborted: why the run ended before its duration
             (:mod:`cbp.executors.faults`), or None.
+        counters: numbers an executor counts over the run, by metric name
+            (the hybrid's ``plans``); they go into the metrics as they are.
     """
 
     method: str
@@ -123,6 +125,7 @@ class Trace:
     signals: dict[str, FloatArray] = field(default_factory=dict)
     transient_s: float = 0.0
     aborted: str | None = None
+    counters: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         """Every column has one row per sample."""

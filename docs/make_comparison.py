@@ -1,8 +1,11 @@
-"""Compare CAT, IK, MP and JT on every CAT scene; print docs/comparison.md's tables.
+"""Compare the methods on every CAT scene; print docs/comparison.md's tables.
 
 Run: .venv/bin/python docs/make_comparison.py [--out out/comparison] [--figures]
+     [--methods cat,hybrid,ik,mp,jt] [--source ground_truth|depth_camera]
 (each scene's report.md, metrics.json, traces and plots go under --out;
 --figures also copies the tracking and contact-force plots into docs/comparison/).
+The second table lists, for the methods that plan (hybrid, MP), the plans per
+scene and their mean joint-space length and duration.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from make_cat_scenes import SCENES  # the same scenes, in the paper's order
 from cbp.compare import compare
 
 ROOT = Path(__file__).parents[1]
-METHODS = ("cat", "ik", "mp", "jt")
+METHODS = ("cat", "hybrid", "ik", "mp", "jt")
 
 
 def _f(value: float | None, digits: int = 2) -> str:
@@ -28,16 +31,23 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "comparison")
     parser.add_argument("--figures", action="store_true")
+    parser.add_argument("--methods", default=",".join(METHODS))
+    parser.add_argument("--source", default="ground_truth")
     args = parser.parse_args()
-    header = "| scene | " + " | ".join(METHODS) + " |"
-    rule = "|---|" + "---|" * len(METHODS)
-    rows = []
+    methods = args.methods.split(",")
+    planners = [m for m in methods if m in ("hybrid", "mp")]
+    header = "| scene | " + " | ".join(methods) + " |"
+    rule = "|---|" + "---|" * len(methods)
+    rows, plans = [], []
     for scene in SCENES:
         result = compare(
-            ROOT / "scenarios" / f"cat_{scene}.yaml", METHODS, args.out / scene
+            ROOT / "scenarios" / f"cat_{scene}.yaml",
+            methods,
+            args.out / args.source / scene,
+            overrides={"perception.source": args.source},
         )
         cells = []
-        for m in METHODS:
+        for m in methods:
             x = result.metrics[m]
             reached = "reached" if x["reached"] else "not reached"
             cells.append(
@@ -46,12 +56,32 @@ def main() -> None:
             )
         rows.append(f"| {scene} | " + " | ".join(cells) + " |")
         print(rows[-1], flush=True)
+        cells = []
+        for m in planners:
+            x = result.metrics[m]
+            n = int(x["plans"])
+            mean = (
+                f"{x['plan_path_length_rad'] / n:.2f} rad, "
+                f"{x['plan_duration_s'] / n:.2f} s"
+                if n
+                else "-"
+            )
+            cells.append(f"{n}; {mean}")
+        plans.append(f"| {scene} | " + " | ".join(cells) + " |")
         if args.figures:
             target = ROOT / "docs" / "comparison"
             target.mkdir(exist_ok=True)
             for name in ("tracking", "contact_force"):
                 shutil.copy(result.out / f"{name}.png", target / f"{scene}_{name}.png")
     print("\n".join([header, rule, *rows]))
+    print()
+    print(
+        "| scene | "
+        + " | ".join(f"{m}: plans; mean length, duration" for m in planners)
+        + " |"
+    )
+    print("|---|" + "---|" * len(planners))
+    print("\n".join(plans))
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from cbp.errors import require_choice
 from cbp.executors.settings import (
     CatSettings,
+    HybridSettings,
     IkSettings,
     JtSettings,
     KinematicSettings,
@@ -110,6 +111,14 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             MpSettings,
             "mp",
             "OMPL RRT-Connect to the IK goal, replanned at an adaptive period",
+            comparable=True,
+        ),
+        ExecutorInfo(
+            "hybrid",
+            HybridSettings,
+            "hybrid",
+            "CAT, and where CAT stalls an IK search and an OMPL plan spliced in "
+            "(control returns to CAT when the goal moves or the plan ends)",
             comparable=True,
         ),
         ExecutorInfo(

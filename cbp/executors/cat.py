@@ -38,6 +38,16 @@ class CatPlanner:
         self.scenario = scenario
         self.settings = settings
         self.engine = scenario.make_engine()
+        #: The entries that bound a step's size only (joint_velocity): not
+        #: obstacles to the goal.
+        self.step_limits = {
+            e.name
+            for e in self.engine.entries
+            if e.plugin.type_name == "joint_velocity"
+        }
+        #: Hard entries other than the step limits that were active at the last
+        #: step of the last period (contacts, joint limits): what holds the arm.
+        self.blocked_by: set[str] = set()
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
@@ -53,6 +63,7 @@ class CatPlanner:
         # A step is kept if it penetrates no deeper than the tolerance, or than
         # where it started (so a robot that starts in collision can leave it).
         stepper.start(q)
+        self.blocked_by = set()
         path = [q]
         steps = rejections = still = 0
         note = FULL_PERIOD_NOTE
@@ -85,6 +96,9 @@ class CatPlanner:
                 still = 0
         else:
             note = "max_steps reached"
+        problem = self.engine.problem
+        if steps and step.dq is not None and problem is not None:
+            self.blocked_by = problem.active_entries(step.dq) - self.step_limits
         return Plan(np.array(path), steps, note)
 
 

@@ -77,6 +77,21 @@ class IkSearch:
 
         Each iteration and collision check is charged to ``budget``.
         """
+        for seed, fixed in self.attempts(q_near):
+            if budget.spent():
+                return None
+            q = self.attempt(goal, seed, fixed, budget)
+            if q is not None:
+                return q
+        return None
+
+    def attempts(self, q_near: FloatArray) -> list[tuple[FloatArray, int | None]]:
+        """The starts :meth:`solve` tries, in order: (seed, joint held fixed).
+
+        The nearest solution first lets every joint move; then the redundant
+        joint is swept outward from its value in ``q_near``, nearest values
+        first, and held at each.
+        """
         s = self.settings
         j = self.redundant
         current = float(q_near[j])
@@ -88,16 +103,20 @@ class IkSearch:
                 if lo <= v <= hi:
                     values.append(v)
             k += 1
+        out: list[tuple[FloatArray, int | None]] = []
         for i, value in enumerate(values):
-            if budget.spent():
-                return None
             seed = np.clip(q_near, self._lower, self._upper)
             seed[j] = value
-            # The nearest solution first lets every joint move; the sweep then
-            # fixes the redundant joint at each value.
-            q = self._solve_from(goal, seed, None if i == 0 else j, budget)
-            if q is not None and self.collision_free(q, budget):
-                return q
+            out.append((seed, None if i == 0 else j))
+        return out
+
+    def attempt(
+        self, goal: pin.SE3, seed: FloatArray, fixed: int | None, budget: Budget
+    ) -> FloatArray | None:
+        """One start of :meth:`attempts`: a collision-free solution, or None."""
+        q = self._solve_from(goal, seed, fixed, budget)
+        if q is not None and self.collision_free(q, budget):
+            return q
         return None
 
     def collision_free(self, q: FloatArray, budget: Budget | None = None) -> bool:

@@ -16,39 +16,56 @@ finish in the budget counts as a miss, so the period grows.
 from __future__ import annotations
 
 import itertools
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch
-from cbp.executors.settings import MpSettings
+from cbp.executors.settings import MpSettings, PlannerSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.runtime import Scenario
+from cbp.sim.trajectory import time_parameterize
 from cbp.trace import Trace
 
-__all__ = ["MpPlanner", "run_mp"]
+__all__ = ["MpPlanner", "RrtConnect", "record_plan", "run_mp"]
 
 
-class MpPlanner:
-    """RRT-Connect from the start point to the IK goal, then simplification."""
+class RrtConnect:
+    """OMPL's RRT-Connect in the joint space, with the collision world's checks.
 
-    def __init__(self, scenario: Scenario, run: SimulatedRun, settings: MpSettings):
+    One plan is begun (:meth:`begin`), grown within budgets over one or several
+    calls (:meth:`grow`: the trees are kept between calls), and turned into a
+    checked, simplified and resampled path (:meth:`path`).
+
+    Args:
+        robot: the robot (fixed base, scalar joints).
+        search: the IK search whose collision checks are the validity checker.
+        settings: simplification, resolution, range and waypoint spacing.
+        seeded: seed OMPL's random numbers (reproducible runs: it takes effect
+            for the process's first planner only).
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        search: IkSearch,
+        settings: PlannerSettings,
+        seeded: bool = False,
+    ) -> None:
         """Build the state space over the joint limits and the validity checker."""
         import ompl.base as ob
         import ompl.geometric as og
         import ompl.util as ou
 
         ou.setLogLevel(ou.LogLevel.LOG_WARN)
-        if settings.timing.clock == "virtual":
-            # Reproducible sampling: OMPL seeds every sampler from this, if it is
-            # set before the process's first planner (one MP run per process).
+        if seeded:
             ou.RNG.setSeed(1)
         self.settings = settings
-        robot = scenario.robot
-        self.search = IkSearch(robot, run.ee_frame, run.world, settings.search)
+        self.search = search
         n = robot.nv
         self._space = ob.RealVectorStateSpace(n)
         bounds = ob.RealVectorBounds(n)
@@ -77,6 +94,8 @@ class MpPlanner:
         self._simplifier = og.PathSimplifier(self._si)
         self._start = self._space.allocState()
         self._goal_state = self._space.allocState()
+        self._setup: object = None
+        self._q_start = np.zeros(n)
 
     @property
     def check_step(self) -> float:
@@ -91,34 +110,10 @@ class MpPlanner:
         """
         self._si.setStateValidityChecker(_always_valid)
         self._valid = _always_valid
+        self._setup = None
 
-    def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
-    ) -> Plan:
-        """IK for the goal, then plan and simplify within the budget."""
-        if goal is None:
-            return Plan(None, 0, "no goal yet")
-        self._budget = budget
-        try:
-            return self._plan(q, goal, budget, run)
-        finally:
-            self._budget = None
-
-    def _plan(
-        self, q: FloatArray, goal: pin.SE3, budget: Budget, run: SimulatedRun
-    ) -> Plan:
-        s = self.settings
-        target = self.search.solution_for(goal, q, budget)
-        if target is None:
-            return Plan(None, 0, "no collision-free IK solution: the arm stops")
-        if np.max(np.abs(target - q)) < 1e-4:
-            return Plan(None, 0, "at the goal")
-        if np.max(np.abs(run.sim.trajectory.positions[-1] - target)) < 1e-9:
-            # The trajectory being followed already ends at this goal: replanning
-            # would only swap one random path for another.
-            return Plan(None, 0, "following the plan to this goal")
-        if not self.search.collision_free(q, budget):
-            return Plan(None, 0, "start in collision: no plan")
+    def begin(self, q: FloatArray, target: FloatArray) -> None:
+        """Start a new plan from ``q`` to ``target`` (both collision-free)."""
         og = self._og
         setup = og.SimpleSetup(self._si)
         for i in range(q.size):
@@ -126,34 +121,55 @@ class MpPlanner:
             self._goal_state[i] = float(target[i])
         setup.setStartAndGoalStates(self._start, self._goal_state)
         planner = og.RRTConnect(self._si)
-        if s.range > 0:
-            planner.setRange(s.range)
+        if self.settings.range > 0:
+            planner.setRange(self.settings.range)
         setup.setPlanner(planner)
-        checks = self.checks
-        left = budget.left()
-        solved = left > 0 and bool(
-            setup.solve(self._until(budget, left * (1.0 - s.simplify_fraction)))
-        )
-        if not solved or not setup.haveExactSolutionPath():
-            return Plan(None, self.checks - checks, "no plan in time", timed_out=True)
-        left = budget.left()
-        path = setup.getSolutionPath()
-        if left > 0:
-            if s.simplify == "full":
-                setup.simplifySolution(self._until(budget, left))
-                path = setup.getSolutionPath()
-            else:
-                self._simplifier.ropeShortcutPath(path)
-                self._simplifier.reduceVertices(path)
-        points = _resample(self._states(path, q), s.waypoint_step)
-        note = "planned"
-        # Resampled points fall between the states OMPL checked; where one of them
-        # touches, use OMPL's own interpolation instead: exactly the checked states.
-        if not all(self.search.collision_free(p, budget) for p in points[1:]):
-            path.interpolate()
-            points = self._states(path, q)
-            note = "planned (checked states only: a resampled point touched)"
-        return Plan(points, self.checks - checks, note)
+        self._setup = setup
+        self._q_start = q.copy()
+
+    def grow(self, budget: Budget, seconds: float) -> bool:
+        """Grow the trees for ``seconds`` more of ``budget``; True once solved."""
+        setup: Any = self._setup
+        if setup is None:
+            raise RuntimeError("RrtConnect.grow before begin")
+        self._budget = budget
+        try:
+            solved = seconds > 0 and bool(setup.solve(self._until(budget, seconds)))
+        finally:
+            self._budget = None
+        return solved and bool(setup.haveExactSolutionPath())
+
+    def path(self, budget: Budget) -> tuple[FloatArray, str]:
+        """The solved plan: simplified in what is left of ``budget``, resampled.
+
+        Returns:
+            The points (the first exactly the start) and a note.
+        """
+        setup: Any = self._setup
+        s = self.settings
+        q = self._q_start
+        self._budget = budget
+        try:
+            left = budget.left()
+            path = setup.getSolutionPath()
+            if left > 0:
+                if s.simplify == "full":
+                    setup.simplifySolution(self._until(budget, left))
+                    path = setup.getSolutionPath()
+                else:
+                    self._simplifier.ropeShortcutPath(path)
+                    self._simplifier.reduceVertices(path)
+            points = _resample(self._states(path, q), s.waypoint_step)
+            note = "planned"
+            # Resampled points fall between the states OMPL checked; where one
+            # touches, use OMPL's own interpolation: exactly the checked states.
+            if not all(self.search.collision_free(p, budget) for p in points[1:]):
+                path.interpolate()
+                points = self._states(path, q)
+                note = "planned (checked states only: a resampled point touched)"
+        finally:
+            self._budget = None
+        return points, note
 
     def _until(self, budget: Budget, seconds: float) -> object:
         """OMPL's termination condition: ``seconds`` more of ``budget`` used."""
@@ -171,6 +187,91 @@ class MpPlanner:
         )
         states[0] = q  # exactly the start point, for continuity
         return states
+
+
+class MpPlanner:
+    """RRT-Connect from the start point to the IK goal, then simplification."""
+
+    def __init__(self, scenario: Scenario, run: SimulatedRun, settings: MpSettings):
+        """The IK search and RRT-Connect on the run's collision world."""
+        self.settings = settings
+        self.search = IkSearch(scenario.robot, run.ee_frame, run.world, settings.search)
+        run.counters.update(plans=0.0, plan_path_length_rad=0.0, plan_duration_s=0.0)
+        # Reproducible sampling in virtual time (one MP run per process).
+        self.rrt = RrtConnect(
+            scenario.robot,
+            self.search,
+            settings,
+            seeded=settings.timing.clock == "virtual",
+        )
+
+    @property
+    def checks(self) -> int:
+        """Validity checks so far."""
+        return self.rrt.checks
+
+    @property
+    def check_step(self) -> float:
+        """Joint-space distance between the states OMPL checks along a motion [rad]."""
+        return self.rrt.check_step
+
+    def close(self) -> None:
+        """Release OMPL's reference to the validity checker."""
+        self.rrt.close()
+
+    def plan(
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
+    ) -> Plan:
+        """IK for the goal, then plan and simplify within the budget."""
+        if goal is None:
+            return Plan(None, 0, "no goal yet")
+        s = self.settings
+        target = self.search.solution_for(goal, q, budget)
+        if target is None:
+            return Plan(None, 0, "no collision-free IK solution: the arm stops")
+        if np.max(np.abs(target - q)) < 1e-4:
+            return Plan(None, 0, "at the goal")
+        if np.max(np.abs(run.sim.trajectory.positions[-1] - target)) < 1e-9:
+            # The trajectory being followed already ends at this goal: replanning
+            # would only swap one random path for another.
+            return Plan(None, 0, "following the plan to this goal")
+        if not self.search.collision_free(q, budget):
+            return Plan(None, 0, "start in collision: no plan")
+        checks = self.checks
+        self.rrt.begin(q, target)
+        if not self.rrt.grow(budget, budget.left() * (1.0 - s.simplify_fraction)):
+            return Plan(None, self.checks - checks, "no plan in time", timed_out=True)
+        points, note = self.rrt.path(budget)
+        timing = s.timing
+        record_plan(
+            run,
+            points,
+            self.search.robot.velocity_limits * timing.velocity_scale,
+            self.search.robot.acceleration_limits * timing.acceleration_scale,
+        )
+        return Plan(points, self.checks - checks, note)
+
+
+def record_plan(
+    run: SimulatedRun, points: FloatArray, vmax: FloatArray, amax: FloatArray
+) -> tuple[float, float]:
+    """Count a global plan in the run's metrics; return its length and duration.
+
+    ``plans``, ``plan_path_length_rad`` (joint-space length) and
+    ``plan_duration_s`` (timed from rest within ``vmax`` and ``amax``) add up
+    over the run.
+    """
+    zeros = np.zeros(points.shape[1])
+    timed = time_parameterize(points, 0.0, zeros, zeros, vmax, amax)
+    length = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+    duration = timed.end_time if timed is not None else float("nan")
+    counters = run.counters
+    counters["plans"] = counters.get("plans", 0.0) + 1
+    counters["plan_path_length_rad"] = (
+        counters.get("plan_path_length_rad", 0.0) + length
+    )
+    counters["plan_duration_s"] = counters.get("plan_duration_s", 0.0) + duration
+    return length, duration
 
 
 def _resample(vertices: FloatArray, step: float) -> FloatArray:

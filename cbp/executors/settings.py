@@ -12,11 +12,13 @@ from cbp.executors.clock import ClockKind, VirtualCosts
 __all__ = [
     "CatSettings",
     "ExecutorTiming",
+    "HybridSettings",
     "IkSearchSettings",
     "IkSettings",
     "JtSettings",
     "KinematicSettings",
     "MpSettings",
+    "PlannerSettings",
     "VelocitySettings",
 ]
 
@@ -163,13 +165,9 @@ class IkSettings:
 
 
 @dataclass(frozen=True, kw_only=True)
-class MpSettings:
-    """The ``method.mp:`` section: OMPL RRT-Connect to the IK goal."""
+class PlannerSettings:
+    """A global planner: IK for the goal, OMPL RRT-Connect to it (MP, hybrid)."""
 
-    timing: ExecutorTiming = field(
-        default_factory=lambda: ExecutorTiming(period=0.25, max_period=4.0)
-    )
-    """Command period (the paper: a nominal 4 Hz, adaptive), budget, limits."""
     search: IkSearchSettings = field(default_factory=IkSearchSettings)
     """The IK search for the goal configuration."""
     simplify_fraction: float = 0.3
@@ -197,6 +195,73 @@ class MpSettings:
             )
         require(self, "> 0", "check_resolution", "waypoint_step")
         require(self, ">= 0", "range")
+
+
+@dataclass(frozen=True, kw_only=True)
+class MpSettings(PlannerSettings):
+    """The ``method.mp:`` section: OMPL RRT-Connect to the IK goal."""
+
+    timing: ExecutorTiming = field(
+        default_factory=lambda: ExecutorTiming(period=0.25, max_period=4.0)
+    )
+    """Command period (the paper: a nominal 4 Hz, adaptive), budget, limits."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class HybridSettings:
+    """The ``method.hybrid:`` section: CAT, and a planner where CAT stalls.
+
+    CAT itself runs with the ``method.cat`` section (its timing is the loop's);
+    these settings say when CAT counts as stalled, how the planner searches,
+    and when control returns to CAT. ``scenarios/configs/hybrid.yaml`` sets
+    each one with its reason.
+    """
+
+    stall_time: float = 0.6
+    """CAT is stalled when, for this long [s], ..."""
+    stall_progress: float = 0.005
+    """... the goal error has shrunk by less than this [m, or rad weighted by
+    ``rotation_weight``] ..."""
+    stall_error: float = 0.02
+    """... while it is above this [m, same weighting] (a goal within it counts
+    as reached) ..."""
+    goal_still: float = 0.01
+    """... the goal has moved less than this [m, same weighting] ..."""
+    rotation_weight: float = 0.1
+    """(errors and goal motions are position [m] + this x rotation [rad]) ..."""
+    require_blocked: bool = True
+    """... and, when true, hard constraints other than the step limits
+    (contacts, joint limits) were active at CAT's last step: a goal out of
+    reach, where nothing blocks the arm, is not planned for."""
+    planning_budget: float = 1.5
+    """Time the planner may use for one goal, over as many command periods as
+    it takes (the arm holds meanwhile) [s of the loop's clock]."""
+    goal_moved: float = 0.05
+    """While planning or following a plan, a goal that moves more than this
+    from the one planned for [m, same weighting] returns control to CAT at the
+    next period."""
+    ik_seeds: int = 16
+    """Configurations the IK search starts from with every joint free: the
+    current one, the middle of the joint ranges, and seeded random ones (the
+    first collision-free solution is planned to; then the redundant joint is
+    swept around the current configuration)."""
+    seed: int = 0
+    """Seed of the random IK starts."""
+    planner: PlannerSettings = field(default_factory=PlannerSettings)
+    """IK search and RRT-Connect (the settings of ``method.mp`` minus timing)."""
+
+    def __post_init__(self) -> None:
+        """Positive times and thresholds."""
+        require(
+            self,
+            "> 0",
+            "stall_time",
+            "stall_error",
+            "planning_budget",
+            "goal_moved",
+        )
+        require(self, ">= 0", "stall_progress", "goal_still", "rotation_weight")
+        require(self, ">= 1", "ik_seeds")
 
 
 @dataclass(frozen=True, kw_only=True)

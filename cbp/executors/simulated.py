@@ -82,6 +82,7 @@ class SimulatedRun:
             one and there is no depth camera).
         events: (time, message) of everything that went wrong and was handled.
         periods: command periods, filled in by trajectory executors.
+        counters: numbers the executor counts (the trace's ``counters``).
     """
 
     def __init__(
@@ -110,6 +111,8 @@ class SimulatedRun:
         self.events: list[tuple[float, str]] = []
         self.faults = Faults(self.event)
         self.periods: list[PeriodRecord] = []
+        #: Numbers the executor counts over the run (into the trace's counters).
+        self.counters: dict[str, float] = {}
         self._goal = _Goal()
         self._goal_failing = False
         self._goal_space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
@@ -397,6 +400,7 @@ class SimulatedRun:
             periods=self.periods,
             events=self.events,
             aborted=self.faults.aborted,
+            counters=dict(self.counters),
         )
 
     @property

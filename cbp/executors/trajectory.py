@@ -50,12 +50,15 @@ class Plan:
         note: what ended the computation or why there is no path.
         timed_out: the planner ran out of time before it had a result (a miss:
             the period grows).
+        stop: brake along the current trajectory now (no path): the robot
+            comes to rest as soon as its limits allow (:func:`stopping_trajectory`).
     """
 
     path: FloatArray | None
     steps: int = 0
     note: str = ""
     timed_out: bool = False
+    stop: bool = False
 
 
 class Planner(Protocol):
@@ -122,7 +125,7 @@ def run_trajectory_executor(
                 failed = True
                 plan = Plan(None, 0, faults.fault(t, "planning", exc))
                 note = plan.note
-            if (failed or hold is not None) and i is not None:
+            if (failed or hold is not None or plan.stop) and i is not None:
                 new = stopping_trajectory(current, i, vmax, amax)
             compute = budget.elapsed()
             try:

@@ -1,0 +1,400 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The hybrid executor: CAT where it suffices, a planner where CAT stalls.
+
+CAT (:mod:`cbp.executors.cat`, with the scenario's ``method.cat`` settings)
+tracks the goal every command period. A stall detector watches what CAT
+reports: when, for ``stall_time``, the goal error (at the end of each period's
+path) has stopped shrinking while the goal stands (nearly) still and hard
+constraints other than the step limits hold the arm (contact rows, joint
+limits), CAT is stuck in a local minimum. Then, over as many command periods
+as it needs (the arm holds, at rest where CAT left it; the periods' budgets
+are the planner's, up to ``planning_budget`` for one goal):
+
+1. the IK search (:class:`~cbp.executors.ik_search.IkSearch`, sweeping the
+   redundant joint) looks for a collision-free configuration for the goal,
+   starting with all joints free from the current configuration, the middle
+   of the joint ranges and seeded random ones, then sweeping the redundant
+   joint around the current configuration (from a stuck configuration, a
+   random start converges to a collision-free solution about a third of the
+   time on the wrist-limit goal; the sweep, 1 in 30);
+2. OMPL's RRT-Connect (:class:`~cbp.executors.mp.RrtConnect`) plans to it in
+   the same collision world (with cameras: the same map, unseen space
+   included), from where the arm is at rest;
+3. the plan is simplified, resampled and handed to the trajectory loop, which
+   times it within the same limits as every executor and splices it in.
+
+While a plan runs, each period checks that the rest of it is still free in the
+current world and that the goal has not moved more than ``goal_moved`` from the
+one planned for; otherwise, and when the plan has been followed to its end,
+control returns to CAT at that period (CAT starts from the point the loop
+gives it, so the motion stays continuous). Where no configuration or no plan
+is found within the budget, an event says so and CAT's safe stop stays; the
+same goal is not planned for again until it moves.
+
+The metrics count ``plans`` (plans spliced in), ``planning_attempts`` (stalls
+that started a search), and the joint-space length [rad] and duration [s] of
+the plans (timed from rest).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.executors.cat import CatPlanner
+from cbp.executors.clock import Budget
+from cbp.executors.ik_search import IkSearch
+from cbp.executors.mp import RrtConnect, record_plan
+from cbp.executors.settings import CatSettings, HybridSettings
+from cbp.executors.simulated import SimulatedRun
+from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.robot import FloatArray
+from cbp.scenario.runtime import Scenario
+from cbp.trace import Trace
+
+__all__ = ["HybridPlanner", "StallDetector", "run_hybrid"]
+
+Mode = Literal["cat", "planning", "following"]
+
+#: Trajectory points looked back over for a contact-free plan start.
+MAX_BACKTRACK = 200
+
+
+@dataclass(frozen=True)
+class _Sample:
+    """One CAT period, as the stall detector sees it."""
+
+    t: float
+    error: float
+    goal: pin.SE3
+    blocked: bool
+
+
+class StallDetector:
+    """Decides from CAT's periods that it is stuck (see the module docstring).
+
+    Args:
+        settings: the hybrid's thresholds.
+    """
+
+    def __init__(self, settings: HybridSettings) -> None:
+        """No periods seen yet."""
+        self.settings = settings
+        self._samples: list[_Sample] = []
+
+    def distance(self, a: pin.SE3, b: pin.SE3) -> float:
+        """Position distance [m] + ``rotation_weight`` x angle [rad] of two poses."""
+        angle = float(np.linalg.norm(pin.log3(a.rotation.T.dot(b.rotation))))
+        return float(np.linalg.norm(a.translation - b.translation)) + (
+            self.settings.rotation_weight * angle
+        )
+
+    def reset(self) -> None:
+        """Forget the periods seen (after a plan, or when CAT moves on)."""
+        self._samples = []
+
+    def add(self, t: float, error: float, goal: pin.SE3, blocked: bool) -> bool:
+        """Record CAT's period at ``t``; True when CAT counts as stalled."""
+        s = self.settings
+        samples = self._samples
+        samples.append(_Sample(t, error, goal, blocked))
+        # Keep just over stall_time of periods.
+        while len(samples) > 2 and samples[1].t <= t - s.stall_time:
+            samples.pop(0)
+        first = samples[0]
+        if t - first.t < s.stall_time - 1e-9:
+            return False
+        if min(x.error for x in samples) <= s.stall_error:
+            return False  # reached (or nearly) at some point: not stuck
+        if first.error - error >= s.stall_progress:
+            return False  # still getting closer
+        if any(self.distance(x.goal, goal) > s.goal_still for x in samples):
+            return False  # the operator is moving the goal
+        return not s.require_blocked or blocked
+
+
+class HybridPlanner:
+    """CAT each period; after a stall, IK + RRT-Connect over several periods."""
+
+    def __init__(self, scenario: Scenario, run: SimulatedRun) -> None:
+        """CAT's planner, the stall detector, the IK search and RRT-Connect."""
+        spec = scenario.spec.method
+        self.settings = spec.settings(HybridSettings)
+        self.cat_settings = spec.settings(CatSettings)
+        self.cat = CatPlanner(scenario, self.cat_settings)
+        self.robot = scenario.robot
+        planner = self.settings.planner
+        self.search = IkSearch(self.robot, run.ee_frame, run.world, planner.search)
+        self.rrt = RrtConnect(
+            self.robot,
+            self.search,
+            planner,
+            seeded=self.cat_settings.timing.clock == "virtual",
+        )
+        self.detector = StallDetector(self.settings)
+        self.frame_id = self.robot.frame_id(run.ee_frame)
+        self._data = self.robot.model.createData()
+        self._rng = np.random.default_rng(self.settings.seed)
+        timing = self.cat_settings.timing
+        self._vmax = self.robot.velocity_limits * timing.velocity_scale
+        self._amax = self.robot.acceleration_limits * timing.acceleration_scale
+        self.mode: Mode = "cat"
+        self._planned_goal: pin.SE3 | None = None  # the goal last planned for
+        self._start: FloatArray | None = None  # where the plan starts (at rest)
+        self._attempts: list[tuple[FloatArray, int | None]] = []
+        self._from: FloatArray | None = None  # resting point to the plan's start
+        self._target: FloatArray | None = None
+        self._solved = False
+        self._spent = 0.0  # planning time used for this goal [s]
+        self._plan: FloatArray | None = None  # the plan being followed
+        run.counters.update(
+            plans=0.0,
+            planning_attempts=0.0,
+            plan_path_length_rad=0.0,
+            plan_duration_s=0.0,
+        )
+
+    def close(self) -> None:
+        """Release OMPL's reference to the validity checker."""
+        self.rrt.close()
+
+    # ------------------------------------------------------------------ the period
+
+    def plan(
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
+    ) -> Plan:
+        """This period's path: CAT's, the planner's, or none (a plan is running)."""
+        if goal is None:
+            return self.cat.plan(q, goal, budget, run)
+        t = run.sim.t
+        if self.mode != "cat" and self._goal_moved(goal):
+            run.event(
+                t,
+                f"hybrid: the goal moved more than {self.settings.goal_moved:g} from "
+                f"the one {'planned' if self.mode == 'following' else 'being planned'}"
+                " for; control returns to CAT",
+            )
+            self._to_cat()
+        if self.mode == "planning":
+            return self._planning(q, goal, budget, run)
+        if self.mode == "following":
+            plan = self._following(q, t, budget, run)
+            if plan is not None:
+                return plan
+        return self._tracking(q, goal, t, budget, run)
+
+    def _tracking(
+        self, q: FloatArray, goal: pin.SE3, t: float, budget: Budget, run: SimulatedRun
+    ) -> Plan:
+        """CAT's period, watched by the stall detector."""
+        plan = self.cat.plan(q, goal, budget, run)
+        end = plan.path[-1] if plan.path is not None else q
+        error = self.detector.distance(self._hand(end), goal)
+        stalled = self.detector.add(t, error, goal, bool(self.cat.blocked_by))
+        tried = self._planned_goal is not None and not self._goal_moved(goal)
+        if stalled and not tried:
+            blocked = ", ".join(sorted(self.cat.blocked_by)) or "nothing"
+            run.event(
+                t,
+                f"hybrid: CAT stalled {error * 1e3:.0f} mm (weighted) from the goal "
+                f"for {self.settings.stall_time:g} s, held by {blocked}; planning",
+            )
+            run.counters["planning_attempts"] += 1
+            self._begin_planning(end, goal)
+            # Brake now: the plan starts where the arm comes to rest.
+            return Plan(None, plan.steps, "hybrid: stalled, braking to plan", stop=True)
+        return plan
+
+    # ------------------------------------------------------------------ planning
+
+    def _begin_planning(self, start: FloatArray, goal: pin.SE3) -> None:
+        self.mode = "planning"
+        self._planned_goal = goal
+        self._start = None  # where the trajectory being followed comes to rest
+        robot = self.robot
+        lower, upper = robot.lower_limits, robot.upper_limits
+        seeds = [start.copy(), robot.middle()]
+        seeds += [
+            self._rng.uniform(lower, upper)
+            for _ in range(max(0, self.settings.ik_seeds - 2))
+        ]
+        # Every seed with all joints free first (from a stuck configuration a
+        # random start converges far more often than the sweep), then the
+        # redundant joint's sweep around the current configuration; one by one
+        # over the periods.
+        self._attempts = [(seed, None) for seed in seeds]
+        self._attempts += self.search.attempts(start)[1:]
+        self._target = None
+        self._from = None
+        self._solved = False
+        self._spent = 0.0
+
+    def _planning(
+        self, q: FloatArray, goal: pin.SE3, budget: Budget, run: SimulatedRun
+    ) -> Plan:
+        """One period of the search; the plan when it is ready and the arm at rest."""
+        t = run.sim.t
+        if self._start is None:
+            self._start = run.sim.trajectory.positions[-1].copy()
+        start = self._start
+        try:
+            if self._target is None:
+                self._search_configuration(goal, budget, run)
+            if self._target is not None and not self._solved:
+                left = budget.left() * (1.0 - self.settings.planner.simplify_fraction)
+                self._solved = self.rrt.grow(budget, left)
+            if self._solved and budget.left() > 0 and np.allclose(q, start, atol=1e-9):
+                points, note = self.rrt.path(budget)
+                assert self._from is not None
+                points = np.vstack([self._from[:-1], points])
+                return self._splice(points, note, t, run)
+        finally:
+            self._spent += budget.elapsed()
+        if self.mode == "planning" and self._spent > self.settings.planning_budget:
+            what = "configuration" if self._target is None else "plan"
+            run.event(
+                t,
+                f"hybrid: no collision-free {what} for the goal within "
+                f"{self.settings.planning_budget:g} s of planning; CAT keeps the arm "
+                "where it stopped",
+            )
+            self._to_cat()
+        return Plan(None, 0, "hybrid: planning, the arm holds")
+
+    def _search_configuration(
+        self, goal: pin.SE3, budget: Budget, run: SimulatedRun
+    ) -> None:
+        """Try the IK seeds in turn within ``budget``; begin RRT-Connect on success."""
+        assert self._start is not None
+        if self._from is None:
+            self._from = self._free_start(run, budget)
+            if self._from is None:
+                run.event(
+                    run.sim.t,
+                    "hybrid: the arm rests in contact and its way in is not free "
+                    "either; no plan from here",
+                )
+                self._to_cat()
+                return
+        while self._attempts and not budget.spent():
+            seed, fixed = self._attempts.pop(0)
+            target = self.search.attempt(goal, seed, fixed, budget)
+            if target is not None:
+                self._target = target
+                self.rrt.begin(self._from[-1], target)
+                return
+        if not self._attempts:
+            run.event(
+                run.sim.t,
+                "hybrid: no collision-free configuration reaches the goal (the IK "
+                "search found none from any seed); CAT keeps the arm where it stopped",
+            )
+            self._to_cat()
+
+    def _free_start(self, run: SimulatedRun, budget: Budget) -> FloatArray | None:
+        """The way from the resting point to where the plan may start.
+
+        OMPL needs a start free of contact; CAT may rest within the penetration
+        tolerance of an obstacle. Then the plan starts at the last free
+        configuration of the trajectory that brought the arm there, reached by
+        going back along it (CAT validated those steps).
+
+        Returns:
+            The configurations from the resting point to the plan's start (one
+            row when the resting point itself is free), or None.
+        """
+        assert self._start is not None
+        if self.search.collision_free(self._start, budget):
+            return self._start[None]
+        came = run.sim.trajectory.positions[::-1]
+        for k in range(1, min(len(came), MAX_BACKTRACK)):
+            if self.search.collision_free(came[k], budget):
+                return np.vstack([self._start[None], came[1 : k + 1]])
+        return None
+
+    def _splice(
+        self, points: FloatArray, note: str, t: float, run: SimulatedRun
+    ) -> Plan:
+        """Hand the plan to the loop; follow it from the next period."""
+        length, duration = record_plan(run, points, self._vmax, self._amax)
+        run.event(
+            t,
+            f"hybrid: {note}: {len(points)} points, {length:.2f} rad, "
+            f"{duration:.2f} s; following it",
+        )
+        self.mode = "following"
+        self._plan = points
+        return Plan(points, self.rrt.checks, f"hybrid: {note}")
+
+    # ------------------------------------------------------------------ following
+
+    def _following(
+        self, q: FloatArray, t: float, budget: Budget, run: SimulatedRun
+    ) -> Plan | None:
+        """Keep following the plan (no new path), or None to give CAT the period."""
+        assert self._plan is not None
+        trajectory = run.sim.trajectory
+        if not np.allclose(trajectory.positions[-1], self._plan[-1], atol=1e-9):
+            # The loop did not splice the plan (its period missed the deadline):
+            # hand it over again while the arm is still at its start.
+            if np.allclose(q, self._plan[0], atol=1e-9):
+                return Plan(self._plan, 0, "hybrid: plan handed over again")
+            run.event(t, "hybrid: the plan was not taken; control returns to CAT")
+            self._to_cat()
+            return None
+        if trajectory.end_time <= t + 1e-9:
+            run.event(t, "hybrid: plan followed to its end; control returns to CAT")
+            self._to_cat()
+            return None
+        # The rest of the plan must still be free in the world as it is now
+        # (with cameras the map may have grown).
+        ahead = np.linalg.norm(self._plan - q, axis=1)
+        rest = self._plan[int(np.argmin(ahead)) :]
+        for point in rest:
+            if not self.search.collision_free(point, budget):
+                run.event(
+                    t,
+                    "hybrid: the rest of the plan is no longer free; control "
+                    "returns to CAT",
+                )
+                self._to_cat()
+                return None
+        return Plan(None, 0, "hybrid: following the plan")
+
+    def _to_cat(self) -> None:
+        """Back to CAT tracking; the stall detector starts afresh.
+
+        The goal planned for is remembered: it is not planned for again until it
+        moves by more than ``goal_moved``.
+        """
+        self.mode = "cat"
+        self._plan = None
+        self._target = None
+        self._solved = False
+        self.detector.reset()
+
+    # ------------------------------------------------------------------ helpers
+
+    def _goal_moved(self, goal: pin.SE3) -> bool:
+        planned = self._planned_goal
+        return planned is not None and (
+            self.detector.distance(planned, goal) > self.settings.goal_moved
+        )
+
+    def _hand(self, q: FloatArray) -> pin.SE3:
+        pin.framesForwardKinematics(self.robot.model, self._data, q)
+        return self._data.oMf[self.frame_id].copy()
+
+
+def run_hybrid(scenario: Scenario, gui: bool = False) -> Trace:
+    """Run ``scenario`` with the hybrid executor; return the trace."""
+    timing = scenario.spec.method.settings(CatSettings).timing
+    run = SimulatedRun(scenario, "hybrid", gui, needs_world=True, clock=timing.clock)
+    planner = HybridPlanner(scenario, run)
+    try:
+        return run_trajectory_executor(run, planner, timing)
+    finally:
+        planner.close()

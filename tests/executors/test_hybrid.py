@@ -1,0 +1,125 @@
+"""The hybrid executor: CAT while it progresses, a plan where it stalls."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from cbp.executors import hybrid as hybrid_module
+from cbp.executors.cat import run_cat
+from cbp.executors.hybrid import StallDetector, run_hybrid
+from cbp.executors.settings import HybridSettings
+from cbp.metrics import run_metrics
+from cbp.scenario import load_scenario
+from tests.executors.test_cat import SCENARIOS
+
+PERIOD = 1.0 / 30.0
+
+
+def _pose(x: float, angle: float = 0.0) -> pin.SE3:
+    return pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, angle), np.array([x, 0.0, 0.3]))
+
+
+def _feed(detector: StallDetector, errors, goals=None, blocked=True) -> list[bool]:
+    goals = goals or [_pose(0.5)] * len(errors)
+    return [
+        detector.add(k * PERIOD, e, g, blocked)
+        for k, (e, g) in enumerate(zip(errors, goals, strict=True))
+    ]
+
+
+def test_a_constant_error_against_a_constraint_is_a_stall_after_stall_time() -> None:
+    settings = HybridSettings(stall_time=0.3)
+    out = _feed(StallDetector(settings), [0.2] * 20)
+    first = out.index(True)
+    assert first * PERIOD == pytest.approx(0.3, abs=PERIOD)
+    assert all(out[first:])
+
+
+@pytest.mark.parametrize(
+    ("case", "errors", "goals", "blocked"),
+    [
+        ("closing in", list(np.linspace(0.3, 0.1, 20)), None, True),
+        ("reached", [0.01] * 20, None, True),
+        ("nothing blocks", [0.2] * 20, None, False),
+        ("goal moving", [0.2] * 20, [_pose(0.5 + 0.01 * k) for k in range(20)], True),
+        ("goal turning", [0.2] * 20, [_pose(0.5, 0.02 * k) for k in range(20)], True),
+    ],
+)
+def test_no_stall_while_progress_is_made_or_the_goal_moves(
+    case, errors, goals, blocked
+) -> None:
+    out = _feed(StallDetector(HybridSettings(stall_time=0.3)), errors, goals, blocked)
+    assert not any(out), case
+
+
+def test_active_entries_name_the_rows_at_their_bounds() -> None:
+    scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
+    engine = scenario.make_engine()
+    q = scenario.q0.copy()
+    limits = scenario.robot.upper_limits
+    q[3] = limits[3] - 0.03  # the elbow at its limit (cat.yaml's margin: 0.03)
+    engine.plugin("hand").set_target(np.array([0.3, 0.0, 0.6]), np.eye(3))
+    engine.step(q, 0.02)
+    assert engine.problem is not None
+    active = engine.problem.active_entries(np.zeros(scenario.robot.nv))
+    assert "joint_limits" in active
+    assert "contact_normals" not in active  # no contact near the start
+
+
+@pytest.mark.slow
+def test_hybrid_goes_around_the_wall_where_cat_stalls() -> None:
+    scenario = load_scenario(SCENARIOS / "cat_local_minimum.yaml")
+    trace = run_hybrid(scenario)
+    m = run_metrics(trace, scenario.robot)
+    assert m["reached"], m
+    assert m["peak_contact_force_n"] == 0.0
+    assert m["plans"] == 1
+    assert m["max_joint_limit_violation_rad"] == 0.0
+    events = "\n".join(msg for _, msg in trace.events)
+    assert "held by contact_normals" in events
+    assert "plan followed to its end; control returns to CAT" in events
+
+
+@pytest.mark.slow
+def test_hybrid_does_not_plan_where_cat_suffices() -> None:
+    scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
+    hybrid = run_metrics(run_hybrid(scenario), scenario.robot)
+    cat = run_metrics(run_cat(scenario), scenario.robot)
+    assert hybrid["reached"]
+    assert hybrid["planning_attempts"] == 0
+    assert hybrid["plans"] == 0
+    assert hybrid["peak_contact_force_n"] == 0.0
+    assert hybrid["total_time_s"] <= 1.1 * cat["total_time_s"] + 0.1
+
+
+@pytest.mark.slow
+def test_control_returns_to_cat_within_a_period_of_the_goal_moving(
+    monkeypatch,
+) -> None:
+    """The planner never finishes; the goal moves 20 cm while it plans."""
+    monkeypatch.setattr(
+        hybrid_module.RrtConnect, "grow", lambda self, budget, seconds: False
+    )
+    scenario = load_scenario(
+        SCENARIOS / "cat_local_minimum.yaml",
+        overrides={
+            "duration": "5",
+            "method.hybrid.planning_budget": "10",
+            "goal.keyframes": "["
+            "{t: 0.5, pose: {position: [0.45, -0.25, 0.30], rpy_deg: [180, 0, 90]}},"
+            "{t: 1.5, pose: {position: [0.45, 0.25, 0.30], rpy_deg: [180, 0, 90]}},"
+            "{t: 3.5, pose: {position: [0.45, 0.25, 0.30], rpy_deg: [180, 0, 90]}},"
+            "{t: 4.5, pose: {position: [0.65, 0.25, 0.30], rpy_deg: [180, 0, 90]}}]",
+        },
+    )
+    trace = run_hybrid(scenario)
+    events = [(t, m) for t, m in trace.events if m.startswith("hybrid:")]
+    planning = next(t for t, m in events if "planning" in m)
+    assert planning < 3.5  # stalled behind the wall before the goal moved
+    returned = next(t for t, m in events if "goal moved" in m)
+    # The goal is 5 cm away from the one planned for at t = 3.75 s; it is
+    # sampled at 30 Hz and acted on at the next command period.
+    crossing = 3.5 + 0.05 / 0.2
+    assert crossing <= returned <= crossing + 2 * PERIOD + 1e-6
