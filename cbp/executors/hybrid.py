@@ -150,6 +150,8 @@ class HybridPlanner:
         self._solved = False
         self._spent = 0.0  # planning time used for this goal [s]
         self._plan: FloatArray | None = None  # the plan being followed
+        self._taken = False  # the loop spliced it in
+        self._note = ""
         run.counters.update(
             plans=0.0,
             planning_attempts=0.0,
@@ -246,10 +248,11 @@ class HybridPlanner:
             if self._target is not None and not self._solved:
                 left = budget.left() * (1.0 - self.settings.planner.simplify_fraction)
                 self._solved = self.rrt.grow(budget, left)
-            if self._solved and budget.left() > 0 and np.allclose(q, start, atol=1e-9):
+            lead = self._lead_in(q, start, run)
+            if self._solved and budget.left() > 0 and lead is not None:
                 points, note = self.rrt.path(budget)
                 assert self._from is not None
-                points = np.vstack([self._from[:-1], points])
+                points = np.vstack([lead[:-1], self._from[:-1], points])
                 return self._splice(points, note, t, run)
         finally:
             self._spent += budget.elapsed()
@@ -294,6 +297,26 @@ class HybridPlanner:
             )
             self._to_cat()
 
+    @staticmethod
+    def _lead_in(
+        q: FloatArray, start: FloatArray, run: SimulatedRun
+    ) -> FloatArray | None:
+        """The rest of the trajectory being followed, from ``q`` to ``start``.
+
+        The plan is spliced at the loop's starting point ``q`` without waiting
+        for the arm to come to rest: it first follows what is left of the
+        (validated, stopping) trajectory to where the plan begins. None when
+        ``q`` is not a point of that trajectory or it no longer ends at
+        ``start``.
+        """
+        positions = run.sim.trajectory.positions
+        if not np.array_equal(positions[-1], start):
+            return None
+        if np.array_equal(q, start):
+            return start[None]
+        match = np.flatnonzero(np.all(positions == q, axis=1))
+        return positions[match[-1] :] if match.size else None
+
     def _free_start(self, run: SimulatedRun, budget: Budget) -> FloatArray | None:
         """The way from the resting point to where the plan may start.
 
@@ -318,15 +341,11 @@ class HybridPlanner:
     def _splice(
         self, points: FloatArray, note: str, t: float, run: SimulatedRun
     ) -> Plan:
-        """Hand the plan to the loop; follow it from the next period."""
-        length, duration = record_plan(run, points, self._vmax, self._amax)
-        run.event(
-            t,
-            f"hybrid: {note}: {len(points)} points, {length:.2f} rad, "
-            f"{duration:.2f} s; following it",
-        )
+        """Hand the plan to the loop; from the next period, follow it."""
         self.mode = "following"
         self._plan = points
+        self._taken = False
+        self._note = note
         return Plan(points, self.rrt.checks, f"hybrid: {note}")
 
     # ------------------------------------------------------------------ following
@@ -337,14 +356,20 @@ class HybridPlanner:
         """Keep following the plan (no new path), or None to give CAT the period."""
         assert self._plan is not None
         trajectory = run.sim.trajectory
-        if not np.allclose(trajectory.positions[-1], self._plan[-1], atol=1e-9):
-            # The loop did not splice the plan (its period missed the deadline):
-            # hand it over again while the arm is still at its start.
-            if np.allclose(q, self._plan[0], atol=1e-9):
-                return Plan(self._plan, 0, "hybrid: plan handed over again")
-            run.event(t, "hybrid: the plan was not taken; control returns to CAT")
-            self._to_cat()
-            return None
+        if not self._taken:
+            if not np.array_equal(trajectory.positions[-1], self._plan[-1]):
+                # The loop did not splice the plan (a missed deadline, or it
+                # could not be timed from the arm's velocity): splice it again
+                # from where the arm is along its way in, next period.
+                self.mode = "planning"
+                return Plan(None, 0, "hybrid: plan not taken; trying again")
+            self._taken = True
+            length, duration = record_plan(run, self._plan, self._vmax, self._amax)
+            run.event(
+                t - self.cat_settings.timing.period,
+                f"hybrid: {self._note}: {len(self._plan)} points, {length:.2f} rad, "
+                f"{duration:.2f} s; following it",
+            )
         if trajectory.end_time <= t + 1e-9:
             run.event(t, "hybrid: plan followed to its end; control returns to CAT")
             self._to_cat()

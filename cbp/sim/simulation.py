@@ -60,6 +60,10 @@ class ContactSample:
     wrist_force: float = 0.0
 
 
+#: How much of the followed trajectory's past is kept [s].
+TRAJECTORY_HISTORY = 1.0
+
+
 class Simulation:
     """A PyBullet simulation of the robot among the scenario's objects.
 
@@ -163,8 +167,13 @@ class Simulation:
     # ------------------------------------------------------------------ control
 
     def follow(self, trajectory: JointTrajectory) -> None:
-        """Track ``trajectory`` with the joint impedance law from now on."""
-        self._trajectory = trajectory
+        """Track ``trajectory`` with the joint impedance law from now on.
+
+        Points older than :data:`TRAJECTORY_HISTORY` are dropped (executors
+        look back along the way the arm came, not further): the trajectory
+        stays bounded over a long run.
+        """
+        self._trajectory = trajectory.since(self.t - TRAJECTORY_HISTORY)
         self._torque = None
 
     @property

@@ -136,6 +136,22 @@ class JointTrajectory:
             self.accelerations[i],
         )
 
+    def since(self, t: float) -> JointTrajectory:
+        """This trajectory without the points before the segment containing ``t``.
+
+        The same motion from ``t`` on; a trajectory followed for hours keeps a
+        bounded number of points.
+        """
+        i = int(np.searchsorted(self.times, t, side="right")) - 1
+        if i <= 0:
+            return self
+        return JointTrajectory(
+            self.times[i:],
+            self.positions[i:],
+            self.velocities[i:],
+            self.accelerations[i:],
+        )
+
     def splice(self, new: JointTrajectory, tolerance: float = 1e-9) -> JointTrajectory:
         """This trajectory up to ``new``'s first point, then ``new``.
 
