@@ -18,7 +18,17 @@ import pytest
 from cbp.compare import ComparisonResult, compare
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
-METHODS = ("cat", "ik", "mp", "jt")
+METHODS = ("cat", "hybrid", "ik", "mp", "jt")
+SCENES = (
+    "free_step",
+    "free_continuous",
+    "boards",
+    "local_minimum",
+    "wrist_limit",
+    "unreachable",
+    "shelf_reach",
+    "shelf_retreat",
+)
 
 pytestmark = pytest.mark.slow
 
@@ -79,6 +89,26 @@ def test_wrist_limit(results: Any) -> None:
     assert reached["mp"]
 
 
+@pytest.mark.parametrize("scene", SCENES)
+def test_hybrid_reaches_what_mp_reaches_without_contact(
+    results: Any, scene: str
+) -> None:
+    """Hybrid reaches what MP reaches, without contact, planning only for CAT.
+
+    It plans only where CAT does not reach (issue 19).
+    """
+    r = results(scene)
+    hybrid, cat = r.metrics["hybrid"], r.metrics["cat"]
+    if r.metrics["mp"]["reached"]:
+        assert hybrid["reached"], hybrid
+    assert hybrid["peak_contact_force_n"] == 0.0
+    if cat["reached"]:
+        assert hybrid["plans"] == 0, hybrid
+        assert hybrid["planning_attempts"] == 0, hybrid
+    if scene in ("local_minimum", "wrist_limit"):
+        assert hybrid["plans"] >= 1
+
+
 def test_unreachable_goal(results: Any) -> None:
     """While the goal is out of reach, JT and CAT stay closer to it than MP and IK."""
     r = results("unreachable")
@@ -90,6 +120,7 @@ def test_unreachable_goal(results: Any) -> None:
     assert max(outside["jt"], outside["cat"]) < min(outside["mp"], outside["ik"]), (
         outside
     )
+    assert outside["hybrid"] == pytest.approx(outside["cat"], rel=0.1)
 
 
 def test_shelf_reach_all_reach_cat_without_contact(results: Any) -> None:
