@@ -93,6 +93,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     scenes.add_argument("--count", type=_positive_int, default=30)
     scenes.add_argument("--seed", type=int, default=0, help="first seed")
     scenes.add_argument("--out", type=Path, default=Path("out/scenes"))
+    robot = sub.add_parser("robot", help="bring your own robot")
+    robot_sub = robot.add_subparsers(dest="robot_command", required=True)
+    init = robot_sub.add_parser(
+        "init", help="write robot.yaml for a URDF arm, saying what it assumed"
+    )
+    init.add_argument("urdf", type=Path)
+    init.add_argument("--out", type=Path, required=True, help="the robot's folder")
+    init.add_argument("--name", default=None, help="default: the URDF's robot name")
+    init.add_argument(
+        "--end-effector", default=None, help="default: last link of the longest chain"
+    )
+    init.add_argument(
+        "--samples",
+        type=int,
+        default=2000,
+        help="configurations sampled for self-collision pairs (0: none)",
+    )
+    init.add_argument("--seed", type=int, default=0)
+    examples = sub.add_parser(
+        "examples", help="copy the example scenarios (and configs) out to edit"
+    )
+    examples.add_argument("out", type=Path, nargs="?", default=Path("cbp_examples"))
     sweep = sub.add_parser(
         "sweep",
         help="run a sweep file (scenes x methods x settings) on Ray or a process pool",
@@ -128,6 +150,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _bench(args.quick, args.out, args.results)
     if args.command == "check":
         return _check(args.scenarios)
+    if args.command == "robot":
+        return _robot_init(args)
+    if args.command == "examples":
+        return _examples(args.out)
     if args.command == "robot-pairs":
         return _robot_pairs(args.robot, args.samples, args.seed)
     if args.command == "scenes":
@@ -137,6 +163,51 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(path)
         return 0
     return _plugins()
+
+
+def _robot_init(args: argparse.Namespace) -> int:
+    from cbp.robot_init import describe_urdf, relative_urdf, write_robot_yaml
+
+    try:
+        setup = describe_urdf(
+            args.urdf,
+            name=args.name,
+            end_effector=args.end_effector,
+            samples=args.samples,
+            seed=args.seed,
+            urdf_entry=relative_urdf(args.urdf, args.out),
+        )
+    except CbpError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    path = write_robot_yaml(setup, args.out)
+    print(f"wrote {path}; assumed:")
+    for line in setup.assumptions:
+        print(f"  - {line}")
+    print(
+        f"use it as robot: {{name: {args.out}}} in a scenario "
+        "(include: cat for constraint-aware teleoperation)"
+    )
+    return 0
+
+
+def _examples(out: Path) -> int:
+    import shutil
+
+    from cbp.data import data_dir
+
+    if out.exists() and any(out.iterdir()):
+        print(f"{out} is not empty; choose a new folder", file=sys.stderr)
+        return 2
+    shutil.copytree(
+        data_dir("scenarios"), out, ignore=shutil.ignore_patterns("__pycache__")
+    )
+    names = sorted(p.name for p in out.glob("*.yaml"))
+    print(f"copied {len(names)} scenarios (and configs/, sweeps/) to {out}:")
+    for name in names:
+        print(f"  {name}")
+    print(f"run one with: cbp run {out / names[0]}" if names else "")
+    return 0
 
 
 def _positive_int(text: str) -> int:

@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
+from cbp.data import data_dir
 from cbp.errors import (
     ConfigError,
     FrameNotFoundError,
@@ -44,8 +45,9 @@ Approximation = Literal["hull", "capsule"]
 #: large as no bound at all.
 _UNBOUNDED = 1e300
 
-#: Where robot description folders are looked up, after ``CBP_ROBOT_PATH``.
-ROBOTS_DIR = Path(__file__).resolve().parent.parent / "robots"
+#: Where robot description folders are looked up, after ``CBP_ROBOT_PATH``:
+#: the robots that ship with cbp (:func:`cbp.data.data_dir`).
+ROBOTS_DIR = data_dir("robots")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -96,17 +98,21 @@ class RobotDescription:
     """Collision settings of the robot's links."""
 
 
-def find_robot_folder(name: str) -> Path:
+def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
     """Return the folder of robot ``name``: a path, or a name under the robot path.
 
-    The search path is ``CBP_ROBOT_PATH`` (os.pathsep-separated) then ``robots/``.
+    A path is taken relative to ``relative_to`` (a scenario's folder) when
+    given, else to the current folder. The search path is ``CBP_ROBOT_PATH``
+    (os.pathsep-separated) then the robots that ship with cbp.
 
     Raises:
         RobotNotFoundError: listing the robots available.
     """
-    direct = Path(name)
-    if (direct / "robot.yaml").is_file():
-        return direct
+    for direct in ([relative_to / name] if relative_to is not None else []) + [
+        Path(name)
+    ]:
+        if (direct / "robot.yaml").is_file():
+            return direct
     roots = [
         Path(p) for p in os.environ.get("CBP_ROBOT_PATH", "").split(os.pathsep) if p
     ]
@@ -260,12 +266,19 @@ class RobotModel:
         return cls(model, name=name, description=description, urdf_path=path, base=base)
 
     @classmethod
-    def load(cls, name: str, *, base: BaseType | None = None) -> RobotModel:
+    def load(
+        cls,
+        name: str,
+        *,
+        base: BaseType | None = None,
+        relative_to: Path | None = None,
+    ) -> RobotModel:
         """Load the robot folder ``name`` (see :func:`find_robot_folder`).
 
-        ``base`` defaults to the one robot.yaml names (``fixed`` if none).
+        ``base`` defaults to the one robot.yaml names (``fixed`` if none); a
+        path ``name`` is relative to ``relative_to`` when given.
         """
-        folder = find_robot_folder(name)
+        folder = find_robot_folder(name, relative_to)
         description = load_file(RobotDescription, folder / "robot.yaml")
         robot = cls.from_urdf(
             folder / description.urdf,
@@ -280,6 +293,16 @@ class RobotModel:
         return robot
 
     # ------------------------------------------------------------------ sizes and names
+
+    @property
+    def end_effector(self) -> str:
+        """The frame a goal task moves by default.
+
+        robot.yaml's ``end_effector``, else the model's last frame.
+        """
+        if self.description is not None:
+            return self.description.end_effector
+        return self.frame_names[-1]
 
     @property
     def nq(self) -> int:

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cbp.data import data_dir
 from cbp.errors import ScenarioError
 
 __all__ = ["generate_scene", "write_scenes"]
@@ -30,7 +31,7 @@ __all__ = ["generate_scene", "write_scenes"]
 REGION = ((0.3, -0.45), (0.75, 0.45))
 #: Hand orientation of every goal: pointing down, fingers across y.
 HAND_DOWN = [180.0, 0.0, 90.0]
-CAT_CONFIG = Path(__file__).resolve().parents[1] / "scenarios" / "configs" / "cat.yaml"
+CAT_CONFIG = data_dir("scenarios") / "configs" / "cat.yaml"
 
 
 def _object(rng: np.random.Generator, k: int) -> dict[str, Any]:

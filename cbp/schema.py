@@ -23,6 +23,7 @@ from typing import Any, Literal, TypeVar
 
 import yaml
 
+from cbp.data import config_path
 from cbp.errors import ConfigError, ScenarioError, suggestion
 from cbp.files import read_text
 
@@ -98,7 +99,9 @@ class Document:
     def resolve_includes(self, key: str = "include") -> list[Path]:
         """Merge the top-level keys of the files named by ``key`` into the root.
 
-        ``include: other.yaml`` (or a list of files), relative to this file. A key
+        ``include: other.yaml`` (or a list of files), relative to this file, or
+        the name of a configuration that ships with cbp (``include: cat``,
+        :func:`cbp.data.shipped_configs`) when no such file is there. A key
         this file sets itself is kept as it is; the others are taken from the
         included files, in order, and their problems are reported with the
         included file's name and line. Included files may include others.
@@ -132,6 +135,9 @@ class Document:
             return
         for name in [names] if isinstance(names, str) else names:
             target = (path.parent / name).resolve()
+            shipped = config_path(name)
+            if shipped is not None and not target.exists():
+                target = shipped.resolve()  # include: cat
             if target in merged or target == Path(self.path).resolve():
                 self.report(node, key, f"'{name}' is included twice (a cycle?)")
                 continue

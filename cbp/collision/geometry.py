@@ -261,14 +261,22 @@ class RobotGeometry:
         self.approximation: Approximation = approximation or (
             settings.approximation if settings else "hull"
         )
-        folder = robot.folder or robot.urdf_path.parent
         model = robot.model
-        geometry_model = pin.buildGeomFromUrdf(
-            model,
-            str(robot.urdf_path),
-            pin.GeometryType.COLLISION,
-            package_dirs=[str(folder)],
-        )
+        # package://name/... resolves under any of these: the robot's folder,
+        # the URDF's folder and the folders above it (a ROS package tree).
+        urdf_folder = robot.urdf_path.resolve().parent
+        folders = [robot.folder, urdf_folder, *list(urdf_folder.parents)[:3]]
+        try:
+            geometry_model = pin.buildGeomFromUrdf(
+                model,
+                str(robot.urdf_path),
+                pin.GeometryType.COLLISION,
+                package_dirs=[str(f) for f in folders if f is not None],
+            )
+        except (RuntimeError, ValueError) as exc:
+            raise ConfigError(
+                f"cannot read the collision geometry of {robot.urdf_path}: {exc}"
+            ) from None
         ignored_links = set(settings.ignore_links) if settings else set()
         links = {f.name for f in model.frames}
         for link in ignored_links - links:

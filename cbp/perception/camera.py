@@ -21,7 +21,7 @@ from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray, RobotModel
 from cbp.state import RobotState
 
-__all__ = ["DepthCamera", "DepthFrame"]
+__all__ = ["DepthCamera", "DepthFrame", "camera_parent"]
 
 
 @dataclass(frozen=True)
@@ -131,6 +131,15 @@ class DepthFrame:
         return rows, cols, depth
 
 
+def camera_parent(parent: str, robot: RobotModel) -> str:
+    """The frame a camera named ``parent`` is mounted on.
+
+    ``end_effector`` names the robot's end effector, so a configuration fits
+    any arm.
+    """
+    return robot.end_effector if parent == "end_effector" else parent
+
+
 class DepthCamera:
     """A camera rendering depth images of a PyBullet client: fixed or mounted.
 
@@ -166,7 +175,7 @@ class DepthCamera:
                     "parent",
                 )
             try:
-                self._frame = robot.frame_id(spec.parent)
+                self._frame = robot.frame_id(camera_parent(spec.parent, robot))
             except FrameNotFoundError as exc:
                 raise ConfigError(str(exc), "parent") from None
             self._view_list: list[float] = []

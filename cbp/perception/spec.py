@@ -36,7 +36,8 @@ class CameraSpec:
     up: Vec3 = (0.0, 0.0, 1.0)
     """The world direction that appears up in the image (fixed cameras)."""
     parent: str | None = None
-    """The robot frame a mounted camera is fixed to (for example ``panda_hand``)."""
+    """The robot frame a mounted camera is fixed to (for example ``panda_hand``;
+    ``end_effector``: the robot's end effector); None for a fixed camera."""
     offset: Pose = field(default_factory=lambda: Pose(position=(0.0, 0.0, 0.0)))
     """The optical frame in ``parent``'s frame (mounted cameras)."""
     width: int = 320

@@ -25,10 +25,12 @@ from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
 from cbp.expressions import check_over, compile_time_function, run_times
 from cbp.files import load_mesh
 from cbp.goals import GoalStream
+from cbp.perception.camera import camera_parent
 from cbp.plugin import Plugin, TakesInput
 from cbp.qp import Entry
 from cbp.registry import Registry
 from cbp.robot import FloatArray, RobotModel
+from cbp.robot_init import load_robot
 from cbp.scenario.runtime import Scenario, goal_receivers
 from cbp.scenario.spec import RobotSpec, ScenarioSpec
 from cbp.schema import INVALID, Document, join_path, mapping_items
@@ -79,7 +81,9 @@ def load_scenario(
     robot: RobotModel | None = None
     if robot_spec is not INVALID and robot_spec is not None:
         try:
-            robot = RobotModel.load(robot_spec.name, base=robot_spec.base)
+            robot = load_robot(
+                robot_spec.name, base=robot_spec.base, relative_to=path.parent
+            )
         except CbpError as exc:
             doc.report(_key_node(root, "robot", "name"), "robot.name", str(exc))
     entries: list[Entry] = []
@@ -196,10 +200,10 @@ def _check_cameras(
     key = "cameras" if spec.perception.cameras else "camera"
     node = _key_node(root, "perception", key)
     for i, camera in enumerate(spec.perception.all_cameras):
-        if camera.parent is None:
+        if camera.parent is None or spec.perception.source != "depth_camera":
             continue
         try:
-            robot.frame_id(camera.parent)
+            robot.frame_id(camera_parent(camera.parent, robot))
         except ConfigError as exc:
             item = node.value[i] if isinstance(node, yaml.SequenceNode) else node
             where = (

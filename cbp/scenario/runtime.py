@@ -141,8 +141,7 @@ class Scenario:
         task = self.goal_task()
         if task is not None:
             return task.goal_frame
-        description = self.robot.description
-        return description.end_effector if description else self.robot.frame_names[-1]
+        return self.robot.end_effector
 
 
 def goal_receivers(entries: list[Entry], name: str | None) -> list[Any]:

@@ -22,8 +22,9 @@ from cbp.state import RobotState
 class GoalPoseParams(PluginParams):
     """Parameters of :class:`GoalPoseTask`."""
 
-    frame: str
-    """Frame to move (a link or a frame of the URDF)."""
+    frame: str | None = None
+    """Frame to move (a link or a frame of the URDF); default: the robot's end
+    effector (``end_effector`` in robot.yaml)."""
     max_step_translation: float = 0.01
     """Largest translation asked for in one step [m]."""
     max_step_rotation: float = 0.05
@@ -71,7 +72,8 @@ class GoalPoseTask(Task[GoalPoseParams]):
     ) -> None:
         """Resolve the frame; take the initial target when one is given."""
         super().__init__(params, robot, name)
-        self.frame_id = located(robot.frame_id, params.frame, "frame")
+        self.frame = params.frame or robot.end_effector
+        self.frame_id = located(robot.frame_id, self.frame, "frame")
         self._target: pin.SE3 | None = None
         self._has_target = False
         # Compile the pose error (or load it from numba's cache) now, on arrays
@@ -125,8 +127,8 @@ class GoalPoseTask(Task[GoalPoseParams]):
 
     @property
     def goal_frame(self) -> str:
-        """The frame moved to the goal (``params.frame``)."""
-        return self.params.frame
+        """The frame moved to the goal (``params.frame`` or the end effector)."""
+        return self.frame
 
     def compute_value(self, state: RobotState) -> FloatArray:
         """Translation error then rotation vector, world frame."""

@@ -195,3 +195,44 @@ def test_a_camera_on_an_unknown_frame_is_refused_at_its_line(tmp_path) -> None:
     text = str(info.value)
     assert "line 9: perception.cameras[1].parent: no frame 'panda_hnd'" in text
     assert "panda_hand" in text
+
+
+def test_a_scenario_names_a_urdf_and_includes_cat_by_name(tmp_path) -> None:
+    """Any URDF arm with CAT's configuration: the goal frame is its end effector."""
+    import pybullet_data
+
+    urdf = Path(pybullet_data.getDataPath()) / "xarm" / "xarm6_robot.urdf"
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        f"name: xarm\ninclude: cat\nrobot: {{name: {urdf}}}\nduration: 1.0\n"
+        "goal: {type: keyframes, keyframes: [{t: 0, pose: {position: [0.3, 0, 0.3]}}]}\n"
+    )
+    scenario = load_scenario(path)
+    assert scenario.robot.nv == 6
+    assert scenario.ee_frame == "link6"  # the last link of the longest chain
+    assert scenario.goal_task() is not None
+    assert scenario.spec.method.name == "cat"
+
+
+def test_cbp_robot_init_writes_a_robot_folder_scenarios_can_use(tmp_path) -> None:
+    import pybullet_data
+
+    from tests.conftest import run_cbp
+
+    urdf = Path(pybullet_data.getDataPath()) / "xarm" / "xarm6_robot.urdf"
+    done = run_cbp(
+        "robot", "init", str(urdf), "--out", str(tmp_path / "arm"), "--samples", "50"
+    )
+    assert done.returncode == 0, done.stderr
+    assert "end effector: link6" in done.stdout
+    text = (tmp_path / "arm" / "robot.yaml").read_text()
+    assert "acceleration limits: 10.0 for every joint" in text  # said, in the file
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        "name: xarm\ninclude: cat\nrobot: {name: arm}\nduration: 1.0\n"
+        "goal: {type: keyframes, keyframes: [{t: 0, pose: {position: [0.3, 0, 0.3]}}]}\n"
+    )
+    scenario = load_scenario(path)  # the robot path is the scenario's
+    assert scenario.robot.name == "xarm6"
+    assert scenario.robot.description is not None
+    assert len(scenario.robot.description.collision.ignore_pairs) > 0

@@ -1,0 +1,130 @@
+"""The wheel works on its own: robots, configurations and examples ship in it.
+
+Builds the wheel, installs it (without dependencies: those of the test's own
+environment are put on the new environment's path) into a fresh virtual
+environment, and from a folder outside the checkout copies the examples out,
+runs one, includes a shipped configuration by name, and brings an arm by URDF.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import sysconfig
+import textwrap
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+pytestmark = pytest.mark.slow
+
+
+def _run(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
+    done = subprocess.run(
+        [str(a) for a in args], cwd=cwd, capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done
+
+
+@pytest.fixture(scope="module")
+def venv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A fresh environment with the wheel installed; dependencies borrowed."""
+    root = tmp_path_factory.mktemp("wheel")
+    _run(
+        sys.executable,
+        "-m",
+        "pip",
+        "wheel",
+        "--no-deps",
+        "-q",
+        "-w",
+        root / "dist",
+        ROOT,
+        cwd=root,
+    )
+    wheel = next((root / "dist").glob("cbp-*.whl"))
+    _run(sys.executable, "-m", "venv", root / "venv", cwd=root)
+    python = root / "venv" / "bin" / "python"
+    _run(python, "-m", "pip", "install", "-q", "--no-deps", wheel, cwd=root)
+    site = _run(
+        python,
+        "-c",
+        "import sysconfig; print(sysconfig.get_paths()['purelib'])",
+        cwd=root,
+    ).stdout.strip()
+    # The test environment's packages (and their .pth files: pinocchio's cmeel
+    # prefix), after the wheel's own: its installed cbp comes first.
+    borrowed = sysconfig.get_paths()["purelib"]
+    (Path(site) / "zz_borrowed.pth").write_text(
+        f"import site; site.addsitedir({borrowed!r})\n"
+    )
+    return root / "venv" / "bin"
+
+
+def test_the_installed_wheel_carries_its_data(venv: Path, tmp_path: Path) -> None:
+    where = _run(
+        venv / "python",
+        "-c",
+        "import cbp.data, cbp.robot; print(cbp.data.data_dir('robots')); "
+        "print(cbp.robot.ROBOTS_DIR)",
+        cwd=tmp_path,
+    ).stdout.split()
+    assert all("venv" in w and "_data" in w for w in where), where
+    assert str(ROOT) not in " ".join(where)
+
+
+def test_examples_run_from_outside_the_checkout(venv: Path, tmp_path: Path) -> None:
+    _run(venv / "cbp", "examples", "ex", cwd=tmp_path)
+    assert (tmp_path / "ex" / "panda_reach.yaml").is_file()
+    assert (tmp_path / "ex" / "configs" / "cat.yaml").is_file()
+    _run(venv / "cbp", "run", "ex/panda_reach.yaml", "--out", "out", cwd=tmp_path)
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert metrics["kinematic"]["reached"]
+
+
+def test_a_scenario_includes_cat_by_name_and_brings_a_urdf(
+    venv: Path, tmp_path: Path
+) -> None:
+    import pybullet_data
+
+    urdf = Path(pybullet_data.getDataPath()) / "xarm" / "xarm6_robot.urdf"
+    _run(
+        venv / "cbp",
+        "robot",
+        "init",
+        urdf,
+        "--out",
+        "arm",
+        "--samples",
+        "200",
+        cwd=tmp_path,
+    )
+    (tmp_path / "s.yaml").write_text(
+        textwrap.dedent(
+            """\
+            name: xarm_post
+            include: cat
+            robot: {name: arm}
+            duration: 3.0
+            goal:
+              type: keyframes
+              keyframes:
+                - {t: 0.3, pose: {position: [0.35, -0.25, 0.25], rpy_deg: [180, 0, 0]}}
+                - {t: 1.0, pose: {position: [0.35, 0.25, 0.25], rpy_deg: [180, 0, 0]}}
+            world:
+              objects:
+                - {name: post, shape: cylinder, size: [0.04, 0.3], pose: {position: [0.45, 0.0, 0.15]}}
+            """
+        )
+    )
+    sub = tmp_path / "elsewhere"
+    sub.mkdir()
+    # Run from another folder: the robot path is the scenario's.
+    _run(venv / "cbp", "run", "../s.yaml", "--out", "out", cwd=sub)
+    metrics = json.loads((sub / "out" / "metrics.json").read_text())["cat"]
+    assert metrics["peak_contact_force_n"] == 0.0
+    assert metrics["final_position_error_m"] < 0.02
