@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import itertools
+import logging
 import sys
 import typing
 from collections.abc import Sequence
@@ -27,6 +28,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             "was aborted after repeated faults (its outputs are written, the "
             "reason is in metrics.json); 130 interrupted."
         ),
+    )
+    noise = parser.add_mutually_exclusive_group()
+    noise.add_argument(
+        "-q", "--quiet", action="store_true", help="log errors only (no warnings)"
+    )
+    noise.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="also every event of a run as it happens (logging at INFO)",
     )
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario headless and write its outputs")
@@ -134,6 +145,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="ray, a process pool, or ray if installed (auto)",
     )
     args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.ERROR
+        if args.quiet
+        else logging.INFO
+        if args.verbose
+        else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
     if args.command == "sweep":
         return _sweep(args.sweep, args.out, args.workers, args.address, args.backend)
     if args.command == "run":

@@ -92,9 +92,12 @@ class Document:
         self.problems.append(f"{line}{where or '<document>'}: {message}")
 
     def raise_if_problems(self) -> None:
-        """Raise one ScenarioError that lists every problem recorded."""
+        """Raise one ScenarioError that lists every problem recorded, once each.
+
+        A node read by two passes reports its problem once.
+        """
         if self.problems:
-            raise ScenarioError(self.path, self.problems)
+            raise ScenarioError(self.path, list(dict.fromkeys(self.problems)))
 
     def resolve_includes(self, key: str = "include") -> list[Path]:
         """Merge the top-level keys of the files named by ``key`` into the root.

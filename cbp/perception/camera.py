@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-import pybullet as pb
 
 from cbp.errors import ConfigError, FrameNotFoundError
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray, RobotModel
+from cbp.sim.bullet import pb
 from cbp.state import RobotState
 
 __all__ = ["DepthCamera", "DepthFrame", "camera_parent"]

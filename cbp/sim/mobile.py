@@ -17,9 +17,9 @@ import math
 from pathlib import Path
 
 import numpy as np
-import pybullet as pb
 
 from cbp.robot import FloatArray, RobotModel
+from cbp.sim.bullet import pb
 from cbp.sim.scene import PybulletScene
 from cbp.sim.settings import ObjectSpec, SimulationSettings
 

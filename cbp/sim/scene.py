@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import pybullet as pb
 
 from cbp.robot import FloatArray, RobotModel
+from cbp.sim.bullet import pb
 from cbp.sim.settings import ObjectSpec
 
 __all__ = ["PybulletScene"]

@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import pybullet as pb
 
 from cbp.robot import FloatArray, RobotModel
+from cbp.sim.bullet import pb
 from cbp.sim.recorder import Recorder
 from cbp.sim.scene import PybulletScene
 from cbp.sim.settings import ObjectSpec, SimulationSettings

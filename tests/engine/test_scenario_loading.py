@@ -236,3 +236,19 @@ def test_cbp_robot_init_writes_a_robot_folder_scenarios_can_use(tmp_path) -> Non
     assert scenario.robot.name == "xarm6"
     assert scenario.robot.description is not None
     assert len(scenario.robot.description.collision.ignore_pairs) > 0
+
+
+def test_cbp_prints_no_pybullet_banner_and_each_problem_once(tmp_path) -> None:
+    from tests.conftest import run_cbp
+
+    path = tmp_path / "dup.yaml"
+    path.write_text("name: a\nname: b\nrobot: {name: franka_panda}\nduration: 1\n")
+    done = run_cbp("-q", "check", str(path))
+    assert done.returncode == 2
+    assert done.stderr.count("duplicate key") == 1, done.stderr
+    assert "pybullet build time" not in done.stdout + done.stderr
+    boards = Path(__file__).resolve().parents[2] / "scenarios" / "cat_boards.yaml"
+    done = run_cbp(
+        "run", str(boards), "--set", "duration=0.2", "--out", str(tmp_path / "o")
+    )
+    assert "pybullet build time" not in done.stdout + done.stderr
