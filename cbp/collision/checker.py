@@ -58,9 +58,12 @@ class FreeSpaceChecker:
             geometry_model.addGeometryObject(
                 pin.GeometryObject(f"environment/{name}", 0, 0, placement, obstacle)
             )
+        allowed = environment.allowed_contacts()
         for i in range(n):
-            for j in range(n, n + len(obstacles)):
-                geometry_model.addCollisionPair(pin.CollisionPair(i, j))
+            link = geometry.shapes[i].link
+            for k in range(len(obstacles)):
+                if link not in allowed[k]:  # wanted contact is not checked
+                    geometry_model.addCollisionPair(pin.CollisionPair(i, n + k))
         if self_collision:
             for i, j in geometry.self_pairs:
                 geometry_model.addCollisionPair(pin.CollisionPair(i, j))

@@ -93,6 +93,10 @@ class Environment(abc.ABC):
         For yes-or-no checks (:class:`~cbp.collision.checker.FreeSpaceChecker`).
         """
 
+    def allowed_contacts(self) -> list[frozenset[str]]:
+        """Per collision object, the robot links that may touch it (none here)."""
+        return [frozenset()] * len(self.collision_objects())
+
     #: True when :meth:`collision_objects` holds only the obstacles' surfaces
     #: (a map's shell of cells next to open space): a shape wholly inside an
     #: obstacle then touches none of them, and checks ask :meth:`inside` too.

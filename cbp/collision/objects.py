@@ -37,6 +37,7 @@ class EnvironmentObject:
         placement: world placement of the shape's frame.
         lower: world AABB lower corner, (3,).
         upper: world AABB upper corner, (3,).
+        allow_contact: robot links that may touch it (left out of its checks).
     """
 
     name: str
@@ -44,6 +45,7 @@ class EnvironmentObject:
     placement: pin.SE3
     lower: FloatArray
     upper: FloatArray
+    allow_contact: frozenset[str] = frozenset()
 
     @classmethod
     def make(
@@ -167,6 +169,8 @@ class PrimitiveEnvironment(Environment):
             shape_index[:count].tolist(), object_index[:count].tolist(), strict=True
         ):
             obj = self.objects[k]
+            if obj.allow_contact and robot.shapes[i].link in obj.allow_contact:
+                continue  # wanted contact
             d, point, other, normal = signed_distance(
                 obj.shape,
                 obj.placement,
@@ -185,6 +189,10 @@ class PrimitiveEnvironment(Environment):
     def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
         """Every declared object."""
         return [(o.name, o.shape, o.placement) for o in self.objects]
+
+    def allowed_contacts(self) -> list[frozenset[str]]:
+        """Per collision object, the robot links that may touch it."""
+        return [o.allow_contact for o in self.objects]
 
     def _near_robot(
         self, centres: FloatArray, radii: FloatArray, margin: float

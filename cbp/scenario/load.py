@@ -99,6 +99,7 @@ def load_scenario(
         q0 = _initial_configuration(doc, robot_spec, robot, root)
         if spec is not INVALID:
             _check_meshes(doc, spec, root, path.parent)
+            _check_allowed_contact(doc, spec, robot, root)
             _check_goal(doc, spec, entries, root, path.parent)
             _check_inputs(doc, spec, entries, root)
             _check_cameras(doc, spec, robot, root)
@@ -151,6 +152,8 @@ def _check_initial_contact(doc: Document, scenario: Scenario, root: yaml.Node) -
     for shape, centre, radius in zip(geometry.shapes, centres, radii, strict=True):
         placement = shape.world_placement(state)
         for obj in objects:
+            if shape.link in obj.allow_contact:
+                continue  # wanted contact
             apart = np.any(centre + radius < obj.lower) or np.any(
                 centre - radius > obj.upper
             )
@@ -191,6 +194,25 @@ def _check_meshes(
                 join_path(join_path("world.objects", i), "file"),
                 exc.message,
             )
+
+
+def _check_allowed_contact(
+    doc: Document, spec: ScenarioSpec, robot: RobotModel, root: yaml.Node
+) -> None:
+    """``allow_contact`` names links of the robot."""
+    node = _key_node(root, "world", "objects")
+    links = set(robot.frame_names)
+    for i, obj in enumerate(spec.world.objects):
+        for link in obj.allow_contact:
+            if link not in links:
+                item = node.value[i] if isinstance(node, yaml.SequenceNode) else None
+                at = _key_node(item, "allow_contact") if item is not None else None
+                doc.report(
+                    at or node,
+                    join_path(join_path("world.objects", i), "allow_contact"),
+                    f"no link '{link}' in robot '{robot.name}'"
+                    f"{suggestion(link, sorted(links))}",
+                )
 
 
 def _check_cameras(

@@ -9,6 +9,7 @@ world, the goal stream and the operator inputs.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -65,20 +66,21 @@ class Scenario:
                 continue
             placement = obj.placement_at(t)
             if obj.shape == "mesh":
-                objects.append(
-                    EnvironmentObject.mesh(
-                        obj.name,
-                        self.path.parent / obj.file,
-                        np.asarray(obj.scale),
-                        placement,
-                    )
+                made = EnvironmentObject.mesh(
+                    obj.name,
+                    self.path.parent / obj.file,
+                    np.asarray(obj.scale),
+                    placement,
                 )
             else:
-                objects.append(
-                    EnvironmentObject.primitive(
-                        obj.name, obj.shape, obj.size, placement
-                    )
+                made = EnvironmentObject.primitive(
+                    obj.name, obj.shape, obj.size, placement
                 )
+            if obj.allow_contact:
+                made = dataclasses.replace(
+                    made, allow_contact=frozenset(obj.allow_contact)
+                )
+            objects.append(made)
         return objects
 
     def collision_world(self) -> CollisionWorld:

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -75,6 +75,10 @@ class ObjectSpec:
     appears then (for an obstacle that cameras must discover during a run)."""
     motion: ObjectMotion | None = None
     """A straight-line motion during the run; none: it stays at ``pose``."""
+    allow_contact: list[str] = field(default_factory=list)
+    """Robot links that may touch this object (wanted contact: a gripper on what
+    it grasps or pushes): their pairs with it are left out of the contact
+    constraints, step validation and the planners' checks (declared objects)."""
 
     @property
     def dynamic(self) -> bool:
