@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DEV_STAMP := $(VENV)/.installed-dev
 OUT ?= out/demo
 
-.PHONY: demo test test-slow test-all lint bench fuzz clean
+.PHONY: demo test test-slow test-all lint bench fuzz browser clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	touch $@
 
 $(DEV_STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e ".[dev,bench,sweep]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,bench,sweep,viewer]"
 	touch $@ $(STAMP)
 
 demo: $(STAMP)
@@ -32,7 +32,16 @@ lint: $(DEV_STAMP)
 test: lint
 	$(BIN)/python -m pytest -m "not slow" -q
 
-test-slow: $(DEV_STAMP)
+# The replay page is tested in a real browser: Debian's Chromium and its driver
+# (installed here when missing and apt-get is allowed).
+browser:
+	@command -v chromium >/dev/null && command -v chromedriver >/dev/null || \
+		apt-get install -y -q chromium chromium-driver >/dev/null 2>&1 || \
+		(apt-get update -q >/dev/null 2>&1 && \
+		 apt-get install -y -q chromium chromium-driver >/dev/null 2>&1) || \
+		echo "install chromium and chromium-driver for the viewer's browser test"
+
+test-slow: $(DEV_STAMP) browser
 	$(BIN)/python -m pytest -m slow -q
 
 test-all: lint

@@ -122,6 +122,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="configurations sampled for self-collision pairs (0: none)",
     )
     init.add_argument("--seed", type=int, default=0)
+    view = sub.add_parser(
+        "view", help="replay a finished run (or a comparison) in the browser"
+    )
+    view.add_argument("out", type=Path, help="the run's output folder")
+    view.add_argument("--port", type=int, default=8080)
+    view.add_argument(
+        "--export", type=Path, default=None, help="write a .viser recording instead"
+    )
     examples = sub.add_parser(
         "examples", help="copy the example scenarios (and configs) out to edit"
     )
@@ -171,6 +179,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _check(args.scenarios)
     if args.command == "robot":
         return _robot_init(args)
+    if args.command == "view":
+        from cbp.viewer import serve
+
+        try:
+            return serve(args.out, args.port, args.export)
+        except CbpError as exc:
+            print(exc, file=sys.stderr)
+            return 2
     if args.command == "examples":
         return _examples(args.out)
     if args.command == "robot-pairs":

@@ -23,12 +23,32 @@ from cbp.metrics import run_metrics
 from cbp.plots import plot_runs
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
+from cbp.schema import to_plain
 from cbp.trace import Trace
 
 __all__ = ["summary_line", "write_outputs"]
 
 #: Events listed in report.md per method (all of them are in metrics.json).
 REPORT_EVENTS = 50
+#: What a replay needs to draw the run (:func:`scene_description`).
+SCENE_FILE = "scene.json"
+
+
+def scene_description(scenario: Scenario) -> dict[str, Any]:
+    """The robot and the objects of ``scenario``, for drawing a replay.
+
+    The URDF (absolute path) with the joints robot.yaml locks, and the declared
+    objects as written (shape, size, pose, appearance and motion).
+    """
+    robot = scenario.robot
+    description = robot.description
+    return {
+        "scenario": scenario.spec.name,
+        "urdf": str(robot.urdf_path.resolve()) if robot.urdf_path else None,
+        "locked_joints": dict(description.locked_joints) if description else {},
+        "objects": [to_plain(o) for o in scenario.spec.world.objects],
+        "folder": str(scenario.path.parent.resolve()),
+    }
 
 
 def write_outputs(
@@ -41,7 +61,8 @@ def write_outputs(
 
     ``trace.csv`` (``trace_<method>.csv`` when there are several methods),
     ``metrics.json`` (one object per method under its name, with its events),
-    the figures of :func:`cbp.plots.plot_runs`, ``report.md``, and copies of
+    the figures of :func:`cbp.plots.plot_runs`, ``report.md``, ``scene.json``
+    (:func:`scene_description`, for ``cbp view``), and copies of
     ``extra_files`` (by name in the folder). They are written into a folder
     beside ``out`` and put in its place when complete
     (:func:`cbp.files.publish_folder`): an earlier output there is replaced as
@@ -57,6 +78,7 @@ def write_outputs(
     staging = staging_folder(out)
     try:
         metrics = _write(scenario, traces, staging)
+        (staging / SCENE_FILE).write_text(json.dumps(scene_description(scenario)))
         for name, source in (extra_files or {}).items():
             shutil.copyfile(source, staging / name)
     except BaseException:

@@ -1,0 +1,119 @@
+"""``cbp view``: a finished comparison replayed in a real browser (Chromium).
+
+The replay is served in this process; headless Chromium (Debian's ``chromium``
+and ``chromium-driver``, through selenium) opens the page. The test waits for
+the browser to connect and draw, scrubs the timeline, and checks the robots
+and the readout follow; it also writes a .viser recording.
+"""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cbp.compare import compare
+
+ROOT = Path(__file__).resolve().parents[1]
+
+pytestmark = pytest.mark.slow
+
+viser = pytest.importorskip("viser", reason="the viewer extra is not installed")
+webdriver = pytest.importorskip("selenium.webdriver")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def comparison(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("view") / "boards"
+    compare(
+        ROOT / "scenarios" / "cat_boards.yaml",
+        ["cat", "ik"],
+        out,
+        overrides={"duration": "1.5"},
+    )
+    return out
+
+
+def _browser():
+    chromium = shutil.which("chromium")
+    driver = shutil.which("chromedriver")
+    if chromium is None or driver is None:
+        pytest.fail(
+            "Chromium is needed: apt-get install chromium chromium-driver "
+            "(make test-slow installs them)"
+        )
+    options = webdriver.ChromeOptions()
+    options.binary_location = chromium
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-dev-shm-usage",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+    ):
+        options.add_argument(flag)
+    service = webdriver.ChromeService(executable_path=driver)
+    return webdriver.Chrome(options=options, service=service)
+
+
+def test_the_replay_page_opens_and_follows_the_timeline(comparison: Path) -> None:
+    from selenium.webdriver.common.by import By
+
+    from cbp.viewer import Replay
+
+    replay = Replay(comparison, port=_free_port())
+    serving = threading.Thread(target=replay.run, daemon=True)
+    serving.start()
+    browser = _browser()
+    try:
+        browser.get(replay.url)
+        deadline = time.monotonic() + 60
+        while not replay.server.get_clients() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert replay.server.get_clients(), "the browser never connected"
+        while time.monotonic() < deadline:
+            canvases = browser.find_elements(By.TAG_NAME, "canvas")
+            if canvases and "time [s]" in browser.page_source:
+                break
+            time.sleep(0.2)
+        assert browser.find_elements(By.TAG_NAME, "canvas"), "nothing drawn"
+        assert "time [s]" in browser.page_source
+        # Both methods' robots are in the scene; scrubbing moves them.
+        cat = next(r for r in replay._robots if r[0].method == "cat")
+        before = cat[1]._urdf.cfg.copy()
+        replay.time.value = 1.2
+        time.sleep(0.5)
+        assert "t = 1.200 s" in replay.readout.content
+        assert "**cat**" in replay.readout.content
+        assert "**ik**" in replay.readout.content
+        assert not np.allclose(cat[1]._urdf.cfg, before)
+        # The readout reaches the page too.
+        deadline = time.monotonic() + 10
+        while "t = 1.200 s" not in browser.page_source and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert "t = 1.200 s" in browser.page_source
+    finally:
+        browser.quit()
+        replay.close()
+
+
+def test_a_replay_exports_a_recording(comparison: Path, tmp_path: Path) -> None:
+    from cbp.viewer import Replay
+
+    replay = Replay(comparison, port=_free_port())
+    try:
+        path = replay.export(tmp_path / "boards.viser", rate=10.0)
+    finally:
+        replay.close()
+    assert path.stat().st_size > 10_000
