@@ -238,6 +238,9 @@ class Document:
         return _build(self, tp, node, where)
 
 
+#: Largest magnitude of a number in a file: beyond it, squares and products of
+#: positions, sizes and gains overflow.
+MAX_MAGNITUDE = 1e12
 #: Deepest nesting of lists and mappings accepted in a file.
 MAX_DEPTH = 64
 #: Most values in a file, counting each use of an alias as a copy of what it
@@ -504,9 +507,14 @@ def _check_scalar(doc: Document, tp: Any, value: Any, node: Node, where: str) ->
         return INVALID
     # bool is a subclass of int: a YAML `yes` must not pass as a number.
     if tp is float and isinstance(value, int | float) and not isinstance(value, bool):
-        if math.isfinite(value):
+        if math.isfinite(value) and abs(value) <= MAX_MAGNITUDE:
             return float(value)
-        doc.report(node, where, f"expected a finite number, got {value}")
+        doc.report(
+            node,
+            where,
+            f"expected a finite number of magnitude at most {MAX_MAGNITUDE:g}, "
+            f"got {value:g}",
+        )
         return INVALID
     if tp is int and isinstance(value, int) and not isinstance(value, bool):
         return value
