@@ -341,7 +341,7 @@ def _sweep(
             out or Path("out") / name,
             workers=workers,
             address=address,
-            progress=sys.stderr.isatty(),
+            progress=True,
             backend=backend,
         )
     except CbpError as exc:
@@ -366,7 +366,9 @@ def _compare(
 
     names = [m.strip() for m in methods.split(",") if m.strip()]
     try:
-        result = compare(path, names, out, jobs=jobs, overrides=overrides)
+        result = compare(
+            path, names, out, jobs=jobs, overrides=overrides, progress=True
+        )
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2

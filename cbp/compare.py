@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,6 +22,7 @@ import numpy as np
 from cbp.executors import COMPARABLE, executor_info
 from cbp.files import check_output_folder
 from cbp.goals import write_recorded
+from cbp.progress import Progress
 from cbp.scenario import Scenario, load_scenario
 from cbp.trace import Trace
 
@@ -76,6 +77,7 @@ def compare(
     *,
     jobs: int = 1,
     overrides: Mapping[str, str] | None = None,
+    progress: bool = False,
 ) -> ComparisonResult:
     """Run ``methods`` on the scenario at ``path``; write and return the results.
 
@@ -87,6 +89,8 @@ def compare(
             methods (CAT, IK, MP plan within wall-clock budgets) are slowed by
             sharing the cores: compare with ``jobs=1`` for timing figures.
         overrides: scenario values to replace (``--set``).
+        progress: show each finished method (a bar on a terminal, else a line
+            on standard error).
     """
     from cbp.report import write_outputs
 
@@ -109,14 +113,20 @@ def compare(
             )
             extra["goal.csv"] = recorded
         traces: dict[str, Trace] = {}
-        if jobs <= 1:
-            for method in methods:
-                traces[method] = _run_one(path, overrides, method)
-        else:
-            with ProcessPoolExecutor(max_workers=jobs) as pool:
-                futures = {
-                    m: pool.submit(_run_one, path, overrides, m) for m in methods
-                }
-                traces = {m: f.result() for m, f in futures.items()}
+        with Progress(len(methods), "compare", lines=progress) as bar:
+            if jobs <= 1:
+                for method in methods:
+                    traces[method] = _run_one(path, overrides, method)
+                    bar.advance(method, traces[method].aborted is not None)
+            else:
+                with ProcessPoolExecutor(max_workers=jobs) as pool:
+                    futures = {
+                        pool.submit(_run_one, path, overrides, m): m for m in methods
+                    }
+                    for future in as_completed(futures):
+                        method = futures[future]
+                        traces[method] = future.result()
+                        bar.advance(method, traces[method].aborted is not None)
+            traces = {m: traces[m] for m in methods}
         metrics = write_outputs(scenario, traces, out, extra)
     return ComparisonResult(out, traces, metrics)

@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cbp.progress import Progress
 from cbp.sweep.spec import RunSpec, expand, load_sweep
 from cbp.sweep.worker import execute_run, read_result
 
@@ -81,7 +82,8 @@ def run_sweep(
         out: its output folder (created).
         workers: CPUs for a local Ray instance or the pool (default: all).
         address: a Ray cluster to join (``ray start --head`` prints it).
-        progress: show a progress bar (runs done, failed, time left).
+        progress: show progress: a bar on a terminal (runs done, failed, time
+            left), else a line per finished run on standard error.
         backend: ``ray``, ``pool`` or ``auto`` (Ray if installed).
 
     Raises:
@@ -114,7 +116,7 @@ def run_sweep(
     if backend == "auto":
         backend = "ray" if _has_ray() or address else "pool"
     outcome.backend = "ray" if backend == "ray" else "process pool"
-    with _Progress(len(runs), outcome.skipped, progress) as bar:
+    with Progress(len(runs), "sweep", outcome.skipped, lines=progress) as bar:
 
         def done(run: RunSpec, record: dict[str, Any]) -> None:
             outcome.records[run.id] = record
@@ -124,7 +126,7 @@ def run_sweep(
                 failed_file.write_text(json.dumps(record, indent=2) + "\n")
             else:
                 failed_file.unlink(missing_ok=True)
-            bar.advance(record["status"] != "ok")
+            bar.advance(record.get("method", ""), record["status"] != "ok")
 
         try:
             if pending and backend == "ray":
@@ -251,48 +253,3 @@ def _run_pool(
                 raise
         queue = lost
     return 0.0
-
-
-class _Progress:
-    """A rich progress bar (runs done, failed, time left), or nothing."""
-
-    def __init__(self, total: int, done: int, show: bool) -> None:
-        self.show = show
-        self.failed = 0
-        self.total, self.done = total, done
-        self._bar: Any = None
-
-    def __enter__(self) -> _Progress:
-        if not self.show:
-            return self
-        try:
-            from rich.progress import (
-                BarColumn,
-                MofNCompleteColumn,
-                Progress,
-                TextColumn,
-                TimeRemainingColumn,
-            )
-        except ImportError:  # the sweep extra is not installed: no bar
-            return self
-        self._bar = Progress(
-            TextColumn("sweep"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("[red]{task.fields[failed]} failed"),
-            TimeRemainingColumn(),
-        )
-        self._bar.start()
-        self._task = self._bar.add_task(
-            "runs", total=self.total, completed=self.done, failed=0
-        )
-        return self
-
-    def advance(self, failed: bool) -> None:
-        self.failed += failed
-        if self._bar is not None:
-            self._bar.update(self._task, advance=1, failed=self.failed)
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            self._bar.stop()
