@@ -12,7 +12,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["config_path", "data_dir", "shipped_configs"]
+__all__ = ["config_path", "data_dir", "is_file", "shipped_configs"]
+
+
+def is_file(path: Path) -> bool:
+    """Whether ``path`` is a file; False also for names the OS refuses.
+
+    ``Path.is_file`` raises on a name too long for the file system (a fuzzed or
+    mistyped scenario value is one).
+    """
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -35,4 +48,4 @@ def config_path(name: str) -> Path | None:
     if "/" in name or "\\" in name or name.endswith((".yaml", ".yml")):
         return None
     path = data_dir("scenarios") / "configs" / f"{name}.yaml"
-    return path if path.is_file() else None
+    return path if is_file(path) else None

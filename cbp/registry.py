@@ -24,6 +24,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
+from cbp.data import is_file
 from cbp.errors import (
     ConfigError,
     PluginDefinitionError,
@@ -153,7 +154,7 @@ def _import_dotted(path: str, search_dirs: Iterable[Path]) -> object:
     module = None
     for folder in search_dirs:
         candidate = Path(folder) / (module_name.replace(".", "/") + ".py")
-        if candidate.is_file():
+        if is_file(candidate):
             module = _import_file(module_name, candidate)
             break
     if module is None:

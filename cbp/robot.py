@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from cbp.data import data_dir
+from cbp.data import data_dir, is_file
 from cbp.errors import (
     ConfigError,
     FrameNotFoundError,
@@ -111,14 +111,14 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
     for direct in ([relative_to / name] if relative_to is not None else []) + [
         Path(name)
     ]:
-        if (direct / "robot.yaml").is_file():
+        if is_file(direct / "robot.yaml"):
             return direct
     roots = [
         Path(p) for p in os.environ.get("CBP_ROBOT_PATH", "").split(os.pathsep) if p
     ]
     roots.append(ROBOTS_DIR)
     for root in roots:
-        if (root / name / "robot.yaml").is_file():
+        if is_file(root / name / "robot.yaml"):
             return root / name
     available = sorted(
         {
@@ -241,7 +241,7 @@ class RobotModel:
             description: the robot.yaml contents, when loading a robot folder.
         """
         path = Path(urdf)
-        if not path.is_file():
+        if not is_file(path):
             raise ConfigError(f"URDF file not found: {path}")
         try:
             if base == "fixed":

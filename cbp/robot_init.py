@@ -32,6 +32,7 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from cbp.data import is_file
 from cbp.errors import ConfigError, RobotNotFoundError
 from cbp.files import MAX_YAML_BYTES, check_file
 from cbp.robot import BaseType, RobotDescription, RobotModel
@@ -166,7 +167,7 @@ def load_robot(
     candidates = ([relative_to / name] if relative_to is not None else []) + [
         Path(name)
     ]
-    path = next((p for p in candidates if p.is_file()), None)
+    path = next((p for p in candidates if is_file(p)), None)
     if path is None:
         raise RobotNotFoundError(f"URDF file not found: {name}")
     setup = describe_urdf(path, samples=0)

@@ -23,7 +23,7 @@ from typing import Any, Literal, TypeVar
 
 import yaml
 
-from cbp.data import config_path
+from cbp.data import config_path, is_file
 from cbp.errors import ConfigError, ScenarioError, suggestion
 from cbp.files import read_text
 
@@ -139,7 +139,7 @@ class Document:
         for name in [names] if isinstance(names, str) else names:
             target = (path.parent / name).resolve()
             shipped = config_path(name)
-            if shipped is not None and not target.exists():
+            if shipped is not None and not is_file(target):
                 target = shipped.resolve()  # include: cat
             if target in merged or target == Path(self.path).resolve():
                 self.report(node, key, f"'{name}' is included twice (a cycle?)")
