@@ -122,6 +122,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="configurations sampled for self-collision pairs (0: none)",
     )
     init.add_argument("--seed", type=int, default=0)
+    init.add_argument(
+        "--home",
+        action="append",
+        default=[],
+        metavar="JOINT=VALUE",
+        help="home posture of a joint [rad or m] (default: mid-range)",
+    )
     view = sub.add_parser(
         "view", help="replay a finished run (or a comparison) in the browser"
     )
@@ -203,11 +210,20 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _robot_init(args: argparse.Namespace) -> int:
     from cbp.robot_init import describe_urdf, relative_urdf, write_robot_yaml
 
+    pairs = _overrides(args.home)
+    if pairs is None:
+        return 2
+    try:
+        home = {joint: float(value) for joint, value in pairs.items()}
+    except ValueError as exc:
+        print(f"--home: {exc}", file=sys.stderr)
+        return 2
     try:
         setup = describe_urdf(
             args.urdf,
             name=args.name,
             end_effector=args.end_effector,
+            home=home or None,
             samples=args.samples,
             seed=args.seed,
             urdf_entry=relative_urdf(args.urdf, args.out),
@@ -285,7 +301,7 @@ def _overrides(items: Sequence[str]) -> dict[str, str] | None:
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
-            print(f"--set expects KEY=VALUE, got {item!r}", file=sys.stderr)
+            print(f"expected KEY=VALUE, got {item!r}", file=sys.stderr)
             return None
         overrides[key.strip()] = value
     return overrides
@@ -318,7 +334,10 @@ def _run(
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
-    trace = executor(scenario, gui)
+    from cbp.progress import run_progress
+
+    with run_progress(f"{scenario.spec.name} ({name})"):
+        trace = executor(scenario, gui)
     try:
         metrics = write_outputs(scenario, {name: trace}, out)[name]
     except CbpError as exc:  # the folder changed during the run; outputs kept

@@ -1,7 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """Progress of long commands: a rich bar on a terminal, plain lines elsewhere.
 
-``cbp sweep`` and ``cbp compare`` report each finished run. Attached to a
+``cbp sweep`` and ``cbp compare`` report each finished run, and ``cbp run``
+the simulated time of its run (:func:`run_progress`, which executors feed with
+:func:`report_time`). Attached to a
 terminal (and with ``rich``, from the sweep extra, installed) a bar shows runs
 done, failures and the time left; otherwise, when asked, one line per finished
 run goes to standard error, which logs and CI keep readably.
@@ -11,9 +13,12 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import Any
 
-__all__ = ["Progress"]
+__all__ = ["Progress", "report_time", "run_progress"]
 
 
 class Progress:
@@ -82,3 +87,59 @@ class Progress:
         """Stop the bar."""
         if self._bar is not None:
             self._bar.stop()
+
+
+#: Receives (simulated time, duration) as a run advances; set by a command.
+_RUN_PROGRESS: ContextVar[Callable[[float, float], None] | None] = ContextVar(
+    "cbp_run_progress", default=None
+)
+
+
+def report_time(t: float, duration: float) -> None:
+    """An executor's run has reached ``t`` of ``duration`` [s] (cheap when unused)."""
+    callback = _RUN_PROGRESS.get()
+    if callback is not None:
+        callback(t, duration)
+
+
+@contextmanager
+def run_progress(label: str) -> Iterator[None]:
+    """Show the progress of the runs inside.
+
+    A bar of simulated time on a terminal, a line every tenth of the run
+    otherwise (on standard error).
+    """
+    state: dict[str, Any] = {"bar": None, "next": 0.1}
+    if sys.stderr.isatty():
+        try:
+            from rich.progress import BarColumn, TextColumn, TimeRemainingColumn
+            from rich.progress import Progress as Bar
+
+            bar = Bar(
+                TextColumn(label),
+                BarColumn(),
+                TextColumn("{task.completed:.1f}/{task.total:.1f} s"),
+                TimeRemainingColumn(),
+            )
+            bar.start()
+            state["bar"] = bar
+            state["task"] = bar.add_task(label, total=1.0)
+        except ImportError:
+            pass
+
+    def update(t: float, duration: float) -> None:
+        bar = state["bar"]
+        if bar is not None:
+            bar.update(state["task"], completed=t, total=duration)
+        elif duration > 0 and t / duration >= state["next"] - 1e-9:
+            print(f"{label}: {t:.1f} of {duration:.1f} s", file=sys.stderr, flush=True)
+            while state["next"] <= t / duration + 1e-9:
+                state["next"] += 0.1
+
+    token = _RUN_PROGRESS.set(update)
+    try:
+        yield
+    finally:
+        _RUN_PROGRESS.reset(token)
+        if state["bar"] is not None:
+            state["bar"].stop()

@@ -42,3 +42,18 @@ def test_cbp_compare_reports_each_method(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert "compare: 1/2 cat" in done.stderr
     assert "compare: 2/2 ik" in done.stderr
+
+
+def test_cbp_run_reports_simulated_time(tmp_path: Path) -> None:
+    done = run_cbp(
+        "run",
+        str(ROOT / "scenarios" / "panda_reach.yaml"),
+        "--set",
+        "duration=1",
+        "--out",
+        str(tmp_path / "out"),
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [x for x in done.stderr.splitlines() if x.startswith("panda_reach")]
+    assert len(lines) == 10, done.stderr  # a line every tenth of the run
+    assert lines[-1] == "panda_reach (kinematic): 1.0 of 1.0 s"

@@ -28,6 +28,7 @@ from cbp.errors import InvalidTargetError
 from cbp.executors.faults import Faults
 from cbp.executors.settings import KinematicSettings
 from cbp.executors.stepping import Step, ValidatedStepper
+from cbp.progress import report_time
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
@@ -110,6 +111,7 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
             events.append((t, f"step rejected: {step.reason}"))
         depth[k] = stepper.depth
         q = step.q
+        report_time(t, scenario.spec.duration)
         if faults.aborted is not None:
             n = k + 1
             break

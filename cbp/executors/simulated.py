@@ -27,6 +27,7 @@ from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.plugin import GoalReceiver
+from cbp.progress import report_time
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.sim.settings import ObjectSpec
@@ -319,6 +320,7 @@ class SimulatedRun:
 
     def advance(self, t: float) -> None:
         """Simulate (and perceive) until ``t``."""
+        report_time(t, self.duration)
         if self._dynamic and self.world is not None:
             # Declared objects that appear or move: the world is brought up to
             # date every OBJECT_UPDATE of simulated time.

@@ -26,6 +26,7 @@ from cbp.errors import PluginOutputError, SolveError
 from cbp.executors.faults import Faults
 from cbp.executors.settings import VelocitySettings
 from cbp.plugin import ReportsSignals
+from cbp.progress import report_time
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.sim.mobile import MobileSimulation
@@ -125,6 +126,7 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
             rows["u"].append(u)
             rows["time"].append(elapsed)
             sim.run_until(t + dt)
+            report_time(t + dt, scenario.spec.duration)
             if faults.aborted is not None:
                 break
     finally:
