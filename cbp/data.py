@@ -45,7 +45,7 @@ def shipped_configs() -> list[str]:
 
 def config_path(name: str) -> Path | None:
     """The shipped configuration ``name`` (``include: cat``), or None."""
-    if "/" in name or "\\" in name or name.endswith((".yaml", ".yml")):
+    if "/" in name or "\\" in name or "\0" in name or name.endswith((".yaml", ".yml")):
         return None
     path = data_dir("scenarios") / "configs" / f"{name}.yaml"
     return path if is_file(path) else None

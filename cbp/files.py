@@ -65,8 +65,9 @@ def check_file(path: Path, what: str, limit: int) -> int:
     """
     try:
         info = path.stat()
-    except OSError as exc:
-        raise ConfigError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the name
+        reason = getattr(exc, "strerror", None) or exc
+        raise ConfigError(f"cannot read {what} {str(path)!r}: {reason}") from None
     if not stat.S_ISREG(info.st_mode):
         kind = "a folder" if stat.S_ISDIR(info.st_mode) else "not a regular file"
         raise ConfigError(f"{what} {path} is {kind}")

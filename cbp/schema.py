@@ -137,7 +137,11 @@ class Document:
         if names is INVALID:
             return
         for name in [names] if isinstance(names, str) else names:
-            target = (path.parent / name).resolve()
+            try:
+                target = (path.parent / name).resolve()
+            except (OSError, ValueError) as exc:  # a NUL byte, a loop of links
+                self.report(node, key, f"cannot include {name!r}: {exc}")
+                continue
             shipped = config_path(name)
             if shipped is not None and not is_file(target):
                 target = shipped.resolve()  # include: cat
