@@ -151,13 +151,15 @@ def test_damaged_structure_is_refused_or_loaded(
         path = data.draw(st.sampled_from(list(_paths(doc))), label="path")
         parent = _parent(doc, path)
         action = data.draw(st.sampled_from(["replace", "remove", "add"]), label="edit")
+        # Copies: a drawn list or mapping put in twice must not come to contain
+        # itself (the walk over the document would never end).
         if action == "replace":
-            parent[path[-1]] = data.draw(values, label="value")
+            parent[path[-1]] = copy.deepcopy(data.draw(values, label="value"))
         elif action == "remove" and isinstance(parent, dict):
             del parent[path[-1]]
         elif isinstance(parent, dict):
             key = data.draw(st.sampled_from(EXTRA_KEYS), label="key")
-            parent[key] = data.draw(values, label="value")
+            parent[key] = copy.deepcopy(data.draw(values, label="value"))
     case = folder / "fuzz_case.yaml"
     case.write_text(yaml.safe_dump(doc, allow_unicode=True))
     load_or_refuse(case)
