@@ -29,7 +29,6 @@ from cbp.executors.faults import Faults
 from cbp.executors.settings import KinematicSettings
 from cbp.executors.stepping import Step, ValidatedStepper
 from cbp.progress import report_time
-from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
 
@@ -50,7 +49,6 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
     dt = scenario.spec.method.settings(KinematicSettings).dt
     steps = math.ceil(scenario.spec.duration / dt) + 1
     frame_id = robot.frame_id(scenario.ee_frame)
-    data = robot.model.createData()
     q = scenario.q0.copy()
     events: list[tuple[float, str]] = []
     t = 0.0
@@ -95,11 +93,15 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
         except Exception as exc:  # anything else: hold the robot, say so
             step = Step("failed", q, None, stepper.depth, "")
             faults.fault(t, "control step", exc)
+            engine.state.update(q)  # the step may have failed before it did
         else:
             faults.ok()
         compute[k] = time.perf_counter() - start
         qs[k] = q
-        ee_p[k], ee_R[k] = _hand(robot, data, frame_id, q)
+        # The engine's kinematics are those of q (the step's start).
+        placement = engine.state.frame_placement(frame_id)
+        ee_p[k] = placement.translation
+        ee_R[k] = placement.rotation
         if goal is not None:
             goal_p[k] = goal.translation
             goal_R[k] = goal.rotation
@@ -132,12 +134,3 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
         rejected_steps=rejected,
         aborted=faults.aborted,
     )
-
-
-def _hand(
-    robot: RobotModel, data: pin.Data, frame_id: int, q: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """The placement (position, rotation) of frame ``frame_id`` at ``q``."""
-    pin.framesForwardKinematics(robot.model, data, q)
-    placement = data.oMf[frame_id]
-    return placement.translation.copy(), placement.rotation.copy()
