@@ -180,19 +180,16 @@ def stopping_trajectory(
     """
     t_s, _, v_s, a_s = current.point(i)
     ahead = current.positions[i:]
+    # Binary search for the shortest prefix that can be stopped on (stoppable
+    # prefixes are upward closed: a longer path leaves more room to brake). The
+    # whole rest is not tried: when only it is stoppable, nothing changes.
+    found: JointTrajectory | None = None
     lo, hi = 2, len(ahead)
-    if hi < 2:
-        return None
-    # The shortest prefix that can be stopped on (stoppable prefixes are
-    # upward closed: a longer path leaves more room to brake).
-    if time_parameterize(ahead[:hi], t_s, v_s, a_s, vmax, amax) is None:
-        return None
     while lo < hi:
         mid = (lo + hi) // 2
-        if time_parameterize(ahead[:mid], t_s, v_s, a_s, vmax, amax) is None:
+        timed = time_parameterize(ahead[:mid], t_s, v_s, a_s, vmax, amax)
+        if timed is None:
             lo = mid + 1
         else:
-            hi = mid
-    if hi == len(ahead):
-        return None
-    return time_parameterize(ahead[:hi], t_s, v_s, a_s, vmax, amax)
+            hi, found = mid, timed
+    return found
