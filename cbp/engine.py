@@ -43,6 +43,8 @@ class Engine:
             was solved as assembled); see :meth:`step`.
         recovery_changed: whether :attr:`recovery` differs from that of the
             solved step before (so a run reports each change once).
+        recovery_scale: when the last step's demands were scaled down, the
+            factor they were scaled by (0: held); else None.
     """
 
     def __init__(
@@ -74,11 +76,17 @@ class Engine:
         self.speed_bound = np.where(
             np.isfinite(velocity), 1.01 * velocity + 1e-9, float(max_step)
         )
+        #: The guard's acceleration bound per joint (nv) [per s^2], with 1 % for
+        #: the solver's tolerance; checked when a step is given the velocity.
+        self.acceleration_bound = (
+            1.01 * np.asarray(robot.acceleration_limits, dtype=float) + 1e-9
+        )
         self._has_limits = bool(
             np.isfinite(robot.lower_limits).any()
             or np.isfinite(robot.upper_limits).any()
         )
         self.problem: QPProblem | None = None
+        self._dt = 0.0  # of the last step
         #: How many times too fast the last step was before the guard slowed it
         #: to the velocity limits (1.0: it was not).
         self.slowed = 1.0
@@ -90,6 +98,8 @@ class Engine:
         # the base class's empty prepare and are not called for it).
         plugins = [e.plugin for e in self.entries]
         self._latching = [p for p in plugins if type(p).prepare is not Plugin.prepare]
+        # Per entry: whether its rows may be eased when the QP is infeasible.
+        self._easable = np.array([p.easable for p in plugins], dtype=bool)
 
     def plugin(self, name: str) -> AnyPlugin:
         """Return the plugin of the entry called ``name``."""
@@ -101,8 +111,13 @@ class Engine:
                 f"Entries: {', '.join(self._by_name)}."
             ) from None
 
-    def step(self, q: FloatArray, dt: float) -> FloatArray:
+    def step(self, q: FloatArray, dt: float, v: FloatArray | None = None) -> FloatArray:
         """Return the displacement dq (nv) of one step of duration ``dt`` from ``q``.
+
+        ``v`` is the joint velocity the robot has at ``q`` (nv): an executor
+        that commands velocities gives its last command, and plugins read it as
+        ``state.v`` (``joint_acceleration`` bounds the step's change of
+        velocity with it). None: at rest, and the guard checks no acceleration.
 
         When the QP is infeasible because hard rows ask for more motion than the
         others allow (the arm inside its safety distance or in penetration, a
@@ -112,47 +127,60 @@ class Engine:
         Every answer passes the step guard (:meth:`guard_step`) before it is
         returned: what reaches a robot is finite, within the velocity limits for
         ``dt`` (slowed down uniformly to them, :attr:`slowed`, when a
-        configuration has no velocity constraint) and within the joint limits.
+        configuration has no velocity constraint), within the acceleration
+        limits from ``v`` when it is given, and within the joint limits.
 
         Raises:
             SolveError: the QP is infeasible or the backend failed; nothing moved.
             UnsafeStepError: (a SolveError) the answer failed the step guard.
             PluginOutputError: a plugin returned a malformed or non-finite output.
             InvalidStateError: ``q`` is not a finite configuration of the robot,
-                or ``dt`` is not a finite positive duration.
+                ``v`` not a finite velocity, or ``dt`` not a finite positive
+                duration.
         """
         q = self._checked(q, dt)
+        self._dt = float(dt)
+        if v is not None:
+            v = self._checked_velocity(v)
         state = self.state
         state.update(q)
+        state.set_velocity(v)
         for plugin in self._latching:
             plugin.prepare(state, dt)
         problem = self.assembler.assemble(state)
         self.problem = problem
         self.recovery = None
+        self.recovery_scale: float | None = None
         try:
             x = self.solver.solve(problem)
         except SolveError as exc:
             x = self._recover(problem, exc)
-        dq = self.guard_step(q, x[: self.robot.nv], dt)
+        dq = self.guard_step(q, x[: self.robot.nv], dt, v)
         self.recovery_changed = self.recovery != self._solved_recovery
         self._solved_recovery = self.recovery
         return dq
 
-    def guard_step(self, q: FloatArray, dq: FloatArray, dt: float) -> FloatArray:
+    def guard_step(
+        self, q: FloatArray, dq: FloatArray, dt: float, v: FloatArray | None = None
+    ) -> FloatArray:
         """The step guard: ``dq`` if it is safe, slowed if only too fast.
 
         Safe: finite; no joint faster than its velocity limit over ``dt`` (with
-        1 % for solver tolerances; :attr:`speed_bound`); ``q`` ⊕ ``dq`` within
-        the position limits by :attr:`limit_tolerance`, or, for a joint that
-        starts beyond its limit, no further beyond than it starts. A step up to
-        :data:`GARBAGE_RATIO` times too fast is scaled down as a whole to the
-        limits (same direction: it still meets every row it met whose bound
-        allows standing still) and :attr:`slowed` says by how much; a faster
-        one is garbage and rejected.
+        1 % for solver tolerances; :attr:`speed_bound`); when the velocity ``v``
+        at ``q`` is given, no joint's velocity changing from it faster than its
+        acceleration limit (with 1 %; :attr:`acceleration_bound`); ``q`` ⊕
+        ``dq`` within the position limits by :attr:`limit_tolerance`, or, for a
+        joint that starts beyond its limit, no further beyond than it starts. A
+        step up to :data:`GARBAGE_RATIO` times too fast is scaled down as a
+        whole to the velocity limits (same direction: it still meets every row
+        it met whose bound allows standing still) and :attr:`slowed` says by
+        how much; a faster one is garbage and rejected. A step that accelerates
+        too hard cannot be scaled into shape and is rejected.
 
         Raises:
-            UnsafeStepError: the step is not finite, is garbage, or ends beyond
-                a joint limit; the message names the joint and the amount.
+            UnsafeStepError: the step is not finite, is garbage, accelerates a
+                joint past its limit, or ends beyond a joint limit; the message
+                names the joint and the amount.
         """
         robot = self.robot
         self.slowed = 1.0
@@ -173,6 +201,15 @@ class Engine:
         if worst > 1.0:
             dq = dq / worst
             self.slowed = worst
+        if v is not None:
+            j, harder = _acceleration_ratio(dq, v, self.acceleration_bound, float(dt))
+            if harder > 1.0:
+                raise UnsafeStepError(
+                    f"step rejected: {self._velocity_name(j)} would change its "
+                    f"velocity from {v[j]:.4g} to {dq[j] / dt:.4g} in {dt:.4g} s, "
+                    f"{harder:.3g} times its acceleration limit "
+                    f"({self.acceleration_bound[j]:.4g}/s^2)"
+                )
         if not self._has_limits:
             return dq
         q_next = q + dq if robot.is_euclidean else robot.integrate(q, dq)
@@ -205,6 +242,19 @@ class Engine:
         except ConfigError as exc:
             raise InvalidStateError(str(exc)) from None
 
+    def _checked_velocity(self, v: FloatArray) -> FloatArray:
+        """``v`` as a float array of nv finite values, or InvalidStateError."""
+        nv = self.robot.nv
+        try:
+            v = np.asarray(v, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InvalidStateError(f"v is not a velocity: {exc}") from None
+        if v.shape != (nv,):
+            raise InvalidStateError(f"v must have {nv} values, got shape {v.shape}")
+        if not _all_finite(np.ascontiguousarray(v)):
+            raise InvalidStateError(f"v must be finite, got {v}")
+        return v
+
     def _velocity_name(self, i: int) -> str:
         """The joint that tangent coordinate ``i`` belongs to."""
         return f"joint {self._joint_of(i, 'v')}"
@@ -228,51 +278,99 @@ class Engine:
     def _recover(self, problem: QPProblem, error: SolveError) -> FloatArray:
         """Solve again with the hard rows that ask for motion eased; else re-raise.
 
-        A hard inequality row whose bound excludes standing still (a contact
-        inside its safety distance, a joint past its limit) asks the step for a
-        motion of its own; several of them, or one beyond what the velocity rows
-        allow, can leave no feasible step. First each such demand is capped at
+        A hard row whose bounds exclude standing still asks the step for a
+        motion of its own: an inequality row inside its safety distance or a
+        joint past its limit, an equality row with an error to remove. Several
+        of them, or one beyond what the velocity and acceleration rows allow,
+        can leave no feasible step. First each inequality demand is capped at
         half of what the single-joint rows (the velocity bounds) let that row
         reach: the arm backs out as fast as its limits allow. If that is still
-        infeasible, the demands become "no further" (the k = 0 form: the row may
-        not get worse). :attr:`recovery` says which was used.
+        infeasible, every demand, equalities' included, is scaled by the
+        largest factor in [0, 1) that the limits allow (bisection); at 0 the
+        inequalities become "no further" (the k = 0 form) and the equalities
+        ask for what the robot's present velocity (``v``) gives them, which
+        its acceleration limits always allow. Rows of plugins that are physical limits
+        (``easable = False``: ``joint_acceleration``) are never eased.
+        :attr:`recovery` says what was done.
         """
         lower, upper = problem.lower, problem.upper
         nv = self.robot.nv
-        hard = ~problem.equality & ~problem.A[:, nv:].any(axis=1)  # no slack
-        demanding = hard & ((lower > _EASE_TOL) | (upper < -_EASE_TOL))
-        if not demanding.any():
+        # Hard (no slack variable) rows of easable entries.
+        hard = ~problem.A[:, nv:].any(axis=1) & self._easable[problem.row_entry]
+        asks_up, asks_down = lower > _EASE_TOL, upper < -_EASE_TOL
+        inequality = hard & ~problem.equality & (asks_up | asks_down)
+        equality = hard & problem.equality & (asks_up | asks_down)
+        rows = np.flatnonzero(inequality | equality)
+        if rows.size == 0:
             raise error
-        A = problem.A[:, :nv]
-        reach_hi, reach_lo = _row_reach(A, lower, upper)
-        rows = np.flatnonzero(demanding)
         names = sorted({problem.entry_names[problem.row_entry[r]] for r in rows})
+        what = (
+            f"{len(rows)} row(s) of {', '.join(names)} asked for more motion than "
+            "the limits allow together: "
+        )
         given = (lower[rows].copy(), upper[rows].copy())
-        for how in ("eased", "held"):
-            if how == "eased":
-                ease_hi = 0.5 * np.maximum(reach_hi[rows], 0.0)
-                ease_lo = 0.5 * np.minimum(reach_lo[rows], 0.0)
-                lower[rows] = np.minimum(given[0], ease_hi)
-                upper[rows] = np.maximum(given[1], ease_lo)
-            else:
-                lower[rows] = np.minimum(given[0], 0.0)
-                upper[rows] = np.maximum(given[1], 0.0)
+        if inequality.any():
+            A = problem.A[:, :nv]
+            reach_hi, reach_lo = _row_reach(A, lower, upper)
+            capped = np.flatnonzero(inequality)
+            lower[capped] = np.minimum(
+                lower[capped], 0.5 * np.maximum(reach_hi[capped], 0)
+            )
+            upper[capped] = np.maximum(
+                upper[capped], 0.5 * np.minimum(reach_lo[capped], 0)
+            )
             try:
                 x = self.solver.solve(problem)
             except SolveError:
-                continue
-            self.recovery = (
-                f"{len(rows)} row(s) of {', '.join(names)} asked for more motion "
-                "than the limits allow together: "
-                + (
-                    "eased to half of what the velocity bounds reach (backing out)"
-                    if how == "eased"
-                    else "held at 'no further' (k = 0)"
-                )
+                lower[rows], upper[rows] = given
+            else:
+                if not equality.any():
+                    self.recovery = (
+                        what + "eased to half of what the velocity bounds reach "
+                        "(backing out)"
+                    )
+                    return x
+                lower[rows], upper[rows] = given  # equalities too: scale all
+
+        # An equality is scaled from the value its row has if the robot keeps
+        # its velocity (the state's v; zero at rest), which the acceleration
+        # rows always allow; an inequality from zero, "no further".
+        equal = problem.equality[rows]
+        anchor = np.zeros(rows.size)
+        anchor[equal] = problem.A[rows[equal], :nv] @ (self.state.v * self._dt)
+
+        def scaled(factor: float) -> FloatArray | None:
+            """The solution with every demand scaled by ``factor``, or None."""
+            lo, hi = given
+            lower[rows] = np.where(lo > anchor, anchor + factor * (lo - anchor), lo)
+            upper[rows] = np.where(hi < anchor, anchor + factor * (hi - anchor), hi)
+            lower[rows[equal]] = upper[rows[equal]] = anchor[equal] + factor * (
+                lo[equal] - anchor[equal]
             )
-            return x
-        lower[rows], upper[rows] = given
-        raise error
+            try:
+                return self.solver.solve(problem)
+            except SolveError:
+                return None
+
+        best = scaled(0.0)
+        if best is None:
+            lower[rows], upper[rows] = given
+            raise error
+        low, high = 0.0, 1.0
+        for _ in range(_SCALE_BISECTIONS):
+            middle = 0.5 * (low + high)
+            found = scaled(middle)
+            if found is None:
+                high = middle
+            else:
+                low, best = middle, found
+        scaled(low)  # leave the bounds of the answer in self.problem
+        self.recovery_scale = low
+        if low == 0.0:
+            self.recovery = what + "held (k = 0: no further, no change)"
+        else:
+            self.recovery = what + "scaled down to what the limits allow"
+        return best
 
 
 @numba.njit(cache=True, nogil=True)
@@ -289,6 +387,19 @@ def _speed_ratio(dq: FloatArray, bound: FloatArray, dt: float) -> tuple[int, flo
         if not math.isfinite(dq[i]):
             return -1, math.nan
         ratio = abs(dq[i]) / (bound[i] * dt)
+        if ratio > worst:
+            worst, at = ratio, i
+    return at, worst
+
+
+@numba.njit(cache=True, nogil=True)
+def _acceleration_ratio(
+    dq: FloatArray, v: FloatArray, bound: FloatArray, dt: float
+) -> tuple[int, float]:
+    """(the hardest-accelerating coordinate, its |dq/dt - v| / (bound dt))."""
+    worst, at = 0.0, 0
+    for i in range(dq.size):
+        ratio = abs(dq[i] / dt - v[i]) / (bound[i] * dt)
         if ratio > worst:
             worst, at = ratio, i
     return at, worst
@@ -317,6 +428,9 @@ GARBAGE_RATIO = 10.0
 
 #: A hard row's bound within this of zero does not count as asking for motion.
 _EASE_TOL = 1e-12
+
+#: Bisection steps for the largest feasible scale of the demands (1/64).
+_SCALE_BISECTIONS = 6
 
 
 def _row_reach(

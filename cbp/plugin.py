@@ -278,6 +278,10 @@ class Plugin(abc.ABC, Generic[ParamsT]):
     the plugin's targets latch (a joint-space term on a Euclidean model). The
     engine then computes it once and folds a soft task's share of the Hessian into
     a constant. :func:`cbp.testing.check_jacobian` verifies the claim."""
+    easable: ClassVar[bool] = True
+    """Whether the engine may ease this entry's hard rows when the QP is
+    infeasible (:meth:`cbp.engine.Engine.step`). False for a physical limit of
+    the robot, which no easing makes true (``joint_acceleration``)."""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """Check the contract when the class is defined (see the module docstring).

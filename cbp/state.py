@@ -25,6 +25,10 @@ class RobotState:
     Attributes:
         robot: the model.
         q: the configuration (nq), read-only.
+        v: the joint velocity at ``q`` (nv) [rad/s or m/s], read-only: what the
+            robot was last commanded, given to :meth:`cbp.engine.Engine.step`
+            by executors that command velocities; zeros (at rest) otherwise.
+            Plugins that bound the change of velocity read it.
         data: pinocchio data holding the kinematics of ``q``.
     """
 
@@ -34,6 +38,7 @@ class RobotState:
         self.data = robot.model.createData()
         self._jacobians: dict[int, FloatArray] = {}
         self.q: FloatArray = np.empty(0)
+        self.v: FloatArray = _at_rest(robot.nv)
         self.update(robot.neutral() if q is None else q)
 
     def update(self, q: FloatArray) -> None:
@@ -46,6 +51,15 @@ class RobotState:
         pin.updateFramePlacements(model, self.data)
         self._jacobians.clear()
         self._joint_jacobians: FloatArray | None = None
+
+    def set_velocity(self, v: FloatArray | None) -> None:
+        """Set :attr:`v` (copied); None: at rest."""
+        if v is None:
+            self.v = _at_rest(self.robot.nv)
+            return
+        v = np.array(v, dtype=float)
+        v.flags.writeable = False
+        self.v = v
 
     def joint_jacobians(self) -> FloatArray:
         """Every joint's motion in the WORLD frame, pinocchio's ``data.J``, (6, nv).
@@ -104,3 +118,10 @@ class RobotState:
         return (
             f"RobotState({self.robot.name!r}, q={np.array2string(self.q, precision=3)})"
         )
+
+
+def _at_rest(nv: int) -> FloatArray:
+    """A read-only zero velocity of ``nv`` coordinates."""
+    v = np.zeros(nv)
+    v.flags.writeable = False
+    return v

@@ -28,6 +28,10 @@ from plugins.constraints.contact_normals_constraint import (
     ContactNormalsConstraint,
     ContactParams,
 )
+from plugins.constraints.joint_acceleration_constraint import (
+    JointAccelerationConstraint,
+    JointAccelerationParams,
+)
 from plugins.constraints.joint_limits_constraint import (
     JointLimitsConstraint,
     JointLimitsParams,
@@ -195,6 +199,10 @@ PLUGIN_CASES: list[PluginCase] = [
         accept=_has_contacts(False),
     ),
     PluginCase("goal_pose", _goal_pose, accept=_away_from_pi),
+    PluginCase(
+        "joint_acceleration",
+        lambda r: JointAccelerationConstraint(JointAccelerationParams(), r),
+    ),
     PluginCase("joint_limits", lambda r: JointLimitsConstraint(JointLimitsParams(), r)),
     PluginCase("joint_step", lambda r: JointStepTask(JointStepParams(), r)),
     PluginCase(

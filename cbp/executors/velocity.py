@@ -8,9 +8,13 @@ from the measured configuration, and ``u = dq / dt`` (base v_x, v_y, yaw rate,
 then the arm's joints) is sent to the simulator. Orbit object and pan object are
 configurations (``scenarios/youbot_*.yaml``), not code here.
 
-A bad input value is refused (the entry keeps its previous one); a QP that
-cannot be solved stops the robot for that tick. Both are events, and the loop
-goes on.
+Each step is given the last command as the robot's velocity: the engine's step
+guard refuses a command that changes a joint's velocity faster than its
+acceleration limit, and a ``joint_acceleration`` constraint (in
+``configs/orbit.yaml``) keeps the QP's answers within it. A bad input value is
+refused (the entry keeps its previous one); a QP that cannot be solved, or an
+answer the guard refuses, brakes the robot for that tick within its
+acceleration limits. Both are events, and the loop goes on.
 """
 
 from __future__ import annotations
@@ -68,6 +72,16 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
         gui,
     )
     faults = Faults(lambda at, m: events.append((at, m)))
+    if not any(e.plugin.type_name == "joint_acceleration" for e in scenario.entries):
+        events.append(
+            (
+                0.0,
+                "no joint_acceleration constraint: answers that accelerate past "
+                "the limits are refused and the robot brakes",
+            )
+        )
+    braking = robot.acceleration_limits * dt
+    u = np.zeros(robot.nv)  # the last command: the robot starts at rest
     try:
         for k in range(steps):
             t = k * dt
@@ -83,15 +97,15 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
             q = sim.q
             start = time.perf_counter()
             try:
-                dq = engine.step(q, dt)
+                dq = engine.step(q, dt, u)
             except (SolveError, PluginOutputError) as exc:
-                dq = np.zeros(robot.nv)
+                dq = _brake(u, braking) * dt
                 failing += 1
                 if failing == 1:  # one event per run of failed ticks
-                    events.append((t, f"step not solved, robot stopped: {exc}"))
+                    events.append((t, f"step not solved, robot braking: {exc}"))
                     log.warning("t=%.3f s: %s", t, exc)
-            except Exception as exc:  # anything else: stop the robot, count it
-                dq = np.zeros(robot.nv)
+            except Exception as exc:  # anything else: brake the robot, count it
+                dq = _brake(u, braking) * dt
                 faults.fault(t, "control step", exc)
             else:
                 faults.ok()
@@ -117,9 +131,7 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
                     signals.setdefault(key, []).append(signal)
             for column in signals.values():  # NaN where a report failed
                 column.extend([np.nan] * (len(rows["t"]) + 1 - len(column)))
-            u = dq / dt
-            if faults.aborted is not None:
-                u = np.zeros(robot.nv)
+            u = dq / dt if faults.aborted is None else _brake(u, braking)
             sim.command(u)
             rows["t"].append(t)
             rows["q"].append(q)
@@ -150,3 +162,8 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
         transient_s=settings.transient_s,
         aborted=faults.aborted,
     )
+
+
+def _brake(u: FloatArray, braking: FloatArray) -> FloatArray:
+    """The command after ``u`` that slows every joint by at most ``braking``."""
+    return np.asarray(u - np.clip(u, -braking, braking))

@@ -5,6 +5,7 @@ from cbp.plugin import AnyConstraint, Constraint
 from cbp.registry import Registry
 
 from .contact_normals_constraint import ContactNormalsConstraint
+from .joint_acceleration_constraint import JointAccelerationConstraint
 from .joint_limits_constraint import JointLimitsConstraint
 from .joint_velocity_constraint import JointVelocityConstraint
 from .min_altitude_constraint import MinAltitudeConstraint
@@ -17,6 +18,7 @@ from .view_direction_constraint import ViewDirectionConstraint
 __all__ = [
     "CONSTRAINTS",
     "ContactNormalsConstraint",
+    "JointAccelerationConstraint",
     "JointLimitsConstraint",
     "JointVelocityConstraint",
     "MinAltitudeConstraint",
@@ -33,6 +35,7 @@ CONSTRAINTS: Registry[AnyConstraint] = Registry(
     Constraint,
     [
         ContactNormalsConstraint,
+        JointAccelerationConstraint,
         JointLimitsConstraint,
         JointVelocityConstraint,
         MinAltitudeConstraint,

@@ -113,6 +113,39 @@ def test_a_step_a_little_too_fast_is_slowed_to_the_limits(robots) -> None:
     assert GARBAGE_RATIO > 2.0
 
 
+def test_a_step_that_accelerates_too_hard_is_rejected(robots) -> None:
+    """Given the velocity the robot has, a jump past the acceleration limit."""
+    robot = robots["panda"]
+    engine = _engine(robot)
+    dt = 0.01
+    jump = 3.0 * robot.acceleration_limits[2] * dt  # rad/s in one step
+
+    def sudden(x: np.ndarray) -> np.ndarray:
+        x[: robot.nv] = 0.0
+        x[2] = jump * dt
+        return x
+
+    engine.solver = FaultySolver(engine.solver, sudden)
+    with pytest.raises(UnsafeStepError, match=r"'panda_joint3'.*acceleration limit"):
+        engine.step(robot.home(), dt, np.zeros(robot.nv))
+    # The same step from a velocity it is within reach of passes.
+    v = np.zeros(robot.nv)
+    v[2] = jump
+    assert engine.step(robot.home(), dt, v)[2] == pytest.approx(jump * dt)
+    # Without a velocity the guard checks no acceleration (kinematic executors
+    # time their own trajectories).
+    engine.step(robot.home(), dt)
+
+
+@pytest.mark.parametrize(
+    "v", [np.zeros(3), np.full(7, np.nan), np.full(7, np.inf), "fast"]
+)
+def test_the_engine_refuses_a_bad_velocity(robots, v) -> None:
+    robot = robots["panda"]
+    with pytest.raises(InvalidStateError, match="v "):
+        _engine(robot).step(robot.home(), 0.01, v)
+
+
 @pytest.mark.parametrize("dt", [0.0, -0.01, math.nan, math.inf, "0.01"])
 def test_the_engine_refuses_a_bad_duration(robots, dt) -> None:
     robot = robots["panda"]

@@ -51,11 +51,11 @@ def _raise_in_engine(monkeypatch, when) -> None:
         step = engine.step
         calls = [0]
 
-        def faulty(q, dt):
+        def faulty(q, dt, *args):
             calls[0] += 1
             if when(calls[0]):
                 raise InjectedError("injected")
-            return step(q, dt)
+            return step(q, dt, *args)
 
         engine.step = faulty
         return engine
@@ -189,13 +189,19 @@ def test_a_goal_input_that_raises_keeps_the_previous_goal(monkeypatch) -> None:
     assert run_metrics(trace, scenario.robot)["reached"]
 
 
-def test_the_velocity_executor_stops_the_base_when_it_aborts(monkeypatch) -> None:
+def test_the_velocity_executor_brakes_the_base_when_it_aborts(monkeypatch) -> None:
     _raise_in_engine(monkeypatch, lambda k: k > 20)
     scenario = load_scenario(SCENARIOS / "youbot_pan.yaml", overrides={"duration": "3"})
     trace = run_velocity(scenario)
     assert trace.aborted is not None
     assert trace.u is not None
-    assert np.all(trace.u[20:] == 0.0)  # nothing but stops after the first fault
+    # From the first fault on, every command brakes within the acceleration
+    # limits (the robot cannot stop at once), and the base comes to rest.
+    braking = scenario.robot.acceleration_limits * 0.02 * (1 + 1e-9)
+    after = np.abs(trace.u[20:])
+    assert np.all(np.diff(after, axis=0) <= 1e-12)
+    assert np.all(np.abs(np.diff(trace.u[20:], axis=0)) <= braking)
+    assert np.all(after[-1] == 0.0)
 
 
 # ------------------------------------------------------------------ cameras

@@ -1,0 +1,145 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Constraint ``joint_acceleration``: bound each step's change of joint velocity."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from cbp.errors import ConfigError, located
+from cbp.joint_space import StepDisplacement
+from cbp.plugin import Constraint, FloatArray, PluginParams
+from cbp.robot import RobotModel, compact_rows
+from cbp.state import RobotState
+
+
+@dataclass(frozen=True, kw_only=True)
+class JointAccelerationParams(PluginParams):
+    """Parameters of :class:`JointAccelerationConstraint`."""
+
+    scale: float = 1.0
+    """Fraction of the robot's acceleration limits to allow, in (0, 1]."""
+    limits: dict[str, float] = field(default_factory=dict)
+    """Acceleration limits by joint name that replace the robot's
+    [rad/s^2 or m/s^2]."""
+    margin: float = 0.0
+    """Distance from each position limit at which a joint must be able to
+    stop [rad or m]: the ``joint_limits`` constraint's margin."""
+
+    def __post_init__(self) -> None:
+        """Scale in (0, 1], limits positive, margin not negative."""
+        if not self.margin >= 0:
+            raise ConfigError(f"must be >= 0, got {self.margin}", "margin")
+        if not 0 < self.scale <= 1:
+            raise ConfigError(f"must be in (0, 1], got {self.scale}", "scale")
+        for joint, value in self.limits.items():
+            if not value > 0:
+                raise ConfigError(f"must be > 0, got {value}", f"limits.{joint}")
+
+
+class JointAccelerationConstraint(
+    StepDisplacement[JointAccelerationParams], Constraint[JointAccelerationParams]
+):
+    r"""The step's velocity within reach of the velocity the robot has.
+
+    .. math:: (v_0 - s\,a_{max}\,\Delta t)\,\Delta t \le q \ominus q_0
+              \le (v_0 + s\,a_{max}\,\Delta t)\,\Delta t
+
+    and, for a joint with a position range, no faster toward a limit than it
+    can brake before it (the limit less ``margin``; :math:`d` the distance
+    left, :math:`a = s\,a_{max}`):
+    :math:`|\Delta q| / \Delta t \le -\tfrac32 a \Delta t +
+    \sqrt{(\tfrac32 a \Delta t)^2 + 2 a d}`, the speed from which the joint
+    stops within :math:`d` one tick later. Without it, a position limit met at
+    speed would need more deceleration than the joint has, and the QP would be
+    infeasible. A joint already too fast for that brakes as hard as it can.
+
+    where :math:`q_0` is the configuration at the start of the step and
+    :math:`v_0` its velocity (``state.v``: the executor's last command), both
+    latched by :meth:`prepare` with the step duration :math:`\Delta t`. For an
+    executor that commands :math:`u = \Delta q / \Delta t` each tick (the
+    velocity executor) the rows are :math:`|u - u_{prev}| \le s\,a_{max}\,\Delta t`:
+    no command asks a joint for more than it can accelerate, so the QP's other
+    rows hold for the velocity the robot really reaches. Dimension: the tangent
+    coordinates [rad or m]. The Jacobian selects them. No singularity.
+
+    When the robot moves faster than the other rows allow (a constraint that
+    suddenly asks it to stop), the rows exclude standing still and the QP can
+    be infeasible; the engine then eases them (see
+    :meth:`cbp.engine.Engine.step`) and its step guard, which checks the same
+    limits, has the executor brake within them.
+    """
+
+    type_name: ClassVar[str] = "joint_acceleration"
+    unit: ClassVar[str] = "rad"
+    easable: ClassVar[bool] = False  # the robot cannot accelerate faster
+
+    def __init__(
+        self, params: JointAccelerationParams, robot: RobotModel, name: str = ""
+    ) -> None:
+        """Gather the limits and keep the coordinates that have one."""
+        super().__init__(params, robot, name)
+        acceleration = np.array(robot.acceleration_limits)
+        for joint, value in params.limits.items():
+            acceleration[located(robot.joint_v_slice, joint, f"limits.{joint}")] = value
+        finite = np.flatnonzero(np.isfinite(acceleration))
+        self.rows = compact_rows(finite)
+        self._finite = finite
+        self._acceleration = params.scale * acceleration[finite]
+        # The rows (positions in ``finite``) of joints with a position range,
+        # their configuration coordinates and their limits less the margin.
+        row_of = {int(v): i for i, v in enumerate(finite)}
+        ranged = [
+            (row_of[int(v)], int(qi))
+            for qi, v in zip(robot.bounded_q, robot.bounded_v, strict=True)
+            if int(v) in row_of
+        ]
+        self._ranged = np.array([r for r, _ in ranged], dtype=int)
+        self._ranged_q = np.array([qi for _, qi in ranged], dtype=int)
+        self._low_limit = robot.lower_limits[self._ranged_q] + params.margin
+        self._high_limit = robot.upper_limits[self._ranged_q] - params.margin
+        self._lower = np.zeros(finite.size)
+        self._upper = np.zeros(finite.size)
+
+    def prepare(self, state: RobotState, dt: float) -> None:
+        """Latch the start configuration, its velocity and the step duration."""
+        super().prepare(state, dt)
+        v = state.v[self._finite]
+        reach = self._acceleration * dt
+        lower, upper = v - reach, v + reach  # velocities
+        if self._ranged.size:
+            r = self._ranged
+            a = self._acceleration[r]
+            q = state.q[self._ranged_q]
+            up = _braking_speed(a, dt, self._high_limit - q)
+            down = _braking_speed(a, dt, q - self._low_limit)
+            # A joint too fast to stop in time brakes as hard as it can.
+            upper[r] = np.maximum(np.minimum(upper[r], up), lower[r])
+            lower[r] = np.minimum(np.maximum(lower[r], -down), upper[r])
+        np.multiply(lower, dt, out=self._lower)
+        np.multiply(upper, dt, out=self._upper)
+
+    def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
+        """(v_0 ∓ scaled acceleration limit x dt) x dt."""
+        return self._lower, self._upper
+
+    def __repr__(self) -> str:
+        """Type, name, scale and limits."""
+        return (
+            f"JointAccelerationConstraint(name={self.name!r}, "
+            f"scale={self.params.scale}, limits={self.params.limits!r}, "
+            f"margin={self.params.margin})"
+        )
+
+
+def _braking_speed(a: FloatArray, dt: float, distance: FloatArray) -> FloatArray:
+    """The speed from which a joint moving one tick more stops within ``distance``.
+
+    Solves v dt + v dt / 2 + v^2 / (2 a) = d for v >= 0 (one tick at v, then
+    braking at ``a`` in ticks of ``dt``, whose distance is at most
+    v^2 / (2 a) + v dt / 2); 0 when the distance is not positive.
+    """
+    b = 1.5 * a * dt
+    return np.asarray(-b + np.sqrt(b * b + 2.0 * a * np.maximum(distance, 0.0)))
