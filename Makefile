@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DEV_STAMP := $(VENV)/.installed-dev
 OUT ?= out/demo
 
-.PHONY: demo test test-slow test-all lint bench fuzz browser clean
+.PHONY: demo test test-slow test-all lint bench fuzz browser teleop clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -23,6 +23,10 @@ $(DEV_STAMP): pyproject.toml | $(BIN)/python
 demo: $(STAMP)
 	$(BIN)/cbp compare scenarios/cat_boards.yaml --methods cat,ik,mp,jt --out $(OUT)
 	@echo "Report: $(OUT)/report.md"
+
+# Drive the arm through the boards from the browser (prints the address).
+teleop: $(DEV_STAMP)
+	$(BIN)/cbp teleop scenarios/cat_boards.yaml
 
 lint: $(DEV_STAMP)
 	$(BIN)/ruff check .

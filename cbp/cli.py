@@ -74,6 +74,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--jobs", type=int, default=1, help="methods run in this many processes"
     )
     compare.add_argument(
+        "--goal",
+        type=Path,
+        default=None,
+        help="replay this recorded goal file (a teleop session's operator_goal.csv)"
+        " instead of the scenario's goal, until its end and 2 s more",
+    )
+    compare.add_argument(
         "--set",
         action="append",
         default=[],
@@ -137,6 +144,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     view.add_argument(
         "--export", type=Path, default=None, help="write a .viser recording instead"
     )
+    teleop = sub.add_parser(
+        "teleop", help="drive the robot from the browser (prints the page's URL)"
+    )
+    teleop.add_argument("scenario", type=Path)
+    teleop.add_argument(
+        "--method", default="cat", help="cat, ik, mp or hybrid (switchable live)"
+    )
+    teleop.add_argument("--port", type=int, default=8080)
+    teleop.add_argument(
+        "--host", default="127.0.0.1", help="address to serve on (default: localhost)"
+    )
+    teleop.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output folder (default out/<name>_teleop)",
+    )
+    teleop.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario value (as for run)",
+    )
     examples = sub.add_parser(
         "examples", help="copy the example scenarios (and configs) out to edit"
     )
@@ -179,7 +210,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         overrides = _overrides(args.set)
         if overrides is None:
             return 2
+        if args.goal is not None:
+            from cbp.goals import recorded_goal_overrides
+
+            try:
+                overrides = {**recorded_goal_overrides(args.goal), **overrides}
+            except CbpError as exc:
+                print(f"--goal: {exc}", file=sys.stderr)
+                return 2
         return _compare(args.scenario, args.methods, args.out, args.jobs, overrides)
+    if args.command == "teleop":
+        overrides = _overrides(args.set)
+        if overrides is None:
+            return 2
+        from cbp.teleop_page import serve_teleop
+
+        return serve_teleop(
+            args.scenario, args.method, args.host, args.port, args.out, overrides
+        )
     if args.command == "bench":
         return _bench(args.quick, args.out, args.results)
     if args.command == "check":

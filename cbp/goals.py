@@ -22,10 +22,11 @@ from __future__ import annotations
 import bisect
 import csv
 import io
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -133,6 +134,23 @@ class GoalSpec:
                 )
 
 
+class GoalSource(Protocol):
+    """What a simulated run samples the operator's goal from.
+
+    A scenario's :class:`GoalStream`, or a live source such as the teleoperation
+    page's (:class:`cbp.teleop.LiveGoal`).
+    """
+
+    @property
+    def rate_hz(self) -> float:
+        """Rate at which the goal is sampled and sent [Hz]."""
+        ...
+
+    def sample(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """Goal position (3,) and rotation (3, 3) at time ``t`` [s]."""
+        ...
+
+
 class GoalStream:
     """Samples a :class:`GoalSpec`: ``pose(t)`` returns the goal at time t.
 
@@ -171,6 +189,11 @@ class GoalStream:
                 self._times.append(k.t)
                 self._positions.append(np.array(M.translation))
                 self._rotations.append(np.array(M.rotation))
+
+    @property
+    def rate_hz(self) -> float:
+        """Rate at which the goal is sampled and sent [Hz]."""
+        return self.spec.rate_hz
 
     @property
     def end_time(self) -> float:
@@ -263,6 +286,21 @@ def _number(text: str) -> float:
         return float(text)
     except ValueError:
         return float("nan")
+
+
+def recorded_goal_overrides(path: Path, settle: float = 2.0) -> dict[str, str]:
+    """Scenario overrides that replace the goal with the recording at ``path``.
+
+    The run lasts until the recording's last sample and ``settle`` seconds more
+    (``cbp compare --goal``: a teleoperation session replayed to every method).
+
+    Raises:
+        ConfigError: the file cannot be read as a recorded goal.
+    """
+    path = Path(path).resolve()
+    times, _, _ = _read_recorded(path)
+    goal = {"type": "recorded", "file": str(path)}
+    return {"goal": json.dumps(goal), "duration": f"{times[-1] + settle:.6f}"}
 
 
 def write_recorded(

@@ -29,7 +29,7 @@ from cbp.errors import ConfigError
 from cbp.robot import FloatArray
 from cbp.spatial import Pose
 
-__all__ = ["Replay", "RunRecording", "load_recordings"]
+__all__ = ["Replay", "RunRecording", "draw_objects", "load_recordings", "wxyz"]
 
 #: One colour per method, as in the figures (CAT blue, IK green, MP orange, JT
 #: red; hybrid purple), RGB 0-255.
@@ -144,7 +144,7 @@ class Replay:
                 ),
             )
             self._robots.append((recording, robot, robot.get_actuated_joint_names()))
-        self._draw_objects()
+        draw_objects(self.server, self.scene)
         self._goal = self.server.scene.add_frame(
             "/goal", axes_length=0.08, axes_radius=0.004
         )
@@ -165,46 +165,6 @@ class Replay:
     def url(self) -> str:
         """The page's address."""
         return f"http://{self.server.get_host()}:{self.server.get_port()}"
-
-    def _draw_objects(self) -> None:
-        scene = self.server.scene
-        for obj in self.scene["objects"]:
-            pose = Pose(**obj["pose"]).to_se3()
-            quat = _wxyz(pose.rotation)
-            name = f"/objects/{obj['name']}"
-            size = obj.get("size") or []
-            colour = (170, 170, 170)
-            if obj["shape"] == "box":
-                scene.add_box(
-                    name,
-                    color=colour,
-                    dimensions=tuple(size),
-                    wxyz=quat,
-                    position=tuple(pose.translation),
-                )
-            elif obj["shape"] == "sphere":
-                scene.add_icosphere(
-                    name, radius=size[0], color=colour, position=tuple(pose.translation)
-                )
-            elif obj["shape"] == "cylinder":
-                scene.add_cylinder(
-                    name,
-                    radius=size[0],
-                    height=size[1],
-                    color=colour,
-                    wxyz=quat,
-                    position=tuple(pose.translation),
-                )
-            elif obj["shape"] == "mesh":
-                import trimesh
-
-                mesh = trimesh.load(
-                    str(Path(self.scene["folder"]) / obj["file"]), force="mesh"
-                )
-                mesh.apply_scale(obj.get("scale", [1.0, 1.0, 1.0]))
-                scene.add_mesh_trimesh(
-                    name, mesh, wxyz=quat, position=tuple(pose.translation)
-                )
 
     def show(self, t: float) -> None:
         """Put every robot, the goal and the readout at time ``t``."""
@@ -267,7 +227,53 @@ class Replay:
         self.server.stop()
 
 
-def _wxyz(rotation: FloatArray) -> tuple[float, float, float, float]:
+def draw_objects(server: Any, description: dict[str, Any]) -> None:
+    """Draw the declared objects of a scene description.
+
+    ``description`` is :func:`cbp.report.scene_description`'s.
+    """
+    scene = server.scene
+    for obj in description["objects"]:
+        pose = Pose(**obj["pose"]).to_se3()
+        quat = wxyz(pose.rotation)
+        name = f"/objects/{obj['name']}"
+        size = obj.get("size") or []
+        colour = (170, 170, 170)
+        if obj["shape"] == "box":
+            scene.add_box(
+                name,
+                color=colour,
+                dimensions=tuple(size),
+                wxyz=quat,
+                position=tuple(pose.translation),
+            )
+        elif obj["shape"] == "sphere":
+            scene.add_icosphere(
+                name, radius=size[0], color=colour, position=tuple(pose.translation)
+            )
+        elif obj["shape"] == "cylinder":
+            scene.add_cylinder(
+                name,
+                radius=size[0],
+                height=size[1],
+                color=colour,
+                wxyz=quat,
+                position=tuple(pose.translation),
+            )
+        elif obj["shape"] == "mesh":
+            import trimesh
+
+            mesh = trimesh.load(
+                str(Path(description["folder"]) / obj["file"]), force="mesh"
+            )
+            mesh.apply_scale(obj.get("scale", [1.0, 1.0, 1.0]))
+            scene.add_mesh_trimesh(
+                name, mesh, wxyz=quat, position=tuple(pose.translation)
+            )
+
+
+def wxyz(rotation: FloatArray) -> tuple[float, float, float, float]:
+    """The quaternion (w, x, y, z), viser's order, of a rotation matrix."""
     import pinocchio as pin
 
     q = pin.Quaternion(rotation)

@@ -71,6 +71,8 @@ class CatPlanner:
             if budget.spent():
                 break
             steps += 1
+            if run.goal_changed():  # a live goal moved: steer toward it now
+                run.resend_goal()
             step = stepper.step(q, s.step_dt)
             budget.charge("qp_step")
             if step.outcome == "failed":

@@ -23,6 +23,7 @@ from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.errors import InvalidTargetError
 from cbp.executors.clock import ClockKind
 from cbp.executors.faults import Faults
+from cbp.goals import GoalSource
 from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
@@ -107,7 +108,7 @@ class SimulatedRun:
             scenario.path.parent,
             gui,
         )
-        self.stream = scenario.goal_stream()
+        self.stream: GoalSource | None = scenario.goal_stream()
         self.goal_task: GoalReceiver | None = scenario.goal_task()
         self.events: list[tuple[float, str]] = []
         self.faults = Faults(self.event)
@@ -171,7 +172,7 @@ class SimulatedRun:
         stream = self.stream
         if stream is None:
             return None
-        sample_t = math.floor(t * stream.spec.rate_hz + 1e-9) / stream.spec.rate_hz
+        sample_t = math.floor(t * stream.rate_hz + 1e-9) / stream.rate_hz
         goal = self._goal
         if sample_t > goal.sample_t:
             goal.sample_t = sample_t
@@ -198,6 +199,20 @@ class SimulatedRun:
                     goal.changes.append((sample_t, pose))
                 goal.pose = pose
         return goal.pose
+
+    def goal_changed(self) -> bool:
+        """Whether the goal source has a goal newer than the last one sampled.
+
+        Only a live source (the teleoperation page's) can: a scenario's stream
+        is sampled at its rate. A planner that works through a period may
+        check it between steps and take the newer goal (:meth:`resend_goal`).
+        """
+        return False
+
+    def resend_goal(self) -> pin.SE3 | None:
+        """Sample the goal source again now and send the goal on."""
+        self._goal.sample_t = -math.inf
+        return self.send_goal(self.sim.t)
 
     def send_goal(self, t: float) -> pin.SE3 | None:
         """Sample the goal at ``t`` and hand it to the scenario's goal task."""
@@ -235,6 +250,22 @@ class SimulatedRun:
             )
         else:
             self.event(t, "goal lies inside an obstacle: the arm stops short of it")
+
+    @property
+    def goal_changes(self) -> list[tuple[float, pin.SE3]]:
+        """Each accepted goal that differs from the one before, and its time."""
+        return self._goal.changes
+
+    @property
+    def stop_requested(self) -> bool:
+        """Whether the run should end now: an operator's stop, never in a script.
+
+        The trajectory loop then ends at the period's start.
+        """
+        return False
+
+    def commanded(self, t_start: float) -> None:
+        """Called when a new trajectory, starting at ``t_start``, is spliced in."""
 
     def event(self, t: float, message: str) -> None:
         """Record (and log) something that went wrong and was handled."""

@@ -93,7 +93,11 @@ def run_trajectory_executor(
     sim = run.sim
     faults = run.faults
     try:
-        while t < run.duration - 1e-9 and faults.aborted is None:
+        while (
+            t < run.duration - 1e-9
+            and faults.aborted is None
+            and not run.stop_requested
+        ):
             t_f = t + period
             current = sim.trajectory
             i = current.first_point_after(t_f)
@@ -148,6 +152,7 @@ def run_trajectory_executor(
             else:
                 if new is not None:
                     sim.follow(current.splice(new))
+                    run.commanded(float(new.times[0]))
                     spliced = True
                 next_period = (
                     max(period * timing.shrink, lo)
@@ -158,7 +163,7 @@ def run_trajectory_executor(
                 PeriodRecord(t, period, plan.steps, compute, missed, spliced, note)
             )
             t, period = t_f, next_period
-        if faults.aborted is None:
+        if faults.aborted is None and not run.stop_requested:
             run.advance(run.duration)
         else:
             # Let the robot come to rest on the (stopping) trajectory it is on.

@@ -155,6 +155,8 @@ class Simulation:
         self._data = model.createData()
         self.t = 0.0
         self.steps = 0
+        #: The sum of the normal forces of the last physics step [N].
+        self.contact_force = 0.0
         self._trajectory = JointTrajectory.hold(0.0, np.asarray(q0, dtype=float))
         self._torque: TorqueController | None = None
         self._last_command = np.asarray(q0, dtype=float).copy()
@@ -221,6 +223,7 @@ class Simulation:
         self.steps += 1
         self._q, self._v = self._read_state()
         force, depth, wrist = self._contact()
+        self.contact_force = force
         interval = self._interval
         interval.force = max(interval.force, force)
         interval.penetration = max(interval.penetration, depth)

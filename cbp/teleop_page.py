@@ -1,0 +1,319 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The teleoperation page of a :class:`~cbp.teleop.TeleopSession`, served by viser.
+
+The scene: the robot's collision meshes at the measured configuration, the
+declared objects, with cameras the map's occupied cells (and, on a toggle,
+the unknown cells near the robot), and the goal as a 6-DOF gizmo the operator
+drags. The panel: the method (switched at the next command period), pause and
+stop, jog buttons for the goal (translate or rotate by a step, in the world's
+or the hand's axes) and a reset, a readout (time, method, steps per period,
+deadline misses, goal error, contact force, the latest events) and a live plot
+of goal error and contact force over the last seconds.
+
+Every browser connected sees the same session; the last goal sent wins. A
+browser that disconnects leaves the goal where it was.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import sys
+import threading
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cbp.errors import CbpError
+from cbp.report import scene_description
+from cbp.teleop import METHODS, TeleopSession, latency_summary
+from cbp.viewer import draw_objects, wxyz
+
+__all__ = ["TeleopPage", "serve_teleop"]
+
+#: Page updates per second.
+UPDATE_RATE = 20.0
+#: The map's cells are redrawn this often [s].
+MAP_PERIOD = 0.5
+#: Seconds of history in the live plot.
+PLOT_SECONDS = 10.0
+#: Cells drawn at most (the nearest to the hand first).
+MAX_CELLS = 60_000
+
+_JOGS = [
+    ("+x", "x", 1.0),
+    ("-x", "x", -1.0),
+    ("+y", "y", 1.0),
+    ("-y", "y", -1.0),
+    ("+z", "z", 1.0),
+    ("-z", "z", -1.0),
+]
+_TURNS = [
+    ("+roll", "rx", 1.0),
+    ("-roll", "rx", -1.0),
+    ("+pitch", "ry", 1.0),
+    ("-pitch", "ry", -1.0),
+    ("+yaw", "rz", 1.0),
+    ("-yaw", "rz", -1.0),
+]
+
+
+class TeleopPage:
+    """Serve ``session`` in the browser.
+
+    Args:
+        session: the session (started or not).
+        host: where to serve (localhost unless asked otherwise).
+        port: the port (0: any free one).
+    """
+
+    def __init__(
+        self, session: TeleopSession, host: str = "127.0.0.1", port: int = 8080
+    ) -> None:
+        """Build the scene and the panel."""
+        import viser
+        import viser.uplot
+        from viser.extras import ViserUrdf
+
+        self.session = session
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        description = scene_description(session.scenario)
+        urdf = description.get("urdf")
+        self._locked = description.get("locked_joints", {})
+        self.robot = (
+            ViserUrdf(
+                self.server,
+                Path(urdf),
+                root_node_name="/robot",
+                load_meshes=False,
+                load_collision_meshes=True,
+                collision_mesh_color_override=(0.12, 0.47, 0.71),
+            )
+            if urdf is not None
+            else None
+        )
+        self._joints = self.robot.get_actuated_joint_names() if self.robot else []
+        self._q_names = session.scenario.robot.coordinate_names("q")
+        draw_objects(self.server, description)
+        camera = self.server.initial_camera
+        camera.position = (1.9, -1.4, 1.3)
+        camera.look_at = (0.4, 0.0, 0.3)
+        position, rotation = session.goal.pose()
+        self.gizmo = self.server.scene.add_transform_controls(
+            "/goal", scale=0.15, position=tuple(position), wxyz=wxyz(rotation)
+        )
+        self.gizmo.on_update(lambda _: self._gizmo_moved())
+        gui = self.server.gui
+        self.method = gui.add_dropdown(
+            "method", METHODS, initial_value=session.planner.method
+        )
+        self.method.on_update(lambda _: session.switch(self.method.value))
+        self.paused = gui.add_checkbox("pause", initial_value=False)
+        self.paused.on_update(lambda _: session.pause(self.paused.value))
+        self.stop_button = gui.add_button("stop and save")
+        self.stopped = threading.Event()
+        self.stop_button.on_click(lambda _: self.stopped.set())
+        with gui.add_folder("jog the goal"):
+            self.frame = gui.add_dropdown(
+                "axes", ("world", "hand"), initial_value="world"
+            )
+            self.step = gui.add_slider(
+                "step [m]", min=0.005, max=0.1, step=0.005, initial_value=0.02
+            )
+            self.turn = gui.add_slider(
+                "turn [deg]", min=1.0, max=45.0, step=1.0, initial_value=10.0
+            )
+            self.jog_buttons: dict[str, Any] = {}
+            for label, axis, sign in _JOGS + _TURNS:
+                button = gui.add_button(label)
+                button.on_click(self._jogger(axis, sign))
+                self.jog_buttons[label] = button
+            reset = gui.add_button("reset goal")
+            reset.on_click(lambda _: self._after_goal(session.reset()))
+        self.show_unknown = gui.add_checkbox("show unknown space", initial_value=False)
+        self.readout = gui.add_markdown("")
+        self._history: deque[tuple[float, float, float]] = deque()
+        self.plot = gui.add_uplot(
+            data=(np.zeros(1), np.zeros(1), np.zeros(1)),
+            series=(
+                viser.uplot.Series(label="t [s]"),
+                viser.uplot.Series(label="goal error [mm]", stroke="blue", width=2),
+                viser.uplot.Series(label="contact [N]", stroke="red", width=2),
+            ),
+            title="goal error and contact force",
+            aspect=2.0,
+        )
+        self._cells: Any = None
+        self._map_drawn: tuple[object, bool, float] = (None, False, -math.inf)
+        self._close = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        """The page's address."""
+        return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
+    # ------------------------------------------------------------------ input
+
+    def _gizmo_moved(self) -> None:
+        wxyz = np.asarray(self.gizmo.wxyz, dtype=float)
+        import pinocchio as pin
+
+        rotation = pin.Quaternion(wxyz[0], wxyz[1], wxyz[2], wxyz[3]).matrix()
+        self.session.set_goal(np.asarray(self.gizmo.position, dtype=float), rotation)
+
+    def _jogger(self, axis: str, sign: float) -> Any:
+        """A click handler that jogs ``axis`` by a step in direction ``sign``."""
+        return lambda _: self._jog(axis, sign)
+
+    def _jog(self, axis: str, sign: float) -> None:
+        step = np.deg2rad(self.turn.value) if axis.startswith("r") else self.step.value
+        self._after_goal(self.session.jog(axis, sign * step, self.frame.value))
+
+    def _after_goal(self, _: int) -> None:
+        """Put the gizmo where the goal now is (a jog or a reset moved it)."""
+        position, rotation = self.session.goal.pose()
+        self.gizmo.position = tuple(position)
+        self.gizmo.wxyz = wxyz(rotation)
+
+    # ------------------------------------------------------------------ output
+
+    def update(self) -> None:
+        """Bring the page up to date with the session (called at UPDATE_RATE)."""
+        session = self.session
+        snap = session.snapshot()
+        if self.robot is not None:
+            by_name = dict(zip(self._q_names, snap.q, strict=True))
+            cfg = np.array(
+                [by_name.get(j, self._locked.get(j, 0.0)) for j in self._joints]
+            )
+            self.robot.update_cfg(cfg)
+        goal, _ = session.goal.pose()
+        error = float(np.linalg.norm(goal - snap.hand))
+        self._history.append((snap.t, 1e3 * error, snap.contact_force))
+        while self._history and self._history[0][0] < snap.t - PLOT_SECONDS:
+            self._history.popleft()
+        lines = [
+            f"**t = {snap.t:.2f} s**, method **{snap.method}**"
+            + (" (paused)" if snap.paused else ""),
+            "",
+            f"- goal error: {error * 1e3:.0f} mm",
+            f"- contact force: {snap.contact_force:.1f} N",
+            f"- steps in the last period: {snap.steps}",
+            f"- deadline misses: {snap.misses}",
+        ]
+        if snap.events:
+            lines += ["", "latest events:"]
+            lines += [f"- {t:.2f} s: {message}" for t, message in snap.events]
+        self.readout.content = "\n".join(lines)
+        if len(self._history) > 1:
+            data = np.array(self._history).T
+            self.plot.data = (data[0], data[1], data[2])
+        self._draw_map(snap.t)
+
+    def _draw_map(self, t: float) -> None:
+        """Redraw the map's cells when the map or the toggle changed."""
+        run = self.session.run
+        world = run.world
+        if run.mapper is None or world is None:
+            return
+        environment = world.environment
+        unknown = bool(self.show_unknown.value)
+        drawn, drawn_unknown, drawn_t = self._map_drawn
+        if environment is drawn and unknown == drawn_unknown:
+            return
+        if unknown == drawn_unknown and t - drawn_t < MAP_PERIOD:
+            return  # a new map, drawn at most every MAP_PERIOD
+        self._map_drawn = (environment, unknown, t)
+        centres = np.asarray(getattr(environment, "centres", np.zeros((0, 3))))
+        colours = np.tile(np.array([[200, 90, 40]], dtype=np.uint8), (len(centres), 1))
+        blocked = getattr(environment, "blocked", None)
+        if unknown and blocked is not None:
+            # Obstacle cells that are not occupied are unknown: shown grey.
+            mask = blocked.mask
+            idx = np.argwhere(mask)
+            points = blocked.lower + (idx + 0.5) * blocked.cell
+            centres = np.vstack([centres, points])
+            colours = np.vstack(
+                [colours, np.full((len(points), 3), 150, dtype=np.uint8)]
+            )
+        if len(centres) > MAX_CELLS:
+            hand = self.session.snapshot().hand
+            nearest = np.argsort(np.linalg.norm(centres - hand, axis=1))[:MAX_CELLS]
+            centres, colours = centres[nearest], colours[nearest]
+        cell = float(getattr(environment, "cell", 0.01))
+        self._cells = self.server.scene.add_point_cloud(
+            "/map", centres.astype(np.float32), colours, point_size=cell
+        )
+
+    def run(self) -> None:
+        """Update the page until :meth:`close` or the stop button."""
+        period = 1.0 / UPDATE_RATE
+        due = time.perf_counter()
+        while not self._close.is_set() and not self.stopped.is_set():
+            self.update()
+            if not self.session.running:
+                break
+            # On a fixed schedule; an update that ran late is not made up.
+            due = max(due + period, time.perf_counter() - period)
+            self._close.wait(max(0.0, due - time.perf_counter()))
+
+    def start(self) -> None:
+        """Update the page in a thread of its own."""
+        self._thread = threading.Thread(target=self.run, name="page", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop updating and serving."""
+        self._close.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self.server.stop()
+
+
+def serve_teleop(
+    scenario: Path,
+    method: str,
+    host: str,
+    port: int,
+    out: Path | None,
+    overrides: dict[str, str],
+) -> int:
+    """``cbp teleop``: serve the session until the page's stop or Ctrl-C.
+
+    Then the arm brakes, and the outputs are written. Exit 2 for a scenario or
+    method that cannot start (nothing runs).
+    """
+    from cbp.files import check_output_folder
+
+    try:
+        session = TeleopSession(scenario, method, overrides)
+        out = out or Path("out") / f"{session.scenario.spec.name}_teleop"
+        check_output_folder(out)
+        page = TeleopPage(session, host=host, port=port)
+    except CbpError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    session.start()
+    print(f"teleoperation of {scenario}: {page.url} (stop on the page or Ctrl-C)")
+    try:
+        with contextlib.suppress(KeyboardInterrupt):
+            page.run()
+    finally:
+        page.close()
+    session.stop()
+    goal_file = session.write(out)
+    latency = latency_summary(session.latency_ms())
+    print(
+        f"wrote {out}; the operator's goals: {goal_file} "
+        f"(replay: cbp compare {scenario} --goal {goal_file})"
+    )
+    if latency["n"]:
+        print(
+            f"goal-to-command latency: median {latency['median_ms']:.1f} ms, "
+            f"p95 {latency['p95_ms']:.1f} ms over {latency['n']} goals"
+        )
+    return 0

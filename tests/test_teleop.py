@@ -1,0 +1,234 @@
+"""``cbp teleop``: a live session driven through its own interface and a browser.
+
+Sessions run the real simulation in real time (PyBullet, CAT and the others),
+so the tests that drive one are slow. The browser test opens the page in
+headless Chromium (Debian's ``chromium`` and ``chromium-driver``), clicks a jog
+button and the method selector, and keeps a screenshot as an artifact in
+``out/test-artifacts/``.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cbp.compare import compare
+from cbp.errors import ConfigError
+from cbp.goals import recorded_goal_overrides
+from cbp.metrics import run_metrics
+from cbp.teleop import GOAL_FILE, LiveGoal, TeleopSession
+from tests.conftest import run_cbp
+
+ROOT = Path(__file__).resolve().parents[1]
+BOARDS = ROOT / "scenarios" / "cat_boards.yaml"
+ARTIFACTS = ROOT / "out" / "test-artifacts"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait(condition, timeout: float) -> bool:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return bool(condition())
+
+
+def test_jogs_move_the_goal_in_world_or_hand_axes() -> None:
+    session = TeleopSession(BOARDS, "cat")
+    p0, R0 = session.goal.pose()
+    session.jog("x", 0.02)
+    p1, R1 = session.goal.pose()
+    np.testing.assert_allclose(p1 - p0, [0.02, 0.0, 0.0])
+    np.testing.assert_array_equal(R1, R0)
+    session.jog("z", 0.05, frame="hand")  # along the hand's own z
+    p2, _ = session.goal.pose()
+    np.testing.assert_allclose(p2 - p1, 0.05 * R0[:, 2], atol=1e-12)
+    session.jog("rz", np.pi / 2, frame="hand")
+    _, R3 = session.goal.pose()
+    np.testing.assert_allclose(R3[:, 2], R0[:, 2], atol=1e-12)  # about it
+    np.testing.assert_allclose(R3[:, 0], R0[:, 1], atol=1e-12)
+    session.reset()
+    np.testing.assert_allclose(session.goal.pose()[0], p0)
+    with pytest.raises(ConfigError, match="axis"):
+        session.jog("w", 0.1)
+    with pytest.raises(ConfigError, match="method"):
+        session.switch("jt")  # not a trajectory executor
+    with pytest.raises(ConfigError, match="method"):
+        TeleopSession(BOARDS, "velocity")
+
+
+def test_the_live_goal_reports_each_sampled_goal_once() -> None:
+    goal = LiveGoal(np.zeros(3), np.eye(3))
+    first = goal.set(np.ones(3), np.eye(3))
+    second = goal.set(2 * np.ones(3), np.eye(3))
+    assert (first, second) == (1, 2)
+    position, _ = goal.sample(0.0)
+    np.testing.assert_array_equal(position, 2 * np.ones(3))
+    taken = goal.take_sampled()
+    assert taken is not None
+    assert taken[0] == 2
+    assert goal.take_sampled() is None  # measured once; 1 was never sampled
+
+
+def test_compare_refuses_a_goal_file_it_cannot_read(tmp_path: Path) -> None:
+    bad = tmp_path / "goal.csv"
+    bad.write_text("t,x\n0,1\n")
+    result = run_cbp("compare", str(BOARDS), "--goal", str(bad))
+    assert result.returncode == 2
+    assert "--goal" in result.stderr
+
+
+@pytest.mark.slow
+def test_a_scripted_session_is_recorded_and_replays(tmp_path: Path) -> None:
+    """Goals sent through the session's interface; the recording replays them.
+
+    Also: a NaN goal is rejected with an event and the arm keeps the previous
+    one; switching methods takes effect at the next period; stopping brakes.
+    """
+    session = TeleopSession(BOARDS, "cat")
+    session.start()
+    try:
+        assert _wait(lambda: session.snapshot().t > 0.5, 10)
+        start = session.snapshot().hand
+        for _ in range(5):
+            session.jog("x", 0.03)
+            time.sleep(0.4)
+        assert _wait(lambda: session.snapshot().hand[0] - start[0] > 0.14, 5)
+        session.set_goal(np.array([np.nan, 0.0, 0.0]), np.eye(3))
+        time.sleep(0.3)
+        session.switch("ik")
+        assert _wait(lambda: session.snapshot().method == "ik", 2)
+        session.jog("z", 0.05)
+        time.sleep(1.5)
+    finally:
+        trace = session.stop()
+    events = [message for _, message in trace.events]
+    assert any(m.startswith("goal rejected") for m in events)
+    assert "method switched from cat to ik" in events
+    assert np.all(np.isfinite(trace.q))
+    live = run_metrics(trace, session.scenario.robot)
+    assert live["peak_contact_force_n"] == 0.0
+    assert trace.aborted is None
+    assert session.latency_ms(), "no goal-to-command latency was measured"
+
+    out = tmp_path / "session"
+    goal_file = session.write(out)
+    assert goal_file == out / GOAL_FILE
+    assert json.loads((out / "metrics.json").read_text())["cat"]["samples"] > 0
+    # Replayed to CAT alone, the recording ends where the live session ended.
+    replay = compare(
+        BOARDS,
+        ["cat"],
+        tmp_path / "replay",
+        overrides=recorded_goal_overrides(goal_file),
+    )
+    metrics = replay.metrics["cat"]
+    assert metrics["peak_contact_force_n"] == 0.0
+    replayed = np.loadtxt(tmp_path / "replay" / "trace.csv", delimiter=",", skiprows=1)
+    header = (tmp_path / "replay" / "trace.csv").read_text().splitlines()[0].split(",")
+    hand = replayed[-1, [header.index(f"ee_{c}") for c in "xyz"]]
+    goal, _ = session.goal.pose()
+    # The live run ended with IK in control; both end at the last goal.
+    assert np.linalg.norm(hand - goal) < 0.01
+    assert np.linalg.norm(trace.ee_position[-1] - goal) < 0.01
+
+
+def _browser():  # type: ignore[no-untyped-def]
+    webdriver = pytest.importorskip("selenium.webdriver")
+    chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
+    if chromium is None or driver is None:
+        pytest.fail(
+            "Chromium is needed: apt-get install chromium chromium-driver "
+            "(make test-slow installs them)"
+        )
+    options = webdriver.ChromeOptions()
+    options.binary_location = chromium
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-dev-shm-usage",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--window-size=1280,900",
+    ):
+        options.add_argument(flag)
+    service = webdriver.ChromeService(executable_path=driver)
+    return webdriver.Chrome(options=options, service=service)
+
+
+@pytest.mark.slow
+def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    from selenium.webdriver.common.by import By
+
+    from cbp.teleop_page import TeleopPage
+
+    session = TeleopSession(BOARDS, "cat")
+    page = TeleopPage(session, port=_free_port())
+    assert page.server.get_host() == "127.0.0.1"  # localhost unless asked
+    session.start()
+    page.start()
+    browser = _browser()
+    try:
+        browser.get(page.url)
+
+        def button(label: str):  # type: ignore[no-untyped-def]
+            found = browser.find_elements(
+                By.XPATH, f"//button[normalize-space()='{label}']"
+            )
+            return found[0] if found else None
+
+        assert _wait(lambda: button("+x") is not None, 60), "the panel never came"
+        assert _wait(lambda: browser.find_elements(By.TAG_NAME, "canvas"), 30)
+        assert _wait(lambda: "goal error" in browser.page_source, 10)
+        time.sleep(1.0)  # let the robot be drawn
+        ARTIFACTS.mkdir(parents=True, exist_ok=True)
+        shot = ARTIFACTS / "teleop_page.png"
+        browser.save_screenshot(str(shot))
+        from PIL import Image
+
+        pixels = np.asarray(Image.open(shot).convert("L"), dtype=float)
+        assert pixels.std() > 5.0, "the screenshot is blank"
+
+        # The page draws the robot where the simulation has it.
+        snap = session.snapshot()
+        drawn = page.robot._urdf.cfg
+        np.testing.assert_allclose(drawn[:7], snap.q[:7], atol=0.05)
+
+        # A jog button moves the simulated hand by the step within a second.
+        before = session.snapshot().hand.copy()
+        step = float(page.step.value)
+        button("+x").click()
+        assert _wait(
+            lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 1.0
+        ), f"the hand moved {session.snapshot().hand - before} in 1 s"
+
+        # The method selector hands control to IK at the next period.
+        selector = browser.find_element(
+            By.XPATH, "//*[normalize-space()='method']/following::input[1]"
+        )
+        selector.click()
+        assert _wait(lambda: browser.find_elements(By.XPATH, "//*[@role='option']"), 5)
+        option = browser.find_element(
+            By.XPATH, "//*[@role='option'][normalize-space()='ik']"
+        )
+        option.click()
+        assert _wait(lambda: session.snapshot().method == "ik", 3)
+    finally:
+        browser.quit()
+        page.close()
+        trace = session.stop()
+    assert "method switched from cat to ik" in [m for _, m in trace.events]
+    assert run_metrics(trace, session.scenario.robot)["peak_contact_force_n"] == 0.0
