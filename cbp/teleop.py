@@ -32,7 +32,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from cbp.errors import ConfigError, require_choice
+from cbp.collision.contacts import ContactSet
+from cbp.errors import CbpError, ConfigError, require_choice
 from cbp.executors.clock import Budget
 from cbp.executors.settings import CatSettings, IkSettings, MpSettings
 from cbp.executors.simulated import SimulatedRun
@@ -176,6 +177,22 @@ class _SwitchingPlanner:
             return Plan(None, 0, "paused", stop=True)
         return self._planner(self.method).plan(q, goal, budget, run)
 
+    def contacts(self) -> ContactSet | None:
+        """The contacts of the method in control's contact rows, if it has them."""
+        planner = self._planners.get(self.method)
+        cat = getattr(planner, "cat", planner)  # hybrid's CAT, or CAT itself
+        engine = getattr(cat, "engine", None)
+        if engine is None:
+            return None
+        for entry in engine.entries:
+            if entry.plugin.type_name == "contact_normals":
+                try:
+                    contacts: ContactSet = entry.plugin.contacts
+                except CbpError:  # nothing latched yet
+                    return None
+                return contacts
+        return None
+
     def close(self) -> None:
         for planner in self._planners.values():
             close = getattr(planner, "close", None)
@@ -237,6 +254,9 @@ class Snapshot:
         misses: deadline misses so far.
         contact_force: contact force of the last physics step [N].
         events: the latest events, newest last.
+        contacts: the contacts CAT's contact rows hold at its latest step
+            (None for a method without them).
+        path: the commanded trajectory's configurations from now on (M, nq).
     """
 
     t: float
@@ -248,6 +268,8 @@ class Snapshot:
     misses: int
     contact_force: float
     events: list[tuple[float, str]] = field(default_factory=list)
+    contacts: ContactSet | None = None
+    path: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 class TeleopSession:
@@ -414,6 +436,8 @@ class TeleopSession:
         q = np.array(run.sim.q, dtype=float)
         self._state.update(q)
         periods = run.periods[-1:] if run.periods else []
+        trajectory = run.sim.trajectory
+        ahead = int(np.searchsorted(trajectory.times, run.sim.t))
         return Snapshot(
             t=run.sim.t,
             q=q,
@@ -424,6 +448,8 @@ class TeleopSession:
             misses=sum(1 for p in run.periods if p.missed),
             contact_force=float(run.sim.contact_force),
             events=list(run.events[-5:]),
+            contacts=self.planner.contacts(),
+            path=np.array(trajectory.positions[ahead:], dtype=float),
         )
 
     def latency_ms(self) -> list[float]:

@@ -29,7 +29,8 @@ import numpy as np
 
 from cbp.errors import CbpError
 from cbp.report import scene_description
-from cbp.teleop import METHODS, TeleopSession, latency_summary
+from cbp.state import RobotState
+from cbp.teleop import METHODS, Snapshot, TeleopSession, latency_summary
 from cbp.viewer import draw_objects, wxyz
 
 __all__ = ["TeleopPage", "serve_teleop"]
@@ -40,6 +41,11 @@ UPDATE_RATE = 20.0
 MAP_PERIOD = 0.5
 #: Seconds of history in the live plot.
 PLOT_SECONDS = 10.0
+#: Length of a contact's normal as drawn [m].
+CONTACT_ARROW = 0.04
+#: The goal counts as out of reach when the commanded trajectory ends this far
+#: from it [m]: the gripper and the reachable posture are drawn.
+UNREACHABLE = 0.02
 #: Cells drawn at most (the nearest to the hand first).
 MAX_CELLS = 60_000
 
@@ -105,6 +111,7 @@ class TeleopPage:
         self.gizmo = self.server.scene.add_transform_controls(
             "/goal", scale=0.15, position=tuple(position), wxyz=wxyz(rotation)
         )
+        self._shown_goal = session.goal.count
         self.gizmo.on_update(lambda _: self._gizmo_moved())
         gui = self.server.gui
         self.method = gui.add_dropdown(
@@ -147,6 +154,27 @@ class TeleopPage:
             aspect=2.0,
         )
         self._cells: Any = None
+        # Where the arm is heading when the goal is out of its reach: a
+        # transparent robot at the end of the commanded trajectory, and the
+        # goal drawn as a gripper (the CAT paper's operator view).
+        self.ghost = (
+            ViserUrdf(
+                self.server,
+                Path(urdf),
+                root_node_name="/reachable",
+                load_meshes=False,
+                load_collision_meshes=True,
+                collision_mesh_color_override=(0.6, 0.6, 0.6, 0.35),
+            )
+            if urdf is not None
+            else None
+        )
+        self._gripper = _add_gripper(self.server, "/goal/gripper")
+        self._state = RobotState(session.scenario.robot)
+        self._hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
+        self._drawn_path: object = None
+        if self.ghost is not None:
+            self.ghost.show_collision = False
         self._map_drawn: tuple[object, bool, float] = (None, False, -math.inf)
         self._close = threading.Event()
         self._thread: threading.Thread | None = None
@@ -163,7 +191,9 @@ class TeleopPage:
         import pinocchio as pin
 
         rotation = pin.Quaternion(wxyz[0], wxyz[1], wxyz[2], wxyz[3]).matrix()
-        self.session.set_goal(np.asarray(self.gizmo.position, dtype=float), rotation)
+        self._shown_goal = self.session.set_goal(
+            np.asarray(self.gizmo.position, dtype=float), rotation
+        )
 
     def _jogger(self, axis: str, sign: float) -> Any:
         """A click handler that jogs ``axis`` by a step in direction ``sign``."""
@@ -173,11 +203,13 @@ class TeleopPage:
         step = np.deg2rad(self.turn.value) if axis.startswith("r") else self.step.value
         self._after_goal(self.session.jog(axis, sign * step, self.frame.value))
 
-    def _after_goal(self, _: int) -> None:
-        """Put the gizmo where the goal now is (a jog or a reset moved it)."""
+    def _after_goal(self, number: int) -> None:
+        """Put the gizmo where the goal now is (a jog, a reset or a script moved it)."""
         position, rotation = self.session.goal.pose()
-        self.gizmo.position = tuple(position)
-        self.gizmo.wxyz = wxyz(rotation)
+        self._shown_goal = number
+        if np.isfinite(position).all() and np.isfinite(rotation).all():
+            self.gizmo.position = tuple(position)
+            self.gizmo.wxyz = wxyz(rotation)
 
     # ------------------------------------------------------------------ output
 
@@ -186,13 +218,13 @@ class TeleopPage:
         session = self.session
         snap = session.snapshot()
         if self.robot is not None:
-            by_name = dict(zip(self._q_names, snap.q, strict=True))
-            cfg = np.array(
-                [by_name.get(j, self._locked.get(j, 0.0)) for j in self._joints]
-            )
-            self.robot.update_cfg(cfg)
+            self.robot.update_cfg(self._cfg(snap.q))
+        if session.goal.count != self._shown_goal:  # sent from elsewhere
+            self._after_goal(session.goal.count)
         goal, _ = session.goal.pose()
         error = float(np.linalg.norm(goal - snap.hand))
+        self._draw_contacts(snap)
+        self._draw_path(snap, goal)
         self._history.append((snap.t, 1e3 * error, snap.contact_force))
         while self._history and self._history[0][0] < snap.t - PLOT_SECONDS:
             self._history.popleft()
@@ -213,6 +245,69 @@ class TeleopPage:
             data = np.array(self._history).T
             self.plot.data = (data[0], data[1], data[2])
         self._draw_map(snap.t)
+
+    def _cfg(self, q: np.ndarray) -> np.ndarray:
+        """The URDF's actuated joints' values for the robot's configuration."""
+        by_name = dict(zip(self._q_names, q, strict=True))
+        return np.array(
+            [by_name.get(j, self._locked.get(j, 0.0)) for j in self._joints]
+        )
+
+    def _draw_contacts(self, snap: Snapshot) -> None:
+        """CAT's contacts: a normal at each robot witness point, by distance.
+
+        Red at contact or closer, through yellow, to green at the safety
+        distance's 5 cm and beyond.
+        """
+        contacts = snap.contacts
+        if contacts is None or not len(contacts.distance):
+            points = np.zeros((0, 2, 3))
+            colours = np.zeros((0, 2, 3))
+        else:
+            start = contacts.point
+            points = np.stack([start, start + CONTACT_ARROW * contacts.normal], axis=1)
+            closeness = np.clip(1.0 - contacts.distance / 0.05, 0.0, 1.0)
+            rgb = np.stack(
+                [closeness, 1.0 - 0.5 * closeness, np.zeros_like(closeness)], axis=1
+            )
+            colours = np.repeat(rgb[:, None, :], 2, axis=1)
+        self.server.scene.add_line_segments(
+            "/contacts", points, colours, thickness=3.0, thickness_units="screen"
+        )
+
+    def _draw_path(self, snap: Snapshot, goal: np.ndarray) -> None:
+        """The commanded trajectory's hand path, and the reachable posture."""
+        path = snap.path
+        if len(path) and path is not self._drawn_path:
+            self._drawn_path = path
+            keep = np.unique(
+                np.linspace(0, len(path) - 1, min(len(path), 60)).astype(int)
+            )
+            hands = np.empty((len(keep), 3))
+            for i, k in enumerate(keep):
+                self._state.update(path[k])
+                hands[i] = self._state.frame_position(self._hand)
+            segments = (
+                np.stack([hands[:-1], hands[1:]], axis=1)
+                if len(hands) > 1
+                else np.zeros((0, 2, 3))
+            )
+            self.server.scene.add_line_segments(
+                "/commanded",
+                segments,
+                (20, 20, 20),
+                thickness=2.0,
+                thickness_units="screen",
+            )
+        end = path[-1] if len(path) else snap.q
+        self._state.update(end)
+        short = float(np.linalg.norm(goal - self._state.frame_position(self._hand)))
+        unreachable = short > UNREACHABLE
+        self._gripper.visible = unreachable
+        if self.ghost is not None:
+            if unreachable:
+                self.ghost.update_cfg(self._cfg(end))
+            self.ghost.show_collision = unreachable
 
     def _draw_map(self, t: float) -> None:
         """Redraw the map's cells when the map or the toggle changed."""
@@ -317,3 +412,20 @@ def serve_teleop(
             f"p95 {latency['p95_ms']:.1f} ms over {latency['n']} goals"
         )
     return 0
+
+
+def _add_gripper(server: Any, name: str) -> Any:
+    """A two-finger gripper of boxes under frame ``name`` (opening along y, z out)."""
+    frame = server.scene.add_frame(name, show_axes=False, visible=False)
+    colour = (200, 60, 60)
+    server.scene.add_box(
+        f"{name}/palm", colour, (0.02, 0.16, 0.03), position=(0, 0, -0.04)
+    )
+    for side in (-1, 1):
+        server.scene.add_box(
+            f"{name}/finger{side}",
+            colour,
+            (0.015, 0.015, 0.05),
+            position=(0, 0.06 * side, 0.0),
+        )
+    return frame

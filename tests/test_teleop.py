@@ -226,6 +226,21 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         )
         option.click()
         assert _wait(lambda: session.snapshot().method == "ik", 3)
+
+        # A goal beyond the boards, sent from elsewhere (a script): the gizmo
+        # follows it; the arm stops short, and the page draws the goal as a
+        # gripper and the reachable posture (the CAT paper's operator view).
+        session.switch("cat")
+        position, rotation = session.goal.pose()
+        beyond = position + np.array([0.35, 0.0, 0.0])
+        session.set_goal(beyond, rotation)
+        assert _wait(lambda: np.allclose(page.gizmo.position, beyond), 1.0)
+        assert _wait(lambda: page._gripper.visible, 8.0)
+        assert page.ghost is not None
+        assert page.ghost.show_collision
+        snap = session.snapshot()
+        assert snap.contacts is not None
+        assert len(snap.contacts.distance) > 0  # CAT's contact rows are drawn
     finally:
         browser.quit()
         page.close()
