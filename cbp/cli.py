@@ -147,7 +147,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     teleop = sub.add_parser(
         "teleop", help="drive the robot from the browser (prints the page's URL)"
     )
-    teleop.add_argument("scenario", type=Path)
+    teleop.add_argument(
+        "scenario",
+        type=Path,
+        nargs="+",
+        help="a scenario; or velocity-executor configurations of one robot to "
+        "switch between (orbit and pan object)",
+    )
     teleop.add_argument(
         "--method", default="cat", help="cat, ik, mp or hybrid (switchable live)"
     )

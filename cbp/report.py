@@ -34,15 +34,37 @@ REPORT_EVENTS = 50
 SCENE_FILE = "scene.json"
 
 
-def scene_description(scenario: Scenario) -> dict[str, Any]:
+#: Objects that appear or move are tracked this often in a scene description [s].
+TRACK_PERIOD = 0.05
+
+
+def scene_description(
+    scenario: Scenario, duration: float | None = None
+) -> dict[str, Any]:
     """The robot and the objects of ``scenario``, for drawing a replay.
 
     The URDF (absolute path) with the joints robot.yaml locks, and the declared
-    objects as written (shape, size, pose, appearance and motion).
+    objects as written (shape, size, pose, appearance and motion). Objects that
+    appear or move have a ``track`` too: rows of (t, present, x, y, z, qx, qy,
+    qz, qw) every :data:`TRACK_PERIOD` over ``duration`` (default the
+    scenario's), for a replay to draw them where they were.
     """
     robot = scenario.robot
     description = robot.description
+    end = scenario.spec.duration if duration is None else duration
+    tracks = {}
+    for o in scenario.spec.world.objects:
+        if not o.dynamic:
+            continue
+        rows = []
+        for t in np.arange(0.0, end + TRACK_PERIOD, TRACK_PERIOD):
+            placement = o.placement_at(float(t))
+            q = pin.Quaternion(placement.rotation)
+            present = float(o.present(float(t)))
+            rows.append([float(t), present, *placement.translation, q.x, q.y, q.z, q.w])
+        tracks[o.name] = np.round(np.array(rows), 6).tolist()
     return {
+        "tracks": tracks,
         "scenario": scenario.spec.name,
         "urdf": str(robot.urdf_path.resolve()) if robot.urdf_path else None,
         "locked_joints": dict(description.locked_joints) if description else {},
@@ -78,7 +100,8 @@ def write_outputs(
     staging = staging_folder(out)
     try:
         metrics = _write(scenario, traces, staging)
-        (staging / SCENE_FILE).write_text(json.dumps(scene_description(scenario)))
+        end = max((float(t.t[-1]) for t in traces.values() if t.t.size), default=0.0)
+        (staging / SCENE_FILE).write_text(json.dumps(scene_description(scenario, end)))
         for name, source in (extra_files or {}).items():
             shutil.copyfile(source, staging / name)
     except BaseException:

@@ -27,13 +27,19 @@ from typing import Any
 
 import numpy as np
 
-from cbp.errors import CbpError
+from cbp.errors import CbpError, ConfigError
 from cbp.report import scene_description
 from cbp.state import RobotState
-from cbp.teleop import METHODS, Snapshot, TeleopSession, latency_summary
+from cbp.teleop import (
+    METHODS,
+    InputSession,
+    Snapshot,
+    TeleopSession,
+    latency_summary,
+)
 from cbp.viewer import draw_objects, wxyz
 
-__all__ = ["TeleopPage", "serve_teleop"]
+__all__ = ["InputsPage", "TeleopPage", "serve_teleop"]
 
 #: Page updates per second.
 UPDATE_RATE = 20.0
@@ -86,7 +92,7 @@ class TeleopPage:
 
         self.session = session
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        description = scene_description(session.scenario)
+        description = scene_description(session.scenario, duration=0.0)
         urdf = description.get("urdf")
         self._locked = description.get("locked_joints", {})
         self.robot = (
@@ -152,6 +158,7 @@ class TeleopPage:
             ),
             title="goal error and contact force",
             aspect=2.0,
+            scales={"x": viser.uplot.Scale(time=False)},
         )
         self._cells: Any = None
         # Where the arm is heading when the goal is out of its reach: a
@@ -173,6 +180,9 @@ class TeleopPage:
         self._state = RobotState(session.scenario.robot)
         self._hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
         self._drawn_path: object = None
+        #: Whether the arm has stopped short of the goal (drawn as a gripper,
+        #: with the posture it stopped in).
+        self.unreachable = False
         if self.ghost is not None:
             self.ghost.show_collision = False
         self._map_drawn: tuple[object, bool, float] = (None, False, -math.inf)
@@ -301,8 +311,13 @@ class TeleopPage:
             )
         end = path[-1] if len(path) else snap.q
         self._state.update(end)
-        short = float(np.linalg.norm(goal - self._state.frame_position(self._hand)))
-        unreachable = short > UNREACHABLE
+        heading = self._state.frame_position(self._hand)
+        short = float(np.linalg.norm(goal - heading))
+        # Out of reach: the arm's trajectory ends short of the goal, where the
+        # hand already is (it is not on its way to anywhere nearer).
+        stalled = float(np.linalg.norm(heading - snap.hand)) < UNREACHABLE / 4
+        unreachable = short > UNREACHABLE and stalled
+        self.unreachable = unreachable
         self._gripper.visible = unreachable
         if self.ghost is not None:
             if unreachable:
@@ -370,7 +385,7 @@ class TeleopPage:
 
 
 def serve_teleop(
-    scenario: Path,
+    scenarios: list[Path],
     method: str,
     host: str,
     port: int,
@@ -379,32 +394,53 @@ def serve_teleop(
 ) -> int:
     """``cbp teleop``: serve the session until the page's stop or Ctrl-C.
 
-    Then the arm brakes, and the outputs are written. Exit 2 for a scenario or
-    method that cannot start (nothing runs).
+    One scenario of a trajectory executor: a goal session
+    (:class:`TeleopPage`). Velocity-executor scenarios (one or several
+    configurations of one robot, switched on the page): an input session
+    (:class:`InputsPage`). Then the outputs are written. Exit 2 for a scenario
+    or method that cannot start (nothing runs).
     """
     from cbp.files import check_output_folder
+    from cbp.scenario import load_scenario
 
+    page: TeleopPage | InputsPage
     try:
-        session = TeleopSession(scenario, method, overrides)
-        out = out or Path("out") / f"{session.scenario.spec.name}_teleop"
+        first = load_scenario(scenarios[0])
+        velocity = first.spec.method.name == "velocity"
+        if not velocity and len(scenarios) > 1:
+            raise ConfigError(
+                "several scenarios are configurations of the velocity executor "
+                "to switch between; a goal session takes one"
+            )
+        out = out or Path("out") / f"{first.spec.name}_teleop"
         check_output_folder(out)
-        page = TeleopPage(session, host=host, port=port)
+        if velocity:
+            inputs = InputSession(scenarios, overrides)
+            page = InputsPage(inputs, host=host, port=port)
+            inputs.start()
+        else:
+            session = TeleopSession(scenarios[0], method, overrides)
+            page = TeleopPage(session, host=host, port=port)
+            session.start()
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
-    session.start()
-    print(f"teleoperation of {scenario}: {page.url} (stop on the page or Ctrl-C)")
+    print(f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)")
     try:
         with contextlib.suppress(KeyboardInterrupt):
             page.run()
     finally:
         page.close()
+    if velocity:
+        inputs.write(inputs.stop(), out)
+        print(f"wrote {out}")
+        return 0
     session.stop()
     goal_file = session.write(out)
     latency = latency_summary(session.latency_ms())
     print(
         f"wrote {out}; the operator's goals: {goal_file} "
-        f"(replay: cbp compare {scenario} --goal {goal_file})"
+        f"(replay: cbp compare {scenarios[0]} --goal {goal_file})"
     )
     if latency["n"]:
         print(
@@ -414,18 +450,149 @@ def serve_teleop(
     return 0
 
 
+class InputsPage:
+    """The page of an :class:`~cbp.teleop.InputSession` (orbit and pan object).
+
+    The robot (its base placed from the planar joint), the declared objects, a
+    dropdown of the configurations, a slider per input value (camera-frame
+    velocities, desired distance: from 0 to twice a positive starting value,
+    else within +-0.2), stop and save, and a readout of the active
+    configuration's signals and the latest events.
+    """
+
+    def __init__(
+        self, session: InputSession, host: str = "127.0.0.1", port: int = 8080
+    ) -> None:
+        """Build the scene and the panel."""
+        import viser
+        from viser.extras import ViserUrdf
+
+        self.session = session
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        scenario = session.scenarios[0]
+        description = scene_description(scenario, duration=0.0)
+        draw_objects(self.server, description)
+        self.base = self.server.scene.add_frame("/robot", show_axes=False)
+        self.robot = ViserUrdf(
+            self.server,
+            Path(description["urdf"]),
+            root_node_name="/robot",
+            load_meshes=False,
+            load_collision_meshes=True,
+            collision_mesh_color_override=(0.95, 0.6, 0.1),
+        )
+        self._joints = self.robot.get_actuated_joint_names()
+        self._q_names = scenario.robot.coordinate_names("q")
+        camera = self.server.initial_camera
+        camera.position = (-1.0, -2.5, 2.0)
+        camera.look_at = (0.6, 0.0, 0.3)
+        gui = self.server.gui
+        self.config = gui.add_dropdown(
+            "configuration", tuple(session.loops), initial_value=session.active
+        )
+        self.config.on_update(lambda _: self._switch())
+        self.stop_button = gui.add_button("stop and save")
+        self.stopped = threading.Event()
+        self.stop_button.on_click(lambda _: self.stopped.set())
+        self.sliders: dict[str, dict[str, list[Any]]] = {}
+        self.folders: dict[str, Any] = {}
+        for config, inputs in session.inputs.items():
+            folder = gui.add_folder(f"{config} inputs")
+            self.folders[config] = folder
+            self.sliders[config] = {}
+            with folder:
+                for entry, values in inputs.items():
+                    handles = []
+                    for i, value in enumerate(values):
+                        top = 2.0 * value if value > 0 else 0.2
+                        bottom = 0.0 if value > 0 else -0.2
+                        slider = gui.add_slider(
+                            f"{entry}[{i}]",
+                            min=bottom,
+                            max=top,
+                            step=(top - bottom) / 200,
+                            initial_value=float(value),
+                        )
+                        slider.on_update(self._setter(config, entry))
+                        handles.append(slider)
+                    self.sliders[config][entry] = handles
+            folder.visible = config == session.active
+        self.readout = gui.add_markdown("")
+        self._close = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        """The page's address."""
+        return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
+    def _setter(self, config: str, entry: str) -> Any:
+        """A slider handler that sends every value of ``entry`` of ``config``."""
+
+        def send(_: Any) -> None:
+            values = [s.value for s in self.sliders[config][entry]]
+            self.session.set_input(entry, np.array(values), config)
+
+        return send
+
+    def _switch(self) -> None:
+        self.session.switch(self.config.value)
+        for config, folder in self.folders.items():
+            folder.visible = config == self.config.value
+
+    def update(self) -> None:
+        """Bring the page up to date with the session."""
+        snap = self.session.snapshot()
+        q = snap["q"]
+        by_name = dict(zip(self._q_names, q, strict=True))
+        # The planar base: x, y, cos(yaw), sin(yaw).
+        yaw = math.atan2(q[3], q[2])
+        self.base.position = (float(q[0]), float(q[1]), 0.0)
+        self.base.wxyz = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        self.robot.update_cfg(np.array([by_name.get(j, 0.0) for j in self._joints]))
+        lines = [f"**t = {snap['t']:.2f} s**, configuration **{snap['active']}**", ""]
+        lines += [f"- {k}: {v:.3f}" for k, v in sorted(snap["signals"].items())]
+        if snap["events"]:
+            lines += ["", "latest events:"]
+            lines += [f"- {t:.2f} s: {m}" for t, m in snap["events"]]
+        self.readout.content = "\n".join(lines)
+
+    def run(self) -> None:
+        """Update the page until :meth:`close` or the stop button."""
+        period = 1.0 / UPDATE_RATE
+        due = time.perf_counter()
+        while not self._close.is_set() and not self.stopped.is_set():
+            self.update()
+            if not self.session.running:
+                break
+            due = max(due + period, time.perf_counter() - period)
+            self._close.wait(max(0.0, due - time.perf_counter()))
+
+    def start(self) -> None:
+        """Update the page in a thread of its own."""
+        self._thread = threading.Thread(target=self.run, name="page", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop updating and serving."""
+        self._close.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self.server.stop()
+
+
 def _add_gripper(server: Any, name: str) -> Any:
     """A two-finger gripper of boxes under frame ``name`` (opening along y, z out)."""
     frame = server.scene.add_frame(name, show_axes=False, visible=False)
     colour = (200, 60, 60)
     server.scene.add_box(
-        f"{name}/palm", colour, (0.02, 0.16, 0.03), position=(0, 0, -0.04)
+        f"{name}/palm", colour, (0.02, 0.16, 0.03), position=(0.0, 0.0, -0.04)
     )
     for side in (-1, 1):
         server.scene.add_box(
             f"{name}/finger{side}",
             colour,
             (0.015, 0.015, 0.05),
-            position=(0, 0.06 * side, 0.0),
+            position=(0.0, 0.06 * side, 0.0),
         )
     return frame

@@ -40,6 +40,10 @@ COLOURS = {
     "jt": (214, 39, 40),
     "hybrid": (148, 103, 189),
 }
+#: The plots show this many seconds up to the cursor.
+PLOT_WINDOW = 5.0
+#: Points per plotted curve at most.
+PLOT_POINTS = 400
 #: Page updates per second while playing.
 FRAME_RATE = 30.0
 
@@ -144,7 +148,14 @@ class Replay:
                 ),
             )
             self._robots.append((recording, robot, robot.get_actuated_joint_names()))
-        draw_objects(self.server, self.scene)
+        self._objects = draw_objects(self.server, self.scene)
+        self.server.initial_camera.position = (1.9, -1.4, 1.3)
+        self.server.initial_camera.look_at = (0.4, 0.0, 0.3)
+        self._tracks = {
+            name: np.array(rows, dtype=float)
+            for name, rows in self.scene.get("tracks", {}).items()
+            if name in self._objects and rows
+        }
         self._goal = self.server.scene.add_frame(
             "/goal", axes_length=0.08, axes_radius=0.004
         )
@@ -157,6 +168,30 @@ class Replay:
             "speed", min=0.1, max=4.0, step=0.1, initial_value=1.0
         )
         self.readout = gui.add_markdown("")
+        import viser.uplot
+
+        self.plots = {}
+        for column, title in (
+            ("goal_error", "goal error [mm], the last 5 s"),
+            ("contact_force", "contact force [N], the last 5 s"),
+        ):
+            series = [viser.uplot.Series(label="t [s]")] + [
+                viser.uplot.Series(
+                    label=r.method,
+                    stroke="#{:02x}{:02x}{:02x}".format(
+                        *COLOURS.get(r.method, (127, 127, 127))
+                    ),
+                    width=2,
+                )
+                for r in self.recordings
+            ]
+            self.plots[column] = gui.add_uplot(
+                data=tuple(np.zeros(1) for _ in series),
+                series=tuple(series),
+                title=title,
+                aspect=2.0,
+                scales={"x": viser.uplot.Scale(time=False)},
+            )
         self.time.on_update(lambda _: self.show(self.time.value))
         self._stop = threading.Event()
         self.show(0.0)
@@ -202,6 +237,32 @@ class Replay:
         else:
             self._goal.visible = False
         self.readout.content = "\n".join(lines)
+        self._move_objects(t)
+        self._plot(t)
+
+    def _move_objects(self, t: float) -> None:
+        """Put the objects that appear or move where they were at ``t``."""
+        for name, track in self._tracks.items():
+            k = max(0, int(np.searchsorted(track[:, 0], t, side="right")) - 1)
+            row = track[k]
+            handle = self._objects[name]
+            handle.visible = bool(row[1])
+            handle.position = tuple(row[2:5])
+            handle.wxyz = (row[8], row[5], row[6], row[7])
+
+    def _plot(self, t: float) -> None:
+        """Each method's goal error and contact force over the 5 s up to ``t``."""
+        first = self.recordings[0]
+        lo = int(np.searchsorted(first.t, t - PLOT_WINDOW))
+        hi = max(lo + 1, int(np.searchsorted(first.t, t, side="right")))
+        step = max(1, (hi - lo) // PLOT_POINTS)
+        times = first.t[lo:hi:step]
+        for column, plot in self.plots.items():
+            values = []
+            for recording in self.recordings:
+                curve = _curve(recording, column)
+                values.append(np.interp(times, recording.t, curve))
+            plot.data = (times, *values)
 
     def run(self) -> None:
         """Serve until :meth:`close`: play when the box is ticked."""
@@ -227,12 +288,13 @@ class Replay:
         self.server.stop()
 
 
-def draw_objects(server: Any, description: dict[str, Any]) -> None:
+def draw_objects(server: Any, description: dict[str, Any]) -> dict[str, Any]:
     """Draw the declared objects of a scene description.
 
     ``description`` is :func:`cbp.report.scene_description`'s.
     """
     scene = server.scene
+    handles: dict[str, Any] = {}
     for obj in description["objects"]:
         pose = Pose(**obj["pose"]).to_se3()
         quat = wxyz(pose.rotation)
@@ -240,7 +302,7 @@ def draw_objects(server: Any, description: dict[str, Any]) -> None:
         size = obj.get("size") or []
         colour = (170, 170, 170)
         if obj["shape"] == "box":
-            scene.add_box(
+            handles[obj["name"]] = scene.add_box(
                 name,
                 color=colour,
                 dimensions=tuple(size),
@@ -248,11 +310,11 @@ def draw_objects(server: Any, description: dict[str, Any]) -> None:
                 position=tuple(pose.translation),
             )
         elif obj["shape"] == "sphere":
-            scene.add_icosphere(
+            handles[obj["name"]] = scene.add_icosphere(
                 name, radius=size[0], color=colour, position=tuple(pose.translation)
             )
         elif obj["shape"] == "cylinder":
-            scene.add_cylinder(
+            handles[obj["name"]] = scene.add_cylinder(
                 name,
                 radius=size[0],
                 height=size[1],
@@ -267,9 +329,20 @@ def draw_objects(server: Any, description: dict[str, Any]) -> None:
                 str(Path(description["folder"]) / obj["file"]), force="mesh"
             )
             mesh.apply_scale(obj.get("scale", [1.0, 1.0, 1.0]))
-            scene.add_mesh_trimesh(
+            handles[obj["name"]] = scene.add_mesh_trimesh(
                 name, mesh, wxyz=quat, position=tuple(pose.translation)
             )
+    return handles
+
+
+def _curve(recording: RunRecording, column: str) -> FloatArray:
+    """A plotted column of a recording: goal error [mm] or a trace column."""
+    c = recording.columns
+    if column == "goal_error":
+        hand = np.column_stack([c["ee_x"], c["ee_y"], c["ee_z"]])
+        return np.asarray(1e3 * np.linalg.norm(recording.goal[0] - hand, axis=1))
+    values = c.get(column)
+    return np.zeros_like(recording.t) if values is None else np.nan_to_num(values)
 
 
 def wxyz(rotation: FloatArray) -> tuple[float, float, float, float]:

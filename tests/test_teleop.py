@@ -214,6 +214,7 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         assert _wait(
             lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 1.0
         ), f"the hand moved {session.snapshot().hand - before} in 1 s"
+        assert _wait(lambda: not page.unreachable, 2.0)  # a goal within reach
 
         # The method selector hands control to IK at the next period.
         selector = browser.find_element(
@@ -227,17 +228,17 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         option.click()
         assert _wait(lambda: session.snapshot().method == "ik", 3)
 
-        # A goal beyond the boards, sent from elsewhere (a script): the gizmo
+        # A goal inside a board, sent from elsewhere (a script): the gizmo
         # follows it; the arm stops short, and the page draws the goal as a
-        # gripper and the reachable posture (the CAT paper's operator view).
+        # gripper and the posture the arm stopped in (the CAT paper's operator
+        # view).
         session.switch("cat")
-        position, rotation = session.goal.pose()
-        beyond = position + np.array([0.35, 0.0, 0.0])
-        session.set_goal(beyond, rotation)
-        assert _wait(lambda: np.allclose(page.gizmo.position, beyond), 1.0)
-        assert _wait(lambda: page._gripper.visible, 8.0)
+        _, rotation = session.goal.pose()
+        inside = np.array([0.55, -0.24, 0.03])  # board_1's centre
+        session.set_goal(inside, rotation)
+        assert _wait(lambda: np.allclose(page.gizmo.position, inside), 1.0)
         assert page.ghost is not None
-        assert page.ghost.show_collision
+        assert _wait(lambda: page._gripper.visible and page.ghost.show_collision, 8.0)
         snap = session.snapshot()
         assert snap.contacts is not None
         assert len(snap.contacts.distance) > 0  # CAT's contact rows are drawn
@@ -247,3 +248,78 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         trace = session.stop()
     assert "method switched from cat to ik" in [m for _, m in trace.events]
     assert run_metrics(trace, session.scenario.robot)["peak_contact_force_n"] == 0.0
+
+
+@pytest.mark.slow
+def test_orbit_and_pan_are_driven_live_and_switched(tmp_path: Path) -> None:
+    """The orbit paper's operator inputs: camera-frame velocity and distance.
+
+    Orbit object runs first; the distance is raised and the camera moved
+    sideways; then pan object takes over within the run, from the last command.
+    """
+    from cbp.teleop import InputSession
+
+    scenarios = ROOT / "scenarios"
+    session = InputSession(
+        [scenarios / "youbot_orbit_case1.yaml", scenarios / "youbot_pan.yaml"]
+    )
+    assert list(session.loops) == ["youbot_orbit_case1", "youbot_pan"]
+    session.start()
+    try:
+        assert _wait(lambda: session.t > 6.0, 15)  # past the start's transient
+        session.set_input("distance", np.array([0.7]))
+        session.set_input("user_velocity", np.array([0.1, 0.0]))
+        assert _wait(lambda: session.t > 12.0, 15)
+        orbit = session.snapshot()["signals"]
+        assert orbit["distance"] == pytest.approx(0.7, abs=0.01)
+        session.switch("youbot_pan")
+        session.set_input("user_velocity", np.array([0.0, 0.0, 0.05]))
+        start = session.t
+        assert _wait(lambda: session.t > start + 3.0, 10)
+        assert session.snapshot()["active"] == "youbot_pan"
+    finally:
+        traces = session.stop()
+    assert set(traces) == {"youbot_orbit_case1", "youbot_pan"}
+    orbit_trace = traces["youbot_orbit_case1"]
+    assert orbit_trace.inputs is not None
+    assert orbit_trace.inputs["distance"][-1][0] == pytest.approx(0.7)
+    assert "switched from youbot_orbit_case1 to youbot_pan" in [
+        m for _, m in traces["youbot_pan"].events
+    ]
+    # Continuous across the switch: no jump in the command.
+    u = np.vstack([orbit_trace.u, traces["youbot_pan"].u])
+    robot = session.robot
+    assert np.all(
+        np.abs(np.diff(u, axis=0)) <= 1.01 * robot.acceleration_limits * 0.02 + 1e-9
+    )
+    session.write(traces, tmp_path / "live")
+    metrics = json.loads((tmp_path / "live" / "metrics.json").read_text())
+    assert set(metrics) == {"youbot_orbit_case1", "youbot_pan"}
+
+
+@pytest.mark.slow
+def test_the_orbit_page_sends_sliders_and_switches_configurations() -> None:
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    from cbp.teleop import InputSession
+    from cbp.teleop_page import InputsPage
+
+    scenarios = ROOT / "scenarios"
+    session = InputSession(
+        [scenarios / "youbot_orbit_case1.yaml", scenarios / "youbot_pan.yaml"]
+    )
+    page = InputsPage(session, port=_free_port())
+    try:
+        assert page.server.get_host() == "127.0.0.1"
+        page.sliders["youbot_orbit_case1"]["distance"][0].value = 0.7
+        assert _wait(
+            lambda: session.inputs["youbot_orbit_case1"]["distance"][0] == 0.7, 1
+        )
+        page.config.value = "youbot_pan"
+        assert _wait(lambda: session.active == "youbot_pan", 1)
+        assert page.folders["youbot_pan"].visible
+        assert not page.folders["youbot_orbit_case1"].visible
+        page.update()
+        assert "youbot_pan" in page.readout.content
+    finally:
+        page.close()
+        session.stop()

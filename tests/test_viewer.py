@@ -61,6 +61,7 @@ def _browser():
         "--disable-dev-shm-usage",
         "--use-angle=swiftshader",
         "--enable-unsafe-swiftshader",
+        "--window-size=1280,900",
     ):
         options.add_argument(flag)
     service = webdriver.ChromeService(executable_path=driver)
@@ -103,6 +104,10 @@ def test_the_replay_page_opens_and_follows_the_timeline(comparison: Path) -> Non
         while "t = 1.200 s" not in browser.page_source and time.monotonic() < deadline:
             time.sleep(0.2)
         assert "t = 1.200 s" in browser.page_source
+        artifacts = ROOT / "out" / "test-artifacts"
+        artifacts.mkdir(parents=True, exist_ok=True)
+        time.sleep(1.0)
+        browser.save_screenshot(str(artifacts / "replay_page.png"))
     finally:
         browser.quit()
         replay.close()
@@ -117,3 +122,35 @@ def test_a_replay_exports_a_recording(comparison: Path, tmp_path: Path) -> None:
     finally:
         replay.close()
     assert path.stat().st_size > 10_000
+
+
+def test_the_replay_moves_objects_and_plots_the_curves(tmp_path: Path) -> None:
+    """A pushed obstacle is drawn where it was; the plots follow the cursor."""
+    from cbp.viewer import Replay
+
+    out = tmp_path / "pushed"
+    compare(
+        ROOT / "scenarios" / "cat_pushed_obstacle.yaml",
+        ["cat"],
+        out,
+        overrides={"duration": "3.0"},
+    )
+    replay = Replay(out, port=_free_port())
+    try:
+        (name,) = replay._tracks
+        replay.show(0.2)
+        before = np.array(replay._objects[name].position)
+        error = replay.plots["goal_error"].data
+        replay.show(2.5)
+        after = np.array(replay._objects[name].position)
+        # Pushed at 5 cm/s from 0.5 s: 10 cm along -y by 2.5 s.
+        np.testing.assert_allclose(after - before, [0.0, -0.10, 0.0], atol=0.01)
+        later = replay.plots["goal_error"].data
+        assert later[0][-1] == pytest.approx(2.5, abs=0.05)  # up to the cursor
+        assert later[0][0] == pytest.approx(0.0, abs=0.05)
+        assert len(later[0]) > len(error[0])
+        assert np.all(np.isfinite(later[1]))
+        force = replay.plots["contact_force"].data
+        assert len(force) == 2  # time and the one method
+    finally:
+        replay.close()

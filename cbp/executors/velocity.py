@@ -19,9 +19,11 @@ acceleration limits. Both are events, and the loop goes on.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -29,7 +31,8 @@ import numpy as np
 from cbp.errors import PluginOutputError, SolveError
 from cbp.executors.faults import Faults
 from cbp.executors.settings import VelocitySettings
-from cbp.plugin import ReportsSignals
+from cbp.expressions import TimeFunction
+from cbp.plugin import ReportsSignals, TakesInput
 from cbp.progress import report_time
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
@@ -37,131 +40,192 @@ from cbp.sim.mobile import MobileSimulation
 from cbp.state import RobotState
 from cbp.trace import Trace
 
-__all__ = ["run_velocity"]
+__all__ = ["VelocityLoop", "run_velocity"]
 
 log = logging.getLogger(__name__)
 
 
 def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the velocity executor; return the trace."""
-    robot = scenario.robot
-    engine = scenario.make_engine()
-    inputs = scenario.inputs()
-    names = {id(e.plugin): e.name for e in scenario.entries}
     settings = scenario.spec.method.settings(VelocitySettings)
-    dt = settings.dt
-    steps = math.ceil(scenario.spec.duration / dt)
-    rows: dict[str, list[Any]] = {
-        k: [] for k in ("t", "q", "u", "time", "ee_p", "ee_R")
-    }
-    frame_id = robot.frame_id(scenario.ee_frame)
-    values: dict[str, list[FloatArray]] = {names[id(p)]: [] for p, _ in inputs}
-    events: list[tuple[float, str]] = []
-    failing = 0
-    reporters = [
-        e.plugin for e in scenario.entries if isinstance(e.plugin, ReportsSignals)
-    ]
-    signals: dict[str, list[float]] = {}
-    state = RobotState(robot)
     sim = MobileSimulation(
-        robot,
+        scenario.robot,
         scenario.spec.world.objects,
         scenario.q0,
         scenario.spec.simulation,
         scenario.path.parent,
         gui,
     )
-    faults = Faults(lambda at, m: events.append((at, m)))
-    if not any(e.plugin.type_name == "joint_acceleration" for e in scenario.entries):
-        events.append(
-            (
-                0.0,
-                "no joint_acceleration constraint: answers that accelerate past "
-                "the limits are refused and the robot brakes",
-            )
-        )
-    braking = robot.acceleration_limits * dt
-    u = np.zeros(robot.nv)  # the last command: the robot starts at rest
+    loop = VelocityLoop(scenario, sim)
+    inputs = scenario.inputs()
     try:
-        for k in range(steps):
-            t = k * dt
+        for k in range(math.ceil(scenario.spec.duration / settings.dt)):
+            t = k * settings.dt
             for plugin, functions in inputs:
-                name = names[id(plugin)]
-                try:
-                    value = np.array([f(t) for f in functions])
-                    plugin.set_input(value)
-                except (ValueError, ArithmeticError) as exc:
-                    value = np.full(len(functions), np.nan)
-                    events.append((t, f"input to '{name}' refused: {exc}"))
-                values[name].append(value)
-            q = sim.q
-            start = time.perf_counter()
-            try:
-                dq = engine.step(q, dt, u)
-            except (SolveError, PluginOutputError) as exc:
-                dq = _brake(u, braking) * dt
-                failing += 1
-                if failing == 1:  # one event per run of failed ticks
-                    events.append((t, f"step not solved, robot braking: {exc}"))
-                    log.warning("t=%.3f s: %s", t, exc)
-            except Exception as exc:  # anything else: brake the robot, count it
-                dq = _brake(u, braking) * dt
-                faults.fault(t, "control step", exc)
-            else:
-                faults.ok()
-                if failing:
-                    events.append((t, f"solved again after {failing} failed ticks"))
-                failing = 0
-                if engine.recovery_changed and engine.recovery is not None:
-                    events.append((t, f"QP eased: {engine.recovery}"))
-            elapsed = time.perf_counter() - start
-            # The end effector, and what the plugins report, at the tick's
-            # measured configuration and with the inputs in effect.
-            state.update(q)
-            placement = state.frame_placement(frame_id)
-            rows["ee_p"].append(placement.translation.copy())
-            rows["ee_R"].append(placement.rotation.copy())
-            for reporter in reporters:
-                try:
-                    reported = reporter.signals(state)
-                except Exception as exc:  # a report is not worth stopping for
-                    faults.fault(t, "signal report", exc)
-                    continue
-                for key, signal in reported.items():
-                    signals.setdefault(key, []).append(signal)
-            for column in signals.values():  # NaN where a report failed
-                column.extend([np.nan] * (len(rows["t"]) + 1 - len(column)))
-            u = dq / dt if faults.aborted is None else _brake(u, braking)
-            sim.command(u)
-            rows["t"].append(t)
-            rows["q"].append(q)
-            rows["u"].append(u)
-            rows["time"].append(elapsed)
-            sim.run_until(t + dt)
-            report_time(t + dt, scenario.spec.duration)
-            if faults.aborted is not None:
+                loop.set_input(plugin, t, functools.partial(_evaluate, functions, t))
+            loop.tick(t)
+            report_time(t + settings.dt, scenario.spec.duration)
+            if loop.faults.aborted is not None:
                 break
     finally:
         sim.close()
-    m = len(rows["t"])
-    return Trace(
-        method="velocity",
-        t=np.array(rows["t"], dtype=float),
-        q=np.array(rows["q"], dtype=float).reshape(m, robot.nq),
-        ee_position=np.array(rows["ee_p"], dtype=float).reshape(m, 3),
-        ee_rotation=np.array(rows["ee_R"], dtype=float).reshape(m, 3, 3),
-        goal_position=np.full((m, 3), np.nan),
-        goal_rotation=np.full((m, 3, 3), np.nan),
-        q_names=robot.coordinate_names("q"),
-        v_names=robot.coordinate_names("v"),
-        events=events,
-        compute_s=np.array(rows["time"], dtype=float),
-        u=np.array(rows["u"], dtype=float).reshape(m, robot.nv),
-        inputs={n: np.array(v) for n, v in values.items()},
-        signals={k: np.array(v) for k, v in signals.items()},
-        transient_s=settings.transient_s,
-        aborted=faults.aborted,
-    )
+    return loop.trace()
+
+
+class VelocityLoop:
+    """One QP per tick from the measured configuration; velocities to the robot.
+
+    :func:`run_velocity` drives it with the scenario's inputs (functions of
+    time); a live session (:mod:`cbp.teleop`) with the operator's, and may
+    switch between loops of several configurations of one robot (orbit and
+    pan object) on one simulation: each tick starts from the last command,
+    whichever loop gave it (:attr:`command`).
+
+    Args:
+        scenario: the configuration (its entries, inputs and settings).
+        sim: the simulation it commands.
+        command: the robot's last command (nv), shared with other loops on
+            the same simulation; a new zero one (at rest) by default.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        sim: MobileSimulation,
+        command: FloatArray | None = None,
+    ) -> None:
+        """Build the engine and the recording."""
+        robot = scenario.robot
+        self.scenario, self.sim, self.robot = scenario, sim, robot
+        self.engine = scenario.make_engine()
+        self.settings = scenario.spec.method.settings(VelocitySettings)
+        self.names = {id(e.plugin): e.name for e in scenario.entries}
+        self.rows: dict[str, list[Any]] = {
+            k: [] for k in ("t", "q", "u", "time", "ee_p", "ee_R")
+        }
+        self.frame_id = robot.frame_id(scenario.ee_frame)
+        self.values: dict[str, list[FloatArray]] = {
+            self.names[id(p)]: [] for p, _ in scenario.inputs()
+        }
+        self.events: list[tuple[float, str]] = []
+        self.failing = 0
+        self.reporters = [
+            e.plugin for e in scenario.entries if isinstance(e.plugin, ReportsSignals)
+        ]
+        self.signals: dict[str, list[float]] = {}
+        self.state = RobotState(robot)
+        self.faults = Faults(lambda at, m: self.events.append((at, m)))
+        if not any(
+            e.plugin.type_name == "joint_acceleration" for e in scenario.entries
+        ):
+            self.events.append(
+                (
+                    0.0,
+                    "no joint_acceleration constraint: answers that accelerate "
+                    "past the limits are refused and the robot brakes",
+                )
+            )
+        self.braking = robot.acceleration_limits * self.settings.dt
+        #: The last command (the robot starts at rest); updated in place.
+        self.command = np.zeros(robot.nv) if command is None else command
+
+    def set_input(
+        self, plugin: TakesInput, t: float, values: Callable[[], list[float]]
+    ) -> None:
+        """Hand ``values()`` to ``plugin``; a value refused is an event.
+
+        The entry then keeps its previous value; what was asked is recorded
+        (NaN where it could not be computed).
+        """
+        name = self.names[id(plugin)]
+        try:
+            value = np.array(values(), dtype=float)
+            plugin.set_input(value)
+        except (ValueError, ArithmeticError, TypeError) as exc:
+            value = np.full(plugin.input_size, np.nan)
+            self.events.append((t, f"input to '{name}' refused: {exc}"))
+        self.values[name].append(value)
+
+    def tick(self, t: float) -> None:
+        """Solve from the measured configuration, command, simulate one tick."""
+        sim, dt, rows = self.sim, self.settings.dt, self.rows
+        u = self.command
+        q = sim.q
+        start = time.perf_counter()
+        try:
+            dq = self.engine.step(q, dt, u)
+        except (SolveError, PluginOutputError) as exc:
+            dq = _brake(u, self.braking) * dt
+            self.failing += 1
+            if self.failing == 1:  # one event per run of failed ticks
+                self.events.append((t, f"step not solved, robot braking: {exc}"))
+                log.warning("t=%.3f s: %s", t, exc)
+        except Exception as exc:  # anything else: brake the robot, count it
+            dq = _brake(u, self.braking) * dt
+            self.faults.fault(t, "control step", exc)
+        else:
+            self.faults.ok()
+            if self.failing:
+                self.events.append(
+                    (t, f"solved again after {self.failing} failed ticks")
+                )
+            self.failing = 0
+            if self.engine.recovery_changed and self.engine.recovery is not None:
+                self.events.append((t, f"QP eased: {self.engine.recovery}"))
+        elapsed = time.perf_counter() - start
+        # The end effector, and what the plugins report, at the tick's
+        # measured configuration and with the inputs in effect.
+        state = self.state
+        state.update(q)
+        placement = state.frame_placement(self.frame_id)
+        rows["ee_p"].append(placement.translation.copy())
+        rows["ee_R"].append(placement.rotation.copy())
+        for reporter in self.reporters:
+            try:
+                reported = reporter.signals(state)
+            except Exception as exc:  # a report is not worth stopping for
+                self.faults.fault(t, "signal report", exc)
+                continue
+            for key, signal in reported.items():
+                self.signals.setdefault(key, []).append(signal)
+        for column in self.signals.values():  # NaN where a report failed
+            column.extend([np.nan] * (len(rows["t"]) + 1 - len(column)))
+        u_next = dq / dt if self.faults.aborted is None else _brake(u, self.braking)
+        u[:] = u_next
+        sim.command(u.copy())
+        rows["t"].append(t)
+        rows["q"].append(q)
+        rows["u"].append(u.copy())
+        rows["time"].append(elapsed)
+        sim.run_until(t + dt)
+
+    def trace(self) -> Trace:
+        """The ticks so far as a trace."""
+        robot, rows = self.robot, self.rows
+        m = len(rows["t"])
+        return Trace(
+            method="velocity",
+            t=np.array(rows["t"], dtype=float),
+            q=np.array(rows["q"], dtype=float).reshape(m, robot.nq),
+            ee_position=np.array(rows["ee_p"], dtype=float).reshape(m, 3),
+            ee_rotation=np.array(rows["ee_R"], dtype=float).reshape(m, 3, 3),
+            goal_position=np.full((m, 3), np.nan),
+            goal_rotation=np.full((m, 3, 3), np.nan),
+            q_names=robot.coordinate_names("q"),
+            v_names=robot.coordinate_names("v"),
+            events=self.events,
+            compute_s=np.array(rows["time"], dtype=float),
+            u=np.array(rows["u"], dtype=float).reshape(m, robot.nv),
+            inputs={n: np.array(v) for n, v in self.values.items()},
+            signals={k: np.array(v) for k, v in self.signals.items()},
+            transient_s=self.settings.transient_s,
+            aborted=self.faults.aborted,
+        )
+
+
+def _evaluate(functions: list[TimeFunction], t: float) -> list[float]:
+    """The values of an input's functions at ``t``."""
+    return [f(t) for f in functions]
 
 
 def _brake(u: FloatArray, braking: FloatArray) -> FloatArray:
