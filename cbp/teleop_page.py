@@ -17,6 +17,8 @@ browser that disconnects leaves the goal where it was.
 from __future__ import annotations
 
 import contextlib
+import json
+import logging
 import math
 import sys
 import threading
@@ -41,6 +43,8 @@ from cbp.viewer import draw_objects, wxyz
 
 __all__ = ["InputsPage", "TeleopPage", "serve_teleop"]
 
+log = logging.getLogger(__name__)
+
 #: Page updates per second.
 UPDATE_RATE = 20.0
 #: The map's cells are redrawn this often [s].
@@ -52,8 +56,46 @@ CONTACT_ARROW = 0.04
 #: The goal counts as out of reach when the commanded trajectory ends this far
 #: from it [m]: the gripper and the reachable posture are drawn.
 UNREACHABLE = 0.02
+#: ... and has stayed there this long [s of simulated time].
+STALLED_FOR = 0.5
 #: Cells drawn at most (the nearest to the hand first).
 MAX_CELLS = 60_000
+
+#: Keyboard shortcuts: key -> the label of the button it presses.
+KEYS = {
+    "w": "+x",
+    "s": "-x",
+    "a": "+y",
+    "d": "-y",
+    "r": "+z",
+    "f": "-z",
+    "i": "+roll",
+    "k": "-roll",
+    "j": "+pitch",
+    "l": "-pitch",
+    "u": "+yaw",
+    "o": "-yaw",
+}
+
+# viser 1.1.1 sends no keyboard events to Python. Its HTML element renders
+# markup in the page, where an image's error handler runs: it installs (once)
+# a listener that presses the button a key names, outside text fields.
+_KEYS_HTML = (
+    '<div style="font-size: 0.8em">keys: '
+    + ", ".join(f"{k} {v}" for k, v in KEYS.items())
+    + '</div><img src="" style="display:none" onerror="'
+    + "if(!window.cbpKeys){window.cbpKeys=1;"
+    + "const m="
+    + json.dumps(KEYS).replace('"', "&quot;")
+    + ";"
+    + "document.addEventListener('keydown',function(e){"
+    + "const t=e.target.tagName;"
+    + "if(t==='INPUT'||t==='TEXTAREA'||e.ctrlKey||e.metaKey)return;"
+    + "const l=m[e.key.toLowerCase()];if(!l)return;"
+    + "for(const b of document.querySelectorAll('button')){"
+    + "if(b.textContent.trim()===l){b.click();e.preventDefault();break;}}});}"
+    + '">'
+)
 
 _JOGS = [
     ("+x", "x", 1.0),
@@ -73,7 +115,69 @@ _TURNS = [
 ]
 
 
-class TeleopPage:
+class _Page:
+    """What both pages share: the server, its address, and an update loop.
+
+    Subclasses build the scene and the panel and define :meth:`update` and
+    :attr:`session` (whose ``running`` ends the loop).
+    """
+
+    session: Any
+
+    def __init__(self, host: str, port: int) -> None:
+        """Start serving (the scene is built by the subclass)."""
+        import viser
+
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        #: Set by the page's "stop and save" button.
+        self.stopped = threading.Event()
+        self._close = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        """The page's address."""
+        return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
+    def update(self) -> None:
+        """Bring the page up to date with the session."""
+        raise NotImplementedError
+
+    def run(self) -> None:
+        """Update the page until :meth:`close`, the stop button or the session's end."""
+        period = 1.0 / UPDATE_RATE
+        due = time.perf_counter()
+        failing: str | None = None
+        while not self._close.is_set() and not self.stopped.is_set():
+            try:
+                self.update()
+            except Exception as exc:  # the page must not stop the session
+                message = f"{type(exc).__name__}: {exc}"
+                if message != failing:
+                    log.warning("page update failed: %s", message)
+                failing = message
+            else:
+                failing = None
+            if not self.session.running:
+                break
+            # On a fixed schedule; an update that ran late is not made up.
+            due = max(due + period, time.perf_counter() - period)
+            self._close.wait(max(0.0, due - time.perf_counter()))
+
+    def start(self) -> None:
+        """Update the page in a thread of its own."""
+        self._thread = threading.Thread(target=self.run, name="page", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop updating and serving."""
+        self._close.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self.server.stop()
+
+
+class TeleopPage(_Page):
     """Serve ``session`` in the browser.
 
     Args:
@@ -91,7 +195,7 @@ class TeleopPage:
         from viser.extras import ViserUrdf
 
         self.session = session
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        super().__init__(host, port)
         description = scene_description(session.scenario, duration=0.0)
         urdf = description.get("urdf")
         self._locked = description.get("locked_joints", {})
@@ -127,7 +231,6 @@ class TeleopPage:
         self.paused = gui.add_checkbox("pause", initial_value=False)
         self.paused.on_update(lambda _: session.pause(self.paused.value))
         self.stop_button = gui.add_button("stop and save")
-        self.stopped = threading.Event()
         self.stop_button.on_click(lambda _: self.stopped.set())
         with gui.add_folder("jog the goal"):
             self.frame = gui.add_dropdown(
@@ -144,6 +247,7 @@ class TeleopPage:
                 button = gui.add_button(label)
                 button.on_click(self._jogger(axis, sign))
                 self.jog_buttons[label] = button
+            gui.add_html(_KEYS_HTML)
             reset = gui.add_button("reset goal")
             reset.on_click(lambda _: self._after_goal(session.reset()))
         self.show_unknown = gui.add_checkbox("show unknown space", initial_value=False)
@@ -183,16 +287,10 @@ class TeleopPage:
         #: Whether the arm has stopped short of the goal (drawn as a gripper,
         #: with the posture it stopped in).
         self.unreachable = False
+        self._short_since: float | None = None
         if self.ghost is not None:
             self.ghost.show_collision = False
         self._map_drawn: tuple[object, bool, float] = (None, False, -math.inf)
-        self._close = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    @property
-    def url(self) -> str:
-        """The page's address."""
-        return f"http://{self.server.get_host()}:{self.server.get_port()}"
 
     # ------------------------------------------------------------------ input
 
@@ -244,6 +342,7 @@ class TeleopPage:
             "",
             f"- goal error: {error * 1e3:.0f} mm",
             f"- contact force: {snap.contact_force:.1f} N",
+            f"- clearance (CAT's nearest contact): {_clearance(snap)}",
             f"- steps in the last period: {snap.steps}",
             f"- deadline misses: {snap.misses}",
         ]
@@ -316,7 +415,14 @@ class TeleopPage:
         # Out of reach: the arm's trajectory ends short of the goal, where the
         # hand already is (it is not on its way to anywhere nearer).
         stalled = float(np.linalg.norm(heading - snap.hand)) < UNREACHABLE / 4
-        unreachable = short > UNREACHABLE and stalled
+        if not (short > UNREACHABLE and stalled):
+            self._short_since = None
+        elif self._short_since is None:
+            self._short_since = snap.t
+        # For a while: a new goal is short of the arm until it is planned for.
+        unreachable = (
+            self._short_since is not None and snap.t - self._short_since >= STALLED_FOR
+        )
         self.unreachable = unreachable
         self._gripper.visible = unreachable
         if self.ghost is not None:
@@ -358,30 +464,6 @@ class TeleopPage:
         self._cells = self.server.scene.add_point_cloud(
             "/map", centres.astype(np.float32), colours, point_size=cell
         )
-
-    def run(self) -> None:
-        """Update the page until :meth:`close` or the stop button."""
-        period = 1.0 / UPDATE_RATE
-        due = time.perf_counter()
-        while not self._close.is_set() and not self.stopped.is_set():
-            self.update()
-            if not self.session.running:
-                break
-            # On a fixed schedule; an update that ran late is not made up.
-            due = max(due + period, time.perf_counter() - period)
-            self._close.wait(max(0.0, due - time.perf_counter()))
-
-    def start(self) -> None:
-        """Update the page in a thread of its own."""
-        self._thread = threading.Thread(target=self.run, name="page", daemon=True)
-        self._thread.start()
-
-    def close(self) -> None:
-        """Stop updating and serving."""
-        self._close.set()
-        if self._thread is not None:
-            self._thread.join(5.0)
-        self.server.stop()
 
 
 def serve_teleop(
@@ -450,7 +532,7 @@ def serve_teleop(
     return 0
 
 
-class InputsPage:
+class InputsPage(_Page):
     """The page of an :class:`~cbp.teleop.InputSession` (orbit and pan object).
 
     The robot (its base placed from the planar joint), the declared objects, a
@@ -464,11 +546,10 @@ class InputsPage:
         self, session: InputSession, host: str = "127.0.0.1", port: int = 8080
     ) -> None:
         """Build the scene and the panel."""
-        import viser
         from viser.extras import ViserUrdf
 
         self.session = session
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        super().__init__(host, port)
         scenario = session.scenarios[0]
         description = scene_description(scenario, duration=0.0)
         draw_objects(self.server, description)
@@ -492,7 +573,6 @@ class InputsPage:
         )
         self.config.on_update(lambda _: self._switch())
         self.stop_button = gui.add_button("stop and save")
-        self.stopped = threading.Event()
         self.stop_button.on_click(lambda _: self.stopped.set())
         self.sliders: dict[str, dict[str, list[Any]]] = {}
         self.folders: dict[str, Any] = {}
@@ -518,13 +598,6 @@ class InputsPage:
                     self.sliders[config][entry] = handles
             folder.visible = config == session.active
         self.readout = gui.add_markdown("")
-        self._close = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    @property
-    def url(self) -> str:
-        """The page's address."""
-        return f"http://{self.server.get_host()}:{self.server.get_port()}"
 
     def _setter(self, config: str, entry: str) -> Any:
         """A slider handler that sends every value of ``entry`` of ``config``."""
@@ -557,28 +630,14 @@ class InputsPage:
             lines += [f"- {t:.2f} s: {m}" for t, m in snap["events"]]
         self.readout.content = "\n".join(lines)
 
-    def run(self) -> None:
-        """Update the page until :meth:`close` or the stop button."""
-        period = 1.0 / UPDATE_RATE
-        due = time.perf_counter()
-        while not self._close.is_set() and not self.stopped.is_set():
-            self.update()
-            if not self.session.running:
-                break
-            due = max(due + period, time.perf_counter() - period)
-            self._close.wait(max(0.0, due - time.perf_counter()))
 
-    def start(self) -> None:
-        """Update the page in a thread of its own."""
-        self._thread = threading.Thread(target=self.run, name="page", daemon=True)
-        self._thread.start()
-
-    def close(self) -> None:
-        """Stop updating and serving."""
-        self._close.set()
-        if self._thread is not None:
-            self._thread.join(5.0)
-        self.server.stop()
+def _clearance(snap: Snapshot) -> str:
+    """The distance of the nearest contact CAT holds, as text; "-" without one."""
+    contacts = snap.contacts
+    if contacts is None or not len(contacts.distance):
+        return "-"
+    nearest = round(1e3 * float(np.min(contacts.distance)), 1) + 0.0  # no -0.0
+    return f"{nearest:.1f} mm"
 
 
 def _add_gripper(server: Any, name: str) -> Any:

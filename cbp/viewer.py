@@ -194,6 +194,7 @@ class Replay:
             )
         self.time.on_update(lambda _: self.show(self.time.value))
         self._stop = threading.Event()
+        self._playing = threading.Lock()
         self.show(0.0)
 
     @property
@@ -267,11 +268,14 @@ class Replay:
     def run(self) -> None:
         """Serve until :meth:`close`: play when the box is ticked."""
         while not self._stop.wait(1.0 / FRAME_RATE):
-            if self.playing.value:
-                t = self.time.value + self.speed.value / FRAME_RATE
-                if t > self.duration:
-                    t = 0.0
-                self.time.value = t  # type: ignore[misc]  # triggers show()
+            with self._playing:  # never after close() has stopped the server
+                if self._stop.is_set():
+                    break
+                if self.playing.value:
+                    t = self.time.value + self.speed.value / FRAME_RATE
+                    if t > self.duration:
+                        t = 0.0
+                    self.time.value = t  # type: ignore[misc]  # triggers show()
 
     def export(self, path: Path, rate: float = 20.0) -> Path:
         """Write the replay as a .viser recording (``rate`` frames per second)."""
@@ -284,7 +288,8 @@ class Replay:
 
     def close(self) -> None:
         """Stop playing and the server."""
-        self._stop.set()
+        with self._playing:
+            self._stop.set()
         self.server.stop()
 
 

@@ -1,7 +1,9 @@
-"""Session-scoped robots and a seeded random generator."""
+"""Session-scoped robots, a seeded random generator, and browser-test helpers."""
 
 from __future__ import annotations
 
+import shutil
+import socket
 import subprocess
 import sys
 
@@ -36,3 +38,37 @@ def run_cbp(*args: str) -> subprocess.CompletedProcess[str]:
         text=True,
         check=False,
     )
+
+
+def headless_chromium():  # type: ignore[no-untyped-def]
+    """Debian's Chromium through selenium, headless, 1280 x 900; fails without it.
+
+    The browser tests are slow tests; ``make test-slow`` installs the browser.
+    """
+    webdriver = pytest.importorskip("selenium.webdriver")
+    chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
+    if chromium is None or driver is None:
+        pytest.fail(
+            "Chromium is needed: apt-get install chromium chromium-driver "
+            "(make test-slow installs them)"
+        )
+    options = webdriver.ChromeOptions()
+    options.binary_location = chromium
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-dev-shm-usage",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--window-size=1280,900",
+    ):
+        options.add_argument(flag)
+    service = webdriver.ChromeService(executable_path=driver)
+    return webdriver.Chrome(options=options, service=service)
+
+
+def free_port() -> int:
+    """A TCP port free on localhost now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])

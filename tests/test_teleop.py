@@ -10,8 +10,6 @@ button and the method selector, and keeps a screenshot as an artifact in
 from __future__ import annotations
 
 import json
-import shutil
-import socket
 import time
 from pathlib import Path
 
@@ -23,17 +21,11 @@ from cbp.errors import ConfigError
 from cbp.goals import recorded_goal_overrides
 from cbp.metrics import run_metrics
 from cbp.teleop import GOAL_FILE, LiveGoal, TeleopSession
-from tests.conftest import run_cbp
+from tests.conftest import free_port, headless_chromium, run_cbp
 
 ROOT = Path(__file__).resolve().parents[1]
 BOARDS = ROOT / "scenarios" / "cat_boards.yaml"
 ARTIFACTS = ROOT / "out" / "test-artifacts"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _wait(condition, timeout: float) -> bool:  # type: ignore[no-untyped-def]
@@ -145,29 +137,6 @@ def test_a_scripted_session_is_recorded_and_replays(tmp_path: Path) -> None:
     assert np.linalg.norm(trace.ee_position[-1] - goal) < 0.01
 
 
-def _browser():  # type: ignore[no-untyped-def]
-    webdriver = pytest.importorskip("selenium.webdriver")
-    chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
-    if chromium is None or driver is None:
-        pytest.fail(
-            "Chromium is needed: apt-get install chromium chromium-driver "
-            "(make test-slow installs them)"
-        )
-    options = webdriver.ChromeOptions()
-    options.binary_location = chromium
-    for flag in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-dev-shm-usage",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--window-size=1280,900",
-    ):
-        options.add_argument(flag)
-    service = webdriver.ChromeService(executable_path=driver)
-    return webdriver.Chrome(options=options, service=service)
-
-
 @pytest.mark.slow
 def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
     pytest.importorskip("viser", reason="the viewer extra is not installed")
@@ -176,11 +145,11 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
     from cbp.teleop_page import TeleopPage
 
     session = TeleopSession(BOARDS, "cat")
-    page = TeleopPage(session, port=_free_port())
+    page = TeleopPage(session, port=free_port())
     assert page.server.get_host() == "127.0.0.1"  # localhost unless asked
     session.start()
     page.start()
-    browser = _browser()
+    browser = headless_chromium()
     try:
         browser.get(page.url)
 
@@ -216,6 +185,14 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         ), f"the hand moved {session.snapshot().hand - before} in 1 s"
         assert _wait(lambda: not page.unreachable, 2.0)  # a goal within reach
 
+        # The keyboard: "w" presses +x (a shortcut in the page).
+        assert "keys: w +x" in browser.page_source
+        before = session.snapshot().hand.copy()
+        browser.find_element(By.TAG_NAME, "body").send_keys("w")
+        assert _wait(
+            lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 1.0
+        ), "the w key did not move the hand"
+
         # The method selector hands control to IK at the next period.
         selector = browser.find_element(
             By.XPATH, "//*[normalize-space()='method']/following::input[1]"
@@ -242,6 +219,25 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         snap = session.snapshot()
         assert snap.contacts is not None
         assert len(snap.contacts.distance) > 0  # CAT's contact rows are drawn
+        assert _wait(
+            lambda: (
+                "clearance (CAT's nearest contact): -\n" not in page.readout.content
+                and " mm\n" in page.readout.content.split("clearance", 1)[1]
+            ),
+            2,
+        )
+
+        # A browser that goes away leaves the arm on its goal: nothing is sent,
+        # the session runs on.
+        count, goal = session.goal.count, session.goal.pose()[0]
+        t = session.snapshot().t
+        browser.quit()
+        assert _wait(lambda: not page.server.get_clients(), 5)
+        time.sleep(1.0)
+        assert session.goal.count == count
+        np.testing.assert_array_equal(session.goal.pose()[0], goal)
+        assert session.running
+        assert session.snapshot().t > t + 0.9
     finally:
         browser.quit()
         page.close()
@@ -307,7 +303,7 @@ def test_the_orbit_page_sends_sliders_and_switches_configurations() -> None:
     session = InputSession(
         [scenarios / "youbot_orbit_case1.yaml", scenarios / "youbot_pan.yaml"]
     )
-    page = InputsPage(session, port=_free_port())
+    page = InputsPage(session, port=free_port())
     try:
         assert page.server.get_host() == "127.0.0.1"
         page.sliders["youbot_orbit_case1"]["distance"][0].value = 0.7

@@ -8,8 +8,6 @@ and the readout follow; it also writes a .viser recording.
 
 from __future__ import annotations
 
-import shutil
-import socket
 import threading
 import time
 from pathlib import Path
@@ -18,6 +16,7 @@ import numpy as np
 import pytest
 
 from cbp.compare import compare
+from tests.conftest import free_port, headless_chromium
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,12 +24,6 @@ pytestmark = pytest.mark.slow
 
 viser = pytest.importorskip("viser", reason="the viewer extra is not installed")
 webdriver = pytest.importorskip("selenium.webdriver")
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="module")
@@ -45,38 +38,15 @@ def comparison(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def _browser():
-    chromium = shutil.which("chromium")
-    driver = shutil.which("chromedriver")
-    if chromium is None or driver is None:
-        pytest.fail(
-            "Chromium is needed: apt-get install chromium chromium-driver "
-            "(make test-slow installs them)"
-        )
-    options = webdriver.ChromeOptions()
-    options.binary_location = chromium
-    for flag in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-dev-shm-usage",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--window-size=1280,900",
-    ):
-        options.add_argument(flag)
-    service = webdriver.ChromeService(executable_path=driver)
-    return webdriver.Chrome(options=options, service=service)
-
-
 def test_the_replay_page_opens_and_follows_the_timeline(comparison: Path) -> None:
     from selenium.webdriver.common.by import By
 
     from cbp.viewer import Replay
 
-    replay = Replay(comparison, port=_free_port())
+    replay = Replay(comparison, port=free_port())
     serving = threading.Thread(target=replay.run, daemon=True)
     serving.start()
-    browser = _browser()
+    browser = headless_chromium()
     try:
         browser.get(replay.url)
         deadline = time.monotonic() + 60
@@ -113,10 +83,34 @@ def test_the_replay_page_opens_and_follows_the_timeline(comparison: Path) -> Non
         replay.close()
 
 
+def test_the_timeline_plays_to_the_end(comparison: Path) -> None:
+    from cbp.viewer import Replay
+
+    replay = Replay(comparison, port=free_port())
+    serving = threading.Thread(target=replay.run, daemon=True)
+    serving.start()
+    try:
+        replay.speed.value = 4.0
+        replay.playing.value = True
+        seen = [0.0]
+        deadline = time.monotonic() + 10
+        # Plays forward, reaches the end, and starts over from 0.
+        while time.monotonic() < deadline:
+            t = float(replay.time.value)
+            if t < seen[-1]:
+                break
+            seen.append(t)
+            time.sleep(0.02)
+        assert max(seen) > replay.duration - 0.2
+        assert float(replay.time.value) < max(seen)  # wrapped around
+    finally:
+        replay.close()
+
+
 def test_a_replay_exports_a_recording(comparison: Path, tmp_path: Path) -> None:
     from cbp.viewer import Replay
 
-    replay = Replay(comparison, port=_free_port())
+    replay = Replay(comparison, port=free_port())
     try:
         path = replay.export(tmp_path / "boards.viser", rate=10.0)
     finally:
@@ -135,7 +129,7 @@ def test_the_replay_moves_objects_and_plots_the_curves(tmp_path: Path) -> None:
         out,
         overrides={"duration": "3.0"},
     )
-    replay = Replay(out, port=_free_port())
+    replay = Replay(out, port=free_port())
     try:
         (name,) = replay._tracks
         replay.show(0.2)

@@ -29,7 +29,8 @@ one planned for; otherwise, and when the plan has been followed to its end,
 control returns to CAT at that period (CAT starts from the point the loop
 gives it, so the motion stays continuous). Where no configuration or no plan
 is found within the budget, an event says so and CAT's safe stop stays; the
-same goal is not planned for again until it moves.
+same goal is searched again after ``retry_after`` (fresh random starts, a new
+RRT-Connect), up to ``tries`` searches, and after that not until it moves.
 
 The metrics count ``plans`` (plans spliced in), ``planning_attempts`` (stalls
 that started a search), and the joint-space length [rad] and duration [s] of
@@ -149,6 +150,8 @@ class HybridPlanner:
         self._target: FloatArray | None = None
         self._solved = False
         self._spent = 0.0  # planning time used for this goal [s]
+        self._tries = 0  # searches started for the goal planned for
+        self._gave_up_at: float | None = None  # when the last search failed
         self._plan: FloatArray | None = None  # the plan being followed
         self._taken = False  # the loop spliced it in
         self._note = ""
@@ -196,8 +199,17 @@ class HybridPlanner:
         end = plan.path[-1] if plan.path is not None else q
         error = self.detector.distance(self._hand(end), goal)
         stalled = self.detector.add(t, error, goal, bool(self.cat.blocked_by))
-        tried = self._planned_goal is not None and not self._goal_moved(goal)
-        if stalled and not tried:
+        same = self._planned_goal is not None and not self._goal_moved(goal)
+        if not same:
+            self._tries = 0
+        settings = self.settings
+        retry = (
+            self._tries < settings.tries
+            and self._gave_up_at is not None
+            and t - self._gave_up_at >= settings.retry_after
+        )
+        if stalled and (not same or retry):
+            self._tries += 1
             blocked = ", ".join(sorted(self.cat.blocked_by)) or "nothing"
             run.event(
                 t,
@@ -264,7 +276,7 @@ class HybridPlanner:
                 f"{self.settings.planning_budget:g} s of planning; CAT keeps the arm "
                 "where it stopped",
             )
-            self._to_cat()
+            self._give_up(t)
         return Plan(None, 0, "hybrid: planning, the arm holds")
 
     def _search_configuration(
@@ -280,7 +292,7 @@ class HybridPlanner:
                     "hybrid: the arm rests in contact and its way in is not free "
                     "either; no plan from here",
                 )
-                self._to_cat()
+                self._give_up(run.sim.t)
                 return
         while self._attempts and not budget.spent():
             seed, fixed = self._attempts.pop(0)
@@ -295,7 +307,7 @@ class HybridPlanner:
                 "hybrid: no collision-free configuration reaches the goal (the IK "
                 "search found none from any seed); CAT keeps the arm where it stopped",
             )
-            self._to_cat()
+            self._give_up(run.sim.t)
 
     @staticmethod
     def _lead_in(
@@ -388,6 +400,16 @@ class HybridPlanner:
                 self._to_cat()
                 return None
         return Plan(None, 0, "hybrid: following the plan")
+
+    def _give_up(self, t: float) -> None:
+        """Back to CAT after a search that found nothing; retry later, bounded.
+
+        The search's random starts and RRT-Connect's samples may fail where
+        another try succeeds: the same goal is tried again after
+        ``retry_after``, up to ``tries`` times in all.
+        """
+        self._gave_up_at = t
+        self._to_cat()
 
     def _to_cat(self) -> None:
         """Back to CAT tracking; the stall detector starts afresh.

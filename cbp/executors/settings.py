@@ -236,6 +236,11 @@ class HybridSettings:
     planning_budget: float = 1.5
     """Time the planner may use for one goal, over as many command periods as
     it takes (the arm holds meanwhile) [s of the loop's clock]."""
+    tries: int = 3
+    """Searches for one goal at most: a search that finds no configuration or
+    no plan is started again (fresh random starts, a new RRT-Connect) ..."""
+    retry_after: float = 2.0
+    """... this long after the last one failed, while CAT stays stalled [s]."""
     goal_moved: float = 0.05
     """While planning or following a plan, a goal that moves more than this
     from the one planned for [m, same weighting] returns control to CAT at the
@@ -260,8 +265,15 @@ class HybridSettings:
             "planning_budget",
             "goal_moved",
         )
-        require(self, ">= 0", "stall_progress", "goal_still", "rotation_weight")
-        require(self, ">= 1", "ik_seeds")
+        require(
+            self,
+            ">= 0",
+            "stall_progress",
+            "goal_still",
+            "rotation_weight",
+            "retry_after",
+        )
+        require(self, ">= 1", "ik_seeds", "tries")
 
 
 @dataclass(frozen=True, kw_only=True)

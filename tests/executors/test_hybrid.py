@@ -83,6 +83,33 @@ def test_hybrid_goes_around_the_wall_where_cat_stalls() -> None:
 
 
 @pytest.mark.slow
+def test_a_failed_search_is_tried_again(monkeypatch) -> None:
+    """The first search finds no configuration (injected); the second plans."""
+    original = hybrid_module.HybridPlanner._begin_planning
+    searches = [0]
+
+    def begin(self, start, goal):  # type: ignore[no-untyped-def]
+        searches[0] += 1
+        original(self, start, goal)
+        if searches[0] == 1:
+            self._attempts = []  # nothing to try: this search fails at once
+
+    monkeypatch.setattr(hybrid_module.HybridPlanner, "_begin_planning", begin)
+    scenario = load_scenario(
+        SCENARIOS / "cat_local_minimum.yaml", overrides={"duration": "14"}
+    )
+    trace = run_hybrid(scenario)
+    m = run_metrics(trace, scenario.robot)
+    events = "\n".join(msg for _, msg in trace.events)
+    assert "no collision-free configuration reaches the goal" in events
+    assert searches[0] == 2
+    assert m["planning_attempts"] == 2
+    assert m["plans"] == 1
+    assert m["reached"], m
+    assert m["peak_contact_force_n"] == 0.0
+
+
+@pytest.mark.slow
 def test_hybrid_does_not_plan_where_cat_suffices() -> None:
     scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
     hybrid = run_metrics(run_hybrid(scenario), scenario.robot)
