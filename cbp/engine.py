@@ -86,11 +86,11 @@ class Engine:
             or np.isfinite(robot.upper_limits).any()
         )
         self.problem: QPProblem | None = None
-        self._dt = 0.0  # of the last step
         #: How many times too fast the last step was before the guard slowed it
         #: to the velocity limits (1.0: it was not).
         self.slowed = 1.0
         self.recovery: str | None = None
+        self.recovery_scale: float | None = None
         self.recovery_changed = False
         self._solved_recovery: str | None = None
         self._by_name = {e.name: e for e in self.entries}
@@ -139,7 +139,6 @@ class Engine:
                 duration.
         """
         q = self._checked(q, dt)
-        self._dt = float(dt)
         if v is not None:
             v = self._checked_velocity(v)
         state = self.state
@@ -150,11 +149,11 @@ class Engine:
         problem = self.assembler.assemble(state)
         self.problem = problem
         self.recovery = None
-        self.recovery_scale: float | None = None
+        self.recovery_scale = None
         try:
             x = self.solver.solve(problem)
         except SolveError as exc:
-            x = self._recover(problem, exc)
+            x = self._recover(problem, exc, float(dt))
         dq = self.guard_step(q, x[: self.robot.nv], dt, v)
         self.recovery_changed = self.recovery != self._solved_recovery
         self._solved_recovery = self.recovery
@@ -275,7 +274,7 @@ class Engine:
                 return f"'{model.names[j]}'"
         return str(i)
 
-    def _recover(self, problem: QPProblem, error: SolveError) -> FloatArray:
+    def _recover(self, problem: QPProblem, error: SolveError, dt: float) -> FloatArray:
         """Solve again with the hard rows that ask for motion eased; else re-raise.
 
         A hard row whose bounds exclude standing still asks the step for a
@@ -322,7 +321,7 @@ class Engine:
             try:
                 x = self.solver.solve(problem)
             except SolveError:
-                lower[rows], upper[rows] = given
+                pass
             else:
                 if not equality.any():
                     self.recovery = (
@@ -330,23 +329,27 @@ class Engine:
                         "(backing out)"
                     )
                     return x
-                lower[rows], upper[rows] = given  # equalities too: scale all
+            lower[rows], upper[rows] = given  # infeasible, or equalities to scale
 
         # An equality is scaled from the value its row has if the robot keeps
         # its velocity (the state's v; zero at rest), which the acceleration
         # rows always allow; an inequality from zero, "no further".
         equal = problem.equality[rows]
         anchor = np.zeros(rows.size)
-        anchor[equal] = problem.A[rows[equal], :nv] @ (self.state.v * self._dt)
+        anchor[equal] = problem.A[rows[equal], :nv] @ (self.state.v * dt)
 
-        def scaled(factor: float) -> FloatArray | None:
-            """The solution with every demand scaled by ``factor``, or None."""
+        def scale(factor: float) -> None:
+            """Set every demand's bounds to ``factor`` of what it asks."""
             lo, hi = given
             lower[rows] = np.where(lo > anchor, anchor + factor * (lo - anchor), lo)
             upper[rows] = np.where(hi < anchor, anchor + factor * (hi - anchor), hi)
             lower[rows[equal]] = upper[rows[equal]] = anchor[equal] + factor * (
                 lo[equal] - anchor[equal]
             )
+
+        def scaled(factor: float) -> FloatArray | None:
+            """The solution with every demand scaled by ``factor``, or None."""
+            scale(factor)
             try:
                 return self.solver.solve(problem)
             except SolveError:
@@ -364,7 +367,7 @@ class Engine:
                 high = middle
             else:
                 low, best = middle, found
-        scaled(low)  # leave the bounds of the answer in self.problem
+        scale(low)  # leave the bounds of the answer in self.problem
         self.recovery_scale = low
         if low == 0.0:
             self.recovery = what + "held (k = 0: no further, no change)"

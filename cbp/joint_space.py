@@ -13,12 +13,21 @@ at the start of each step.
 from __future__ import annotations
 
 import abc
+from collections.abc import Mapping
 
+import numpy as np
+
+from cbp.errors import ConfigError, located
 from cbp.plugin import FloatArray, ParamsT, Plugin
-from cbp.robot import IndexRows, RobotModel, rows_count
+from cbp.robot import IndexRows, IntArray, RobotModel, rows_count
 from cbp.state import RobotState
 
-__all__ = ["JointDifference", "StepDisplacement"]
+__all__ = [
+    "JointDifference",
+    "StepDisplacement",
+    "check_scaled_limits",
+    "limits_by_joint",
+]
 
 
 class JointDifference(Plugin[ParamsT]):
@@ -80,3 +89,31 @@ class StepDisplacement(JointDifference[ParamsT]):
     def reference(self) -> FloatArray:
         """The configuration at the start of the step."""
         return self.latched(self._q0)
+
+
+def check_scaled_limits(scale: float, limits: Mapping[str, float]) -> None:
+    """A limit plugin's parameters: ``scale`` in (0, 1], every limit positive.
+
+    Raises:
+        ConfigError: located at ``scale`` or ``limits.<joint>``.
+    """
+    if not 0 < scale <= 1:
+        raise ConfigError(f"must be in (0, 1], got {scale}", "scale")
+    for joint, value in limits.items():
+        if not value > 0:
+            raise ConfigError(f"must be > 0, got {value}", f"limits.{joint}")
+
+
+def limits_by_joint(
+    robot: RobotModel, robot_limits: FloatArray, limits: Mapping[str, float]
+) -> tuple[IntArray, FloatArray]:
+    """The tangent coordinates with a finite limit, and those limits.
+
+    ``robot_limits`` (nv) with ``limits`` by joint name put in their place
+    (an unknown joint is a ConfigError located at ``limits.<joint>``).
+    """
+    values = np.array(robot_limits, dtype=float)
+    for joint, value in limits.items():
+        values[located(robot.joint_v_slice, joint, f"limits.{joint}")] = value
+    finite = np.flatnonzero(np.isfinite(values))
+    return finite, values[finite]

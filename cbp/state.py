@@ -38,7 +38,8 @@ class RobotState:
         self.data = robot.model.createData()
         self._jacobians: dict[int, FloatArray] = {}
         self.q: FloatArray = np.empty(0)
-        self.v: FloatArray = _at_rest(robot.nv)
+        self._rest = _at_rest(robot.nv)
+        self.v: FloatArray = self._rest
         self.update(robot.neutral() if q is None else q)
 
     def update(self, q: FloatArray) -> None:
@@ -55,7 +56,7 @@ class RobotState:
     def set_velocity(self, v: FloatArray | None) -> None:
         """Set :attr:`v` (copied); None: at rest."""
         if v is None:
-            self.v = _at_rest(self.robot.nv)
+            self.v = self._rest  # read-only: shared by every step at rest
             return
         v = np.array(v, dtype=float)
         v.flags.writeable = False

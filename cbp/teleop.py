@@ -41,6 +41,7 @@ from cbp.executors.trajectory import Plan, Planner, run_trajectory_executor
 from cbp.goals import write_recorded
 from cbp.robot import FloatArray
 from cbp.scenario import Scenario, load_scenario
+from cbp.sim.trajectory import JointTrajectory
 from cbp.state import RobotState
 from cbp.trace import Trace
 
@@ -256,7 +257,8 @@ class Snapshot:
         events: the latest events, newest last.
         contacts: the contacts CAT's contact rows hold at its latest step
             (None for a method without them).
-        path: the commanded trajectory's configurations from now on (M, nq).
+        trajectory: the trajectory the robot follows (a new object at each
+            splice; its last point is where the arm is heading).
     """
 
     t: float
@@ -269,7 +271,7 @@ class Snapshot:
     contact_force: float
     events: list[tuple[float, str]] = field(default_factory=list)
     contacts: ContactSet | None = None
-    path: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    trajectory: JointTrajectory | None = None
 
 
 class TeleopSession:
@@ -315,6 +317,7 @@ class TeleopSession:
         self.timing = self.scenario.spec.method.settings(CatSettings).timing
         self._state = RobotState(robot)
         self._frame = robot.frame_id(self.scenario.ee_frame)
+        self._periods_counted = self._misses = 0
         self._thread: threading.Thread | None = None
         self.trace: Trace | None = None
         self.error: BaseException | None = None
@@ -435,21 +438,23 @@ class TeleopSession:
         run = self.run
         q = np.array(run.sim.q, dtype=float)
         self._state.update(q)
-        periods = run.periods[-1:] if run.periods else []
-        trajectory = run.sim.trajectory
-        ahead = int(np.searchsorted(trajectory.times, run.sim.t))
+        periods = run.periods
+        # Deadline misses counted once per period (a session may run for hours).
+        for period in periods[self._periods_counted :]:
+            self._misses += period.missed
+        self._periods_counted = len(periods)
         return Snapshot(
             t=run.sim.t,
             q=q,
             hand=self._state.frame_position(self._frame).copy(),
             method=self.planner.method,
             paused=self.planner.paused,
-            steps=periods[0].steps if periods else 0,
-            misses=sum(1 for p in run.periods if p.missed),
+            steps=periods[-1].steps if periods else 0,
+            misses=self._misses,
             contact_force=float(run.sim.contact_force),
             events=list(run.events[-5:]),
             contacts=self.planner.contacts(),
-            path=np.array(trajectory.positions[ahead:], dtype=float),
+            trajectory=run.sim.trajectory,
         )
 
     def latency_ms(self) -> list[float]:

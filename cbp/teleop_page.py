@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from cbp.errors import CbpError, ConfigError
+from cbp.perception.kernels import OCCUPIED, UNKNOWN
 from cbp.report import scene_description
 from cbp.state import RobotState
 from cbp.teleop import (
@@ -284,6 +285,7 @@ class TeleopPage(_Page):
         self._state = RobotState(session.scenario.robot)
         self._hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
         self._drawn_path: object = None
+        self._drawn_contacts: object = False  # nothing drawn yet
         #: Whether the arm has stopped short of the goal (drawn as a gripper,
         #: with the posture it stopped in).
         self.unreachable = False
@@ -353,7 +355,7 @@ class TeleopPage(_Page):
         if len(self._history) > 1:
             data = np.array(self._history).T
             self.plot.data = (data[0], data[1], data[2])
-        self._draw_map(snap.t)
+        self._draw_map(snap.t, snap.hand)
 
     def _cfg(self, q: np.ndarray) -> np.ndarray:
         """The URDF's actuated joints' values for the robot's configuration."""
@@ -369,6 +371,9 @@ class TeleopPage(_Page):
         distance's 5 cm and beyond.
         """
         contacts = snap.contacts
+        if contacts is self._drawn_contacts:
+            return
+        self._drawn_contacts = contacts
         if contacts is None or not len(contacts.distance):
             points = np.zeros((0, 2, 3))
             colours = np.zeros((0, 2, 3))
@@ -386,9 +391,17 @@ class TeleopPage(_Page):
 
     def _draw_path(self, snap: Snapshot, goal: np.ndarray) -> None:
         """The commanded trajectory's hand path, and the reachable posture."""
-        path = snap.path
-        if len(path) and path is not self._drawn_path:
-            self._drawn_path = path
+        trajectory = snap.trajectory
+        if trajectory is None:
+            return
+        if trajectory is not self._drawn_path:  # a new one was spliced in
+            self._drawn_path = trajectory
+            ahead = int(np.searchsorted(trajectory.times, snap.t))
+            path = (
+                trajectory.positions[ahead:]
+                if ahead < len(trajectory.times)
+                else trajectory.positions[-1:]
+            )
             keep = np.unique(
                 np.linspace(0, len(path) - 1, min(len(path), 60)).astype(int)
             )
@@ -408,7 +421,7 @@ class TeleopPage(_Page):
                 thickness=2.0,
                 thickness_units="screen",
             )
-        end = path[-1] if len(path) else snap.q
+        end = trajectory.positions[-1]
         self._state.update(end)
         heading = self._state.frame_position(self._hand)
         short = float(np.linalg.norm(goal - heading))
@@ -430,7 +443,7 @@ class TeleopPage(_Page):
                 self.ghost.update_cfg(self._cfg(end))
             self.ghost.show_collision = unreachable
 
-    def _draw_map(self, t: float) -> None:
+    def _draw_map(self, t: float, hand: np.ndarray) -> None:
         """Redraw the map's cells when the map or the toggle changed."""
         run = self.session.run
         world = run.world
@@ -444,23 +457,22 @@ class TeleopPage(_Page):
         if unknown == drawn_unknown and t - drawn_t < MAP_PERIOD:
             return  # a new map, drawn at most every MAP_PERIOD
         self._map_drawn = (environment, unknown, t)
-        centres = np.asarray(getattr(environment, "centres", np.zeros((0, 3))))
+        # The grid's own states (the environment holds the obstacle shell, in
+        # which occupied and unknown cells are not told apart). The map thread
+        # may be writing a frame meanwhile: the page shows a cell a frame late.
+        grid = run.mapper.grid
+        centres = grid.centres(OCCUPIED)
         colours = np.tile(np.array([[200, 90, 40]], dtype=np.uint8), (len(centres), 1))
-        blocked = getattr(environment, "blocked", None)
-        if unknown and blocked is not None:
-            # Obstacle cells that are not occupied are unknown: shown grey.
-            mask = blocked.mask
-            idx = np.argwhere(mask)
-            points = blocked.lower + (idx + 0.5) * blocked.cell
+        if unknown:
+            points = grid.centres(UNKNOWN)
             centres = np.vstack([centres, points])
             colours = np.vstack(
                 [colours, np.full((len(points), 3), 150, dtype=np.uint8)]
             )
         if len(centres) > MAX_CELLS:
-            hand = self.session.snapshot().hand
             nearest = np.argsort(np.linalg.norm(centres - hand, axis=1))[:MAX_CELLS]
             centres, colours = centres[nearest], colours[nearest]
-        cell = float(getattr(environment, "cell", 0.01))
+        cell = grid.cell
         self._cells = self.server.scene.add_point_cloud(
             "/map", centres.astype(np.float32), colours, point_size=cell
         )

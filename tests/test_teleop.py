@@ -319,3 +319,27 @@ def test_the_orbit_page_sends_sliders_and_switches_configurations() -> None:
     finally:
         page.close()
         session.stop()
+
+
+@pytest.mark.slow
+def test_the_page_draws_the_map_and_unknown_space_on_the_toggle() -> None:
+    """With cameras: the occupied cells, and the unknown ones when asked."""
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    from cbp.perception.kernels import OCCUPIED
+    from cbp.teleop_page import MAX_CELLS, TeleopPage
+
+    session = TeleopSession(BOARDS, "cat", {"perception.source": "depth_camera"})
+    page = TeleopPage(session, port=free_port())
+    try:
+        page.update()
+        assert session.run.mapper is not None
+        occupied = session.run.mapper.grid.count(OCCUPIED)
+        assert occupied > 0
+        assert len(page._cells.points) == min(occupied, MAX_CELLS)
+        page.show_unknown.value = True
+        page.update()
+        assert len(page._cells.points) > min(occupied, MAX_CELLS - 1)
+        assert len(page._cells.points) <= MAX_CELLS
+    finally:
+        page.close()
+        session.run.finish()

@@ -8,8 +8,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from cbp.errors import ConfigError, located
-from cbp.joint_space import StepDisplacement
+from cbp.errors import ConfigError
+from cbp.joint_space import StepDisplacement, check_scaled_limits, limits_by_joint
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel, compact_rows
 from cbp.state import RobotState
@@ -32,11 +32,7 @@ class JointAccelerationParams(PluginParams):
         """Scale in (0, 1], limits positive, margin not negative."""
         if not self.margin >= 0:
             raise ConfigError(f"must be >= 0, got {self.margin}", "margin")
-        if not 0 < self.scale <= 1:
-            raise ConfigError(f"must be in (0, 1], got {self.scale}", "scale")
-        for joint, value in self.limits.items():
-            if not value > 0:
-                raise ConfigError(f"must be > 0, got {value}", f"limits.{joint}")
+        check_scaled_limits(self.scale, self.limits)
 
 
 class JointAccelerationConstraint(
@@ -81,13 +77,12 @@ class JointAccelerationConstraint(
     ) -> None:
         """Gather the limits and keep the coordinates that have one."""
         super().__init__(params, robot, name)
-        acceleration = np.array(robot.acceleration_limits)
-        for joint, value in params.limits.items():
-            acceleration[located(robot.joint_v_slice, joint, f"limits.{joint}")] = value
-        finite = np.flatnonzero(np.isfinite(acceleration))
+        finite, acceleration = limits_by_joint(
+            robot, robot.acceleration_limits, params.limits
+        )
         self.rows = compact_rows(finite)
         self._finite = finite
-        self._acceleration = params.scale * acceleration[finite]
+        self._acceleration = params.scale * acceleration
         # The rows (positions in ``finite``) of joints with a position range,
         # their configuration coordinates and their limits less the margin.
         row_of = {int(v): i for i, v in enumerate(finite)}

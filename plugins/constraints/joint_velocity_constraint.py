@@ -8,8 +8,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from cbp.errors import ConfigError, located
-from cbp.joint_space import StepDisplacement
+from cbp.joint_space import StepDisplacement, check_scaled_limits, limits_by_joint
 from cbp.plugin import Constraint, FloatArray, PluginParams
 from cbp.robot import RobotModel, compact_rows
 from cbp.state import RobotState
@@ -26,11 +25,7 @@ class JointVelocityParams(PluginParams):
 
     def __post_init__(self) -> None:
         """Scale in (0, 1], limits positive."""
-        if not 0 < self.scale <= 1:
-            raise ConfigError(f"must be in (0, 1], got {self.scale}", "scale")
-        for joint, value in self.limits.items():
-            if not value > 0:
-                raise ConfigError(f"must be > 0, got {value}", f"limits.{joint}")
+        check_scaled_limits(self.scale, self.limits)
 
 
 class JointVelocityConstraint(
@@ -55,12 +50,9 @@ class JointVelocityConstraint(
     ) -> None:
         """Gather the limits and keep the coordinates that have one."""
         super().__init__(params, robot, name)
-        velocity = np.array(robot.velocity_limits)
-        for joint, value in params.limits.items():
-            velocity[located(robot.joint_v_slice, joint, f"limits.{joint}")] = value
-        finite = np.flatnonzero(np.isfinite(velocity))
+        finite, velocity = limits_by_joint(robot, robot.velocity_limits, params.limits)
         self.rows = compact_rows(finite)
-        self._velocity = params.scale * velocity[finite]
+        self._velocity = params.scale * velocity
         self._reach = np.zeros(finite.size)
         self._negative_reach = np.zeros(finite.size)
         self._dt = 0.0
