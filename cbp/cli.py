@@ -51,12 +51,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         help=f"executor: {', '.join(EXECUTORS)} (default: the scenario's method.name)",
     )
     run.add_argument("--gui", action="store_true", help="show PyBullet's window")
-    run.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario value, e.g. --set perception.source=depth_camera",
+    _add_set(
+        run,
+        "override a scenario value, e.g. --set perception.source=depth_camera",
     )
     compare = sub.add_parser(
         "compare", help="run several methods on one recorded goal stream; one report"
@@ -80,12 +77,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="replay this recorded goal file (a teleop session's operator_goal.csv)"
         " instead of the scenario's goal, until its end and 2 s more",
     )
-    compare.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario value (as for run)",
+    _add_set(
+        compare,
+        "override a scenario value (as for run)",
     )
     bench = sub.add_parser("bench", help="time the engine, CAT, MP, orbit and map rows")
     bench.add_argument("--quick", action="store_true", help="fewer repetitions")
@@ -167,12 +161,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="output folder (default out/<name>_teleop)",
     )
-    teleop.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario value (as for run)",
+    _add_set(
+        teleop,
+        "override a scenario value (as for run)",
     )
     examples = sub.add_parser(
         "examples", help="copy the example scenarios (and configs) out to edit"
@@ -259,6 +250,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(path)
         return 0
     return _plugins()
+
+
+def _add_set(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """The repeatable ``--set KEY=VALUE`` scenario override (read by _overrides)."""
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help=help_text
+    )
 
 
 def _robot_init(args: argparse.Namespace) -> int:
