@@ -11,12 +11,13 @@ as it needs (the arm holds, at rest where CAT left it; the periods' budgets
 are the planner's, up to ``planning_budget`` for one goal):
 
 1. the IK search (:class:`~cbp.executors.ik_search.IkSearch`, sweeping the
-   redundant joint) looks for a collision-free configuration for the goal,
-   starting with all joints free from the current configuration, the middle
-   of the joint ranges and seeded random ones, then sweeping the redundant
-   joint around the current configuration (from a stuck configuration, a
-   random start converges to a collision-free solution about a third of the
-   time on the wrist-limit goal; the sweep, 1 in 30);
+   redundant joint) looks for a collision-free configuration for the goal:
+   with all joints free from the current configuration, the middle of the
+   joint ranges and seeded random ones, keeping the solution nearest in time
+   at the velocity limits; when none of them gives one, sweeping the redundant
+   joint around the current configuration and taking its first (from a stuck
+   configuration, a random start converges to a collision-free solution about
+   a third of the time on the wrist-limit goal; the sweep, 1 in 30);
 2. OMPL's RRT-Connect (:class:`~cbp.executors.mp.RrtConnect`) plans to it in
    the same collision world (with cameras: the same map, unseen space
    included), from where the arm is at rest;
@@ -148,6 +149,7 @@ class HybridPlanner:
         self._attempts: list[tuple[FloatArray, int | None]] = []
         self._from: FloatArray | None = None  # resting point to the plan's start
         self._target: FloatArray | None = None
+        self._nearest: FloatArray | None = None  # nearest solution found so far
         self._solved = False
         self._spent = 0.0  # planning time used for this goal [s]
         self._tries = 0  # searches started for the goal planned for
@@ -242,6 +244,7 @@ class HybridPlanner:
         self._attempts = [(seed, None) for seed in seeds]
         self._attempts += self.search.attempts(start)[1:]
         self._target = None
+        self._nearest = None
         self._from = None
         self._solved = False
         self._spent = 0.0
@@ -296,10 +299,20 @@ class HybridPlanner:
                 return
         while self._attempts and not budget.spent():
             seed, fixed = self._attempts.pop(0)
-            target = self.search.attempt(goal, seed, fixed, budget)
-            if target is not None:
-                self._target = target
-                self.rrt.begin(self._from[-1], target)
+            found = self.search.attempt(goal, seed, fixed, budget)
+            if found is not None and (
+                self._nearest is None
+                or self._time_to(found) < self._time_to(self._nearest)
+            ):
+                self._nearest = found
+            # Every all-joints-free start is tried and the solution nearest in
+            # time is kept: which seed converges first depends on where CAT
+            # stopped, and a far one makes a long plan. The sweep holds the
+            # redundant joint near its value, so its first solution is taken.
+            free_starts_left = bool(self._attempts) and self._attempts[0][1] is None
+            if self._nearest is not None and not free_starts_left:
+                self._target = self._nearest
+                self.rrt.begin(self._from[-1], self._nearest)
                 return
         if not self._attempts:
             run.event(
@@ -308,6 +321,11 @@ class HybridPlanner:
                 "search found none from any seed); CAT keeps the arm where it stopped",
             )
             self._give_up(run.sim.t)
+
+    def _time_to(self, q: FloatArray) -> float:
+        """Shortest time [s] from the plan's start to ``q`` at the velocity limits."""
+        assert self._start is not None
+        return float(np.max(np.abs(q - self._start) / self._vmax))
 
     @staticmethod
     def _lead_in(
