@@ -626,19 +626,41 @@ def _shelf_octree_world() -> tuple[Any, np.ndarray]:
 
 
 def _query_rows(cfg: BenchConfig) -> list[Row]:
-    """The full-arm contact query alone: declared objects, and an octree."""
+    """The full-arm contact query alone: declared objects, and the map of them.
+
+    Inside the shelf (the shelf retreat's start) the same configuration is
+    queried against the declared objects and against a 1 cm map of their
+    surfaces, with 450k more cells far away for the second map size; the
+    boards row is the query of a scene with few contacts.
+    """
+    from cbp.collision import MetaballRefiner, OccupancyEnvironment
     from cbp.scenario import load_scenario
 
     n, w = max(cfg.repetitions // 2, 3), min(cfg.warmup, 50)
     boards = load_scenario(SCENARIOS / "cat_boards.yaml")
     octree_world, inside = _shelf_octree_world()
-    cells = len(octree_world.environment)
+    centres = octree_world.environment.centres
+    grown_world, _ = _shelf_octree_world()
+    grown = np.concatenate([centres, _far_cells(9 * len(centres), 0.01)])
+    grown_world.set_environment(OccupancyEnvironment(grown, 0.01, MetaballRefiner()))
+    shelf = load_scenario(SCENARIOS / "cat_shelf_retreat.yaml")
     rows = []
     for case, world, q in (
         ("full arm vs declared objects (boards)", boards.collision_world(), None),
         (
-            f"full arm vs octree inside the shelf ({cells} cells, normals refined)",
+            "full arm vs declared objects inside the shelf",
+            shelf.collision_world(),
+            inside,
+        ),
+        (
+            f"full arm vs map inside the shelf: {len(centres)} cells, normals refined",
             octree_world,
+            inside,
+        ),
+        (
+            f"full arm vs larger map inside the shelf: {len(grown)} cells (far ones"
+            " added), normals refined",
+            grown_world,
             inside,
         ),
     ):
@@ -874,6 +896,13 @@ def _orbit_row(cfg: BenchConfig) -> list[Row]:
 
 
 def _map_row(cfg: BenchConfig) -> list[Row]:
+    """Map updates: a frame into an empty map, and frames of a moving arm.
+
+    The shelf reach scene seen by the head and side cameras (320x240) in turn,
+    at eight configurations of an arm swinging around its start; each update
+    integrates one frame (robot filtered out, seen space and the arm's space
+    marked) and takes the snapshot the collision world queries.
+    """
     from cbp.perception.camera import DepthCamera
     from cbp.perception.occupancy import OccupancyGrid
     from cbp.scenario import load_scenario
@@ -882,29 +911,53 @@ def _map_row(cfg: BenchConfig) -> list[Row]:
 
     scenario = load_scenario(SCENARIOS / "cat_shelf_reach.yaml")
     spec = scenario.spec.perception
-    camera = spec.all_cameras[0]
-    with PybulletScene(scenario.robot, scenario.spec.world.objects, SCENARIOS) as scene:
-        scene.set_configuration(scenario.q0)
-        frame = DepthCamera(scene.client, camera).capture()
-    grid = OccupancyGrid(spec, scenario.collision_world().geometry)
-    state = RobotState(scenario.robot, scenario.q0)
+    cameras = [c for c in spec.all_cameras if c.parent is None][:2]
+    robot = scenario.robot
+    swing = np.zeros(robot.nq)
+    swing[:4] = (0.3, 0.2, 0.3, 0.2)
+    states, frames = [], []
+    with PybulletScene(robot, scenario.spec.world.objects, SCENARIOS) as scene:
+        for k in range(8):
+            q = np.clip(
+                scenario.q0 + np.sin(2 * np.pi * k / 8) * swing,
+                robot.lower_limits,
+                robot.upper_limits,
+            )
+            scene.set_configuration(q)
+            states.append(RobotState(robot, q))
+            frames.append(DepthCamera(scene.client, cameras[k % 2]).capture())
+    geometry = scenario.collision_world().geometry
+    n = max(cfg.repetitions // 40, 3)
+    cold_n = min(n, 10)  # a grid of the scene's bounds each: ~7 MB
+    empty = iter([OccupancyGrid(spec, geometry) for _ in range(cold_n + 1)])
 
-    def update(i: int) -> object:
-        grid.integrate(frame, state)
+    def first(i: int) -> object:
+        grid = next(empty)  # a new one every call, the warm-up's included
+        grid.integrate(frames[0], states[0])
         return grid.environment()
 
-    n = max(cfg.repetitions // 40, 3)
-    median, p95 = measure(update, n, min(cfg.warmup, 3))
-    return [
-        Row(
-            "map",
-            f"one {camera.width}x{camera.height} frame: integrate + snapshot",
-            median,
-            p95,
-            n,
-            note=f"{len(grid.centres())} occupied cells; rendering excluded",
-        )
-    ]
+    grid = OccupancyGrid(spec, geometry)
+
+    def update(i: int) -> object:
+        grid.integrate(frames[i % 8], states[i % 8])
+        return grid.environment()
+
+    size = f"{cameras[0].width}x{cameras[0].height}"
+    cold = Row(
+        "map",
+        f"first {size} frame into an empty map: integrate + snapshot",
+        *measure(first, cold_n, 1),
+        cold_n,
+    )
+    moving = Row(
+        "map",
+        f"one {size} frame, two cameras in turn, arm moving: integrate + snapshot",
+        *measure(update, 4 * n, 16),
+        4 * n,
+        note=f"{len(grid.centres())} occupied cells, {len(grid.environment())} "
+        "indexed (the obstacle shell); rendering excluded",
+    )
+    return [moving, cold]
 
 
 # ---------------------------------------------------------------- profile and output
@@ -1129,11 +1182,20 @@ TARGETS = [
     ),
     (
         "query",
-        "full arm vs octree",
+        "full arm vs map inside the shelf",
         "query",
-        "full arm vs declared",
+        "full arm vs declared objects inside the shelf",
         1.2,
-        "contact query against the map / against declared objects (issue 16)",
+        "contact query against the map / against the declared objects, inside the "
+        "shelf (issue 16)",
+    ),
+    (
+        "query",
+        "full arm vs larger map",
+        "query",
+        "full arm vs map inside the shelf",
+        1.1,
+        "contact query against the map at ~500k cells / at ~50k (issue 16: flat)",
     ),
     (
         "cat step",

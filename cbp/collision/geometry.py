@@ -221,7 +221,25 @@ def _planes(hull: trimesh.Trimesh) -> FloatArray:
     offsets = np.einsum("ij,ij->i", normals, hull.triangles[:, 0, :])
     planes = np.hstack([normals, offsets[:, None]])
     # Coplanar triangles repeat a plane: keep one of each.
-    return np.unique(np.round(planes, 9), axis=0)
+    planes = np.unique(np.round(planes, 9), axis=0)
+    return planes[_spread_order(planes[:, :3])]
+
+
+def _spread_order(normals: FloatArray) -> IntArray:
+    """An order of the faces in which each next normal is the least like those before.
+
+    Point-inside tests stop at the first plane a point lies beyond; with the
+    normals spread this way, a point outside the hull is usually rejected within
+    the first few planes (in sorted order, neighbouring planes face alike).
+    """
+    order = [0]
+    likeness = normals.dot(normals[0])
+    for _ in range(len(normals) - 1):
+        likeness[order[-1]] = np.inf
+        k = int(np.argmin(likeness))
+        order.append(k)
+        likeness = np.maximum(likeness, normals.dot(normals[k]))
+    return np.asarray(order, dtype=np.int64)
 
 
 class RobotGeometry:

@@ -9,6 +9,8 @@ thread runs beside the control loop.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
@@ -21,7 +23,7 @@ __all__ = [
     "UNKNOWN",
     "carve_shapes",
     "mark_seen",
-    "shell_cells",
+    "shell_update",
 ]
 
 UNKNOWN = 0
@@ -46,6 +48,8 @@ def mark_seen(
     near: float,
     max_range: float,
     misses_to_clear: int,
+    dirty: np.ndarray,
+    brick: int,
 ) -> int:
     """Mark the cells a depth image sees through; return how many changed state.
 
@@ -71,6 +75,9 @@ def mark_seen(
         near: the camera's near plane [m].
         max_range: cells farther from the camera are not marked [m].
         misses_to_clear: misses that clear an occupied cell.
+        dirty: per brick of ``brick`` cells a side, True where a cell changed
+            state (updated in place, for :func:`shell_update`).
+        brick: cells per brick side.
     """
     h, w = ranges.shape
     _, ny, nz = grid.shape
@@ -78,6 +85,7 @@ def mark_seen(
     missed = misses.reshape(-1)
     changed = 0
     limit2 = (max_range - cell) * (max_range - cell)
+    slack = 1.0 + 2.0 / min(h, w)  # a pixel of the side planes' rounding
     for i in range(box[0], box[1]):
         x = lower[0] + (i + 0.5) * cell
         for j in range(box[2], box[3]):
@@ -90,7 +98,30 @@ def mark_seen(
             y0 = clip[1, 0] * x + clip[1, 1] * y + clip[1, 3]
             w0 = clip[2, 0] * x + clip[2, 1] * y + clip[2, 3]
             r0 = (x - centre[0]) ** 2 + (y - centre[1]) ** 2
-            for k in range(box[4], box[5]):
+            # The column's cells in front of the near plane, within the side
+            # planes and in range: an interval of z (each test below is linear
+            # in z, the range a quadratic), widened by a cell and a pixel's slack;
+            # the cells are still tested one by one.
+            lo, hi = -np.inf, np.inf
+            lo, hi = _half_line(lo, hi, -d0 - near, -axis[2])
+            for a, b in (
+                (x0, clip[0, 2]),
+                (-x0, -clip[0, 2]),
+                (y0, clip[1, 2]),
+                (-y0, -clip[1, 2]),
+            ):
+                lo, hi = _half_line(lo, hi, slack * w0 + a, slack * clip[2, 2] + b)
+            left = limit2 - r0
+            if left < 0.0:
+                continue
+            reach = math.sqrt(left)
+            lo = max(lo, centre[2] - reach)
+            hi = min(hi, centre[2] + reach)
+            if not lo <= hi:
+                continue
+            k_lo = max(box[4], math.floor((lo - lower[2]) / cell - 0.5) - 1)
+            k_hi = min(box[5], math.ceil((hi - lower[2]) / cell - 0.5) + 2)
+            for k in range(k_lo, k_hi):
                 c = row + k
                 state = flat[c]
                 if state == FREE:
@@ -113,16 +144,30 @@ def mark_seen(
                     continue
                 if state == UNKNOWN:
                     flat[c] = FREE
+                    dirty[i // brick, j // brick, k // brick] = True
                     changed += 1
                 else:
                     m = missed[c] + 1
                     if m >= misses_to_clear:
                         flat[c] = FREE
                         missed[c] = 0
+                        dirty[i // brick, j // brick, k // brick] = True
                         changed += 1
                     else:
                         missed[c] = m
     return changed
+
+
+@numba.njit(cache=True, nogil=True)
+def _half_line(lo: float, hi: float, a: float, b: float) -> tuple[float, float]:
+    """The interval [lo, hi] cut to where a + b z >= 0."""
+    if b > 0.0:
+        lo = max(lo, -a / b)
+    elif b < 0.0:
+        hi = min(hi, -a / b)
+    elif a < 0.0:
+        return 1.0, 0.0  # empty
+    return lo, hi
 
 
 @numba.njit(cache=True, nogil=True)
@@ -136,6 +181,8 @@ def carve_shapes(
     radii: FloatArray,
     boxes: FloatArray,
     grow: float,
+    dirty: np.ndarray,
+    brick: int,
 ) -> int:
     """Mark unknown cells whose centre is inside a grown shape free; return count.
 
@@ -143,7 +190,7 @@ def carve_shapes(
     obstacle seen inside the robot's padding is real). The shapes as
     :class:`~cbp.collision.geometry.WorldShapes` gives them; ``boxes``
     (shapes, 6) holds each grown shape's world bounding box (lower corner,
-    upper corner).
+    upper corner). ``dirty`` and ``brick`` as in :func:`mark_seen`.
     """
     nx, ny, nz = grid.shape
     flat = grid.reshape(-1)
@@ -172,87 +219,116 @@ def carve_shapes(
                         continue
                     if inside_convex(x, y, z, planes, first, last, grow):
                         flat[row + k] = FREE
+                        dirty[i // brick, j // brick, k // brick] = True
                         changed += 1
     return changed
 
 
 @numba.njit(cache=True, nogil=True)
-def shell_cells(
+def shell_update(
     grid: np.ndarray,
+    blocked: np.ndarray,
+    dirty: np.ndarray,
     lower: FloatArray,
     cell: float,
     brick: int,
     unknown_blocks: bool,
-    blocked: np.ndarray,
+    old_centres: FloatArray,
+    old_start: IntArray,
 ) -> tuple[FloatArray, IntArray]:
-    """The obstacle cells next to open space, sorted by brick, and each brick's run.
+    """The obstacle cells next to open space, brick by brick, redone where changed.
 
     A cell is blocked when occupied, or unknown and ``unknown_blocks``; it is in
     the shell when one of its six neighbours inside the grid is not blocked.
     Only the shell can be the cell closest to a robot shape that stands in open
     space, so only the shell is indexed: a solid block of unknown space costs
-    its surface, not its volume. ``blocked`` (nx, ny, nz) receives the blocked
-    mask (for point-inside tests).
+    its surface, not its volume.
+
+    Only the bricks marked ``dirty`` (a cell in them changed state since the
+    last update) have their ``blocked`` mask recomputed, and only they and
+    their six neighbouring bricks (whose face cells border them) are scanned for
+    the shell; every other brick's run is copied from ``old_centres``. A map
+    whose view does not change costs a copy of its shell.
+
+    Args:
+        grid: cell states (nx, ny, nz).
+        blocked: the blocked mask (nx, ny, nz), kept up to date in place.
+        dirty: per brick (bx, by, bz), True where cells changed; cleared here.
+        lower: the grid's lower corner [m].
+        cell: cell size [m].
+        brick: cells per brick side.
+        unknown_blocks: unknown cells are obstacles.
+        old_centres: the last update's shell (its result), brick by brick.
+        old_start: its runs (bricks + 1,).
 
     Returns:
         (centres (N, 3) in brick order, start (bricks + 1,)): brick b's cells
-        are ``centres[start[b]:start[b + 1]]``, bricks numbered in C order over
-        ``ceil(shape / brick)``.
+        are ``centres[start[b]:start[b + 1]]``, bricks numbered in C order.
     """
     nx, ny, nz = grid.shape
-    flat = grid.reshape(-1)
-    mask = blocked.reshape(-1)
-    n = flat.size
-    for c in range(n):
-        v = flat[c]
-        mask[c] = v == OCCUPIED or (unknown_blocks and v == UNKNOWN)
-    sx, sy = ny * nz, nz
-    found = np.empty(1024, dtype=np.int64)
-    count = 0
-    for i in range(nx):
-        for j in range(ny):
-            row = i * sx + j * sy
-            for k in range(nz):
-                c = row + k
-                if not mask[c]:
+    bx, by, bz = dirty.shape
+    redo = np.zeros((bx, by, bz), dtype=np.bool_)
+    for p in range(bx):
+        for q in range(by):
+            for r in range(bz):
+                if not dirty[p, q, r]:
                     continue
-                if (
-                    (k > 0 and not mask[c - 1])
-                    or (k + 1 < nz and not mask[c + 1])
-                    or (j > 0 and not mask[c - sy])
-                    or (j + 1 < ny and not mask[c + sy])
-                    or (i > 0 and not mask[c - sx])
-                    or (i + 1 < nx and not mask[c + sx])
-                ):
-                    if count == found.size:
-                        grown = np.empty(2 * found.size, dtype=np.int64)
-                        grown[:count] = found
-                        found = grown
-                    found[count] = c
-                    count += 1
-    by, bz = -(-ny // brick), -(-nz // brick)
-    bx = -(-nx // brick)
-    key = np.empty(count, dtype=np.int64)
-    counts = np.zeros(bx * by * bz, dtype=np.int64)
-    for m in range(count):
-        c = found[m]
-        i, rest = c // sx, c % sx
-        j, k = rest // sy, rest % sy
-        b = ((i // brick) * by + j // brick) * bz + k // brick
-        key[m] = b
-        counts[b] += 1
-    start = np.zeros(counts.size + 1, dtype=np.int64)
-    for b in range(counts.size):
-        start[b + 1] = start[b] + counts[b]
-    centres = np.empty((count, 3))
-    fill = start[:-1].copy()
-    for m in range(count):
-        c = found[m]
-        i, rest = c // sx, c % sx
-        j, k = rest // sy, rest % sy
-        slot = fill[key[m]]
-        centres[slot, 0] = lower[0] + (i + 0.5) * cell
-        centres[slot, 1] = lower[1] + (j + 0.5) * cell
-        centres[slot, 2] = lower[2] + (k + 0.5) * cell
-        fill[key[m]] = slot + 1
-    return centres, start
+                for i in range(p * brick, min((p + 1) * brick, nx)):
+                    for j in range(q * brick, min((q + 1) * brick, ny)):
+                        for k in range(r * brick, min((r + 1) * brick, nz)):
+                            v = grid[i, j, k]
+                            blocked[i, j, k] = v == OCCUPIED or (
+                                unknown_blocks and v == UNKNOWN
+                            )
+                redo[p, q, r] = True
+                if p > 0:
+                    redo[p - 1, q, r] = True
+                if p + 1 < bx:
+                    redo[p + 1, q, r] = True
+                if q > 0:
+                    redo[p, q - 1, r] = True
+                if q + 1 < by:
+                    redo[p, q + 1, r] = True
+                if r > 0:
+                    redo[p, q, r - 1] = True
+                if r + 1 < bz:
+                    redo[p, q, r + 1] = True
+                dirty[p, q, r] = False
+    centres = np.empty((len(old_centres) + 1024, 3))
+    start = np.zeros(bx * by * bz + 1, dtype=np.int64)
+    count = 0
+    b = 0
+    for p in range(bx):
+        for q in range(by):
+            for r in range(bz):
+                if len(centres) - count < brick**3:  # room for a brick's cells
+                    grown = np.empty((2 * len(centres), 3))
+                    grown[:count] = centres[:count]
+                    centres = grown
+                if not redo[p, q, r]:
+                    first, last = old_start[b], old_start[b + 1]
+                    if len(centres) - count < last - first:
+                        grown = np.empty((2 * len(centres) + last - first, 3))
+                        grown[:count] = centres[:count]
+                        centres = grown
+                    centres[count : count + last - first] = old_centres[first:last]
+                    count += last - first
+                else:
+                    for i in range(p * brick, min((p + 1) * brick, nx)):
+                        for j in range(q * brick, min((q + 1) * brick, ny)):
+                            for k in range(r * brick, min((r + 1) * brick, nz)):
+                                if blocked[i, j, k] and (
+                                    (k > 0 and not blocked[i, j, k - 1])
+                                    or (k + 1 < nz and not blocked[i, j, k + 1])
+                                    or (j > 0 and not blocked[i, j - 1, k])
+                                    or (j + 1 < ny and not blocked[i, j + 1, k])
+                                    or (i > 0 and not blocked[i - 1, j, k])
+                                    or (i + 1 < nx and not blocked[i + 1, j, k])
+                                ):
+                                    centres[count, 0] = lower[0] + (i + 0.5) * cell
+                                    centres[count, 1] = lower[1] + (j + 0.5) * cell
+                                    centres[count, 2] = lower[2] + (k + 0.5) * cell
+                                    count += 1
+                b += 1
+                start[b] = count
+    return centres[:count].copy(), start

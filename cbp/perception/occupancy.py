@@ -44,7 +44,7 @@ from cbp.perception.kernels import (
     UNKNOWN,
     carve_shapes,
     mark_seen,
-    shell_cells,
+    shell_update,
 )
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import FloatArray
@@ -111,6 +111,11 @@ class OccupancyGrid:
             dims = -(-np.array(self.shape) // brick)
         self._brick = brick
         self._dims = dims
+        # The snapshot's bookkeeping (shell_update): the blocked mask, the bricks
+        # changed since the last snapshot, and the last shell.
+        self._blocked = np.zeros(self.shape, dtype=np.bool_)
+        self._dirty = np.ones(tuple(int(n) for n in dims), dtype=np.bool_)
+        self._shell = (np.empty((0, 3)), np.zeros(int(np.prod(dims)) + 1, np.int64))
 
     # ------------------------------------------------------------------ reading
 
@@ -216,6 +221,8 @@ class OccupancyGrid:
                 shapes.radii,
                 boxes,
                 grow,
+                self._dirty,
+                self._brick,
             )
         )
 
@@ -246,6 +253,8 @@ class OccupancyGrid:
                 frame.near,
                 self.spec.max_range,
                 self.spec.misses_to_clear,
+                self._dirty,
+                self._brick,
             )
         )
 
@@ -272,9 +281,12 @@ class OccupancyGrid:
     def _insert(self, points: FloatArray) -> None:
         idx = np.floor((points - self.lower) / self.cell).astype(np.intp)
         inside = np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
-        idx = idx[inside]
-        self.cells[idx[:, 0], idx[:, 1], idx[:, 2]] = OCCUPIED
-        self.misses[idx[:, 0], idx[:, 1], idx[:, 2]] = 0
+        i, j, k = idx[inside].T
+        new = self.cells[i, j, k] != OCCUPIED
+        self.cells[i, j, k] = OCCUPIED
+        self.misses[i, j, k] = 0
+        b = self._brick
+        self._dirty[i[new] // b, j[new] // b, k[new] // b] = True
 
     # ------------------------------------------------------------------ snapshot
 
@@ -293,10 +305,18 @@ class OccupancyGrid:
             if s.refine_normals
             else None
         )
-        blocked = np.empty(self.shape, dtype=np.bool_)
-        centres, start = shell_cells(
-            self.cells, self.lower, self.cell, self._brick, s.unknown_blocks, blocked
+        centres, start = shell_update(
+            self.cells,
+            self._blocked,
+            self._dirty,
+            self.lower,
+            self.cell,
+            self._brick,
+            s.unknown_blocks,
+            *self._shell,
         )
+        self._shell = (centres, start)
+        blocked = self._blocked.copy()
         index = CellIndex.from_bricks(
             centres, start, self.lower, self.cell, self._brick, self._dims
         )

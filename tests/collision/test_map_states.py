@@ -106,6 +106,56 @@ def test_a_second_camera_sees_the_shadow_free(scene, robots) -> None:
     assert not world.environment.inside(BEHIND)[0]
 
 
+def _shell_from_scratch(grid: OccupancyGrid) -> set[tuple[int, int, int]]:
+    """The obstacle cells with a neighbour inside the grid that is not blocked."""
+    blocked = (grid.cells == OCCUPIED) | (
+        (grid.cells == UNKNOWN) & grid.spec.unknown_blocks
+    )
+    open_next = np.zeros_like(blocked)
+    for axis in range(3):
+        for shift in (1, -1):
+            moved = np.roll(~blocked, shift, axis=axis)
+            edge = [slice(None)] * 3
+            edge[axis] = 0 if shift == 1 else -1
+            moved[tuple(edge)] = False  # no wrap-around: outside the grid
+            open_next |= moved
+    return {tuple(map(int, ijk)) for ijk in np.argwhere(blocked & open_next)}
+
+
+def test_each_snapshot_is_the_shell_of_the_whole_map(scene, robots) -> None:
+    """Snapshots rescan only changed bricks; they match a full rescan each time.
+
+    Two cameras, an arm that moves between frames (its old space stays free,
+    its new space is carved), and the box removed and seen through until its
+    cells clear.
+    """
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(replace(SPEC, misses_to_clear=2), geometry)
+    rng = np.random.default_rng(3)
+    q = robot.home()
+    snapshots = 0
+    for step in range(8):
+        if step == 4:
+            scene.remove_object("box")
+        q = np.clip(
+            q + rng.uniform(-0.3, 0.3, q.shape), robot.lower_limits, robot.upper_limits
+        )
+        scene.set_configuration(q)
+        state = RobotState(robot, q)
+        for camera in (FRONT, SIDE) if step % 2 else (FRONT,):
+            grid.integrate(DepthCamera(scene.client, camera).capture(), state)
+        env = grid.environment()
+        cells = np.floor((env.centres - grid.lower) / grid.cell).astype(int)
+        got = {tuple(map(int, ijk)) for ijk in cells}
+        assert len(got) == len(env.centres)  # no cell twice
+        assert got == _shell_from_scratch(grid), step
+        assert np.array_equal(env.blocked.mask, grid.cells != FREE)
+        snapshots += 1
+    assert grid.state_at(IN_BOX)[0] == FREE  # the removed box cleared
+    assert snapshots == 8
+
+
 def test_the_checker_finds_a_shape_wholly_inside_unknown_space(robots) -> None:
     robot = robots["panda"]
     geometry = RobotGeometry(robot)
