@@ -18,6 +18,7 @@ from cbp.collision import MetaballRefiner
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the study's folder
 from tests.collision.normals_study import (
+    DistanceFieldNormals,
     angle_errors,
     tilted_plane,
     yawed_box,
@@ -30,6 +31,8 @@ METHODS = {
         radius_cells=1.5, offset_cells=0.0
     ),
     "metaball R=3 cells, 0.5 cell out (shipped)": MetaballRefiner(),
+    "distance-field gradient, 1.5 cells out": DistanceFieldNormals(1.5),
+    "distance-field gradient, 3 cells out": DistanceFieldNormals(3.0),
 }
 SURFACES = {
     "plane tilted 10 deg": tilted_plane(10.0),
@@ -43,8 +46,8 @@ SURFACES = {
 def main() -> None:
     """Measure every method on every surface; write the figure and the table."""
     rows = []
-    fig, ax = plt.subplots(figsize=(9, 4))
-    width = 0.25
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    width = 0.8 / len(METHODS)
     for m, (method, refiner) in enumerate(METHODS.items()):
         medians = []
         for surface, (cells, sample) in SURFACES.items():
@@ -52,7 +55,7 @@ def main() -> None:
             med, p90 = float(np.median(errors)), float(np.percentile(errors, 90))
             medians.append(med)
             rows.append(f"| {surface} | {method} | {med:.1f} | {p90:.1f} |")
-        x = np.arange(len(SURFACES)) + (m - 1) * width
+        x = np.arange(len(SURFACES)) + (m - (len(METHODS) - 1) / 2) * width
         ax.bar(x, medians, width, label=method)
     ax.set_xticks(np.arange(len(SURFACES)), list(SURFACES), fontsize=8)
     ax.set_ylabel("median normal error [deg]")
