@@ -25,6 +25,7 @@ import io
 import json
 import platform
 import pstats
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -877,20 +878,37 @@ def _orbit_row(cfg: BenchConfig) -> list[Row]:
     scenario = load_scenario(SCENARIOS / "youbot_orbit_case1.yaml")
     engine = scenario.make_engine()
     inputs = scenario.inputs()
-    q = scenario.q0.copy()
+    robot = scenario.robot
+    dt = 0.02
+    # The run as the executor drives it: each tick from where the last one
+    # went, with the last command as the velocity. (Repeating the start's tick
+    # would time the first 0.06 s of the run, which the start errors make
+    # infeasible and the engine eases with extra solves.)
+    state = {"q": scenario.q0.copy(), "v": np.zeros(robot.nv)}
+    eased = [0]
 
     def tick(i: int) -> object:
         for plugin, functions in inputs:
-            plugin.set_input(np.array([f(0.02 * i) for f in functions]))
-        return engine.step(q, 0.02)
+            plugin.set_input(np.array([f(dt * i) for f in functions]))
+        dq = engine.step(state["q"], dt, state["v"])
+        state["q"] = pin.integrate(robot.model, state["q"], dq)
+        state["v"] = dq / dt
+        eased[0] += engine.recovery is not None
+        return dq
 
     n = cfg.repetitions
+    warmup = max(cfg.warmup, 10)
+    median, p95 = measure(tick, n, warmup)
+    note_eased = f"; {eased[0]} ticks eased in all" if eased[0] else ""
     return [
         Row(
             "orbit",
             "one velocity-executor tick (youBot, 8 DOF)",
-            *measure(tick, n, cfg.warmup),
+            median,
+            p95,
             n,
+            note=f"ticks of the running orbit ({n} after the first {warmup})"
+            f"{note_eased}",
         )
     ]
 
@@ -1107,7 +1125,13 @@ def write_results(result: dict[str, Any], path: Path, command: str) -> None:
     lines += ["## Profile of the CAT step (boards): largest own-time shares", ""]
     lines += [f"1. {name}: {pct:.0f} %" for name, pct in result["profile_cat_step"]]
     lines.append("")
-    path.write_text("\n".join(lines))
+    here = str(Path(__file__).resolve().parent)
+    if here not in sys.path:  # loaded by file path (cbp bench) or as a package
+        sys.path.append(here)
+    from results_file import keep_other_sections
+
+    # The other scripts' sections (collision.py, sweep.py, ...) stay.
+    path.write_text(keep_other_sections(path, "\n".join(lines)))
 
 
 def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
@@ -1122,6 +1146,14 @@ def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
 
     total = us("reaching step")
     assembly = us("assembly")
+    declared = next(
+        (
+            r["median_us"]
+            for r in rows
+            if r["case"].endswith("objects inside the shelf")
+        ),
+        float("nan"),
+    )
     listed = us("kinematics") + us("prepare") + assembly + us("daqp")
     return [
         "## Where the time goes",
@@ -1152,7 +1184,21 @@ def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
         f"{us('octree: of which'):.0f} us (the rest: reducing candidates to a "
         "few per shape, refining their normals, and the arrays around them); "
         f"the self pairs {us('self pairs'):.0f} us; kinematics, shape placements "
-        "and stacking the contacts the rest.",
+        "and stacking the contacts the rest. The same configuration against the "
+        f"declared objects costs {declared:.0f} us in all and gives 7 contacts "
+        "to the map's 17. In the compiled pass (counted once, not timed per run): about "
+        "4 us is the call itself, about 10 us walking the ~7,800 bricks around "
+        "the 11 shapes' boxes, and the rest rotating the ~6,700 cells of the "
+        "bricks near a box into its frame and measuring the ~1,800 inside it. "
+        "Skipping bricks by a lower bound of their distance and pre-testing "
+        "cells against the world box did not measurably help; a distance field "
+        "over a window around the arm would replace the pass (not built).",
+        "- Map update: the see-through pass over the grid's unknown and "
+        "occupied cells in the frustum about 5.5 ms, the depth image to points "
+        "1.2-1.7 ms, the self-filter 1.8-2 ms (points on the robot are tested "
+        "against every plane of their hull), inserting readings about 1 ms, "
+        "carving the robot's space 0.7 ms, the snapshot 0.9 ms (only bricks "
+        "that changed are rescanned; the first frame's snapshot rescans all).",
         "",
     ]
 

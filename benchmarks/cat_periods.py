@@ -17,6 +17,7 @@ import platform
 from pathlib import Path
 
 import numpy as np
+from results_file import put_section  # this folder: scripts run from it
 
 from cbp.executors.cat import run_cat
 from cbp.executors.settings import CatSettings
@@ -81,8 +82,7 @@ def main() -> None:
         ]
     )
     if args.append is not None:
-        with open(args.append, "a") as f:
-            f.write(text)
+        put_section(args.append, text)
     print(text)
 
 

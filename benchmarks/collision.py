@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from results_file import put_section  # this folder: scripts run from it
 
 from cbp.collision import (
     CollisionSettings,
@@ -132,8 +133,7 @@ def main() -> None:
     text = "\n".join(lines)
     print(text)
     if args.append:
-        with args.append.open("a") as f:
-            f.write(text)
+        put_section(args.append, text)
 
 
 if __name__ == "__main__":

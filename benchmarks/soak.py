@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 import yaml
+from results_file import put_section  # this folder: scripts run from it
 
 from cbp.executors.cat import CatPlanner
 from cbp.executors.settings import CatSettings
@@ -210,8 +211,7 @@ def main() -> None:
     text = _markdown(results, args.minutes, args.seed)
     print(text)
     if args.append is not None:
-        with open(args.append, "a") as f:
-            f.write(text)
+        put_section(args.append, text)
 
 
 if __name__ == "__main__":

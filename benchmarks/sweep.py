@@ -18,6 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from results_file import put_section  # this folder: scripts run from it
+
 from cbp.executors.cat import run_cat
 from cbp.scenario import load_scenario
 from cbp.sweep import run_sweep
@@ -86,8 +88,7 @@ def main() -> None:
     )
     print(text)
     if args.append is not None:
-        with open(args.append, "a") as f:
-            f.write(text)
+        put_section(args.append, text)
 
 
 if __name__ == "__main__":

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from results_file import put_section  # this folder: scripts run from it
 
 from cbp.teleop import TeleopSession, latency_summary
 from cbp.teleop_page import TeleopPage
@@ -112,7 +113,9 @@ def main() -> None:
     rows = [measure(p, args.goals, args.browser) for p in (0.0333, None)]
     lines = [
         "",
-        "## Teleoperation: goal-to-command latency (benchmarks/teleop_latency.py)",
+        "## Teleoperation: goal-to-command latency, "
+        f"{'headless Chromium on the page' if args.browser else 'no browser'} "
+        "(benchmarks/teleop_latency.py)",
         "",
         f"Boards, CAT, the page served at 20 Hz ({'headless Chromium connected' if args.browser else 'no browser connected'}); "
         f"{args.goals} goals sent 0.25 s apart through the session's interface. "
@@ -132,8 +135,7 @@ def main() -> None:
     text = "\n".join(lines) + "\n"
     print(text)
     if args.append is not None:
-        with open(args.append, "a") as f:
-            f.write(text)
+        put_section(args.append, text)
 
 
 if __name__ == "__main__":

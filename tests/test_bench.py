@@ -39,3 +39,21 @@ def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:
 
     assert text.count("| met |") + text.count("| missed by") == len(TARGETS)
     assert "## Where the time goes" in text
+
+
+def test_results_sections_are_replaced_in_place_and_kept(tmp_path) -> None:
+    """A script's section replaces its last copy; cbp bench keeps the others'."""
+    from benchmarks.results_file import keep_other_sections, put_section
+
+    path = tmp_path / "RESULTS.md"
+    path.write_text(
+        "# Benchmarks\n\n## a\n\nold a\n\n## b\n\nold b\n\n## a\n\nstale copy\n"
+    )
+    put_section(path, "\n## a\n\nnew a\n")
+    put_section(path, "## c\n\nnew c\n")
+    text = path.read_text()
+    assert text == "# Benchmarks\n\n## a\n\nnew a\n\n## b\n\nold b\n\n## c\n\nnew c\n\n"
+    merged = keep_other_sections(path, "# Benchmarks\n\n## b\n\nbench's b\n")
+    assert merged == (
+        "# Benchmarks\n\n## b\n\nbench's b\n\n## a\n\nnew a\n\n## c\n\nnew c\n\n"
+    )
