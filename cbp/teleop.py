@@ -34,8 +34,9 @@ import pinocchio as pin
 
 from cbp.collision.contacts import ContactSet
 from cbp.errors import CbpError, ConfigError, require_choice
+from cbp.executors import EXECUTORS, PERIODIC
 from cbp.executors.clock import Budget
-from cbp.executors.settings import CatSettings, IkSettings, MpSettings
+from cbp.executors.settings import CatSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import Plan, Planner, run_trajectory_executor
 from cbp.goals import write_recorded
@@ -50,7 +51,7 @@ __all__ = ["METHODS", "LiveGoal", "TeleopSession"]
 log = logging.getLogger(__name__)
 
 #: The methods a session can switch between: the trajectory executors.
-METHODS = ("cat", "ik", "mp", "hybrid")
+METHODS = PERIODIC
 #: A session lasts until it is stopped, at most this long (the scenario
 #: schema's longest duration) [s].
 LONGEST = 86400.0
@@ -147,23 +148,7 @@ class _SwitchingPlanner:
         planner = self._planners.get(method)
         if planner is not None:
             return planner
-        scenario, run, spec = self.scenario, self.run, self.scenario.spec.method
-        if method == "cat":
-            from cbp.executors.cat import CatPlanner
-
-            planner = CatPlanner(scenario, spec.settings(CatSettings))
-        elif method == "ik":
-            from cbp.executors.ik import IkPlanner
-
-            planner = IkPlanner(scenario, run, spec.settings(IkSettings))
-        elif method == "mp":
-            from cbp.executors.mp import MpPlanner
-
-            planner = MpPlanner(scenario, run, spec.settings(MpSettings))
-        else:
-            from cbp.executors.hybrid import HybridPlanner
-
-            planner = HybridPlanner(scenario, run)
+        planner = EXECUTORS[method].make_planner(self.scenario, self.run)
         self._planners[method] = planner
         return planner
 

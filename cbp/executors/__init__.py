@@ -37,12 +37,15 @@ from cbp.executors.settings import (
 )
 
 if TYPE_CHECKING:
+    from cbp.executors.simulated import SimulatedRun
+    from cbp.executors.trajectory import Planner
     from cbp.scenario.runtime import Scenario
     from cbp.trace import Trace
 
 __all__ = [
     "COMPARABLE",
     "EXECUTORS",
+    "PERIODIC",
     "Executor",
     "ExecutorInfo",
     "executor_info",
@@ -65,6 +68,10 @@ class ExecutorInfo:
         summary: one sentence for help texts and the schema's documentation.
         comparable: it tracks a goal in the simulator, so ``cbp compare`` can
             run it beside the others on one recorded goal stream.
+        periodic: it plans a path each command period for the trajectory loop
+            (:mod:`cbp.executors.trajectory`); its module's ``make_planner``
+            gives the planner to other loops (``cbp teleop`` switches among
+            these).
     """
 
     name: str
@@ -72,12 +79,25 @@ class ExecutorInfo:
     module: str
     summary: str
     comparable: bool = False
+    periodic: bool = False
 
     def load(self) -> Executor:
         """Import the executor's module and return its ``run_<name>`` function."""
         module = importlib.import_module(f"cbp.executors.{self.module}")
         executor: Executor = getattr(module, f"run_{self.name}")
         return executor
+
+    def make_planner(self, scenario: Scenario, run: SimulatedRun) -> Planner:
+        """The executor's per-period planner for ``run`` (periodic executors).
+
+        Raises:
+            ValueError: the executor does not plan per command period.
+        """
+        if not self.periodic:
+            raise ValueError(f"the {self.name} executor has no per-period planner")
+        module = importlib.import_module(f"cbp.executors.{self.module}")
+        planner: Planner = module.make_planner(scenario, run)
+        return planner
 
 
 #: Every executor, in the order reports list them.
@@ -97,6 +117,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "constraint-aware teleoperation: many validated QP steps per command "
             "period, spliced trajectories (CAT paper)",
             comparable=True,
+            periodic=True,
         ),
         ExecutorInfo(
             "ik",
@@ -105,6 +126,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "collision-aware IK near the current configuration, then a checked "
             "joint-space line",
             comparable=True,
+            periodic=True,
         ),
         ExecutorInfo(
             "mp",
@@ -112,6 +134,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "mp",
             "OMPL RRT-Connect to the IK goal, replanned at an adaptive period",
             comparable=True,
+            periodic=True,
         ),
         ExecutorInfo(
             "hybrid",
@@ -120,6 +143,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "CAT, and where CAT stalls an IK search and an OMPL plan spliced in "
             "(control returns to CAT when the goal moves or the plan ends)",
             comparable=True,
+            periodic=True,
         ),
         ExecutorInfo(
             "jt",
@@ -140,6 +164,8 @@ EXECUTORS: dict[str, ExecutorInfo] = {
 
 #: The executors ``cbp compare`` accepts, in table order.
 COMPARABLE = tuple(name for name, info in EXECUTORS.items() if info.comparable)
+#: The executors that plan per command period (``cbp teleop --method``).
+PERIODIC = tuple(name for name, info in EXECUTORS.items() if info.periodic)
 
 
 def executor_info(name: str, choices: tuple[str, ...] | None = None) -> ExecutorInfo:

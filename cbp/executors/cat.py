@@ -27,7 +27,7 @@ from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 
-__all__ = ["CatPlanner", "run_cat"]
+__all__ = ["CatPlanner", "make_planner", "run_cat"]
 
 
 class CatPlanner:
@@ -104,8 +104,13 @@ class CatPlanner:
         return Plan(np.array(path), steps, note)
 
 
+def make_planner(scenario: Scenario, run: SimulatedRun) -> CatPlanner:
+    """CAT's planner for ``run``, with the scenario's ``method.cat`` settings."""
+    return CatPlanner(scenario, scenario.spec.method.settings(CatSettings))
+
+
 def run_cat(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the CAT executor; return the trace."""
     settings = scenario.spec.method.settings(CatSettings)
     run = SimulatedRun(scenario, "cat", gui, clock=settings.timing.clock)
-    return run_trajectory_executor(run, CatPlanner(scenario, settings), settings.timing)
+    return run_trajectory_executor(run, make_planner(scenario, run), settings.timing)

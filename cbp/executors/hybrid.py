@@ -57,7 +57,7 @@ from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
 
-__all__ = ["HybridPlanner", "StallDetector", "run_hybrid"]
+__all__ = ["HybridPlanner", "StallDetector", "make_planner", "run_hybrid"]
 
 Mode = Literal["cat", "planning", "following"]
 
@@ -454,11 +454,16 @@ class HybridPlanner:
         return self._data.oMf[self.frame_id].copy()
 
 
+def make_planner(scenario: Scenario, run: SimulatedRun) -> HybridPlanner:
+    """The hybrid's planner for ``run`` (``method.hybrid``); close it after."""
+    return HybridPlanner(scenario, run)
+
+
 def run_hybrid(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the hybrid executor; return the trace."""
     timing = scenario.spec.method.settings(CatSettings).timing
     run = SimulatedRun(scenario, "hybrid", gui, needs_world=True, clock=timing.clock)
-    planner = HybridPlanner(scenario, run)
+    planner = make_planner(scenario, run)
     try:
         return run_trajectory_executor(run, planner, timing)
     finally:

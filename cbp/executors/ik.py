@@ -24,7 +24,7 @@ from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 
-__all__ = ["IkPlanner", "run_ik"]
+__all__ = ["IkPlanner", "make_planner", "run_ik"]
 
 
 class IkPlanner:
@@ -74,12 +74,15 @@ def interpolate_checked(
     return Plan(np.array(path), n, "at the IK solution")
 
 
+def make_planner(scenario: Scenario, run: SimulatedRun) -> IkPlanner:
+    """The IK method's planner for ``run``, with the ``method.ik`` settings."""
+    return IkPlanner(scenario, run, scenario.spec.method.settings(IkSettings))
+
+
 def run_ik(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the IK method; return the trace."""
     settings = scenario.spec.method.settings(IkSettings)
     run = SimulatedRun(
         scenario, "ik", gui, needs_world=True, clock=settings.timing.clock
     )
-    return run_trajectory_executor(
-        run, IkPlanner(scenario, run, settings), settings.timing
-    )
+    return run_trajectory_executor(run, make_planner(scenario, run), settings.timing)

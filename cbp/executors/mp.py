@@ -31,7 +31,7 @@ from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import time_parameterize
 from cbp.trace import Trace
 
-__all__ = ["MpPlanner", "RrtConnect", "record_plan", "run_mp"]
+__all__ = ["MpPlanner", "RrtConnect", "make_planner", "record_plan", "run_mp"]
 
 
 class RrtConnect:
@@ -287,13 +287,18 @@ def _always_valid(state: object) -> bool:
     return True
 
 
+def make_planner(scenario: Scenario, run: SimulatedRun) -> MpPlanner:
+    """The MP method's planner for ``run`` (``method.mp``); close it after."""
+    return MpPlanner(scenario, run, scenario.spec.method.settings(MpSettings))
+
+
 def run_mp(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the MP method; return the trace."""
     settings = scenario.spec.method.settings(MpSettings)
     run = SimulatedRun(
         scenario, "mp", gui, needs_world=True, clock=settings.timing.clock
     )
-    planner = MpPlanner(scenario, run, settings)
+    planner = make_planner(scenario, run)
     try:
         return run_trajectory_executor(run, planner, settings.timing)
     finally:
