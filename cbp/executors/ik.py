@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.executors.clock import Budget
-from cbp.executors.ik_search import IkSearch
+from cbp.executors.ik_search import IkSearch, SearchEvents
 from cbp.executors.settings import IkSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
@@ -34,6 +34,7 @@ class IkPlanner:
         """Set up the IK search on the scenario's collision world."""
         self.settings = settings
         self.search = IkSearch(scenario.robot, run.ee_frame, run.world, settings.search)
+        self.events = SearchEvents("ik")
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
@@ -43,7 +44,9 @@ class IkPlanner:
             return Plan(None, 0, "no goal yet")
         target = self.search.solution_for(goal, q, budget)
         if target is None:
+            self.events.failed(run, goal, exhausted=not budget.spent())
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
+        self.events.solved(run)
         return interpolate_checked(
             q, target, self.settings.interpolation_step, self.search, budget
         )

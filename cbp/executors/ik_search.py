@@ -12,6 +12,8 @@ close to it, so small goal changes give small joint changes.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pinocchio as pin
 
@@ -20,7 +22,10 @@ from cbp.executors.clock import Budget
 from cbp.executors.settings import IkSearchSettings
 from cbp.robot import FloatArray, RobotModel
 
-__all__ = ["IkSearch"]
+if TYPE_CHECKING:
+    from cbp.executors.simulated import SimulatedRun
+
+__all__ = ["IkSearch", "SearchEvents"]
 
 
 class IkSearch:
@@ -158,3 +163,65 @@ class IkSearch:
             dq = -J.T.dot(np.linalg.solve(JJt, err))
             q = np.clip(pin.integrate(model, q, dq), self._lower, self._upper)
         return None
+
+
+#: A goal the search has not solved for this long [s] is reported even when
+#: every search was cut short by the period's budget.
+REPORT_AFTER = 1.0
+
+
+class SearchEvents:
+    """The run's events for a planner's IK search: once per goal it fails, and again.
+
+    A planner that needs a collision-free configuration for the goal (IK, MP)
+    holds the arm while the search finds none, and asks again every period (the
+    map may change). Without an event the run would only show an arm that does
+    not move; this says so once per goal (as soon as a search ends without a
+    solution, or after :data:`REPORT_AFTER` of searches cut short by the
+    budget), with the likely reason when space no camera has seen counts as an
+    obstacle, and says when a solution is found.
+
+    Args:
+        method: the planner's name, for the messages.
+    """
+
+    def __init__(self, method: str) -> None:
+        """No failure reported yet."""
+        self.method = method
+        self._goal: pin.SE3 | None = None  # the goal not solved yet
+        self._since = 0.0  # since when [s]
+        self._reported = False
+
+    def failed(self, run: SimulatedRun, goal: pin.SE3, exhausted: bool) -> None:
+        """No solution for ``goal`` this period; ``exhausted``: every start tried."""
+        t = run.sim.t
+        if self._goal is None or not goal.isApprox(self._goal, 1e-9):
+            self._goal, self._since, self._reported = goal, t, False
+        if self._reported or not (exhausted or t - self._since >= REPORT_AFTER):
+            return
+        self._reported = True
+        how = (
+            ""
+            if exhausted
+            else f" in {t - self._since:.1f} s of searches cut short by the "
+            "period's budget"
+        )
+        perception = run.scenario.spec.perception
+        why = (
+            "; space no camera has seen counts as an obstacle "
+            "(perception.unknown: occupied), and the goal's configurations may "
+            "pass through it until a camera sees that space"
+            if perception.source == "depth_camera" and perception.unknown_blocks
+            else ""
+        )
+        run.event(
+            t,
+            f"{self.method}: no collision-free IK solution for the goal{how}{why}; "
+            "the arm holds, and the search is tried again each period",
+        )
+
+    def solved(self, run: SimulatedRun) -> None:
+        """The search found a solution (after a reported failure: say so)."""
+        if self._reported:
+            run.event(run.sim.t, f"{self.method}: a collision-free IK solution found")
+        self._goal, self._reported = None, False

@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.executors.clock import Budget
-from cbp.executors.ik_search import IkSearch
+from cbp.executors.ik_search import IkSearch, SearchEvents
 from cbp.executors.settings import MpSettings, PlannerSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import Plan, run_trajectory_executor
@@ -196,6 +196,7 @@ class MpPlanner:
         """The IK search and RRT-Connect on the run's collision world."""
         self.settings = settings
         self.search = IkSearch(scenario.robot, run.ee_frame, run.world, settings.search)
+        self.events = SearchEvents("mp")
         run.counters.update(plans=0.0, plan_path_length_rad=0.0, plan_duration_s=0.0)
         # Reproducible sampling in virtual time (one MP run per process).
         self.rrt = RrtConnect(
@@ -228,7 +229,9 @@ class MpPlanner:
         s = self.settings
         target = self.search.solution_for(goal, q, budget)
         if target is None:
+            self.events.failed(run, goal, exhausted=not budget.spent())
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
+        self.events.solved(run)
         if np.max(np.abs(target - q)) < 1e-4:
             return Plan(None, 0, "at the goal")
         if np.max(np.abs(run.sim.trajectory.positions[-1] - target)) < 1e-9:

@@ -135,3 +135,38 @@ def test_cbp_compare_writes_one_report(tmp_path: Path) -> None:
     )
     assert bad.returncode == 2
     assert "'jt'" in bad.stderr
+
+
+@pytest.mark.slow
+def test_ik_that_finds_no_solution_in_the_map_says_why_once() -> None:
+    """With the cameras, unseen space blocks every IK solution of free_step.
+
+    The run says so once (not every period), names unknown space as the
+    likely reason, and the arm holds without contact; with unseen space free
+    the same goal is reached and nothing is said.
+    """
+    from cbp.executors.ik import run_ik
+    from cbp.metrics import run_metrics
+
+    path = Path(__file__).resolve().parents[2] / "scenarios" / "cat_free_step.yaml"
+    runs = {}
+    for unknown in ("occupied", "free"):
+        scenario = load_scenario(
+            path,
+            overrides={
+                "method.name": "ik",
+                "perception.source": "depth_camera",
+                "perception.unknown": unknown,
+            },
+        )
+        trace = run_ik(scenario)
+        said = [m for _, m in trace.events if "no collision-free IK solution" in m]
+        runs[unknown] = (run_metrics(trace), said)
+    blocked, said = runs["occupied"]
+    assert len(said) == 1, said
+    assert "space no camera has seen counts as an obstacle" in said[0]
+    assert not blocked["reached"]
+    assert blocked["peak_contact_force_n"] == 0.0
+    free, said = runs["free"]
+    assert free["reached"], free
+    assert said == []
