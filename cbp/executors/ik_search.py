@@ -27,6 +27,11 @@ if TYPE_CHECKING:
 
 __all__ = ["IkSearch", "SearchEvents"]
 
+#: One start of a search: (seed, the joint held fixed or None).
+_Start = tuple[FloatArray, int | None]
+#: What a search is for: (goal, the world's environment, the configuration near).
+_SearchKey = tuple[pin.SE3, object, FloatArray]
+
 
 class IkSearch:
     """Finds collision-free joint angles for a frame pose, near a configuration.
@@ -59,21 +64,59 @@ class IkSearch:
         self.solves = 0
         self._goal: pin.SE3 | None = None
         self._solution: FloatArray | None = None
+        # Searches by (goal, the world's environment, the configuration searched
+        # near): the last one that tried every start and found nothing, and the
+        # one under way with the starts it has left.
+        self._failed: _SearchKey | None = None
+        self._pending: tuple[_SearchKey, list[_Start]] | None = None
 
     def solution_for(
         self, goal: pin.SE3, q_near: FloatArray, budget: Budget
     ) -> FloatArray | None:
-        """:meth:`solve`, remembered while the goal stays the same.
+        """:meth:`solve`, spread over calls and remembered while the goal stays.
 
-        The executors ask every command period; the search runs again only
-        for a new goal, or after a failure (from where the arm is then).
+        The executors ask every command period. A search that ``budget`` cuts
+        short goes on from where it stopped at the next call, while the goal,
+        the collision world and ``q_near`` stay (otherwise it starts again). A
+        solution is kept while the goal stays the same; a search that tried
+        every start and found none is not repeated until the goal, the world
+        (a new map snapshot, a moved object) or the arm's configuration (by
+        1 mrad in any joint) changes: it would find none again.
         """
-        if self._goal is None or not goal.isApprox(self._goal, 1e-9):
-            self._goal = goal
-            self._solution = self.solve(goal, q_near, budget)
-            if self._solution is None:
-                self._goal = None
-        return self._solution
+        if self._goal is not None and goal.isApprox(self._goal, 1e-9):
+            return self._solution
+        self._goal = self._solution = None
+        if self._failed is not None and self._same(self._failed, goal, q_near):
+            return None
+        if self._pending is None or not self._same(self._pending[0], goal, q_near):
+            self._pending = (
+                (goal, self._environment(), q_near.copy()),
+                self.attempts(q_near),
+            )
+        key, starts = self._pending
+        while starts and not budget.spent():
+            seed, fixed = starts.pop(0)
+            q = self.attempt(goal, seed, fixed, budget)
+            if q is not None:
+                self._pending = None
+                self._goal, self._solution = goal, q
+                return q
+        if not starts:  # every start tried
+            self._pending = None
+            self._failed = key
+        return None
+
+    def _environment(self) -> object:
+        return None if self.world is None else self.world.environment
+
+    def _same(self, key: _SearchKey, goal: pin.SE3, q: FloatArray) -> bool:
+        """``key``'s search is this one: same goal, same world, same start."""
+        their_goal, environment, their_q = key
+        return (
+            goal.isApprox(their_goal, 1e-9)
+            and environment is self._environment()
+            and float(np.max(np.abs(q - their_q))) < 1e-3
+        )
 
     def solve(
         self, goal: pin.SE3, q_near: FloatArray, budget: Budget

@@ -116,6 +116,7 @@ class OccupancyGrid:
         self._blocked = np.zeros(self.shape, dtype=np.bool_)
         self._dirty = np.ones(tuple(int(n) for n in dims), dtype=np.bool_)
         self._shell = (np.empty((0, 3)), np.zeros(int(np.prod(dims)) + 1, np.int64))
+        self._snapshot: OccupancyEnvironment | None = None
 
     # ------------------------------------------------------------------ reading
 
@@ -295,7 +296,12 @@ class OccupancyGrid:
 
         Obstacles are the occupied cells and, with ``unknown: occupied``, the
         unknown ones. The snapshot owns its arrays: later frames do not change it.
+        While no cell has changed state since the last snapshot, that snapshot
+        is returned again (with what it has built on demand, such as the
+        planners' octree), so its users can tell that the map has not changed.
         """
+        if self._snapshot is not None and not self._dirty.any():
+            return self._snapshot
         s = self.spec
         refiner = (
             MetaballRefiner(
@@ -320,13 +326,14 @@ class OccupancyGrid:
         index = CellIndex.from_bricks(
             centres, start, self.lower, self.cell, self._brick, self._dims
         )
-        return OccupancyEnvironment(
+        self._snapshot = OccupancyEnvironment(
             centres,
             self.cell,
             refiner,
             index=index,
             blocked=BlockedGrid(blocked, self.lower.copy(), self.cell),
         )
+        return self._snapshot
 
     def __repr__(self) -> str:
         """Size, resolution and the cells in each state."""

@@ -170,3 +170,59 @@ def test_ik_that_finds_no_solution_in_the_map_says_why_once() -> None:
     free, said = runs["free"]
     assert free["reached"], free
     assert said == []
+
+
+def test_a_failed_search_is_not_repeated_until_something_changes(
+    boards: Scenario,
+) -> None:
+    """Same goal, configuration and world: no second search; a new world: one."""
+    from cbp.collision import PrimitiveEnvironment
+
+    run = SimulatedRun(boards, "ik", needs_world=True)
+    try:
+        search = IkSearch(boards.robot, run.ee_frame, run.world, IkSearchSettings())
+        out_of_reach = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))
+        q = boards.q0.copy()
+        assert search.solution_for(out_of_reach, q, WallBudget(10.0)) is None
+        first = search.solves
+        assert first > 0
+        assert search.solution_for(out_of_reach, q, WallBudget(10.0)) is None
+        assert search.solves == first  # nothing changed: not searched again
+        moved = q.copy()
+        moved[0] += 0.01
+        assert search.solution_for(out_of_reach, moved, WallBudget(10.0)) is None
+        second = search.solves
+        assert second > first  # the arm moved: searched again
+        run.world.set_environment(PrimitiveEnvironment([]))
+        assert search.solution_for(out_of_reach, moved, WallBudget(10.0)) is None
+        assert search.solves > second  # a new world: searched again
+        # A search cut short by its budget is not remembered as failed.
+        cut = IkSearch(boards.robot, run.ee_frame, run.world, IkSearchSettings())
+        assert cut.solution_for(out_of_reach, q, WallBudget(0.0)) is None
+        assert cut._failed is None
+    finally:
+        run.finish()
+
+
+def test_a_search_cut_short_goes_on_where_it_stopped(boards: Scenario) -> None:
+    """Over several small budgets the search tries each start once, then stops."""
+    from cbp.executors.clock import VirtualBudget, VirtualCosts
+
+    run = SimulatedRun(boards, "ik", needs_world=True)
+    try:
+        search = IkSearch(boards.robot, run.ee_frame, run.world, IkSearchSettings())
+        out_of_reach = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))
+        q = boards.q0.copy()
+        whole = IkSearch(boards.robot, run.ee_frame, run.world, IkSearchSettings())
+        assert whole.solve(out_of_reach, q, WallBudget(10.0)) is None
+        # Each budget holds about two starts' iterations (80 x 26 us each).
+        calls = 0
+        while search._failed is None:
+            budget = VirtualBudget(0.004, VirtualCosts())
+            assert search.solution_for(out_of_reach, q, budget) is None
+            calls += 1
+            assert calls < 200
+        assert calls > 5  # it took several calls ...
+        assert search.solves == whole.solves  # ... and tried every start once
+    finally:
+        run.finish()
