@@ -10,6 +10,16 @@ wherever one of those faces is the largest at the cell, which is everywhere but
 within a grid step of a ridge between small faces; there the excess of a
 neighbouring face is taken, a slightly smaller value (a test bounds it).
 
+Most cells near a robot are far from it (in a perceived map of the shelf scene,
+about 2,000 within the 6.5 cm margin per query, 200 within 2 cm), and those
+need not be measured as finely: a cell whose excess over the face of its
+nearest grid point already shows it beyond ``exact_within`` (2 cm,
+:data:`EXACT_WITHIN`) keeps that excess. It is a lower bound (the largest excess
+is at least any one face's), exact for 84 % of such cells and within 1 mm for
+99 % on the Panda's hulls (``tests/collision/test_cells.py``), never more than
+two grid steps' reach (13 mm) too near: far contacts may look nearer than they
+are, never farther, and the contacts that stop the arm are measured in full.
+
 The loops are compiled with numba (the per-cell work is a few dozen flops, which
 numpy can only batch at the cost of many temporary arrays); they release the GIL.
 They take their arrays grouped in named tuples: :class:`Bricks` (an index's,
@@ -31,6 +41,7 @@ from cbp.robot import FloatArray, IntArray
 
 __all__ = [
     "CAPSULE",
+    "EXACT_WITHIN",
     "HULL",
     "VALUE_UNIT",
     "Bricks",
@@ -47,6 +58,9 @@ __all__ = [
 
 #: Shape kinds in :attr:`Shapes.kind`.
 HULL, CAPSULE = 0, 1
+#: Cells nearer than this to a hull [m] are measured against the faces of all
+#: eight grid points around them; farther ones, against their nearest's.
+EXACT_WITHIN = 0.02
 #: The unit of the face grids' values [m].
 VALUE_UNIT = 1e-3
 
@@ -156,6 +170,7 @@ def _hull_excess(
     last: tuple[int, int, int],
     inv_step: float,
     cutoff: float,
+    exact_within: float,
 ) -> tuple[float, int]:
     """A point's excess over a hull's faces (in its frame), and the face.
 
@@ -165,7 +180,8 @@ def _hull_excess(
     stored at the eight grid points around the point; it is ``inf`` (face -1)
     when the nearest grid point's value shows the excess is at least ``cutoff``
     (both in ``VALUE_UNIT``) less the distance to that point (the excess changes
-    by at most the distance moved).
+    by at most the distance moved). Where the excess over the nearest grid
+    point's face is at least ``exact_within`` [m], that excess is returned.
     """
     fx = (x - gx) * inv_step
     fy = (y - gy) * inv_step
@@ -177,11 +193,18 @@ def _hull_excess(
     ) * nz + min(max(int(fz + 0.5), 0), last[2] + 1)
     if values[near] >= cutoff:  # in VALUE_UNIT
         return np.inf, -1
+    face = int(faces[near])
+    depth = (
+        planes[face, 0] * x
+        + planes[face, 1] * y
+        + planes[face, 2] * z
+        - planes[face, 3]
+    )
+    if depth >= exact_within:  # far: a lower bound is enough
+        return depth, face
     ix = min(max(int(fx), 0), last[0])
     iy = min(max(int(fy), 0), last[1])
     iz = min(max(int(fz), 0), last[2])
-    depth = -np.inf
-    face = 0
     for cx in range(2):
         for cy in range(2):
             base = ((ix + cx) * ny + iy + cy) * nz + iz
@@ -201,9 +224,17 @@ def _hull_excess(
 
 @numba.njit(cache=True, nogil=True)
 def hull_excesses(
-    shapes: Shapes, s: int, points: FloatArray, depth: FloatArray, face: IntArray
+    shapes: Shapes,
+    s: int,
+    points: FloatArray,
+    exact_within: float,
+    depth: FloatArray,
+    face: IntArray,
 ) -> None:
-    """Points' excess over hull ``s``'s faces (points in its frame), and the face."""
+    """Points' excess over hull ``s``'s faces (points in its frame), and the face.
+
+    Measured as :func:`candidates` measures cells (``exact_within`` as there).
+    """
     planes = shapes.planes[shapes.plane_start[s] : shapes.plane_start[s + 1]]
     faces = shapes.faces[shapes.grid_start[s] : shapes.grid_start[s + 1]]
     values = shapes.values[shapes.grid_start[s] : shapes.grid_start[s + 1]]
@@ -226,6 +257,7 @@ def hull_excesses(
             last,
             inv_step,
             np.inf,
+            exact_within,
         )
 
 
@@ -237,6 +269,7 @@ def candidates(
     half: float,
     directions: FloatArray,
     margin: float,
+    exact_within: float,
     out: Candidates,
 ) -> int:
     """The closest cell per shape and group, within ``margin`` of each shape.
@@ -244,7 +277,8 @@ def candidates(
     Per shape (placed by ``frames`` (S, 4, 4)): the bricks near its box, the
     cells inside its box, each cell's distance and group (a hull's face, or the
     capsule direction of ``directions`` closest to the cell), the closest cell
-    per group. Writes to ``out`` and returns the number written.
+    per group. Hull distances from ``exact_within`` [m] on are lower bounds
+    (the module's docstring). Writes to ``out`` and returns the number written.
     """
     centres, start, origin, size, dims = bricks
     kind, to_frame, lower, upper, capsule = (
@@ -400,6 +434,7 @@ def candidates(
                                 last,
                                 inv_step,
                                 cutoff,
+                                exact_within + half,
                             )
                             if depth - half >= margin:
                                 continue

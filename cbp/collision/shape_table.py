@@ -10,6 +10,7 @@ Tables and face grids are built once and kept (robots loaded again reuse them).
 from __future__ import annotations
 
 import functools
+import math
 import threading
 from dataclasses import dataclass
 
@@ -22,6 +23,7 @@ from cbp.collision.broad import compile_broad_phase
 from cbp.collision.cell_index import CellIndex
 from cbp.collision.cell_kernels import (
     CAPSULE,
+    EXACT_WITHIN,
     HULL,
     VALUE_UNIT,
     Candidates,
@@ -209,7 +211,11 @@ class ShapeTable:
         )
 
     def candidates(
-        self, index: CellIndex, placements: list[pin.SE3], margin: float
+        self,
+        index: CellIndex,
+        placements: list[pin.SE3],
+        margin: float,
+        exact_within: float = EXACT_WITHIN,
     ) -> Candidates:
         """The closest cell per shape and group within ``margin`` of each shape.
 
@@ -221,6 +227,8 @@ class ShapeTable:
             placements: the shapes' placements in the world, in table order.
             margin: the largest distance reported [m]; with half a cell, at most
                 the table's reach.
+            exact_within: hull distances from this on [m] are lower bounds
+                (:mod:`cbp.collision.cell_kernels`); ``inf``: all in full.
 
         Returns:
             The shape index (K,), the cell's centre (K, 3), the shape's outward
@@ -246,16 +254,27 @@ class ShapeTable:
             np.empty(capacity),
         )
         count = candidates(
-            index.bricks, self.arrays, frames, half, DIRECTIONS, float(margin), out
+            index.bricks,
+            self.arrays,
+            frames,
+            half,
+            DIRECTIONS,
+            float(margin),
+            float(exact_within),
+            out,
         )
         return out.head(count)
 
-    def hull_excess(self, s: int, points: FloatArray) -> tuple[FloatArray, IntArray]:
+    def hull_excess(
+        self, s: int, points: FloatArray, exact_within: float = math.inf
+    ) -> tuple[FloatArray, IntArray]:
         """Points' excess over hull ``s``'s face planes, as queries measure it.
 
         Args:
             s: a hull's index in the table.
             points: points in the hull's frame, inside its grown box (n, 3).
+            exact_within: from this excess on [m], the nearest grid point's face
+                only, as :meth:`candidates` (default: all in full).
 
         Returns:
             (the excess [m] (n,), the face it is measured on (n,)).
@@ -265,7 +284,7 @@ class ShapeTable:
         points = np.ascontiguousarray(points, dtype=float).reshape(-1, 3)
         depth = np.empty(len(points))
         face = np.empty(len(points), dtype=np.intp)
-        hull_excesses(self.arrays, s, points, depth, face)
+        hull_excesses(self.arrays, s, points, float(exact_within), depth, face)
         return depth, face
 
 

@@ -16,14 +16,21 @@ from cbp.collision import (
     RobotGeometry,
 )
 from cbp.collision.cell_index import CellIndex
-from cbp.collision.cell_kernels import VALUE_UNIT, cell_hits, spread_contacts
+from cbp.collision.cell_kernels import (
+    EXACT_WITHIN,
+    VALUE_UNIT,
+    cell_hits,
+    spread_contacts,
+)
 from cbp.collision.contacts import ContactSet
 from cbp.collision.geometry import LinkShape
-from cbp.collision.shape_table import DIRECTIONS, ShapeTable
+from cbp.collision.shape_table import DIRECTIONS, FACE_GRID_STEP, ShapeTable
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
 
 CELL = 0.01
+#: The largest distance from a point to its nearest face-grid point [m].
+SLACK = 0.5 * math.sqrt(3.0) * FACE_GRID_STEP
 
 
 @pytest.fixture(scope="module")
@@ -126,6 +133,39 @@ def test_face_grid_gives_the_largest_excess_within_a_bound(geometry) -> None:
     assert error.max() < 1e-3  # and within 1 mm near ridges
 
 
+def test_far_points_are_measured_on_one_face_from_below(geometry) -> None:
+    """Beyond EXACT_WITHIN a point's excess is over its nearest grid point's face.
+
+    A lower bound of the largest excess (never farther), within two grid steps'
+    reach, and exact for most points.
+    """
+    rng = np.random.default_rng(4)
+    table = ShapeTable.build(geometry.shapes, 0.07)
+    errors = []
+    for s, shape in enumerate(geometry.shapes):
+        if isinstance(shape.shape, coal.Capsule):
+            continue
+        points = rng.uniform(table.lower[s], table.upper[s], size=(20000, 3))
+        exact = (points.dot(shape.planes[:, :3].T) - shape.planes[:, 3]).max(axis=1)
+        full, _ = table.hull_excess(s, points)
+        depth, face = table.hull_excess(s, points, EXACT_WITHIN)
+        near = full < EXACT_WITHIN
+        # Within the band, as measured in full; beyond it, on one face.
+        np.testing.assert_array_equal(depth[near], full[near])
+        far = depth >= EXACT_WITHIN
+        assert np.all(far | near)
+        excess = points.dot(shape.planes[:, :3].T) - shape.planes[:, 3]
+        np.testing.assert_allclose(
+            depth[far], excess[np.arange(len(points)), face][far], atol=1e-12
+        )
+        errors.append(exact[far] - depth[far])
+    error = np.concatenate(errors)
+    assert error.min() > -1e-12  # never farther than the largest excess
+    assert error.max() < 2 * SLACK
+    assert np.mean(error < 1e-12) > 0.75  # the nearest point's face, mostly
+    assert np.quantile(error, 0.99) < 2e-3
+
+
 def test_grid_values_bound_the_excess_from_below(geometry) -> None:
     """The quick reject's values: the excess at each grid point, rounded down."""
     table = ShapeTable.build(geometry.shapes, 0.065)
@@ -168,8 +208,11 @@ def test_candidates_match_brute_force_on_the_panda(geometry, robots) -> None:
             exp_by_shape[s] = min(exp_by_shape.get(s, math.inf), d)
         assert set(got) == set(exp_by_shape)
         for s, ds in got.items():
-            assert min(ds) == pytest.approx(exp_by_shape[s], abs=2e-3)
             assert min(ds) <= exp_by_shape[s] + 1e-9  # never farther
+            if exp_by_shape[s] < EXACT_WITHIN:  # measured in full
+                assert min(ds) == pytest.approx(exp_by_shape[s], abs=2e-3)
+            else:  # a lower bound: two grid steps' reach at most
+                assert min(ds) > exp_by_shape[s] - 2 * SLACK - 1e-9
             assert max(ds) < margin
         found_any += len(shape)
     assert found_any > 20
