@@ -49,6 +49,7 @@ __all__ = [
     "Contacts",
     "Shapes",
     "candidates",
+    "cell_contacts",
     "cell_hits",
     "hull_excesses",
     "metaball_normals",
@@ -581,23 +582,26 @@ def cell_hits(
         np.empty((n, 3)),
         np.empty(n),
     )
-    count = reduce_cells(found, half, per_shape, cos_max, spacing2, out)
+    count = reduce_cells(found, n, half, per_shape, cos_max, spacing2, out)
     return out.head(count)
 
 
 @numba.njit(cache=True, nogil=True)
 def reduce_cells(
     found: Candidates,
+    n: int,
     half: float,
     per_shape: int,
     cos_max: float,
     spacing2: float,
     out: Contacts,
 ) -> int:
-    """The loop of :func:`cell_hits`: writes to ``out``, returns the count."""
+    """The loop of :func:`cell_hits` over the first ``n`` candidates.
+
+    Writes to ``out``, returns the count.
+    """
     shape, centre, outward, distance = found
     out_shape, robot, obstacle, normal, out_distance = out
-    n = shape.size
     keep = np.empty(max(per_shape, 1), dtype=np.int64)
     count = 0
     start = 0
@@ -643,4 +647,45 @@ def reduce_cells(
             out_distance[count] = distance[k]
             count += 1
         start = end
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def cell_contacts(
+    bricks: Bricks,
+    shapes: Shapes,
+    frames: FloatArray,
+    half: float,
+    directions: FloatArray,
+    margin: float,
+    exact_within: float,
+    per_shape: int,
+    cos_max: float,
+    spacing2: float,
+    refine_radius: float,
+    refine_offset: float,
+    found: Candidates,
+    out: Contacts,
+) -> int:
+    """The shapes' contacts with the cells, in one call.
+
+    :func:`candidates` into ``found`` (room for one per shape and group), those
+    reduced into ``out`` as :func:`cell_hits` does (room for ``per_shape`` per
+    shape), and, when ``refine_radius`` > 0, their normals re-estimated as
+    :class:`~cbp.collision.map_environment.MetaballRefiner` does: the field of
+    the cells within ``refine_radius`` [m] of the obstacle point moved
+    ``refine_offset`` [m] along the normal (:func:`metaball_normals`). Returns
+    the number of contacts written to ``out``.
+    """
+    n = candidates(
+        bricks, shapes, frames, half, directions, margin, exact_within, found
+    )
+    count = reduce_cells(found, n, half, per_shape, cos_max, spacing2, out)
+    if refine_radius > 0.0 and count > 0:
+        obstacle, normal = out.obstacle, out.normal
+        at = np.empty((count, 3))
+        for i in range(count):
+            for a in range(3):
+                at[i, a] = obstacle[i, a] + refine_offset * normal[i, a]
+        metaball_normals(bricks, at, refine_radius, normal[:count])
     return count

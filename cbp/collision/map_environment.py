@@ -18,7 +18,6 @@ import pinocchio as pin
 from scipy.spatial import cKDTree
 
 from cbp.collision.cell_index import CellIndex
-from cbp.collision.cell_kernels import cell_hits
 from cbp.collision.contacts import ContactSet
 from cbp.collision.environment import Environment
 from cbp.collision.geometry import LinkShape, PlacedShapes
@@ -208,15 +207,30 @@ class OccupancyEnvironment(Environment):
         if table is None or shapes is not last_shapes or margin != last_margin:
             table = ShapeTable.for_shapes(shapes, margin + half)
             self._last_table = (shapes, margin, table)
-        found = table.candidates(self.index, robot.placements, margin)
-        if not len(found.shape):
-            return ContactSet.empty()
         # On the shape's surface, on the cell toward the shape, the normal from
-        # the cell toward the shape; a few per shape, spread over directions.
-        hits = cell_hits(found, half, per_shape, _COS_SPREAD, (2.0 * self.cell) ** 2)
+        # the cell toward the shape; a few per shape, spread over directions;
+        # a metaball refinement in the same compiled call, another after it.
+        refiner = self.refiner
+        metaball = refiner if isinstance(refiner, MetaballRefiner) else None
+        hits = table.contacts(
+            self.index,
+            robot.placements,
+            margin,
+            per_shape,
+            _COS_SPREAD,
+            (2.0 * self.cell) ** 2,
+            None
+            if metaball is None
+            else (
+                metaball.radius_cells * self.cell,
+                metaball.offset_cells * self.cell,
+            ),
+        )
+        if not len(hits.shape):
+            return ContactSet.empty()
         normal = hits.normal
-        if self.refiner is not None and len(normal):
-            normal = self.refiner.refine(self.index, hits.obstacle, normal)
+        if refiner is not None and metaball is None:
+            normal = refiner.refine(self.index, hits.obstacle, normal)
         return ContactSet.obstacles(
             hits.shape, hits.robot, hits.obstacle, normal, hits.distance
         )

@@ -27,8 +27,10 @@ from cbp.collision.cell_kernels import (
     HULL,
     VALUE_UNIT,
     Candidates,
+    Contacts,
     Shapes,
     candidates,
+    cell_contacts,
     cell_hits,
     hull_excesses,
     spread_contacts,
@@ -236,16 +238,8 @@ class ShapeTable:
             cell (K,).
         """
         half = 0.5 * index.cell
-        if margin + half > self.reach + 1e-9:
-            raise ValueError(
-                f"margin {margin} + half a cell {half} exceeds the table's reach "
-                f"{self.reach}"
-            )
-        frames = (
-            placements.homogeneous
-            if isinstance(placements, ShapePlacements)
-            else np.array([M.homogeneous for M in placements]).reshape(-1, 4, 4)
-        )
+        self._check_reach(margin, half)
+        frames = _frames(placements)
         capacity = self.capacity
         out = Candidates(
             np.empty(capacity, dtype=np.intp),
@@ -264,6 +258,65 @@ class ShapeTable:
             out,
         )
         return out.head(count)
+
+    def contacts(
+        self,
+        index: CellIndex,
+        placements: list[pin.SE3],
+        margin: float,
+        per_shape: int,
+        cos_max: float,
+        spacing2: float,
+        refine: tuple[float, float] | None = None,
+    ) -> Contacts:
+        """The shapes' contacts with the cells, reduced and refined, in one call.
+
+        :meth:`candidates`, then :func:`~cbp.collision.cell_kernels.cell_hits`
+        and, with ``refine`` (kernel radius, offset) [m], the metaball normals
+        (:func:`~cbp.collision.cell_kernels.cell_contacts`).
+        """
+        half = 0.5 * index.cell
+        self._check_reach(margin, half)
+        capacity = self.capacity
+        found = Candidates(
+            np.empty(capacity, dtype=np.intp),
+            np.empty((capacity, 3)),
+            np.empty((capacity, 3)),
+            np.empty(capacity),
+        )
+        room = min(capacity, max(per_shape, 1) * len(self.kind))
+        out = Contacts(
+            np.empty(room, dtype=np.intp),
+            np.empty((room, 3)),
+            np.empty((room, 3)),
+            np.empty((room, 3)),
+            np.empty(room),
+        )
+        radius, offset = refine if refine is not None else (0.0, 0.0)
+        count = cell_contacts(
+            index.bricks,
+            self.arrays,
+            _frames(placements),
+            half,
+            DIRECTIONS,
+            float(margin),
+            EXACT_WITHIN,
+            int(per_shape),
+            float(cos_max),
+            float(spacing2),
+            float(radius),
+            float(offset),
+            found,
+            out,
+        )
+        return out.head(count)
+
+    def _check_reach(self, margin: float, half: float) -> None:
+        if margin + half > self.reach + 1e-9:
+            raise ValueError(
+                f"margin {margin} + half a cell {half} exceeds the table's reach "
+                f"{self.reach}"
+            )
 
     def hull_excess(
         self, s: int, points: FloatArray, exact_within: float = math.inf
@@ -286,6 +339,13 @@ class ShapeTable:
         face = np.empty(len(points), dtype=np.intp)
         hull_excesses(self.arrays, s, points, float(exact_within), depth, face)
         return depth, face
+
+
+def _frames(placements: list[pin.SE3]) -> FloatArray:
+    """The placements as homogeneous matrices (n, 4, 4)."""
+    if isinstance(placements, ShapePlacements):
+        return placements.homogeneous
+    return np.array([M.homogeneous for M in placements]).reshape(-1, 4, 4)
 
 
 #: Tables by shapes and reach, oldest first, with the shapes they were built for.
@@ -360,6 +420,7 @@ def compile_kernels() -> None:
     spread_contacts(order, found.shape, found.outward, found.centre, 1, 0.9, 1e-4, keep)
     index.metaball_normals(found.centre, 0.03, np.ascontiguousarray(found.outward))
     cell_hits(found, 0.005, 1, 0.9, 1e-4)
+    table.contacts(index, [pin.SE3.Identity()] * 2, 0.01, 1, 0.9, 1e-4, (0.03, 0.005))
     _COMPILED = True
 
 

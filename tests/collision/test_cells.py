@@ -305,6 +305,34 @@ def test_cell_hits_reduce_as_the_general_contact_reduction(geometry, robots) -> 
     assert compared > 20
 
 
+def test_one_call_gives_what_the_steps_give(geometry, robots) -> None:
+    """ShapeTable.contacts: candidates, cell_hits and the metaball, in one call."""
+    margin, half = 0.06, 0.5 * CELL
+    cells = _two_boxes()
+    index = CellIndex(cells, CELL)
+    table = ShapeTable.build(geometry.shapes, margin + half)
+    refiner = MetaballRefiner()
+    refine = (refiner.radius_cells * CELL, refiner.offset_cells * CELL)
+    cos_max, spacing2 = math.cos(math.radians(25.0)), (2 * CELL) ** 2
+    compared = 0
+    for placements, found in _candidates_at_random_poses(
+        geometry, robots["panda"], cells, margin, seed=5
+    ):
+        hits = cell_hits(found, half, 3, cos_max, spacing2)
+        refined = refiner.refine(index, hits.obstacle, hits.normal)
+        for option, normal in ((None, hits.normal), (refine, refined)):
+            got = table.contacts(
+                index, placements, margin, 3, cos_max, spacing2, option
+            )
+            for name in ("shape", "robot", "obstacle", "distance"):
+                np.testing.assert_array_equal(
+                    getattr(got, name), getattr(hits, name), err_msg=name
+                )
+            np.testing.assert_allclose(got.normal, normal, atol=1e-12)
+        compared += len(hits.shape)
+    assert compared > 20
+
+
 def test_occupancy_query_uses_every_shape_kind(robots) -> None:
     """Capsule-approximated links find the same box as hulls, at the same distance."""
     robot = robots["panda"]
