@@ -15,7 +15,7 @@ import functools
 
 import numpy as np
 
-from cbp.collision.cell_kernels import Bricks, metaball_normals
+from cbp.collision.cell_kernels import Bricks, metaball_normals, occupied_bits
 from cbp.robot import FloatArray, IntArray
 
 __all__ = ["BRICK", "MAX_BRICKS", "CellIndex"]
@@ -55,6 +55,8 @@ class CellIndex:
         counts = np.bincount(key, minlength=int(np.prod(self.dims)))
         self.start = np.zeros(counts.size + 1, dtype=np.int64)
         np.cumsum(counts, out=self.start[1:])
+        self.occupied = occupied_bits(self.start, self.dims)
+        """Each column's non-empty bricks, as bits (:class:`Bricks`)."""
 
     @classmethod
     def from_bricks(
@@ -83,6 +85,7 @@ class CellIndex:
         index.dims = np.asarray(dims, dtype=np.int64)
         index.centres = np.ascontiguousarray(centres, dtype=float)
         index.start = np.ascontiguousarray(start, dtype=np.int64)
+        index.occupied = occupied_bits(index.start, index.dims)
         return index
 
     def __len__(self) -> int:
@@ -93,7 +96,12 @@ class CellIndex:
     def bricks(self) -> Bricks:
         """The arrays as the compiled queries read them."""
         return Bricks(
-            self.centres, self.start, self.origin, self.cell * self.brick, self.dims
+            self.centres,
+            self.start,
+            self.origin,
+            self.cell * self.brick,
+            self.dims,
+            self.occupied,
         )
 
     def metaball_normals(

@@ -36,6 +36,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 import numpy.typing as npt
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from cbp.robot import FloatArray, IntArray
 
@@ -53,6 +54,7 @@ __all__ = [
     "cell_hits",
     "hull_excesses",
     "metaball_normals",
+    "occupied_bits",
     "reduce_cells",
     "spread_contacts",
 ]
@@ -64,6 +66,8 @@ HULL, CAPSULE = 0, 1
 EXACT_WITHIN = 0.02
 #: The unit of the face grids' values [m].
 VALUE_UNIT = 1e-3
+#: A word of 64 set bits.
+ALL_BITS = np.uint64(0xFFFFFFFFFFFFFFFF)
 
 
 class Bricks(NamedTuple):
@@ -71,7 +75,10 @@ class Bricks(NamedTuple):
 
     Brick b's cells are ``centres[start[b]:start[b + 1]]``; bricks of side
     ``size`` [m] are counted from the corner ``origin``, ``dims`` along x, y and
-    z, numbered in C order.
+    z, numbered in C order. ``occupied[x * dims[1] + y]`` has bit z % 64 of
+    word z // 64 set where brick (x, y, z) holds cells
+    (:func:`occupied_bits`): a query reads the few non-empty bricks of a column
+    without visiting the empty ones.
     """
 
     centres: FloatArray
@@ -79,6 +86,26 @@ class Bricks(NamedTuple):
     origin: FloatArray
     size: float
     dims: npt.NDArray[np.int64]
+    occupied: npt.NDArray[np.uint64]
+
+
+def occupied_bits(
+    start: npt.NDArray[np.int64], dims: npt.NDArray[np.int64]
+) -> npt.NDArray[np.uint64]:
+    """Each column's non-empty bricks as bits (:attr:`Bricks.occupied`)."""
+    nx, ny, nz = (int(n) for n in dims)
+    words = -(-nz // 64)
+    full = np.zeros((nx * ny, words * 64), dtype=np.uint8)
+    full[:, :nz] = (np.diff(start) > 0).reshape(nx * ny, nz)
+    # Bit k of a word is brick 64 w + k: little-endian bytes of packed bits.
+    packed = np.packbits(full, axis=1, bitorder="little")
+    return np.ascontiguousarray(packed.view("<u8").astype(np.uint64))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _lowest_bit(bits: np.uint64) -> int:
+    """The index of the lowest set bit of a non-zero word (one instruction)."""
+    return int(trailing_zeros(bits))  # type: ignore[call-arg]  # a numba intrinsic
 
 
 class Shapes(NamedTuple):
@@ -281,7 +308,7 @@ def candidates(
     per group. Hull distances from ``exact_within`` [m] on are lower bounds
     (the module's docstring). Writes to ``out`` and returns the number written.
     """
-    centres, start, origin, size, dims = bricks
+    centres, start, origin, size, dims, occupied = bricks
     kind, to_frame, lower, upper, capsule = (
         shapes.kind,
         shapes.to_frame,
@@ -359,98 +386,106 @@ def candidates(
         n_touched = 0
         for bx in range(bx0, bx1 + 1):
             for by in range(by0, by1 + 1):
-                row = (bx * dims[1] + by) * dims[2]
-                for bz in range(bz0, bz1 + 1):
-                    b = row + bz
-                    if start[b] == start[b + 1]:
-                        continue
-                    # Skip a brick whose bounding sphere misses the box.
-                    dx = origin[0] + (bx + 0.5) * size - tx
-                    dy = origin[1] + (by + 0.5) * size - ty
-                    dz = origin[2] + (bz + 0.5) * size - tz
-                    x = r00 * dx + r10 * dy + r20 * dz
-                    y = r01 * dx + r11 * dy + r21 * dz
-                    z = r02 * dx + r12 * dy + r22 * dz
-                    if (
-                        x < lx - brick_radius
-                        or x > ux + brick_radius
-                        or y < ly - brick_radius
-                        or y > uy + brick_radius
-                        or z < lz - brick_radius
-                        or z > uz + brick_radius
-                    ):
-                        continue
-                    for k in range(start[b], start[b + 1]):
-                        # R^T (c - t): the cell in the shape's frame.
-                        dx = centres[k, 0] - tx
-                        dy = centres[k, 1] - ty
-                        dz = centres[k, 2] - tz
+                column = bx * dims[1] + by
+                row = column * dims[2]
+                # The column's non-empty bricks in [bz0, bz1], lowest first.
+                for word in range(bz0 >> 6, (bz1 >> 6) + 1):
+                    bits = occupied[column, word]
+                    low = max(bz0 - (word << 6), 0)
+                    high = min(bz1 - (word << 6), 63)
+                    bits &= ALL_BITS >> np.uint64(63 - high)
+                    bits &= ~((np.uint64(1) << np.uint64(low)) - np.uint64(1))
+                    while bits:
+                        bz = (word << 6) + _lowest_bit(bits)
+                        bits &= bits - np.uint64(1)
+                        b = row + bz
+                        # Skip a brick whose bounding sphere misses the box.
+                        dx = origin[0] + (bx + 0.5) * size - tx
+                        dy = origin[1] + (by + 0.5) * size - ty
+                        dz = origin[2] + (bz + 0.5) * size - tz
                         x = r00 * dx + r10 * dy + r20 * dz
                         y = r01 * dx + r11 * dy + r21 * dz
                         z = r02 * dx + r12 * dy + r22 * dz
-                        # One branch, not six: which cells fall inside is
-                        # unpredictable, and mispredictions cost more than this.
-                        if not (
-                            (x > lx)
-                            & (x < ux)
-                            & (y > ly)
-                            & (y < uy)
-                            & (z > lz)
-                            & (z < uz)
+                        if (
+                            x < lx - brick_radius
+                            or x > ux + brick_radius
+                            or y < ly - brick_radius
+                            or y > uy + brick_radius
+                            or z < lz - brick_radius
+                            or z > uz + brick_radius
                         ):
                             continue
-                        if is_capsule:
-                            on_axis = min(max(z, -half_length), half_length)
-                            ox, oy, oz = x, y, z - on_axis
-                            length = math.sqrt(ox * ox + oy * oy + oz * oz)
-                            if length < 1e-12:  # on the axis: take x
-                                ox, oy, oz, length = 1.0, 0.0, 0.0, 1.0
-                            depth = length - radius
-                            if depth - half >= margin:
+                        for k in range(start[b], start[b + 1]):
+                            # R^T (c - t): the cell in the shape's frame.
+                            dx = centres[k, 0] - tx
+                            dy = centres[k, 1] - ty
+                            dz = centres[k, 2] - tz
+                            x = r00 * dx + r10 * dy + r20 * dz
+                            y = r01 * dx + r11 * dy + r21 * dz
+                            z = r02 * dx + r12 * dy + r22 * dz
+                            # One branch, not six: which cells fall inside is
+                            # unpredictable, and mispredictions cost more than this.
+                            if not (
+                                (x > lx)
+                                & (x < ux)
+                                & (y > ly)
+                                & (y < uy)
+                                & (z > lz)
+                                & (z < uz)
+                            ):
                                 continue
-                            ox, oy, oz = ox / length, oy / length, oz / length
-                            group = 0
-                            top = -np.inf
-                            for g in range(len(directions)):
-                                v = (
-                                    directions[g, 0] * ox
-                                    + directions[g, 1] * oy
-                                    + directions[g, 2] * oz
+                            if is_capsule:
+                                on_axis = min(max(z, -half_length), half_length)
+                                ox, oy, oz = x, y, z - on_axis
+                                length = math.sqrt(ox * ox + oy * oy + oz * oz)
+                                if length < 1e-12:  # on the axis: take x
+                                    ox, oy, oz, length = 1.0, 0.0, 0.0, 1.0
+                                depth = length - radius
+                                if depth - half >= margin:
+                                    continue
+                                ox, oy, oz = ox / length, oy / length, oz / length
+                                group = 0
+                                top = -np.inf
+                                for g in range(len(directions)):
+                                    v = (
+                                        directions[g, 0] * ox
+                                        + directions[g, 1] * oy
+                                        + directions[g, 2] * oz
+                                    )
+                                    if v > top:
+                                        top, group = v, g
+                            else:
+                                depth, group = _hull_excess(
+                                    x,
+                                    y,
+                                    z,
+                                    hull_planes,
+                                    hull_faces,
+                                    hull_values,
+                                    gx,
+                                    gy,
+                                    gz,
+                                    ny,
+                                    nz,
+                                    last,
+                                    inv_step,
+                                    cutoff,
+                                    exact_within + half,
                                 )
-                                if v > top:
-                                    top, group = v, g
-                        else:
-                            depth, group = _hull_excess(
-                                x,
-                                y,
-                                z,
-                                hull_planes,
-                                hull_faces,
-                                hull_values,
-                                gx,
-                                gy,
-                                gz,
-                                ny,
-                                nz,
-                                last,
-                                inv_step,
-                                cutoff,
-                                exact_within + half,
-                            )
-                            if depth - half >= margin:
-                                continue
-                            ox = hull_planes[group, 0]
-                            oy = hull_planes[group, 1]
-                            oz = hull_planes[group, 2]
-                        if depth < best[group]:
-                            if best_cell[group] < 0:
-                                touched[n_touched] = group
-                                n_touched += 1
-                            best[group] = depth
-                            best_cell[group] = k
-                            best_out[group, 0] = ox
-                            best_out[group, 1] = oy
-                            best_out[group, 2] = oz
+                                if depth - half >= margin:
+                                    continue
+                                ox = hull_planes[group, 0]
+                                oy = hull_planes[group, 1]
+                                oz = hull_planes[group, 2]
+                            if depth < best[group]:
+                                if best_cell[group] < 0:
+                                    touched[n_touched] = group
+                                    n_touched += 1
+                                best[group] = depth
+                                best_cell[group] = k
+                                best_out[group, 0] = ox
+                                best_out[group, 1] = oy
+                                best_out[group, 2] = oz
         for i in range(n_touched):
             g = touched[i]
             k = best_cell[g]
@@ -478,7 +513,7 @@ def metaball_normals(
     F is the metaball field of :class:`~cbp.collision.environment.MetaballRefiner`
     over the cells within ``radius`` of each point.
     """
-    centres, start, origin, size, dims = bricks
+    centres, start, origin, size, dims, _ = bricks
     r2 = radius * radius
     ranges = np.empty((3, 2), dtype=np.int64)
     for i in range(len(at)):

@@ -20,6 +20,7 @@ from cbp.collision.cell_kernels import (
     EXACT_WITHIN,
     VALUE_UNIT,
     cell_hits,
+    occupied_bits,
     spread_contacts,
 )
 from cbp.collision.contacts import ContactSet
@@ -239,6 +240,49 @@ def test_far_cells_change_nothing(geometry, robots) -> None:
     sa, sb = np.lexsort((a[3], a[0])), np.lexsort((b[3], b[0]))
     np.testing.assert_array_equal(a[0][sa], b[0][sb])
     np.testing.assert_allclose(a[3][sa], b[3][sb], atol=1e-12)
+
+
+def test_occupied_bits_mark_the_non_empty_bricks() -> None:
+    """Bit z % 64 of word z // 64 of a column, for columns of several words."""
+    rng = np.random.default_rng(2)
+    dims = np.array([3, 4, 150])  # three words per column
+    counts = rng.integers(0, 3, size=int(np.prod(dims))) * (rng.random(1800) < 0.2)
+    start = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    bits = occupied_bits(start, dims)
+    assert bits.shape == (12, 3)
+    assert bits.dtype == np.uint64
+    for column in range(12):
+        for z in range(int(dims[2])):
+            on = bool((int(bits[column, z // 64]) >> (z % 64)) & 1)
+            assert on == (counts[column * 150 + z] > 0)
+
+
+def test_a_tall_map_is_searched_over_its_whole_height(geometry, robots) -> None:
+    """Columns of more than 64 bricks: cells above the 64th brick are found."""
+    robot = robots["panda"]
+    state = RobotState(robot, robot.home())
+    model = geometry.geometry_model()
+    data = pin.GeometryData(model)
+    pin.updateGeometryPlacements(robot.model, state.data, model, data)
+    placements = list(data.oMg)
+    hand = max(
+        (s for s, shape in enumerate(geometry.shapes) if shape.link == "panda_hand"),
+        key=lambda s: geometry.shapes[s].radius,
+    )
+    above = placements[hand].translation + np.array([0.0, 0.0, 0.13])
+    # A box over the hand, and a cell 2.57 m below: the box's bottom in brick
+    # 64 of its column, the first of a column's second word of bits, with the
+    # shapes below it reaching down into the first word.
+    box = _shell(above + np.array([0.0, 0.0, 0.1]), 0.1)
+    cells = np.r_[box, np.c_[np.zeros((1, 2)), [[above[2] - 2.57]]]]
+    index = CellIndex(cells, CELL)
+    bottom = np.floor((box[:, 2].min() - index.origin[2]) / (CELL * index.brick))
+    assert bottom == 64
+    table = ShapeTable.build(geometry.shapes, 0.065)
+    found = table.candidates(index, placements, 0.06)
+    expected = _brute_force(geometry.shapes, placements, cells, 0.06, 0.5 * CELL)
+    assert expected  # shapes near the box at the top
+    assert set(found.shape.tolist()) == {s for s, _ in expected}
 
 
 def test_metaball_normals_match_the_formula() -> None:
