@@ -51,6 +51,7 @@ __all__ = [
     "Shapes",
     "candidates",
     "cell_contacts",
+    "cell_contacts_flat",
     "cell_hits",
     "hull_excesses",
     "metaball_normals",
@@ -699,12 +700,12 @@ def cell_contacts(
     spacing2: float,
     refine_radius: float,
     refine_offset: float,
-    found: Candidates,
+    capacity: int,
     out: Contacts,
 ) -> int:
     """The shapes' contacts with the cells, in one call.
 
-    :func:`candidates` into ``found`` (room for one per shape and group), those
+    :func:`candidates` (room for ``capacity``: one per shape and group), those
     reduced into ``out`` as :func:`cell_hits` does (room for ``per_shape`` per
     shape), and, when ``refine_radius`` > 0, their normals re-estimated as
     :class:`~cbp.collision.map_environment.MetaballRefiner` does: the field of
@@ -712,6 +713,12 @@ def cell_contacts(
     ``refine_offset`` [m] along the normal (:func:`metaball_normals`). Returns
     the number of contacts written to ``out``.
     """
+    found = Candidates(
+        np.empty(capacity, dtype=np.intp),
+        np.empty((capacity, 3)),
+        np.empty((capacity, 3)),
+        np.empty(capacity),
+    )
     n = candidates(
         bricks, shapes, frames, half, directions, margin, exact_within, found
     )
@@ -724,3 +731,26 @@ def cell_contacts(
                 at[i, a] = obstacle[i, a] + refine_offset * normal[i, a]
         metaball_normals(bricks, at, refine_radius, normal[:count])
     return count
+
+
+#: Where each group of :func:`cell_contacts_flat`'s arguments ends.
+_B = len(Bricks.__annotations__)
+_S = _B + len(Shapes.__annotations__)
+_R = _S + 11  # frames ... capacity
+
+
+@numba.njit(cache=True, nogil=True)
+def cell_contacts_flat(*args):  # type: ignore[no-untyped-def]
+    """:func:`cell_contacts` with its named tuples' fields passed one by one.
+
+    The arguments are the fields of the Bricks, then of the Shapes, then the
+    other arguments up to ``capacity``, then the fields of ``out``. Numba's
+    dispatcher types arrays in compiled code but named tuples in Python: the
+    same call with named tuples costs about 2 us more.
+    """
+    return cell_contacts(  # type: ignore[call-arg]  # a tuple of known length
+        Bricks(*args[:_B]),
+        Shapes(*args[_B:_S]),
+        *args[_S:_R],
+        Contacts(*args[_R:]),
+    )

@@ -30,7 +30,7 @@ from cbp.collision.cell_kernels import (
     Contacts,
     Shapes,
     candidates,
-    cell_contacts,
+    cell_contacts_flat,
     cell_hits,
     hull_excesses,
     spread_contacts,
@@ -278,12 +278,6 @@ class ShapeTable:
         half = 0.5 * index.cell
         self._check_reach(margin, half)
         capacity = self.capacity
-        found = Candidates(
-            np.empty(capacity, dtype=np.intp),
-            np.empty((capacity, 3)),
-            np.empty((capacity, 3)),
-            np.empty(capacity),
-        )
         room = min(capacity, max(per_shape, 1) * len(self.kind))
         out = Contacts(
             np.empty(room, dtype=np.intp),
@@ -293,9 +287,9 @@ class ShapeTable:
             np.empty(room),
         )
         radius, offset = refine if refine is not None else (0.0, 0.0)
-        count = cell_contacts(
-            index.bricks,
-            self.arrays,
+        count = cell_contacts_flat(
+            *index.bricks,
+            *self.arrays,
             _frames(placements),
             half,
             DIRECTIONS,
@@ -306,8 +300,8 @@ class ShapeTable:
             float(spacing2),
             float(radius),
             float(offset),
-            found,
-            out,
+            capacity,
+            *out,
         )
         return out.head(count)
 
