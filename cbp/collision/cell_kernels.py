@@ -163,6 +163,17 @@ class Contacts(NamedTuple):
     normal: FloatArray
     distance: FloatArray
 
+    @classmethod
+    def room(cls, count: int) -> Contacts:
+        """Uninitialised arrays for ``count`` contacts (a kernel's output)."""
+        return cls(
+            np.empty(count, dtype=np.intp),
+            np.empty((count, 3)),
+            np.empty((count, 3)),
+            np.empty((count, 3)),
+            np.empty(count),
+        )
+
     def head(self, count: int) -> Contacts:
         """The first ``count`` contacts (views)."""
         return Contacts(
@@ -611,13 +622,7 @@ def cell_hits(
         toward the shape.
     """
     n = len(found.shape)
-    out = Contacts(
-        np.empty(n, dtype=np.intp),
-        np.empty((n, 3)),
-        np.empty((n, 3)),
-        np.empty((n, 3)),
-        np.empty(n),
-    )
+    out = Contacts.room(n)
     count = reduce_cells(found, n, half, per_shape, cos_max, spacing2, out)
     return out.head(count)
 

@@ -279,13 +279,7 @@ class ShapeTable:
         self._check_reach(margin, half)
         capacity = self.capacity
         room = min(capacity, max(per_shape, 1) * len(self.kind))
-        out = Contacts(
-            np.empty(room, dtype=np.intp),
-            np.empty((room, 3)),
-            np.empty((room, 3)),
-            np.empty((room, 3)),
-            np.empty(room),
-        )
+        out = Contacts.room(room)
         radius, offset = refine if refine is not None else (0.0, 0.0)
         count = cell_contacts_flat(
             *index.bricks,

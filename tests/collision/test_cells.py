@@ -109,19 +109,24 @@ def _brute_force(
     return best
 
 
+def _points_in_hull_boxes(geometry: RobotGeometry, table: ShapeTable, seed: int):
+    """(shape index, shape, 20,000 random points in its grown box) per hull."""
+    rng = np.random.default_rng(seed)
+    for s, shape in enumerate(geometry.shapes):
+        if isinstance(shape.shape, coal.Capsule):
+            continue
+        yield s, shape, rng.uniform(table.lower[s], table.upper[s], size=(20000, 3))
+
+
 def test_face_grid_gives_the_largest_excess_within_a_bound(geometry) -> None:
     """Points measured through the face grid against all of a hull's faces.
 
     The grid picks the largest face exactly away from ridges between small faces;
     near them it takes a neighbour's excess, a little smaller (never larger).
     """
-    rng = np.random.default_rng(3)
     table = ShapeTable.build(geometry.shapes, 0.07)
     errors = []
-    for s, shape in enumerate(geometry.shapes):
-        if isinstance(shape.shape, coal.Capsule):
-            continue
-        points = rng.uniform(table.lower[s], table.upper[s], size=(20000, 3))
+    for s, shape, points in _points_in_hull_boxes(geometry, table, seed=3):
         excess = points.dot(shape.planes[:, :3].T) - shape.planes[:, 3]
         depth, face = table.hull_excess(s, points)
         np.testing.assert_allclose(
@@ -140,13 +145,9 @@ def test_far_points_are_measured_on_one_face_from_below(geometry) -> None:
     A lower bound of the largest excess (never farther), within two grid steps'
     reach, and exact for most points.
     """
-    rng = np.random.default_rng(4)
     table = ShapeTable.build(geometry.shapes, 0.07)
     errors = []
-    for s, shape in enumerate(geometry.shapes):
-        if isinstance(shape.shape, coal.Capsule):
-            continue
-        points = rng.uniform(table.lower[s], table.upper[s], size=(20000, 3))
+    for s, shape, points in _points_in_hull_boxes(geometry, table, seed=4):
         exact = (points.dot(shape.planes[:, :3].T) - shape.planes[:, 3]).max(axis=1)
         full, _ = table.hull_excess(s, points)
         depth, face = table.hull_excess(s, points, EXACT_WITHIN)
