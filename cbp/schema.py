@@ -85,8 +85,8 @@ class Document:
     def report(self, node: Node | None, where: str, message: str) -> None:
         """Record a problem at ``where`` (a document path), with the node's line."""
         line = ""
-        if node is not None:
-            mark = node.start_mark
+        mark = node.start_mark if node is not None else None
+        if mark is not None:  # nodes made by --set have none
             where_file = f"{mark.name}, " if mark.name != self.path else ""
             line = f"{where_file}line {mark.line + 1}: "
         self.problems.append(f"{line}{where or '<document>'}: {message}")

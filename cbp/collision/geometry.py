@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,6 +33,7 @@ from cbp.robot import Approximation, FloatArray, IntArray, RobotModel
 from cbp.state import RobotState
 
 __all__ = [
+    "Attachment",
     "LinkShape",
     "RobotGeometry",
     "ShapePlacements",
@@ -149,6 +151,27 @@ class LinkShape:
         return state.data.oMf[self.frame_id] * self.placement
 
 
+@dataclass(frozen=True)
+class Attachment:
+    """A rigid body fixed on a robot frame that the URDF does not hold.
+
+    A mounted camera's housing, a tool: checked like the URDF's collision shapes
+    (padding, contacts, self-collision with non-adjacent bodies, the depth
+    images' self-filter).
+
+    Attributes:
+        name: the shape's name.
+        frame: the robot frame that carries it.
+        placement: its pose in that frame.
+        shape: a coal primitive (box, sphere, cylinder or capsule).
+    """
+
+    name: str
+    frame: str
+    placement: pin.SE3
+    shape: coal.ShapeBase
+
+
 def _hull_shape(path: Path, scale: FloatArray) -> tuple[coal.Convex, trimesh.Trimesh]:
     mesh = load_mesh(path, "collision mesh")
     mesh.apply_scale(scale)
@@ -251,6 +274,8 @@ class RobotGeometry:
         approximation: ``hull`` (convex hull of each mesh) or ``capsule`` (the
             least-volume capsule around the hull; faster against octrees, coarser);
             default: robot.yaml's.
+        attachments: bodies fixed on the robot's frames beyond the URDF's
+            (camera housings), after its shapes.
 
     Attributes:
         shapes: every checked shape, in URDF order.
@@ -266,6 +291,7 @@ class RobotGeometry:
         robot: RobotModel,
         padding: float | None = None,
         approximation: Approximation | None = None,
+        attachments: Sequence[Attachment] = (),
     ) -> None:
         """Load the URDF's collision elements as convex shapes."""
         if robot.urdf_path is None:
@@ -303,7 +329,7 @@ class RobotGeometry:
                 "collision.ignore_links",
             )
         self.shapes: list[LinkShape] = []
-        halves = []
+        halves: list[FloatArray] = []
         for obj in geometry_model.geometryObjects:
             frame = model.frames[obj.parentFrame]
             if frame.name in ignored_links:
@@ -319,25 +345,21 @@ class RobotGeometry:
             else:
                 shape = obj.geometry
                 hull = _primitive_mesh(shape)
-            vertices = np.asarray(hull.vertices)
-            lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-            centre_local = 0.5 * (lo + hi)
-            halves.append(0.5 * (hi - lo))
-            in_frame = vertices.dot(placement.rotation.T) + placement.translation
-            self.shapes.append(
-                LinkShape(
-                    name=obj.name,
-                    link=frame.name,
-                    frame_id=int(obj.parentFrame),
-                    joint_id=int(frame.parentJoint),
-                    placement=placement,
-                    shape=shape,
-                    centre=placement.act(centre_local),
-                    radius=float(np.linalg.norm(vertices - centre_local, axis=1).max()),
-                    planes=_transform_planes(_planes(hull), placement),
-                    lower=in_frame.min(axis=0),
-                    upper=in_frame.max(axis=0),
+            self._add(obj.name, int(obj.parentFrame), placement, shape, hull, halves)
+        for attached in attachments:
+            if attached.frame not in links:
+                raise ConfigError(
+                    f"'{attached.name}' is fixed on '{attached.frame}', which the "
+                    f"robot has no frame of{suggestion(attached.frame, links)}"
                 )
+            shape = attached.shape
+            self._add(
+                attached.name,
+                robot.frame_id(attached.frame),
+                attached.placement,
+                shape,
+                _primitive_mesh(shape),
+                halves,
             )
         self.radii = np.array([s.radius for s in self.shapes])
         self.box_halves = np.array(halves).reshape(-1, 3)
@@ -349,6 +371,38 @@ class RobotGeometry:
         # Contiguous copies: the compiled broad phase is compiled for them.
         self._pair_a = np.ascontiguousarray(pairs[:, 0])
         self._pair_b = np.ascontiguousarray(pairs[:, 1])
+
+    def _add(
+        self,
+        name: str,
+        frame_id: int,
+        placement: pin.SE3,
+        shape: coal.ShapeBase,
+        hull: trimesh.Trimesh,
+        halves: list[FloatArray],
+    ) -> None:
+        """Append the shape ``hull`` describes, placed on a frame."""
+        frame = self.robot.model.frames[frame_id]
+        vertices = np.asarray(hull.vertices)
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        centre_local = 0.5 * (lo + hi)
+        halves.append(0.5 * (hi - lo))
+        in_frame = vertices.dot(placement.rotation.T) + placement.translation
+        self.shapes.append(
+            LinkShape(
+                name=name,
+                link=frame.name,
+                frame_id=frame_id,
+                joint_id=int(frame.parentJoint),
+                placement=placement,
+                shape=shape,
+                centre=placement.act(centre_local),
+                radius=float(np.linalg.norm(vertices - centre_local, axis=1).max()),
+                planes=_transform_planes(_planes(hull), placement),
+                lower=in_frame.min(axis=0),
+                upper=in_frame.max(axis=0),
+            )
+        )
 
     def _self_pairs(self, ignore: list[tuple[str, str]]) -> list[tuple[int, int]]:
         model = self.robot.model

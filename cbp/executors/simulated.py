@@ -452,7 +452,9 @@ class SimulatedRun:
             out[:] = np.inf
             return out
         dynamic = [o for o in declared if o.dynamic]
-        geometry = RobotGeometry(self.robot, padding=0.0)
+        geometry = RobotGeometry(
+            self.robot, padding=0.0, attachments=self.scenario.attachments()
+        )
         settings = CollisionSettings(
             activation_distance=CLEARANCE_RANGE, self_collision=False, padding=0.0
         )

@@ -6,6 +6,14 @@ y = 2(H - 1 - v)/H - 1 (not at pixel centres), and returns its matrices
 column-major. With that convention the unprojection through inv(P V) matches
 analytic surfaces to well under a millimetre; with pixel centres it is biased by
 2-4 mm (measured, ``../shared/notes/perception.md``).
+
+A camera's ``near`` is its sensor's minimum range, not the renderer's clipping
+plane. A renderer clips what lies nearer than its near plane and shows what is
+behind it, so a board 4 cm in front of a wrist camera with a 5 cm near plane
+would be seen *through*, and the map would free the board's cells. A real depth
+sensor gives no reading there instead. Frames are therefore rendered with a
+clipping plane at :data:`RENDER_NEAR_FRACTION` of the far plane (at most the
+minimum range), and pixels nearer than the minimum range hold no reading.
 """
 
 from __future__ import annotations
@@ -21,7 +29,17 @@ from cbp.robot import FloatArray, RobotModel
 from cbp.sim.bullet import pb
 from cbp.state import RobotState
 
-__all__ = ["DepthCamera", "DepthFrame", "camera_parent"]
+__all__ = ["RENDER_NEAR_FRACTION", "DepthCamera", "DepthFrame", "camera_parent"]
+
+RENDER_NEAR_FRACTION = 1e-3
+"""The rendering clip plane as a fraction of the far plane: 2.5 mm for a 2.5 m
+camera, where PyBullet's depth is within 0.2 mm at 2.4 m (0.02 mm with 1 cm)."""
+
+_FAR_PLANE = 1.0 - 1e-6
+"""Depth buffer values from here up are the far plane: nothing seen."""
+_FAR_BUFFER = 1.0 + 1e-6
+"""The largest depth buffer value that is a reading: the far plane comes back
+as 1.0000001 (float32 rounding) with a near plane of a few millimetres."""
 
 
 @dataclass(frozen=True)
@@ -32,9 +50,11 @@ class DepthFrame:
         depth: PyBullet's depth buffer in [0, 1], (H, W).
         view: the 4x4 view matrix (world to camera, OpenGL convention).
         projection: the 4x4 projection matrix.
-        near: near plane [m].
+        near: the projection's near (clipping) plane [m].
         far: far plane [m].
         camera: the camera's name.
+        min_range: the sensor's minimum range [m]: nearer pixels hold no
+            reading (what a real sensor gives, rather than a view past them).
     """
 
     depth: FloatArray
@@ -43,6 +63,12 @@ class DepthFrame:
     near: float
     far: float
     camera: str = ""
+    min_range: float = 0.0
+
+    @property
+    def closest(self) -> float:
+        """The nearest depth a reading can have [m]."""
+        return max(self.near, self.min_range)
 
     @property
     def position(self) -> FloatArray:
@@ -51,17 +77,30 @@ class DepthFrame:
         return np.asarray(-R.T.dot(t))
 
     def valid(self) -> np.ndarray:
-        """Pixels that hold a reading: finite and within [0, 1] (H, W)."""
+        """Pixels that hold a reading (H, W).
+
+        Finite, within [0, 1], and not nearer than the minimum range.
+        """
         z = self.depth
         with np.errstate(invalid="ignore"):
-            return np.isfinite(z) & (z >= 0.0) & (z <= 1.0)
+            nearest = self._buffer_at(self.min_range)
+            return np.isfinite(z) & (z >= nearest) & (z <= _FAR_BUFFER)
+
+    def _buffer_at(self, distance: float) -> float:
+        """The depth buffer's value at ``distance`` along the axis (0 at near)."""
+        n, f = self.near, self.far
+        if distance <= n:
+            return 0.0
+        return f / (f - n) * (1.0 - n / distance)
 
     def problem(self, min_valid_fraction: float) -> str | None:
         """Why the frame should not be used, or None.
 
         A reading is a finite depth in (0, 1]: 1 is the far plane (nothing seen
         up to it, which the map uses), 0 the near plane exactly, what a failed
-        render or a blinded sensor gives. A frame with fewer than
+        render or a blinded sensor gives. A pixel nearer than the minimum range
+        counts here (the camera works; something is close in front of it),
+        though the map takes nothing from it. A frame with fewer than
         ``min_valid_fraction`` of its pixels reading, or of the wrong shape, is
         refused.
         """
@@ -71,7 +110,7 @@ class DepthFrame:
         if not np.all(np.isfinite(self.view)):
             return "camera pose not finite"
         with np.errstate(invalid="ignore"):
-            reading = np.isfinite(z) & (z > 0.0) & (z <= 1.0)
+            reading = np.isfinite(z) & (z > 0.0) & (z <= _FAR_BUFFER)
         fraction = float(np.count_nonzero(reading)) / z.size
         if fraction < min_valid_fraction:
             return (
@@ -90,7 +129,7 @@ class DepthFrame:
         n, f = self.near, self.far
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             metric = f * n / (f - (f - n) * z)
-            out = np.where(z >= 1.0 - 1e-6, np.inf, metric)
+            out = np.where(z >= _FAR_PLANE, np.inf, metric)
         out[~self.valid()] = np.nan
         return np.asarray(out)
 
@@ -108,7 +147,7 @@ class DepthFrame:
         world = ndc.dot(inv.T)
         world = world[:, :3] / world[:, 3:4]
         with np.errstate(invalid="ignore"):
-            hit = self.valid() & (self.depth < 1.0 - 1e-6)
+            hit = self.valid() & (self.depth < _FAR_PLANE)
         return world.reshape(h, w, 3), hit
 
     def project(self, points: FloatArray) -> tuple[np.ndarray, np.ndarray, FloatArray]:
@@ -160,8 +199,9 @@ class DepthCamera:
         self.client = client
         self.spec = spec
         self.name = spec.name
+        self._clip_near = min(spec.near, RENDER_NEAR_FRACTION * spec.far)
         self._projection_list = pb.computeProjectionMatrixFOV(
-            spec.fov_deg, spec.width / spec.height, spec.near, spec.far
+            spec.fov_deg, spec.width / spec.height, self._clip_near, spec.far
         )
         # PyBullet's matrices are column-major.
         self.projection = np.array(self._projection_list).reshape(4, 4).T
@@ -226,7 +266,13 @@ class DepthCamera:
         )
         buffer = np.asarray(depth, dtype=float).reshape(s.height, s.width)
         return DepthFrame(
-            buffer, self.view.copy(), self.projection, s.near, s.far, self.name
+            buffer,
+            self.view.copy(),
+            self.projection,
+            self._clip_near,
+            s.far,
+            self.name,
+            min_range=s.near,
         )
 
     def _set_view(self, eye: object, target: object, up: object) -> None:

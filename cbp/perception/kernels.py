@@ -72,7 +72,8 @@ def mark_seen(
         centre: the optical centre [m].
         ranges: measured depth along the axis per pixel (H, W): inf sees to
             ``max_range``, -inf (or NaN) says nothing.
-        near: the camera's near plane [m].
+        near: cells nearer than this are not marked (the frame's closest
+            possible reading) [m].
         max_range: cells farther from the camera are not marked [m].
         misses_to_clear: misses that clear an occupied cell.
         dirty: per brick of ``brick`` cells a side, True where a cell changed

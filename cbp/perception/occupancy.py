@@ -251,7 +251,7 @@ class OccupancyGrid:
                 np.ascontiguousarray(frame.view[2]),
                 np.ascontiguousarray(frame.position),
                 np.ascontiguousarray(ranges),
-                frame.near,
+                frame.closest,
                 self.spec.max_range,
                 self.spec.misses_to_clear,
                 self._dirty,

@@ -47,14 +47,26 @@ class CameraSpec:
     fov_deg: float = 60.0
     """Vertical field of view [deg]."""
     near: float = 0.1
-    """Near clipping distance [m]."""
+    """Minimum range [m]: nearer surfaces give no reading (never a view past
+    them, as a renderer's clipping plane would)."""
     far: float = 3.0
     """Far clipping distance [m]; farther surfaces are not seen."""
     rate_hz: float = 15.0
     """Frames per second."""
+    body: Vec3 | None = (0.04, 0.04, 0.025)
+    """A mounted camera's housing [m]: a box (width, height, depth) along the
+    optical frame's x, y and z, its front face at the optical centre. It joins
+    the robot's collision shapes while the cameras are in use, so the camera is
+    kept out of obstacles like any link (a camera inside a board would see
+    through it and empty the board's cells). None: no housing (then nothing
+    keeps the optical centre out of obstacles). Fixed cameras ignore it."""
 
     def __post_init__(self) -> None:
         """Positive sizes, a sensible frustum, and either a pose or a parent."""
+        if self.body is not None and not all(0.0 < v < 1.0 for v in self.body):
+            raise ConfigError(
+                f"each side must be within (0, 1) m, got {list(self.body)}", "body"
+            )
         if self.width < 8 or self.height < 8:
             raise ConfigError(
                 f"image must be at least 8x8, got {self.width}x{self.height}", "width"

@@ -14,14 +14,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import coal
 import numpy as np
+import pinocchio as pin
 
-from cbp.collision.geometry import RobotGeometry
+from cbp.collision.geometry import Attachment, RobotGeometry
 from cbp.collision.objects import EnvironmentObject, PrimitiveEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.engine import Engine
 from cbp.expressions import TimeFunction, compile_time_function
 from cbp.goals import GoalStream
+from cbp.perception.camera import camera_parent
 from cbp.plugin import GoalReceiver, TakesInput, Task, UsesCollisionWorld
 from cbp.qp import Entry
 from cbp.robot import FloatArray, RobotModel
@@ -83,14 +86,43 @@ class Scenario:
             objects.append(made)
         return objects
 
+    def attachments(self) -> list[Attachment]:
+        """Bodies on the robot beyond its URDF: mounted cameras' housings.
+
+        Only while the cameras are in use (``perception.source: depth_camera``).
+        """
+        perception = self.spec.perception
+        if perception.source != "depth_camera":
+            return []
+        bodies = []
+        for camera in perception.all_cameras:
+            if camera.parent is None or camera.body is None:
+                continue
+            width, height, depth = camera.body
+            behind = pin.SE3(np.eye(3), np.array([0.0, 0.0, -0.5 * depth]))
+            bodies.append(
+                Attachment(
+                    name=f"camera_{camera.name}",
+                    frame=camera_parent(camera.parent, self.robot),
+                    placement=camera.offset.to_se3() * behind,
+                    shape=coal.Box(width, height, depth),
+                )
+            )
+        return bodies
+
     def collision_world(self) -> CollisionWorld:
         """The scenario's collision world (built once), attached to its plugins.
 
         Its environment is the declared objects; an executor with a depth camera
-        replaces it with occupancy-map snapshots as they come.
+        replaces it with occupancy-map snapshots as they come. The robot's
+        shapes include :meth:`attachments`.
         """
         if self._world is None:
-            geometry = RobotGeometry(self.robot, padding=self.spec.collision.padding)
+            geometry = RobotGeometry(
+                self.robot,
+                padding=self.spec.collision.padding,
+                attachments=self.attachments(),
+            )
             environment = PrimitiveEnvironment(self.environment_objects())
             self._world = CollisionWorld(geometry, environment, self.spec.collision)
             for entry in self.entries:

@@ -229,3 +229,47 @@ def test_camera_poses_are_checked(changes, message) -> None:
     base = {"name": "c", "parent": "panda_hand"}
     with pytest.raises(ConfigError, match=message):
         CameraSpec(**{**base, **changes})
+
+
+def test_a_surface_nearer_than_the_minimum_range_is_not_seen_through(
+    scene, robots
+) -> None:
+    """A box 3 cm before a camera whose range starts at 5 cm: no reading.
+
+    And no view past it: a renderer's clipping plane would show what is behind
+    the box, and the map would free the box's cells.
+    """
+    robot = robots["panda"]
+    close = CameraSpec(
+        name="close",
+        position=(0.6, -0.08, 0.15),  # the box's front face is at y = -0.05
+        target=(0.6, 1.0, 0.15),
+        near=0.05,
+        far=3.0,
+        fov_deg=30.0,
+    )
+    frame = DepthCamera(scene.client, close).capture()
+    h, w = frame.depth.shape
+    assert not frame.valid()[h // 2, w // 2]
+    assert np.isnan(frame.ranges()[h // 2, w // 2])
+    assert frame.problem(0.5) is None  # a close reading: the camera works
+    grid = OccupancyGrid(replace(SPEC, cameras=[close]), RobotGeometry(robot))
+    grid.integrate(frame, None)
+    inside = np.array([[0.6, y, 0.15] for y in (-0.01, 0.01, 0.03)])
+    assert np.all(grid.state_at(inside) == UNKNOWN)
+
+
+def test_the_far_plane_reads_as_nothing_seen_with_a_near_clipping_plane(
+    scene,
+) -> None:
+    """The far plane is background, not invalid, with a near clipping plane.
+
+    With a clipping plane of millimetres it comes back as 1.0000001.
+    """
+    up = CameraSpec(
+        name="up", position=(0.0, 0.0, 1.2), target=(0.0, 0.0, 3.0), up=(1.0, 0.0, 0.0)
+    )
+    frame = DepthCamera(scene.client, up).capture()
+    assert frame.near < up.near
+    assert np.all(frame.valid())
+    assert np.all(np.isinf(frame.ranges()))

@@ -195,3 +195,20 @@ def test_set_overrides_values_and_reports_bad_ones(tmp_path: Path) -> None:
     text = str(info.value)
     assert "--set perception.source" in text
     assert "depth_camera" in text
+
+
+def test_set_with_an_unknown_key_on_the_way_is_a_located_problem(
+    tmp_path: Path,
+) -> None:
+    """``--set`` makes the missing mappings; an unknown key among them is reported."""
+    path = _write(
+        tmp_path / "s.yaml",
+        """\
+        name: t
+        robot: {name: franka_panda}
+        duration: 1.0
+        """,
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path, overrides={"perception.cameras[2].near": "0.1"})
+    assert "unknown key 'cameras[2]'" in str(info.value)
