@@ -27,7 +27,7 @@ import trimesh
 from scipy.optimize import minimize
 
 from cbp.collision.broad import near_pairs
-from cbp.errors import ConfigError, suggestion
+from cbp.errors import ConfigError, FrameNotFoundError, suggestion
 from cbp.files import load_mesh
 from cbp.robot import Approximation, FloatArray, IntArray, RobotModel
 from cbp.state import RobotState
@@ -347,18 +347,16 @@ class RobotGeometry:
                 hull = _primitive_mesh(shape)
             self._add(obj.name, int(obj.parentFrame), placement, shape, hull, halves)
         for attached in attachments:
-            if attached.frame not in links:
-                raise ConfigError(
-                    f"'{attached.name}' is fixed on '{attached.frame}', which the "
-                    f"robot has no frame of{suggestion(attached.frame, links)}"
-                )
-            shape = attached.shape
+            try:
+                frame_id = robot.frame_id(attached.frame)
+            except FrameNotFoundError as exc:
+                raise ConfigError(f"'{attached.name}': {exc}") from None
             self._add(
                 attached.name,
-                robot.frame_id(attached.frame),
+                frame_id,
                 attached.placement,
-                shape,
-                _primitive_mesh(shape),
+                attached.shape,
+                _primitive_mesh(attached.shape),
                 halves,
             )
         self.radii = np.array([s.radius for s in self.shapes])
