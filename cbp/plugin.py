@@ -60,7 +60,8 @@ with the same rules whether it is then used from Python or from a scenario:
 * :meth:`Plugin.prepare` is the only method that may change the plugin.
 
 Optional capabilities are the protocols below (:class:`GoalReceiver`,
-:class:`TakesInput`, :class:`UsesCollisionWorld`, :class:`ReportsSignals`): a
+:class:`TakesInput`, :class:`UsesCollisionWorld`, :class:`HoldsContacts`,
+:class:`ReportsSignals`): a
 plugin has one by defining its methods, and executors test for it with
 ``isinstance``. Writing rows in place (:meth:`Plugin.linearize_into`,
 :meth:`Plugin.value_into`) is an optional speed-up, not part of the contract;
@@ -99,12 +100,14 @@ from cbp.robot import FloatArray, RobotModel
 from cbp.state import RobotState
 
 if TYPE_CHECKING:
+    from cbp.collision.contacts import ContactSet
     from cbp.collision.world import CollisionWorld
 
 __all__ = [
     "Constraint",
     "FloatArray",
     "GoalReceiver",
+    "HoldsContacts",
     "Linearization",
     "ParamsT",
     "Plugin",
@@ -475,6 +478,27 @@ class UsesCollisionWorld(Protocol):
 
     def attach_world(self, world: CollisionWorld) -> None:
         """Use ``world`` for contact queries from now on."""
+
+
+@runtime_checkable
+class HoldsContacts(Protocol):
+    """A constraint with a row per contact with the environment.
+
+    Executors read the contacts latched for the current step, with the world's
+    shapes, to say what holds the arm (``contact_normals``).
+    """
+
+    @property
+    def contacts(self) -> ContactSet:
+        """The contacts latched for the current step.
+
+        Raises:
+            CbpError: nothing is latched yet (no step, no world).
+        """
+
+    @property
+    def world(self) -> CollisionWorld | None:
+        """The collision world the contacts come from."""
 
 
 @runtime_checkable

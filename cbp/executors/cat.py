@@ -18,16 +18,21 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from cbp.errors import CbpError
 from cbp.executors.clock import Budget
 from cbp.executors.settings import CatSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.executors.stepping import ValidatedStepper
 from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.plugin import HoldsContacts
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 
 __all__ = ["CatPlanner", "make_planner", "run_cat"]
+
+#: A contact row within this of its bound (the safety distance) holds the arm [m].
+HOLDING_DISTANCE = 0.005
 
 
 class CatPlanner:
@@ -48,6 +53,15 @@ class CatPlanner:
         #: Hard entries other than the step limits that were active at the last
         #: step of the last period (contacts, joint limits): what holds the arm.
         self.blocked_by: set[str] = set()
+        self._contact_entries = [
+            (e.name, e.plugin)
+            for e in self.engine.entries
+            if isinstance(e.plugin, HoldsContacts)
+        ]
+        #: Whether unseen space held the arm at the last period, and when that
+        #: was last said [s].
+        self._unseen_holds = False
+        self._unseen_said = -np.inf
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
@@ -101,7 +115,50 @@ class CatPlanner:
         problem = self.engine.problem
         if steps and step.dq is not None and problem is not None:
             self.blocked_by = problem.active_entries(step.dq) - self.step_limits
+        self._say_if_unseen_space_holds(run)
         return Plan(np.array(path), steps, note)
+
+    def _say_if_unseen_space_holds(self, run: SimulatedRun) -> None:
+        """An event when contacts with space no camera has seen hold the arm.
+
+        The arm then waits for a camera to see that space, which an obstacle
+        would not tell the user. Said when it starts, at most once a second.
+        """
+        links: list[str] = []
+        nearest: FloatArray | None = None
+        for name, plugin in self._contact_entries:
+            if name not in self.blocked_by or plugin.world is None:
+                continue
+            try:
+                contacts = plugin.contacts
+            except CbpError:  # nothing latched
+                continue
+            bound = float(getattr(plugin.params, "safety_distance", 0.0))
+            holding = (contacts.distance <= bound + HOLDING_DISTANCE) & (
+                contacts.other_shape < 0  # not the robot's own
+            )
+            # A point just inside the obstacle cell, behind its witness point.
+            inside = contacts.other_point - 1e-3 * contacts.normal
+            unseen = holding & run.unseen(inside)
+            if not unseen.any():
+                continue
+            shapes = plugin.world.geometry.shapes
+            links += [shapes[i].link for i in contacts.shape[unseen]]
+            k = np.flatnonzero(unseen)[np.argmin(contacts.distance[unseen])]
+            nearest = contacts.other_point[k]
+        t = run.sim.t
+        started = nearest is not None and not self._unseen_holds
+        self._unseen_holds = nearest is not None
+        if nearest is None or not started or t - self._unseen_said < 1.0:
+            return
+        self._unseen_said = t
+        x, y, z = nearest
+        run.event(
+            t,
+            f"held by space no camera has seen (beside {', '.join(sorted(set(links)))};"
+            f" nearest at {x:.2f}, {y:.2f}, {z:.2f} m): a camera that sees it, or"
+            " perception.unknown: free, lets the arm on",
+        )
 
 
 def make_planner(scenario: Scenario, run: SimulatedRun) -> CatPlanner:

@@ -25,6 +25,7 @@ from cbp.executors.clock import ClockKind
 from cbp.executors.faults import Faults
 from cbp.goals import GoalSource
 from cbp.perception.camera import DepthCamera, DepthFrame
+from cbp.perception.kernels import UNKNOWN
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.plugin import GoalReceiver
@@ -273,6 +274,17 @@ class SimulatedRun:
         log.info("%s t=%.3f s: %s", self.method, t, message)
 
     # ------------------------------------------------------------------ perception
+
+    def unseen(self, points: FloatArray) -> np.ndarray:
+        """Which points (n, 3) lie in unseen space that counts as an obstacle.
+
+        Space no camera has seen and the robot has not held; all False without
+        cameras or with ``perception.unknown: free``.
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if self.mapper is None or not self.scenario.spec.perception.unknown_blocks:
+            return np.zeros(len(points), dtype=bool)
+        return np.asarray(self.mapper.grid.state_at(points) == UNKNOWN)
 
     def perceive_until(self, t: float) -> None:
         """Capture the camera frames due before ``t`` and hand them to the map."""

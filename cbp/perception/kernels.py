@@ -29,7 +29,7 @@ __all__ = [
 UNKNOWN = 0
 """Never seen, never held by the robot."""
 FREE = 1
-"""Seen through, or held by the robot's padded shapes."""
+"""Seen through, or held by the robot (see ``OccupancyGrid.carve_robot``)."""
 OCCUPIED = 2
 """A depth reading fell in it (and no later frame saw through it often enough)."""
 

@@ -5,10 +5,13 @@ Every cell starts **unknown**. A frame marks the cells it sees *through* free (t
 measured surface along their pixel lies more than a cell beyond them) and the
 cells its readings fall in **occupied**; an occupied cell seen through
 ``misses_to_clear`` times becomes free again (a removed obstacle). The space the
-robot's padded shapes hold at a frame's time is free too: the robot was there.
-With ``perception.unknown: occupied`` (the default) unknown cells are obstacles
-for every collision-aware method, so the arm never moves into space nothing has
-seen: the far side of an obstacle, its shadow, or what the arm itself hides.
+robot's padded shapes hold is free too, with two cells more at the first frame (a
+run starts clear): the robot was there. Nothing more: space beside the arm that
+no camera sees (its own shadow) stays unknown, so the arm never creeps into it a
+frame at a time (``robot_space``). With ``perception.unknown: occupied`` (the
+default) unknown cells are obstacles for every collision-aware method, so the
+arm never moves into space nothing has seen: the far side of an obstacle, its
+shadow, or what the arm itself hides.
 
 Why not OctoMap: ray-cast insertion of one 320x240 frame takes 120-250 ms on this
 machine and its default clamping keeps a moved obstacle for about nine frames
@@ -104,6 +107,7 @@ class OccupancyGrid:
         self.frames = 0
         self.robot_points_removed = 0
         self.last: FrameSummary | None = None
+        self._started = False  # the robot's first space has been freed
         brick = BRICK
         dims = -(-np.array(self.shape) // brick)
         while np.prod(dims) > MAX_BRICKS:
@@ -192,16 +196,29 @@ class OccupancyGrid:
     def carve_robot(self, state: RobotState) -> int:
         """Mark the unknown cells the robot holds free; return how many.
 
-        The robot's shapes grown by the padding and ``robot_margin`` (the space
-        the self-filter takes for the robot, so no reading is ever inserted
-        there) and one cell more: the contact query measures cells near a hull's
-        edges by their face planes, which can be up to sqrt(3) times nearer than
-        the cell; without the extra cell the robot would start in contact with
-        the unknown space around it.
+        With ``robot_space: held`` (the default), the first call frees the
+        cells within the padded shapes and two cells more: a run starts clear
+        of obstacles, and the contact query keeps the padded shapes a cell from
+        obstacle cell centres (half a cell of inflation, half the cell's own
+        size), so the arm starts a cell clear of the unknown space around it.
+        Later calls free only the cells whose centre the padded shapes hold:
+        the constraint keeps the arm farther than that from unknown cells, so in
+        a run without contact they free nothing, and the robot never frees
+        space it has not been in.
+
+        With ``robot_space: nearby`` every call frees the padded shapes plus
+        ``robot_margin`` plus one cell (the space the self-filter takes for the
+        robot): unsafe, see :attr:`PerceptionSpec.robot_space`.
         """
         if self.geometry is None:
             return 0
-        grow = self.geometry.padding + self.spec.robot_margin + self.cell
+        if self.spec.robot_space == "nearby":
+            grow = self.geometry.padding + self.spec.robot_margin + self.cell
+        elif not self._started:
+            grow = self.geometry.padding + 2.0 * self.cell
+        else:
+            grow = self.geometry.padding
+        self._started = True
         shapes = self.geometry.world_shapes(state)
         boxes = np.empty((len(self.geometry.shapes), 6))
         oMf = state.data.oMf

@@ -133,6 +133,16 @@ class PerceptionSpec:
     """Frames that must see through a cell before it is cleared."""
     robot_margin: float = 0.02
     """Points within the robot's padded shapes plus this margin are filtered [m]."""
+    robot_space: Literal["held", "nearby"] = "held"
+    """Which unseen space the robot's presence frees. ``held`` (the default): at
+    the first frame its padded shapes and two cells more (a run starts clear of
+    obstacles, as the loader checks for declared ones), after that only the
+    cells its padded shapes hold, so it never frees space it has not been in.
+    ``nearby`` (before version 0.4): on every frame the padded shapes plus
+    ``robot_margin`` plus one cell. That lets the arm move beside space no
+    camera sees (its own shadow) and is unsafe: each frame frees centimetres
+    beyond where the arm may stand, so it can walk into an obstacle nothing has
+    seen."""
     min_valid_fraction: float = 0.2
     """A depth frame with fewer pixels holding a reading than this fraction is
     dropped (an event): all-NaN, all-zero or blinded frames never reach the

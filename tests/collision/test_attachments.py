@@ -13,6 +13,7 @@ from cbp.collision import RobotGeometry
 from cbp.collision.geometry import Attachment
 from cbp.collision.objects import EnvironmentObject, PrimitiveEnvironment
 from cbp.errors import ConfigError
+from cbp.perception.spec import CameraSpec
 from cbp.scenario import load_scenario
 from cbp.state import RobotState
 
@@ -25,6 +26,10 @@ def _scenario(source: str):
     )
 
 
+def _wrist(scenario) -> CameraSpec:
+    return next(c for c in scenario.spec.perception.all_cameras if c.name == "wrist")
+
+
 def test_the_wrist_camera_housing_joins_the_robot_while_cameras_are_used() -> None:
     with_cameras = _scenario("depth_camera").collision_world().geometry
     declared = _scenario("ground_truth").collision_world().geometry
@@ -34,7 +39,7 @@ def test_the_wrist_camera_housing_joins_the_robot_while_cameras_are_used() -> No
     housing = with_cameras.shapes[-1]
     assert housing.link == "panda_hand"
     # Its front face holds the optical centre; it lies behind it.
-    spec = _scenario("depth_camera").spec.perception.all_cameras[2]
+    spec = _wrist(_scenario("depth_camera"))
     optical = spec.offset.to_se3()
     behind = optical.act(np.array([0.0, 0.0, -0.01]))
     ahead = optical.act(np.array([0.0, 0.0, 0.01]))
@@ -47,7 +52,7 @@ def test_an_obstacle_at_the_camera_is_a_contact_of_its_housing() -> None:
     scenario = _scenario("depth_camera")
     world = scenario.collision_world()
     state = RobotState(scenario.robot, scenario.q0)
-    spec = scenario.spec.perception.all_cameras[2]
+    spec = _wrist(scenario)
     hand = state.data.oMf[scenario.robot.frame_id("panda_hand")]
     lens = (hand * spec.offset.to_se3()).translation
     probe = EnvironmentObject.primitive(

@@ -273,3 +273,42 @@ def test_the_far_plane_reads_as_nothing_seen_with_a_near_clipping_plane(
     assert frame.near < up.near
     assert np.all(frame.valid())
     assert np.all(np.isinf(frame.ranges()))
+
+
+def _creep(robots, robot_space: str) -> float:
+    """Turn joint 1 toward space no camera sees while the arm stays clear of it.
+
+    Each 0.5 degree step is taken only when the padded arm would be clear of
+    every obstacle cell of the map as it stands, and the robot's space is then
+    freed as a frame would free it. Returns how far the arm got [rad].
+    """
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(
+        replace(SPEC, cell_size=0.01, robot_space=robot_space), geometry
+    )
+    q = robot.home()
+    grid.carve_robot(RobotState(robot, q))
+    step = np.radians(0.5)
+    for _ in range(120):
+        ahead = q.copy()
+        ahead[0] += step
+        world = CollisionWorld(geometry, grid.environment())
+        contacts = world.contacts(RobotState(robot, ahead)).environment_part()
+        if len(contacts.distance) and contacts.distance.min() < 0.0:
+            break
+        q = ahead
+        grid.carve_robot(RobotState(robot, q))
+    return float(q[0] - robot.home()[0])
+
+
+def test_the_robot_never_frees_space_it_has_not_held(robots) -> None:
+    """No camera sees anything: the arm may not creep into the unseen space.
+
+    With ``robot_space: nearby`` each frame freed centimetres beyond where the
+    arm may stand, so it could turn on into space nothing had seen (and into an
+    obstacle hidden there); with ``held`` it stops within the space it started
+    in (the padded shapes and two cells).
+    """
+    assert _creep(robots, "held") < np.radians(3.0)
+    assert _creep(robots, "nearby") == pytest.approx(np.radians(60.0))

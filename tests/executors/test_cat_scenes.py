@@ -123,15 +123,52 @@ def test_many_steps_per_period_on_boards_and_shelf() -> None:
     ],
 )
 def test_the_cameras_map_keeps_every_scene_free_of_contact(scene: str) -> None:
-    """Unseen space counts as an obstacle: no contact, outcomes as declared.
-
-    Except the shelf retreat's: with the cameras the wrist camera's housing is a
-    robot shape, and whether it passes the middle board's front edge (4-7 mm
-    clear) or stops at it depends on the steps each period holds (wall clock):
-    measured reached in 2 of 3 runs, stopped in the third, 0 N in all.
-    """
+    """Unseen space counts as an obstacle: no contact, outcomes as declared."""
     _, camera = _run(scene, "depth_camera")
     _, declared = _run(scene)
     assert camera["peak_contact_force_n"] == 0.0, camera
-    if scene != "shelf_retreat":
-        assert camera["reached"] == declared["reached"]
+    assert camera["reached"] == declared["reached"]
+
+
+# The shelf retreat seen only by the head camera and a wrist camera mounted low on
+# the hand: the middle board's underside, which the arm passes on its way out, is
+# hidden from both (by the arm and by the board itself).
+FEW_CAMERAS = (
+    "[{name: head, position: [-0.35, 0.0, 1.15], target: [0.55, 0.0, 0.15]},"
+    " {name: wrist, parent: end_effector, offset: {position: [0.035, 0.0, 0.02],"
+    " rpy_deg: [0.0, 25.0, 0.0]}, width: 160, height: 120, fov_deg: 80.0,"
+    " near: 0.05, far: 1.5}]"
+)
+
+
+@pytest.mark.parametrize("robot_space", ["held", "nearby"])
+def test_an_obstacle_no_camera_sees_is_never_entered(robot_space: str) -> None:
+    """The robot frees only the space it has held, so it stops short of the board.
+
+    The run says that unseen space holds the arm, and beside which links.
+
+    With ``robot_space: nearby`` (before 0.4) every frame freed a few centimetres
+    of unseen space around the arm, which then moved into them, frame after
+    frame, and pressed the board (measured 177 N): the test shows that hazard.
+    Virtual time, so each run is the same.
+    """
+    scenario = load_scenario(
+        SCENARIOS / "cat_shelf_retreat.yaml",
+        overrides={
+            "perception.source": "depth_camera",
+            "perception.cameras": FEW_CAMERAS,
+            "perception.robot_space": robot_space,
+            "method.cat.timing.clock": "virtual",
+        },
+    )
+    trace = run_cat(scenario)
+    m = run_metrics(trace)
+    if robot_space == "held":
+        assert m["peak_contact_force_n"] == 0.0, m
+        assert not m["reached"]  # the way out lies in space nothing has seen
+        # ... and the run says so.
+        said = [e for _, e in trace.events if "held by space no camera" in e]
+        assert said, trace.events
+        assert "panda_link6" in said[0]
+    else:
+        assert m["peak_contact_force_n"] > 50.0, m
