@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +34,7 @@ from cbp.robot import Approximation, FloatArray, IntArray, RobotModel
 from cbp.state import RobotState
 
 __all__ = [
+    "UNREAD_VISUAL_EXCESS",
     "Attachment",
     "LinkShape",
     "RobotGeometry",
@@ -43,6 +45,13 @@ __all__ = [
     "inside_convex",
     "points_inside",
 ]
+
+
+log = logging.getLogger(__name__)
+
+#: How far a link is taken to look larger than its collision shapes when its
+#: visual meshes cannot be read [m] (the self-filter's reach before version 0.4).
+UNREAD_VISUAL_EXCESS = 0.03
 
 
 class ShapePlacements(list[pin.SE3]):
@@ -185,6 +194,23 @@ def _hull_shape(path: Path, scale: FloatArray) -> tuple[coal.Convex, trimesh.Tri
     return coal.Convex(points, triangles), hull
 
 
+def _beyond_planes(points: FloatArray, planes: list[FloatArray]) -> float:
+    """How far the farthest of ``points`` lies outside the nearest of some hulls.
+
+    Per point, the distance beyond a hull's faces is its largest plane excess
+    (n . x - d); the point is counted against the hull it is least beyond. 0
+    when every point is inside a hull.
+    """
+    worst = 0.0
+    for start in range(0, len(points), 4096):
+        chunk = points[start : start + 4096]
+        least = np.full(len(chunk), np.inf)
+        for p in planes:
+            least = np.minimum(least, (chunk.dot(p[:, :3].T) - p[:, 3]).max(axis=1))
+        worst = max(worst, float(least.max()))
+    return worst
+
+
 def _segment_distances(points: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
     ab = b - a
     t = np.clip((points - a).dot(ab) / max(float(ab.dot(ab)), 1e-12), 0.0, 1.0)
@@ -310,17 +336,19 @@ class RobotGeometry:
         # the URDF's folder and the folders above it (a ROS package tree).
         urdf_folder = robot.urdf_path.resolve().parent
         folders = [robot.folder, urdf_folder, *list(urdf_folder.parents)[:3]]
+        self._package_dirs = [str(f) for f in folders if f is not None]
         try:
             geometry_model = pin.buildGeomFromUrdf(
                 model,
                 str(robot.urdf_path),
                 pin.GeometryType.COLLISION,
-                package_dirs=[str(f) for f in folders if f is not None],
+                package_dirs=self._package_dirs,
             )
         except (RuntimeError, ValueError) as exc:
             raise ConfigError(
                 f"cannot read the collision geometry of {robot.urdf_path}: {exc}"
             ) from None
+        self._attached = len(attachments)
         ignored_links = set(settings.ignore_links) if settings else set()
         links = {f.name for f in model.frames}
         for link in ignored_links - links:
@@ -401,6 +429,71 @@ class RobotGeometry:
                 upper=in_frame.max(axis=0),
             )
         )
+
+    @functools.cached_property
+    def visual_excess(self) -> FloatArray:
+        """How far each shape's link looks larger than its shapes [m], (n,).
+
+        A camera sees a link's visual geometry (the URDF's ``<visual>``
+        elements), and that may reach past its collision shapes: this is the
+        largest distance of a visual vertex beyond the face planes of the link's
+        shapes (of the nearest one, where a link has several), 0 where the visual
+        geometry lies inside. The depth images' self-filter grows each shape by
+        it, so the robot's own readings are recognised however coarse its
+        collision geometry is. Measured once, when first asked for. When the
+        visual geometry cannot be read, every link gets
+        :data:`UNREAD_VISUAL_EXCESS` (logged); attachments get 0 (nothing draws
+        them but what they stand for).
+        """
+        robot = self.robot
+        own = self.shapes[: len(self.shapes) - self._attached]
+        excess = np.zeros(len(self.shapes))
+        try:
+            visual = pin.buildGeomFromUrdf(
+                robot.model,
+                str(robot.urdf_path),
+                pin.GeometryType.VISUAL,
+                package_dirs=self._package_dirs,
+            )
+        except (RuntimeError, ValueError) as exc:
+            reason = next(
+                (line for line in str(exc).splitlines() if "load resource" in line),
+                str(exc).splitlines()[0] if str(exc) else type(exc).__name__,
+            )
+            log.warning(
+                "cannot read the visual geometry of %s (%s): the depth images' "
+                "self-filter takes every link to look %.0f mm larger than its "
+                "collision shapes",
+                robot.urdf_path,
+                reason.strip(),
+                1000 * UNREAD_VISUAL_EXCESS,
+            )
+            excess[: len(own)] = UNREAD_VISUAL_EXCESS
+            return excess
+        model = robot.model
+        unfiltered = set()
+        for obj in visual.geometryObjects:
+            link = model.frames[obj.parentFrame].name
+            on_link = [s for s, shape in enumerate(own) if shape.link == link]
+            if not on_link:
+                unfiltered.add(link)
+                continue
+            if isinstance(obj.geometry, coal.BVHModelBase):  # a mesh, scaled
+                vertices = np.asarray(obj.geometry.vertices(), dtype=float)
+            else:
+                vertices = np.asarray(_primitive_mesh(obj.geometry).vertices)
+            frame = model.frames[obj.parentFrame]
+            placement = frame.placement.inverse() * obj.placement
+            in_frame = vertices.dot(placement.rotation.T) + placement.translation
+            beyond = _beyond_planes(in_frame, [own[s].planes for s in on_link])
+            excess[on_link] = np.maximum(excess[on_link], beyond)
+        if unfiltered:
+            log.warning(
+                "links with visual geometry but no collision shape: %s; depth "
+                "readings of them are not taken for the robot",
+                ", ".join(sorted(unfiltered)),
+            )
+        return excess
 
     def _self_pairs(self, ignore: list[tuple[str, str]]) -> list[tuple[int, int]]:
         model = self.robot.model
@@ -514,7 +607,7 @@ class RobotGeometry:
             shapes.plane_start,
             shapes.centres,
             shapes.radii,
-            self.padding + margin,
+            np.full(len(self.shapes), self.padding + margin),
             inside,
         )
         return inside
@@ -574,14 +667,14 @@ def points_inside(
     plane_start: IntArray,
     centres: FloatArray,
     radii: FloatArray,
-    grow: float,
+    grow: FloatArray,
     out: np.ndarray,
 ) -> int:
-    """Flag the points (n, 3) inside some shape grown by ``grow``; return the count.
+    """Flag the points (n, 3) inside some shape s grown by ``grow[s]``; count them.
 
-    The shapes as :class:`WorldShapes` gives them; a point within ``grow`` of every
-    face plane counts as inside (exact on faces, a little generous at edges and
-    corners).
+    The shapes as :class:`WorldShapes` gives them; a point within ``grow[s]`` of
+    every face plane of shape s counts as inside (exact on faces, a little
+    generous at edges and corners).
     """
     count = 0
     for n in range(points.shape[0]):
@@ -589,10 +682,12 @@ def points_inside(
         out[n] = False
         for s in range(radii.size):
             dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
-            reach = radii[s] + grow
+            reach = radii[s] + grow[s]
             if dx * dx + dy * dy + dz * dz > reach * reach:
                 continue
-            if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grow):
+            if inside_convex(
+                x, y, z, planes, plane_start[s], plane_start[s + 1], grow[s]
+            ):
                 out[n] = True
                 count += 1
                 break

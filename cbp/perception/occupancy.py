@@ -55,6 +55,10 @@ from cbp.state import RobotState
 
 __all__ = ["FrameSummary", "OccupancyGrid"]
 
+#: With ``robot_space: nearby``, how far beyond the padded shapes the robot's
+#: presence frees unseen space (and one cell more) [m].
+NEARBY_MARGIN = 0.02
+
 
 @dataclass(frozen=True)
 class FrameSummary:
@@ -108,6 +112,12 @@ class OccupancyGrid:
         self.robot_points_removed = 0
         self.last: FrameSummary | None = None
         self._started = False  # the robot's first space has been freed
+        # The self-filter's reach around each robot shape [m].
+        self._robot_reach = (
+            np.ascontiguousarray(geometry.visual_excess + spec.robot_margin)
+            if geometry is not None
+            else np.zeros(0)
+        )
         brick = BRICK
         dims = -(-np.array(self.shape) // brick)
         while np.prod(dims) > MAX_BRICKS:
@@ -174,7 +184,7 @@ class OccupancyGrid:
                 shapes.plane_start,
                 shapes.centres,
                 shapes.radii,
-                self.geometry.padding + self.spec.robot_margin,
+                self._robot_reach,
                 robot,
             )
         removed = int(robot.sum())
@@ -207,13 +217,13 @@ class OccupancyGrid:
         space it has not been in.
 
         With ``robot_space: nearby`` every call frees the padded shapes plus
-        ``robot_margin`` plus one cell (the space the self-filter takes for the
-        robot): unsafe, see :attr:`PerceptionSpec.robot_space`.
+        2 cm plus one cell (the space the self-filter took for the robot before
+        version 0.4): unsafe, see :attr:`PerceptionSpec.robot_space`.
         """
         if self.geometry is None:
             return 0
         if self.spec.robot_space == "nearby":
-            grow = self.geometry.padding + self.spec.robot_margin + self.cell
+            grow = self.geometry.padding + NEARBY_MARGIN + self.cell
         elif not self._started:
             grow = self.geometry.padding + 2.0 * self.cell
         else:

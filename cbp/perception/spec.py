@@ -131,15 +131,24 @@ class PerceptionSpec:
     """Depth readings farther than this are ignored [m]."""
     misses_to_clear: int = 2
     """Frames that must see through a cell before it is cleared."""
-    robot_margin: float = 0.02
-    """Points within the robot's padded shapes plus this margin are filtered [m]."""
+    robot_margin: float = 0.005
+    """Depth readings within this distance of the robot's shapes are taken for
+    the robot and dropped [m]. Measured from the shapes themselves (not the
+    padded ones), each grown by how far its link's visual geometry reaches past
+    it (:attr:`~cbp.collision.geometry.RobotGeometry.visual_excess`): the margin
+    covers depth noise and the error between the robot's modelled and actual
+    pose. Every reading farther out is mapped, even inside the padding, so an
+    obstacle that comes at the arm stays in view until it is this close (a
+    reading the filter drops leaves its cell as it was). Before version 0.4 it
+    was 0.02 beyond the padded shapes: an obstacle pushed into the arm vanished
+    3 cm before it touched."""
     robot_space: Literal["held", "nearby"] = "held"
     """Which unseen space the robot's presence frees. ``held`` (the default): at
     the first frame its padded shapes and two cells more (a run starts clear of
     obstacles, as the loader checks for declared ones), after that only the
     cells its padded shapes hold, so it never frees space it has not been in.
     ``nearby`` (before version 0.4): on every frame the padded shapes plus
-    ``robot_margin`` plus one cell. That lets the arm move beside space no
+    2 cm plus one cell. That lets the arm move beside space no
     camera sees (its own shadow) and is unsafe: each frame frees centimetres
     beyond where the arm may stand, so it can walk into an obstacle nothing has
     seen."""

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from cbp.collision import (
+    CollisionSettings,
     CollisionWorld,
     EnvironmentObject,
     PrimitiveEnvironment,
@@ -113,3 +114,60 @@ def test_a_removed_box_clears_within_the_stated_frames(scene, robots) -> None:
         assert world.environment_version == mapper.updates == 2 + SPEC.misses_to_clear
     finally:
         mapper.close()
+
+
+def test_an_obstacle_inside_the_padding_is_mapped_and_the_arm_is_not(robots) -> None:
+    """The self-filter drops readings within robot_margin of the arm's shapes only.
+
+    A wall stands 7 mm beside the hand: inside the 1 cm padding, beyond the 5 mm
+    margin. Before version 0.4 the filter dropped every reading within the
+    padding plus 2 cm, so the wall's face beside the hand was never mapped (an
+    obstacle pushed into the arm vanished before it touched).
+    """
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    state = RobotState(robot, robot.home())
+    hand = state.data.oMf[robot.frame_id("panda_hand")].translation
+    unpadded = CollisionWorld(
+        RobotGeometry(robot, padding=0.0),
+        settings=CollisionSettings(
+            activation_distance=1.0, self_collision=False, padding=0.0
+        ),
+    )
+
+    def wall_at(y: float) -> ObjectSpec:
+        return ObjectSpec(
+            name="wall",
+            shape="box",
+            size=(0.3, 0.02, 0.3),
+            pose=Pose(position=(float(hand[0]), y, float(hand[2]))),
+        )
+
+    def clearance(y: float) -> float:  # from the unpadded arm to the wall at y
+        unpadded.set_environment(_objects([wall_at(y)]))
+        return float(unpadded.check(state.q).contacts.distance.min())
+
+    gap = 0.007
+    low, high = float(hand[1]), float(hand[1]) + 0.3  # touching at low, far at high
+    for _ in range(40):
+        mid = 0.5 * (low + high)
+        low, high = (low, mid) if clearance(mid) > gap else (mid, high)
+    wall = wall_at(high)
+    assert clearance(high) == pytest.approx(gap, abs=1e-4)
+    camera = CameraSpec(  # looks along the wall's face toward the hand
+        position=(hand[0] + 0.5, hand[1] - 0.35, hand[2] + 0.25),
+        target=(hand[0], high, hand[2]),
+        far=3.0,
+    )
+    with PybulletScene(robot, [wall]) as scene:
+        scene.set_configuration(robot.home())
+        frame = DepthCamera(scene.client, camera).capture()
+    grid = OccupancyGrid(SPEC, geometry)
+    summary = grid.integrate(frame, state)
+    centres = grid.centres()
+    assert summary.robot_points > 1000
+    on_wall = _objects([wall]).clearance(centres) <= grid.cell
+    assert on_wall.all()  # nothing of the arm is mapped
+    # Cells of the wall's face inside the padding (12 here; none before 0.4).
+    in_padding = geometry.contains(state, centres)
+    assert np.count_nonzero(in_padding) >= 5

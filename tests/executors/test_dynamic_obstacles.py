@@ -119,6 +119,31 @@ def test_a_box_pushed_into_the_standing_hand_makes_the_arm_yield() -> None:
     assert m["peak_contact_force_n"] < 0.15 * holding["peak_contact_force_n"], m
 
 
+@pytest.mark.slow
+def test_a_box_pushed_into_the_arm_stays_in_view_until_it_touches() -> None:
+    """With the cameras the arm yields as it does from the declared box.
+
+    The box's face comes within the arm's padding; the self-filter keeps its
+    readings (they are farther than robot_margin from the arm's shapes), so the
+    map holds the box where it is. Before version 0.4 the filter dropped
+    everything within 3 cm of the arm and the box pressed the forearm with
+    233 N here (declared box: 22 N). Virtual clock: the frames as in the
+    declared run's time.
+    """
+    path = SCENARIOS / "cat_pushed_obstacle.yaml"
+    virtual = {"method.cat.timing.clock": "virtual"}
+    declared = run_metrics(run_cat(load_scenario(path, overrides=virtual)))
+    seen = run_metrics(
+        run_cat(
+            load_scenario(
+                path, overrides=virtual | {"perception.source": "depth_camera"}
+            )
+        )
+    )
+    limit = 1.5 * declared["peak_contact_force_n"] + 5.0
+    assert seen["peak_contact_force_n"] <= limit, (seen, declared)
+
+
 def run_with(method: str, path: Path):
     """Run ``path`` with another executor through the executor registry."""
     from cbp.executors import EXECUTORS
