@@ -86,6 +86,20 @@ class DepthFrame:
             nearest = self._buffer_at(self.min_range)
             return np.isfinite(z) & (z >= nearest) & (z <= _FAR_BUFFER)
 
+    @property
+    def buffer_limits(self) -> tuple[float, float, float]:
+        """Depth buffer values: the minimum range, the far plane, the largest valid.
+
+        A pixel holds a reading when its value is finite and between the first
+        and the last; from the second up it sees nothing up to the far plane.
+        """
+        return self._buffer_at(self.min_range), _FAR_PLANE, _FAR_BUFFER
+
+    @property
+    def unprojection(self) -> FloatArray:
+        """From normalised device coordinates to the world: inv(projection view)."""
+        return np.asarray(np.linalg.inv(self.projection.dot(self.view)))
+
     def _buffer_at(self, distance: float) -> float:
         """The depth buffer's value at ``distance`` along the axis (0 at near)."""
         n, f = self.near, self.far

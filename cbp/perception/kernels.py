@@ -22,6 +22,8 @@ __all__ = [
     "OCCUPIED",
     "UNKNOWN",
     "carve_shapes",
+    "eroded_ranges",
+    "insert_readings",
     "mark_seen",
     "shell_update",
 ]
@@ -333,3 +335,130 @@ def shell_update(
                 b += 1
                 start[b] = count
     return centres[:count].copy(), start
+
+
+@numba.njit(cache=True, nogil=True)
+def eroded_ranges(
+    depth: FloatArray,
+    near: float,
+    far: float,
+    nearest: float,
+    far_plane: float,
+    far_buffer: float,
+) -> FloatArray:
+    """Each pixel's range along the axis, the least over its 3 x 3 neighbours [m].
+
+    What :meth:`~cbp.perception.camera.DepthFrame.ranges` gives, with a pixel
+    holding no reading at -inf (it says nothing) and background at ``far``
+    (seen to the far plane), eroded over 3 x 3 pixels (edges repeat the border
+    pixel): a cell at a depth edge or on a grazing surface spans several pixels
+    and is seen through only in front of all of them. ``nearest``,
+    ``far_plane`` and ``far_buffer`` are depth buffer values: the minimum
+    range, where the far plane starts, and the largest valid value.
+    """
+    h, w = depth.shape
+    metric = np.empty((h, w))
+    for r in range(h):
+        for c in range(w):
+            z = depth[r, c]
+            if not (np.isfinite(z) and z >= nearest and z <= far_buffer):
+                metric[r, c] = -np.inf
+            elif z >= far_plane:
+                metric[r, c] = far
+            else:
+                metric[r, c] = far * near / (far - (far - near) * z)
+    out = np.empty((h, w))
+    for r in range(h):
+        for c in range(w):
+            least = np.inf
+            for rr in range(max(r - 1, 0), min(r + 2, h)):
+                for cc in range(max(c - 1, 0), min(c + 2, w)):
+                    least = min(least, metric[rr, cc])
+            out[r, c] = least
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def insert_readings(
+    depth: FloatArray,
+    unproject: FloatArray,
+    nearest: float,
+    far_plane: float,
+    far_buffer: float,
+    camera: FloatArray,
+    max_range: float,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    reach: FloatArray,
+    grid: np.ndarray,
+    misses: np.ndarray,
+    lower: FloatArray,
+    cell: float,
+    dirty: np.ndarray,
+    brick: int,
+) -> tuple[int, int, int]:
+    """Mark the cells depth readings fall in occupied; count valid, robot, inserted.
+
+    Each pixel that holds a reading nearer than the far plane is unprojected
+    (``unproject``: the inverse of projection times view, as
+    :meth:`~cbp.perception.camera.DepthFrame.points` does), dropped when
+    farther than ``max_range`` from ``camera`` or within ``reach[s]`` of a
+    robot shape s (the shapes as :class:`~cbp.collision.geometry.WorldShapes`
+    gives them; no shapes: no robot), and its cell made occupied with no
+    misses. One pass, one call: the map thread takes the GIL once per frame
+    for it, not once per array operation. ``dirty`` and ``brick`` as in
+    :func:`mark_seen`.
+
+    Returns (pixels holding a reading, readings taken for the robot, readings
+    inserted).
+    """
+    h, w = depth.shape
+    nx, ny, nz = grid.shape
+    valid = 0
+    robot = 0
+    inserted = 0
+    for r in range(h):
+        y = 2.0 * (h - 1 - r) / h - 1.0
+        for c in range(w):
+            z = depth[r, c]
+            if not (np.isfinite(z) and z >= nearest and z <= far_buffer):
+                continue
+            valid += 1
+            if z >= far_plane:
+                continue
+            x = 2.0 * c / w - 1.0
+            zn = 2.0 * z - 1.0
+            u = unproject
+            ww = u[3, 0] * x + u[3, 1] * y + u[3, 2] * zn + u[3, 3]
+            px = (u[0, 0] * x + u[0, 1] * y + u[0, 2] * zn + u[0, 3]) / ww
+            py = (u[1, 0] * x + u[1, 1] * y + u[1, 2] * zn + u[1, 3]) / ww
+            pz = (u[2, 0] * x + u[2, 1] * y + u[2, 2] * zn + u[2, 3]) / ww
+            dx, dy, dz = px - camera[0], py - camera[1], pz - camera[2]
+            if dx * dx + dy * dy + dz * dz > max_range * max_range:
+                continue
+            on_robot = False
+            for s in range(radii.size):
+                ex, ey, ez = px - centres[s, 0], py - centres[s, 1], pz - centres[s, 2]
+                around = radii[s] + reach[s]
+                if ex * ex + ey * ey + ez * ez > around * around:
+                    continue
+                first, last = plane_start[s], plane_start[s + 1]
+                if inside_convex(px, py, pz, planes, first, last, reach[s]):
+                    on_robot = True
+                    break
+            if on_robot:
+                robot += 1
+                continue
+            i = math.floor((px - lower[0]) / cell)
+            j = math.floor((py - lower[1]) / cell)
+            k = math.floor((pz - lower[2]) / cell)
+            if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
+                continue
+            inserted += 1
+            misses[i, j, k] = 0
+            if grid[i, j, k] != OCCUPIED:
+                grid[i, j, k] = OCCUPIED
+                dirty[i // brick, j // brick, k // brick] = True
+    return valid, robot, inserted

@@ -31,10 +31,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import minimum_filter
 
 from cbp.collision.cell_index import BRICK, MAX_BRICKS, CellIndex
-from cbp.collision.geometry import RobotGeometry, points_inside
+from cbp.collision.geometry import RobotGeometry
 from cbp.collision.map_environment import (
     BlockedGrid,
     MetaballRefiner,
@@ -46,6 +45,8 @@ from cbp.perception.kernels import (
     OCCUPIED,
     UNKNOWN,
     carve_shapes,
+    eroded_ranges,
+    insert_readings,
     mark_seen,
     shell_update,
 )
@@ -58,6 +59,8 @@ __all__ = ["FrameSummary", "OccupancyGrid"]
 #: With ``robot_space: nearby``, how far beyond the padded shapes the robot's
 #: presence frees unseen space (and one cell more) [m].
 NEARBY_MARGIN = 0.02
+
+_NONE = np.zeros(0)  # no robot shapes
 
 
 @dataclass(frozen=True)
@@ -167,37 +170,39 @@ class OccupancyGrid:
                 it holds (None: no robot).
         """
         carved = self.carve_robot(state) if state is not None else 0
-        points, hit = frame.points()
-        valid = frame.valid()
-        camera = frame.position
-        rows, cols = np.nonzero(hit)
-        pts = np.ascontiguousarray(points[rows, cols])
-        near = np.einsum("ij,ij->i", pts - camera, pts - camera) <= (
-            self.spec.max_range**2
-        )
-        robot = np.zeros(len(pts), dtype=np.bool_)
-        if state is not None and self.geometry is not None and len(pts):
-            shapes = self.geometry.world_shapes(state)
-            points_inside(
-                pts,
-                shapes.planes,
-                shapes.plane_start,
-                shapes.centres,
-                shapes.radii,
-                self._robot_reach,
-                robot,
-            )
-        removed = int(robot.sum())
-        self.robot_points_removed += removed
         seen = self._see_through(frame)
-        keep = pts[near & ~robot]
-        self._insert(keep)
+        if state is not None and self.geometry is not None:
+            shapes = self.geometry.world_shapes(state)
+            robot = (shapes.planes, shapes.plane_start, shapes.centres, shapes.radii)
+            reach = self._robot_reach
+        else:
+            robot = (np.zeros((0, 4)), np.zeros(1, np.int64), np.zeros((0, 3)), _NONE)
+            reach = _NONE
+        nearest, far_plane, far_buffer = frame.buffer_limits
+        valid, removed, inserted = insert_readings(
+            np.ascontiguousarray(frame.depth, dtype=float),
+            frame.unprojection,
+            nearest,
+            far_plane,
+            far_buffer,
+            np.ascontiguousarray(frame.position),
+            self.spec.max_range,
+            *robot,
+            reach,
+            self.cells,
+            self.misses,
+            self.lower,
+            self.cell,
+            self._dirty,
+            self._brick,
+        )
+        self.robot_points_removed += removed
         self.frames += 1
         self.last = FrameSummary(
             camera=frame.camera,
-            valid_fraction=float(valid.mean()) if valid.size else 0.0,
+            valid_fraction=valid / frame.depth.size if frame.depth.size else 0.0,
             robot_points=removed,
-            inserted=len(keep),
+            inserted=inserted,
             seen=seen,
             carved=carved,
         )
@@ -260,8 +265,15 @@ class OccupancyGrid:
         # grazing surface spans several pixels, and is free only in front of all
         # of them. NaN (no reading) says nothing: it becomes -inf; background
         # sees to the far plane.
-        ranges = np.nan_to_num(frame.ranges(), nan=-np.inf, posinf=frame.far)
-        ranges = minimum_filter(ranges, size=3, mode="nearest")
+        nearest, far_plane, far_buffer = frame.buffer_limits
+        ranges = eroded_ranges(
+            np.ascontiguousarray(frame.depth, dtype=float),
+            frame.near,
+            frame.far,
+            nearest,
+            far_plane,
+            far_buffer,
+        )
         box = self._frustum_box(frame)
         if box is None:
             return 0
@@ -277,7 +289,7 @@ class OccupancyGrid:
                 clip,
                 np.ascontiguousarray(frame.view[2]),
                 np.ascontiguousarray(frame.position),
-                np.ascontiguousarray(ranges),
+                ranges,
                 frame.closest,
                 self.spec.max_range,
                 self.spec.misses_to_clear,
@@ -305,16 +317,6 @@ class OccupancyGrid:
         if np.any(hi <= lo):
             return None
         return np.array([lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]], dtype=np.int64)
-
-    def _insert(self, points: FloatArray) -> None:
-        idx = np.floor((points - self.lower) / self.cell).astype(np.intp)
-        inside = np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
-        i, j, k = idx[inside].T
-        new = self.cells[i, j, k] != OCCUPIED
-        self.cells[i, j, k] = OCCUPIED
-        self.misses[i, j, k] = 0
-        b = self._brick
-        self._dirty[i[new] // b, j[new] // b, k[new] // b] = True
 
     # ------------------------------------------------------------------ snapshot
 

@@ -13,6 +13,7 @@ from cbp.collision import (
     RobotGeometry,
 )
 from cbp.perception.camera import DepthCamera
+from cbp.perception.kernels import OCCUPIED
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, PerceptionSpec
@@ -171,3 +172,42 @@ def test_an_obstacle_inside_the_padding_is_mapped_and_the_arm_is_not(robots) -> 
     # Cells of the wall's face inside the padding (12 here; none before 0.4).
     in_padding = geometry.contains(state, centres)
     assert np.count_nonzero(in_padding) >= 5
+
+
+def test_the_compiled_frame_pass_matches_the_frame_s_own_points(scene, robots) -> None:
+    """One compiled pass per frame reads the depth as DepthFrame's numpy code does."""
+    from scipy.ndimage import minimum_filter
+
+    from cbp.perception.kernels import eroded_ranges
+
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    state = RobotState(robot, robot.home())
+    frame = DepthCamera(scene.client, CAMERA).capture()
+    grid = OccupancyGrid(SPEC, geometry)
+    summary = grid.integrate(frame, state)
+    # The readings: the numpy points, less the robot's and those out of range.
+    points, hit = frame.points()
+    pts = points[hit]
+    robot_points = geometry.contains(state, pts, SPEC.robot_margin - geometry.padding)
+    kept = pts[~robot_points]
+    idx = np.floor((kept - grid.lower) / grid.cell).astype(int)
+    inside = np.all((idx >= 0) & (idx < np.array(grid.shape)), axis=1)
+    expected = np.zeros(grid.shape, dtype=bool)
+    expected[tuple(idx[inside].T)] = True
+    np.testing.assert_array_equal(grid.cells == OCCUPIED, expected)
+    assert summary.robot_points == np.count_nonzero(robot_points)
+    assert summary.inserted == np.count_nonzero(inside)
+    assert summary.valid_fraction == pytest.approx(frame.valid().mean())
+    # The see-through ranges: NaN says nothing, background is the far plane,
+    # eroded over 3 x 3 pixels.
+    reference = minimum_filter(
+        np.nan_to_num(frame.ranges(), nan=-np.inf, posinf=frame.far),
+        size=3,
+        mode="nearest",
+    )
+    nearest, far_plane, far_buffer = frame.buffer_limits
+    ranges = eroded_ranges(
+        frame.depth, frame.near, frame.far, nearest, far_plane, far_buffer
+    )
+    np.testing.assert_allclose(ranges, reference, rtol=1e-12)
