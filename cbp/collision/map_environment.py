@@ -100,7 +100,12 @@ class OccupancyEnvironment(Environment):
     hull's face planes is its signed distance to the hull where the nearest
     feature is a face (exact there, and a lower bound near edges and corners, so
     never an overestimate); capsules are measured exactly, against their axis.
-    Cells are cubes: the distance to a cell is its centre's less half a cell. The
+    Cells are cubes: the distance to a cell is its centre's less half a cell
+    (the cube's inscribed sphere: up to 0.37 of a cell more than the distance to
+    its farthest-reaching corner, where a face is tilted to the grid). The
+    collision world inflates map obstacles by another half cell
+    (:attr:`resolution`), which covers that: the distance the constraints see
+    is never more than the distance to any point of the cube. The
     closest cell per face (or direction) is a candidate; a few representative
     contacts per shape are kept, and their normals refined.
 
