@@ -570,19 +570,39 @@ class RobotGeometry:
         return centres.reshape(-1, 3), self.radii
 
     def world_shapes(self, state: RobotState) -> WorldShapes:
-        """Every shape's half-spaces and bounding sphere in the world at ``state``."""
+        """Every shape's half-spaces and bounding sphere in the world at ``state``.
+
+        One compiled pass over the stacked planes (the map thread calls this per
+        depth frame: one release of the GIL, not one per shape).
+        """
         oMf = state.data.oMf
-        planes = []
-        for s in self.shapes:
-            M = oMf[s.frame_id]
-            planes.append(_transform_planes(s.planes, M))
-        centres, radii = self.world_spheres(state)
-        return WorldShapes(
-            np.ascontiguousarray(np.vstack(planes)).reshape(-1, 4),
-            self._plane_start,
-            np.ascontiguousarray(centres),
-            np.ascontiguousarray(radii, dtype=float),
+        frames = np.array([oMf[i].homogeneous for i in self._frame_ids]).reshape(
+            -1, 4, 4
         )
+        planes = np.empty_like(self._local_planes)
+        centres = np.empty((len(self.shapes), 3))
+        _place_shapes(
+            self._local_planes,
+            self._plane_start,
+            self._local_centres,
+            frames,
+            planes,
+            centres,
+        )
+        return WorldShapes(planes, self._plane_start, centres, self.radii, frames)
+
+    @functools.cached_property
+    def _frame_ids(self) -> list[int]:
+        return [s.frame_id for s in self.shapes]
+
+    @functools.cached_property
+    def _local_planes(self) -> FloatArray:
+        planes = [s.planes for s in self.shapes]
+        return np.ascontiguousarray(np.vstack(planes)).reshape(-1, 4)
+
+    @functools.cached_property
+    def _local_centres(self) -> FloatArray:
+        return np.array([s.centre for s in self.shapes], dtype=float).reshape(-1, 3)
 
     @functools.cached_property
     def _plane_start(self) -> IntArray:
@@ -635,12 +655,48 @@ class WorldShapes:
             ``plane_start[s + 1]``, (shapes + 1,).
         centres: bounding-sphere centres (shapes, 3) [m].
         radii: bounding-sphere radii (shapes,) [m].
+        frames: the frames that carry the shapes, as homogeneous matrices
+            (shapes, 4, 4).
     """
 
     planes: FloatArray
     plane_start: IntArray
     centres: FloatArray
     radii: FloatArray
+    frames: FloatArray
+
+
+@numba.njit(cache=True, nogil=True)
+def _place_shapes(
+    local_planes: FloatArray,
+    plane_start: IntArray,
+    local_centres: FloatArray,
+    frames: FloatArray,
+    planes: FloatArray,
+    centres: FloatArray,
+) -> None:
+    """Write each shape's planes and sphere centre placed by its frame (S, 4, 4)."""
+    for s in range(frames.shape[0]):
+        R = frames[s, :3, :3]
+        t = frames[s, :3, 3]
+        for p in range(plane_start[s], plane_start[s + 1]):
+            d = local_planes[p, 3]
+            for a in range(3):
+                n = (
+                    R[a, 0] * local_planes[p, 0]
+                    + R[a, 1] * local_planes[p, 1]
+                    + R[a, 2] * local_planes[p, 2]
+                )
+                planes[p, a] = n
+                d += n * t[a]
+            planes[p, 3] = d
+        for a in range(3):
+            centres[s, a] = (
+                R[a, 0] * local_centres[s, 0]
+                + R[a, 1] * local_centres[s, 1]
+                + R[a, 2] * local_centres[s, 2]
+                + t[a]
+            )
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cbp.collision.cell_index import BRICK, MAX_BRICKS, CellIndex
-from cbp.collision.geometry import RobotGeometry
+from cbp.collision.geometry import RobotGeometry, WorldShapes
 from cbp.collision.map_environment import (
     BlockedGrid,
     MetaballRefiner,
@@ -116,6 +116,11 @@ class OccupancyGrid:
         self.last: FrameSummary | None = None
         self._started = False  # the robot's first space has been freed
         # The self-filter's reach around each robot shape [m].
+        if geometry is not None:  # the shapes' boxes in their frames
+            lower = np.array([s.lower for s in geometry.shapes]).reshape(-1, 3)
+            upper = np.array([s.upper for s in geometry.shapes]).reshape(-1, 3)
+            self._box_centres = 0.5 * (lower + upper)
+            self._box_halves = 0.5 * (upper - lower)
         self._robot_reach = (
             np.ascontiguousarray(geometry.visual_excess + spec.robot_margin)
             if geometry is not None
@@ -169,13 +174,15 @@ class OccupancyGrid:
             state: the robot at capture time, for the self-filter and the space
                 it holds (None: no robot).
         """
-        carved = self.carve_robot(state) if state is not None else 0
-        seen = self._see_through(frame)
         if state is not None and self.geometry is not None:
             shapes = self.geometry.world_shapes(state)
+            carved = self.carve_robot(state, shapes)
+        seen = self._see_through(frame)
+        if state is not None and self.geometry is not None:
             robot = (shapes.planes, shapes.plane_start, shapes.centres, shapes.radii)
             reach = self._robot_reach
         else:
+            carved = 0
             robot = (np.zeros((0, 4)), np.zeros(1, np.int64), np.zeros((0, 3)), _NONE)
             reach = _NONE
         nearest, far_plane, far_buffer = frame.buffer_limits
@@ -208,8 +215,10 @@ class OccupancyGrid:
         )
         return self.last
 
-    def carve_robot(self, state: RobotState) -> int:
+    def carve_robot(self, state: RobotState, shapes: WorldShapes | None = None) -> int:
         """Mark the unknown cells the robot holds free; return how many.
+
+        ``shapes``: the robot's shapes placed at ``state``, when already at hand.
 
         With ``robot_space: held`` (the default), the first call frees the
         cells within the padded shapes and two cells more: a run starts clear
@@ -234,15 +243,13 @@ class OccupancyGrid:
         else:
             grow = self.geometry.padding
         self._started = True
-        shapes = self.geometry.world_shapes(state)
-        boxes = np.empty((len(self.geometry.shapes), 6))
-        oMf = state.data.oMf
-        for s, shape in enumerate(self.geometry.shapes):
-            M = oMf[shape.frame_id]
-            centre = M.act(0.5 * (shape.lower + shape.upper))
-            half = np.abs(M.rotation).dot(0.5 * (shape.upper - shape.lower)) + grow
-            boxes[s, :3] = centre - half
-            boxes[s, 3:] = centre + half
+        if shapes is None:
+            shapes = self.geometry.world_shapes(state)
+        # Each grown shape's world box: its frame's box around the hull, rotated.
+        R, t = shapes.frames[:, :3, :3], shapes.frames[:, :3, 3]
+        centre = np.einsum("sij,sj->si", R, self._box_centres) + t
+        half = np.einsum("sij,sj->si", np.abs(R), self._box_halves) + grow
+        boxes = np.hstack([centre - half, centre + half])
         return int(
             carve_shapes(
                 self.cells,
