@@ -148,6 +148,9 @@ def describe_urdf(
             f"self-collision: {len(pairs)} link pairs never (or always) collide in "
             f"{samples} random configurations (seed {seed}) and are skipped"
         )
+    visual = _visual_note(urdf, robot.name)
+    if visual:
+        notes.append(visual)
     return RobotSetup(document, notes)
 
 
@@ -213,6 +216,26 @@ def _last_link(model: pin.Model) -> str:
         if f.parentJoint == deepest and f.type == pin.FrameType.BODY
     ]
     return str(bodies[-1])
+
+
+def _visual_note(urdf: Path, name: str) -> str | None:
+    """How far the links look larger than their collision shapes, for depth cameras."""
+    from cbp.collision.geometry import RobotGeometry
+
+    try:
+        geometry = RobotGeometry(RobotModel.from_urdf(urdf, name=name))
+    except ConfigError:
+        return None  # said where the geometry is loaded for a run
+    if not geometry.shapes:
+        return None
+    excess = geometry.visual_excess
+    worst = int(np.argmax(excess))
+    return (
+        "depth cameras: the visual meshes reach up to "
+        f"{1000 * excess[worst]:.1f} mm past the collision shapes "
+        f"({geometry.shapes[worst].link}); the self-filter grows each link by "
+        "its own, so readings of the arm are not taken for obstacles"
+    )
 
 
 def _ignorable_pairs(

@@ -225,6 +225,9 @@ def test_cbp_robot_init_writes_a_robot_folder_scenarios_can_use(tmp_path) -> Non
     )
     assert done.returncode == 0, done.stderr
     assert "end effector: link6" in done.stdout
+    assert "the visual meshes reach up to 2.0 mm past the collision shapes (link3)" in (
+        done.stdout
+    )
     text = (tmp_path / "arm" / "robot.yaml").read_text()
     assert "acceleration limits: 10.0 for every joint" in text  # said, in the file
     path = tmp_path / "s.yaml"
