@@ -42,6 +42,7 @@ __all__ = [
     "WorldShapes",
     "find_ignorable_pairs",
     "fit_capsule",
+    "inside_any",
     "inside_convex",
     "points_inside",
 ]
@@ -716,6 +717,32 @@ def inside_convex(
     return True
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def inside_any(
+    x: float,
+    y: float,
+    z: float,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    grow: FloatArray,
+) -> bool:
+    """Whether (x, y, z) is inside some shape s grown by ``grow[s]``.
+
+    The shapes as :class:`WorldShapes` gives them: each bounding sphere first,
+    then the planes of the shapes whose grown sphere holds the point.
+    """
+    for s in range(radii.size):
+        dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
+        reach = radii[s] + grow[s]
+        if dx * dx + dy * dy + dz * dz > reach * reach:
+            continue
+        if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grow[s]):
+            return True
+    return False
+
+
 @numba.njit(cache=True, nogil=True)
 def points_inside(
     points: FloatArray,
@@ -734,19 +761,18 @@ def points_inside(
     """
     count = 0
     for n in range(points.shape[0]):
-        x, y, z = points[n, 0], points[n, 1], points[n, 2]
-        out[n] = False
-        for s in range(radii.size):
-            dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
-            reach = radii[s] + grow[s]
-            if dx * dx + dy * dy + dz * dz > reach * reach:
-                continue
-            if inside_convex(
-                x, y, z, planes, plane_start[s], plane_start[s + 1], grow[s]
-            ):
-                out[n] = True
-                count += 1
-                break
+        out[n] = inside_any(
+            points[n, 0],
+            points[n, 1],
+            points[n, 2],
+            planes,
+            plane_start,
+            centres,
+            radii,
+            grow,
+        )
+        if out[n]:
+            count += 1
     return count
 
 

@@ -14,7 +14,7 @@ import math
 import numba
 import numpy as np
 
-from cbp.collision.geometry import inside_convex
+from cbp.collision.geometry import inside_any, inside_convex
 from cbp.robot import FloatArray, IntArray
 
 __all__ = [
@@ -438,17 +438,7 @@ def insert_readings(
             dx, dy, dz = px - camera[0], py - camera[1], pz - camera[2]
             if dx * dx + dy * dy + dz * dz > max_range * max_range:
                 continue
-            on_robot = False
-            for s in range(radii.size):
-                ex, ey, ez = px - centres[s, 0], py - centres[s, 1], pz - centres[s, 2]
-                around = radii[s] + reach[s]
-                if ex * ex + ey * ey + ez * ez > around * around:
-                    continue
-                first, last = plane_start[s], plane_start[s + 1]
-                if inside_convex(px, py, pz, planes, first, last, reach[s]):
-                    on_robot = True
-                    break
-            if on_robot:
+            if inside_any(px, py, pz, planes, plane_start, centres, radii, reach):
                 robot += 1
                 continue
             i = math.floor((px - lower[0]) / cell)
