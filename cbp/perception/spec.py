@@ -215,6 +215,12 @@ class PerceptionSpec:
             raise ConfigError(
                 f"must be >= 1, got {self.misses_to_clear}", "misses_to_clear"
             )
+        if not 0.0 <= self.robot_margin <= 0.2:
+            raise ConfigError(
+                f"must be in [0, 0.2] m, got {self.robot_margin} (below 0 the "
+                "robot's own readings would be mapped as obstacles beside it)",
+                "robot_margin",
+            )
 
     @property
     def all_cameras(self) -> list[CameraSpec]:

@@ -255,3 +255,21 @@ def test_cbp_prints_no_pybullet_banner_and_each_problem_once(tmp_path) -> None:
         "run", str(boards), "--set", "duration=0.2", "--out", str(tmp_path / "o")
     )
     assert "pybullet build time" not in done.stdout + done.stderr
+
+
+def test_a_negative_self_filter_margin_is_refused_at_its_line(tmp_path) -> None:
+    path = tmp_path / "margin.yaml"
+    path.write_text(
+        "name: m\n"
+        "robot: {name: franka_panda}\n"
+        "duration: 1.0\n"
+        "perception:\n"
+        "  source: depth_camera\n"
+        "  cameras: [{name: head, position: [0, 0, 1], target: [1, 0, 0]}]\n"
+        "  robot_margin: -0.01\n"
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert "line 7: perception.robot_margin: must be in [0, 0.2] m, got -0.01" in str(
+        info.value
+    )
