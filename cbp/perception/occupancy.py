@@ -60,7 +60,15 @@ __all__ = ["FrameSummary", "OccupancyGrid"]
 #: presence frees unseen space (and one cell more) [m].
 NEARBY_MARGIN = 0.02
 
-_NONE = np.zeros(0)  # no robot shapes
+#: The self-filter's shapes when there is no robot: planes, plane starts,
+#: sphere centres and radii, reach (as ``insert_readings`` takes them).
+_NO_ROBOT = (
+    np.zeros((0, 4)),
+    np.zeros(1, np.int64),
+    np.zeros((0, 3)),
+    np.zeros(0),
+    np.zeros(0),
+)
 
 
 @dataclass(frozen=True)
@@ -174,17 +182,19 @@ class OccupancyGrid:
             state: the robot at capture time, for the self-filter and the space
                 it holds (None: no robot).
         """
+        robot = _NO_ROBOT
+        carved = 0
         if state is not None and self.geometry is not None:
             shapes = self.geometry.world_shapes(state)
             carved = self.carve_robot(state, shapes)
+            robot = (
+                shapes.planes,
+                shapes.plane_start,
+                shapes.centres,
+                shapes.radii,
+                self._robot_reach,
+            )
         seen = self._see_through(frame)
-        if state is not None and self.geometry is not None:
-            robot = (shapes.planes, shapes.plane_start, shapes.centres, shapes.radii)
-            reach = self._robot_reach
-        else:
-            carved = 0
-            robot = (np.zeros((0, 4)), np.zeros(1, np.int64), np.zeros((0, 3)), _NONE)
-            reach = _NONE
         nearest, far_plane, far_buffer = frame.buffer_limits
         valid, removed, inserted = insert_readings(
             np.ascontiguousarray(frame.depth, dtype=float),
@@ -195,7 +205,6 @@ class OccupancyGrid:
             np.ascontiguousarray(frame.position),
             self.spec.max_range,
             *robot,
-            reach,
             self.cells,
             self.misses,
             self.lower,
