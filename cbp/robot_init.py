@@ -26,7 +26,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
@@ -37,6 +37,9 @@ from cbp.errors import ConfigError, RobotNotFoundError
 from cbp.files import MAX_YAML_BYTES, check_file
 from cbp.robot import BaseType, RobotDescription, RobotModel
 from cbp.schema import from_plain
+
+if TYPE_CHECKING:
+    from cbp.collision.geometry import RobotGeometry
 
 __all__ = [
     "DEFAULT_ACCELERATION",
@@ -141,16 +144,21 @@ def describe_urdf(
     }
     if velocity:
         document["velocity_limits"] = velocity
+    # The collision geometry, loaded once: needed for the self-collision pairs
+    # (its errors then stop here), wanted for the depth cameras' note.
+    geometry = _geometry(urdf, robot.name, required=samples > 0)
     if samples > 0:
-        pairs = _ignorable_pairs(urdf, robot.name, samples, seed)
+        from cbp.collision.geometry import find_ignorable_pairs
+
+        assert geometry is not None
+        pairs = find_ignorable_pairs(geometry, np.random.default_rng(seed), samples)
         document["collision"] = {"ignore_pairs": [list(p) for p in pairs]}
         notes.append(
             f"self-collision: {len(pairs)} link pairs never (or always) collide in "
             f"{samples} random configurations (seed {seed}) and are skipped"
         )
-    visual = _visual_note(urdf, robot.name)
-    if visual:
-        notes.append(visual)
+    if geometry is not None and geometry.shapes:
+        notes.append(_visual_note(geometry))
     return RobotSetup(document, notes)
 
 
@@ -218,16 +226,20 @@ def _last_link(model: pin.Model) -> str:
     return str(bodies[-1])
 
 
-def _visual_note(urdf: Path, name: str) -> str | None:
-    """How far the links look larger than their collision shapes, for depth cameras."""
+def _geometry(urdf: Path, name: str, required: bool) -> RobotGeometry | None:
+    """The URDF's collision geometry; None when it cannot be read and not required."""
     from cbp.collision.geometry import RobotGeometry
 
     try:
-        geometry = RobotGeometry(RobotModel.from_urdf(urdf, name=name))
+        return RobotGeometry(RobotModel.from_urdf(urdf, name=name))
     except ConfigError:
+        if required:
+            raise
         return None  # said where the geometry is loaded for a run
-    if not geometry.shapes:
-        return None
+
+
+def _visual_note(geometry: RobotGeometry) -> str:
+    """How far the links look larger than their collision shapes, for depth cameras."""
     excess = geometry.visual_excess
     worst = int(np.argmax(excess))
     return (
@@ -236,13 +248,3 @@ def _visual_note(urdf: Path, name: str) -> str | None:
         f"({geometry.shapes[worst].link}); the self-filter grows each link by "
         "its own, so readings of the arm are not taken for obstacles"
     )
-
-
-def _ignorable_pairs(
-    urdf: Path, name: str, samples: int, seed: int
-) -> list[tuple[str, str]]:
-    from cbp.collision.geometry import RobotGeometry, find_ignorable_pairs
-
-    robot = RobotModel.from_urdf(urdf, name=name)
-    geometry = RobotGeometry(robot)
-    return find_ignorable_pairs(geometry, np.random.default_rng(seed), samples)

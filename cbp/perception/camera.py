@@ -18,6 +18,7 @@ minimum range), and pixels nearer than the minimum range hold no reading.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,9 +96,12 @@ class DepthFrame:
         """
         return self._buffer_at(self.min_range), _FAR_PLANE, _FAR_BUFFER
 
-    @property
+    @functools.cached_property
     def unprojection(self) -> FloatArray:
-        """From normalised device coordinates to the world: inv(projection view)."""
+        """From normalised device coordinates to the world: inv(projection view).
+
+        Computed once per frame (the map's passes and :meth:`points` use it).
+        """
         return np.asarray(np.linalg.inv(self.projection.dot(self.view)))
 
     def _buffer_at(self, distance: float) -> float:
@@ -157,8 +161,7 @@ class DepthFrame:
         X, Y = np.meshgrid(x, y)
         Z = 2.0 * self.depth - 1.0
         ndc = np.stack([X, Y, Z, np.ones_like(Z)], axis=-1).reshape(-1, 4)
-        inv = np.linalg.inv(self.projection.dot(self.view))
-        world = ndc.dot(inv.T)
+        world = ndc.dot(self.unprojection.T)
         world = world[:, :3] / world[:, 3:4]
         with np.errstate(invalid="ignore"):
             hit = self.valid() & (self.depth < _FAR_PLANE)

@@ -337,6 +337,12 @@ def shell_update(
     return centres[:count].copy(), start
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _holds_reading(z: float, nearest: float, far_buffer: float) -> bool:
+    """A depth buffer value is a reading (as DepthFrame.valid tells)."""
+    return bool(np.isfinite(z) and z >= nearest and z <= far_buffer)
+
+
 @numba.njit(cache=True, nogil=True)
 def eroded_ranges(
     depth: FloatArray,
@@ -361,7 +367,7 @@ def eroded_ranges(
     for r in range(h):
         for c in range(w):
             z = depth[r, c]
-            if not (np.isfinite(z) and z >= nearest and z <= far_buffer):
+            if not _holds_reading(z, nearest, far_buffer):
                 metric[r, c] = -np.inf
             elif z >= far_plane:
                 metric[r, c] = far
@@ -416,6 +422,7 @@ def insert_readings(
     """
     h, w = depth.shape
     nx, ny, nz = grid.shape
+    u = unproject
     valid = 0
     robot = 0
     inserted = 0
@@ -423,14 +430,13 @@ def insert_readings(
         y = 2.0 * (h - 1 - r) / h - 1.0
         for c in range(w):
             z = depth[r, c]
-            if not (np.isfinite(z) and z >= nearest and z <= far_buffer):
+            if not _holds_reading(z, nearest, far_buffer):
                 continue
             valid += 1
             if z >= far_plane:
                 continue
             x = 2.0 * c / w - 1.0
             zn = 2.0 * z - 1.0
-            u = unproject
             ww = u[3, 0] * x + u[3, 1] * y + u[3, 2] * zn + u[3, 3]
             px = (u[0, 0] * x + u[0, 1] * y + u[0, 2] * zn + u[0, 3]) / ww
             py = (u[1, 0] * x + u[1, 1] * y + u[1, 2] * zn + u[1, 3]) / ww

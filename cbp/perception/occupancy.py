@@ -194,10 +194,12 @@ class OccupancyGrid:
                 shapes.radii,
                 self._robot_reach,
             )
-        seen = self._see_through(frame)
-        nearest, far_plane, far_buffer = frame.buffer_limits
+        depth = np.ascontiguousarray(frame.depth, dtype=float)
+        limits = frame.buffer_limits
+        seen = self._see_through(frame, depth, limits)
+        nearest, far_plane, far_buffer = limits
         valid, removed, inserted = insert_readings(
-            np.ascontiguousarray(frame.depth, dtype=float),
+            depth,
             frame.unprojection,
             nearest,
             far_plane,
@@ -275,21 +277,22 @@ class OccupancyGrid:
             )
         )
 
-    def _see_through(self, frame: DepthFrame) -> int:
-        """Free the cells in front of the readings (eroded over a cell's footprint)."""
+    def _see_through(
+        self,
+        frame: DepthFrame,
+        depth: FloatArray,
+        limits: tuple[float, float, float],
+    ) -> int:
+        """Free the cells in front of the readings (eroded over a cell's footprint).
+
+        ``depth``: the frame's depth buffer as contiguous float64; ``limits``:
+        its :attr:`~DepthFrame.buffer_limits` (both taken once per frame).
+        """
         # The nearest reading around each pixel: a cell at a depth edge or on a
         # grazing surface spans several pixels, and is free only in front of all
         # of them. NaN (no reading) says nothing: it becomes -inf; background
         # sees to the far plane.
-        nearest, far_plane, far_buffer = frame.buffer_limits
-        ranges = eroded_ranges(
-            np.ascontiguousarray(frame.depth, dtype=float),
-            frame.near,
-            frame.far,
-            nearest,
-            far_plane,
-            far_buffer,
-        )
+        ranges = eroded_ranges(depth, frame.near, frame.far, *limits)
         box = self._frustum_box(frame)
         if box is None:
             return 0
@@ -317,7 +320,7 @@ class OccupancyGrid:
     def _frustum_box(self, frame: DepthFrame) -> np.ndarray | None:
         """Index range of the grid cells within the frustum's bounding box."""
         reach = min(self.spec.max_range, frame.far / _min_axis_cos(frame))
-        inv = np.linalg.inv(frame.projection.dot(frame.view))
+        inv = frame.unprojection
         corners = [frame.position]
         for x in (-1.0, 1.0):
             for y in (-1.0, 1.0):
@@ -391,7 +394,7 @@ class OccupancyGrid:
 
 def _min_axis_cos(frame: DepthFrame) -> float:
     """The cosine of the widest angle between the optical axis and a corner ray."""
-    inv = np.linalg.inv(frame.projection.dot(frame.view))
+    inv = frame.unprojection
     centre = inv.dot([0.0, 0.0, 1.0, 1.0])
     axis = centre[:3] / centre[3] - frame.position
     axis /= np.linalg.norm(axis)
