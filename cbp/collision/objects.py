@@ -7,7 +7,7 @@ compiled broad phase keeps (:mod:`cbp.collision.broad`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import coal
@@ -38,6 +38,8 @@ class EnvironmentObject:
         lower: world AABB lower corner, (3,).
         upper: world AABB upper corner, (3,).
         allow_contact: robot links that may touch it (left out of its checks).
+        velocity: its world-frame linear velocity [m/s] (a declared motion), for
+            queries that look ahead (:class:`PrimitiveEnvironment`).
     """
 
     name: str
@@ -46,6 +48,7 @@ class EnvironmentObject:
     lower: FloatArray
     upper: FloatArray
     allow_contact: frozenset[str] = frozenset()
+    velocity: FloatArray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
     def make(
@@ -112,13 +115,40 @@ class PrimitiveEnvironment(Environment):
 
     Only the (shape, object) pairs whose bounding sphere and box are within the
     margin reach coal, so the cost grows with the objects near the robot.
+
+    With a ``look_ahead`` [s], an object that moves (its ``velocity``) is
+    measured where it will be by then, to first order: a contact's distance is
+    less the object's approach along the contact normal over that time,
+    d - max(0, n . v) t_ahead, with the normal n pointing from the object toward
+    the robot. An executor that plans now for a motion the robot
+    makes later sets it to how long its plan runs (the trajectory executors: two
+    command periods), so that the plan keeps clear of the object as it comes.
+    An object moving away is measured where it is: the prediction never lets
+    the robot nearer than the object's present position allows.
+
+    Args:
+        objects: the declared objects, where they are now.
+        look_ahead: how far ahead moving objects are measured [s] (>= 0).
     """
 
-    def __init__(self, objects: list[EnvironmentObject]) -> None:
-        """Index the objects' bounding boxes."""
+    def __init__(
+        self, objects: list[EnvironmentObject], look_ahead: float = 0.0
+    ) -> None:
+        """Index the objects' bounding boxes (swept over the look-ahead)."""
+        if not look_ahead >= 0.0:
+            raise ValueError(f"look_ahead must be >= 0 s, got {look_ahead}")
         self.objects = list(objects)
-        self._lower = np.array([o.lower for o in objects]).reshape(-1, 3)
-        self._upper = np.array([o.upper for o in objects]).reshape(-1, 3)
+        self.look_ahead = float(look_ahead)
+        #: Each object's displacement over the look-ahead [m], (n, 3).
+        self._ahead = (
+            np.array([o.velocity for o in objects], dtype=float).reshape(-1, 3)
+            * self.look_ahead
+        )
+        self._moving = bool(np.any(self._ahead))
+        lower = np.array([o.lower for o in objects]).reshape(-1, 3)
+        upper = np.array([o.upper for o in objects]).reshape(-1, 3)
+        self._lower = np.minimum(lower, lower + self._ahead)
+        self._upper = np.maximum(upper, upper + self._ahead)
         # Objects far from the whole robot are skipped with one k-d tree query
         # on their box centres, so the cost grows with the objects nearby.
         self._box_centres = 0.5 * (self._lower + self._upper)
@@ -179,6 +209,8 @@ class PrimitiveEnvironment(Environment):
                 request,
                 result,
             )
+            if self._moving:  # the object's approach over the look-ahead
+                d -= max(float(normal.dot(self._ahead[k])), 0.0)
             if d < margin:
                 rows.append((i, -1, point, other, normal, d))
         contacts = ContactSet.from_rows(rows)

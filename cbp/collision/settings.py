@@ -22,6 +22,13 @@ class CollisionSettings:
     """Also query the robot's own shape pairs."""
     padding: float | None = None
     """Distance added around the links [m]; default: robot.yaml's."""
+    predict_motion: bool = True
+    """Plan against declared objects that move (``motion:``) where they will be
+    when the plan runs: the trajectory executors measure them two command
+    periods ahead along their velocity
+    (:class:`~cbp.collision.objects.PrimitiveEnvironment`'s ``look_ahead``).
+    False: where they are now, as an occupancy map sees them (it has no
+    velocities)."""
     penetration_tolerance: float = 0.005
     """Step validation rejects a step that penetrates deeper than this [m]
     (plus half a cell against an occupancy map, whose surfaces are only known

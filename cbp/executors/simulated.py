@@ -52,12 +52,23 @@ OBJECT_UPDATE = 0.01
 
 
 #: Which of some objects are in the scene at a time, and where.
-ObjectKey = tuple[tuple[bool, tuple[float, ...]], ...]
+ObjectKey = tuple[tuple[bool, tuple[float, ...], tuple[float, ...]], ...]
 
 
 def _object_key(objects: list[ObjectSpec], t: float) -> ObjectKey:
-    """Which of ``objects`` are present at ``t``, and where (equal: no change)."""
-    return tuple((o.present(t), tuple(o.placement_at(t).translation)) for o in objects)
+    """Which of ``objects`` are present at ``t``, where, and how they move then.
+
+    Equal keys: nothing changed (an object that stops keeps its place but not
+    its velocity).
+    """
+    return tuple(
+        (
+            o.present(t),
+            tuple(o.placement_at(t).translation),
+            tuple(o.velocity_at(t)),
+        )
+        for o in objects
+    )
 
 
 @dataclass
@@ -86,6 +97,9 @@ class SimulatedRun:
         events: (time, message) of everything that went wrong and was handled.
         periods: command periods, filled in by trajectory executors.
         counters: numbers the executor counts (the trace's ``counters``).
+        look_ahead: how long the plan being made runs on the robot [s]; moving
+            declared objects are measured that far ahead
+            (``collision.predict_motion``). Set by the trajectory executors.
     """
 
     def __init__(
@@ -127,6 +141,8 @@ class SimulatedRun:
             [] if use_camera else [o for o in spec.world.objects if o.dynamic]
         )
         self._declared_key = _object_key(self._dynamic, 0.0)
+        self._predict_motion = spec.collision.predict_motion
+        self.look_ahead = 0.0
         self.world: CollisionWorld | None = None
         if needs_world or scenario.needs_collision_world or use_camera:
             self.world = scenario.collision_world()
@@ -392,7 +408,10 @@ class SimulatedRun:
         ]
         self._declared_key = key
         self.world.set_environment(
-            PrimitiveEnvironment(self.scenario.environment_objects(t))
+            PrimitiveEnvironment(
+                self.scenario.environment_objects(t),
+                self.look_ahead if self._predict_motion else 0.0,
+            )
         )
         for name in appeared:
             self.event(t, f"object '{name}' appeared")

@@ -89,6 +89,8 @@ def run_trajectory_executor(
     amax = robot.acceleration_limits * timing.acceleration_scale
     lo, hi = timing.bounds()
     period = timing.period
+    # The longest a joint takes to stop from its top speed [s].
+    stop_time = float(np.max(vmax / amax))
     t = 0.0
     sim = run.sim
     faults = run.faults
@@ -109,6 +111,11 @@ def run_trajectory_executor(
             budget = make_budget(
                 timing.clock, timing.time_budget * period, timing.virtual_costs
             )
+            # The plan made now starts a period from now and runs until the next
+            # one replaces it, a period later; from there the robot may need its
+            # stopping time to get out of the way. Moving obstacles are measured
+            # that far ahead (as speed and separation monitoring counts them).
+            run.look_ahead = 2.0 * period + stop_time
             new: JointTrajectory | None = None
             failed = False
             hold: str | None = None

@@ -60,8 +60,8 @@ class Scenario:
     def environment_objects(self, t: float = 0.0) -> list[EnvironmentObject]:
         """The declared objects as collision objects (mesh files resolved).
 
-        Those in the scene at time ``t`` [s], where they are then
-        (``appear_at``, ``motion``).
+        Those in the scene at time ``t`` [s], where they are then and with their
+        velocity then (``appear_at``, ``motion``).
         """
         objects = []
         for obj in self.spec.world.objects:
@@ -83,6 +83,8 @@ class Scenario:
                 made = dataclasses.replace(
                     made, allow_contact=frozenset(obj.allow_contact)
                 )
+            if obj.motion is not None:
+                made = dataclasses.replace(made, velocity=obj.velocity_at(t))
             objects.append(made)
         return objects
 

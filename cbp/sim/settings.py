@@ -49,6 +49,11 @@ class ObjectMotion:
         moved = min(max(t - self.start, 0.0), self.stop - self.start)
         return moved * np.asarray(self.velocity, dtype=float)
 
+    def velocity_at(self, t: float) -> np.ndarray:
+        """World-frame velocity at time ``t`` [m/s]: zero before and after."""
+        moving = self.start <= t < self.stop
+        return np.asarray(self.velocity if moving else (0.0, 0.0, 0.0), dtype=float)
+
 
 @dataclass(frozen=True, kw_only=True)
 class ObjectSpec:
@@ -88,6 +93,12 @@ class ObjectSpec:
     def present(self, t: float) -> bool:
         """The object is in the scene at time ``t``."""
         return t >= self.appear_at
+
+    def velocity_at(self, t: float) -> np.ndarray:
+        """The object's world-frame velocity at time ``t`` [m/s]."""
+        if self.motion is None:
+            return np.zeros(3)
+        return self.motion.velocity_at(t)
 
     def placement_at(self, t: float) -> pin.SE3:
         """The object's world placement at time ``t``."""
