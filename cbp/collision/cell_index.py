@@ -15,7 +15,13 @@ import functools
 
 import numpy as np
 
-from cbp.collision.cell_kernels import Bricks, metaball_normals, occupied_bits
+from cbp.collision.cell_kernels import (
+    SLOT_BRICK,
+    Bricks,
+    metaball_normals,
+    occupied_bits,
+    slot_masks,
+)
 from cbp.robot import FloatArray, IntArray
 
 __all__ = ["BRICK", "MAX_BRICKS", "CellIndex"]
@@ -49,7 +55,10 @@ class CellIndex:
         self.dims = (-(-extent // brick)).astype(np.int64)
         b = ijk // brick
         key = (b[:, 0] * self.dims[1] + b[:, 1]) * self.dims[2] + b[:, 2]
-        order = np.argsort(key, kind="stable")
+        # By brick, and within a brick by place (i, j, k) (:attr:`Bricks.slots`).
+        local = ijk % brick
+        place = (local[:, 0] * brick + local[:, 1]) * brick + local[:, 2]
+        order = np.lexsort((place, key))
         self.centres = np.ascontiguousarray(centres[order])
         """Centres sorted by brick (N, 3)."""
         counts = np.bincount(key, minlength=int(np.prod(self.dims)))
@@ -57,6 +66,7 @@ class CellIndex:
         np.cumsum(counts, out=self.start[1:])
         self.occupied = occupied_bits(self.start, self.dims)
         """Each column's non-empty bricks, as bits (:class:`Bricks`)."""
+        self.slots = _place_bits(self)
 
     @classmethod
     def from_bricks(
@@ -86,6 +96,7 @@ class CellIndex:
         index.centres = np.ascontiguousarray(centres, dtype=float)
         index.start = np.ascontiguousarray(start, dtype=np.int64)
         index.occupied = occupied_bits(index.start, index.dims)
+        index.slots = _place_bits(index)
         return index
 
     def __len__(self) -> int:
@@ -102,6 +113,7 @@ class CellIndex:
             self.cell * self.brick,
             self.dims,
             self.occupied,
+            self.slots,
         )
 
     def metaball_normals(
@@ -119,3 +131,28 @@ class CellIndex:
             float(radius),
             normals,
         )
+
+
+def _place_bits(index: CellIndex) -> np.ndarray:
+    """Each brick's occupied places as bits; empty unless bricks are 4 cells.
+
+    A brick's cells not in place order are sorted into it first (a map's
+    compiled pass writes them in order). Centres given twice (two on one
+    place) leave it empty: queries then read each centre.
+    """
+    if index.brick != SLOT_BRICK:
+        return np.zeros(0, dtype=np.uint64)
+    masks = np.zeros(len(index.start) - 1, dtype=np.uint64)
+    if slot_masks(
+        index.centres, index.start, index.origin, index.cell, index.brick, masks
+    ):
+        return masks
+    ijk = np.floor((index.centres - index.origin) / index.cell).astype(np.int64)
+    if len(np.unique(ijk, axis=0)) < len(ijk):
+        return np.zeros(0, dtype=np.uint64)
+    local = ijk % index.brick
+    place = (local[:, 0] * index.brick + local[:, 1]) * index.brick + local[:, 2]
+    brick_of = np.repeat(np.arange(len(index.start) - 1), np.diff(index.start))
+    index.centres = np.ascontiguousarray(index.centres[np.lexsort((place, brick_of))])
+    slot_masks(index.centres, index.start, index.origin, index.cell, index.brick, masks)
+    return masks

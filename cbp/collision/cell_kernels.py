@@ -36,7 +36,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 import numpy.typing as npt
+from numba import types
 from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.extending import intrinsic
 
 from cbp.robot import FloatArray, IntArray
 
@@ -44,6 +46,7 @@ __all__ = [
     "CAPSULE",
     "EXACT_WITHIN",
     "HULL",
+    "SLOT_BRICK",
     "VALUE_UNIT",
     "Bricks",
     "Candidates",
@@ -57,6 +60,7 @@ __all__ = [
     "metaball_normals",
     "occupied_bits",
     "reduce_cells",
+    "slot_masks",
     "spread_contacts",
 ]
 
@@ -80,6 +84,12 @@ class Bricks(NamedTuple):
     word z // 64 set where brick (x, y, z) holds cells
     (:func:`occupied_bits`): a query reads the few non-empty bricks of a column
     without visiting the empty ones.
+
+    Bricks of 4 x 4 x 4 cells also have ``slots``: per brick, bit
+    (i * 4 + j) * 4 + k set where its cell (i, j, k) is occupied, and its cells
+    in that order (:func:`slot_masks`). A query then tests all 64 places of a
+    brick against a shape's box at once (:func:`_slots_in_box`) and reads no
+    centre; other bricks (maps spread over very large boxes) leave it empty.
     """
 
     centres: FloatArray
@@ -88,6 +98,7 @@ class Bricks(NamedTuple):
     size: float
     dims: npt.NDArray[np.int64]
     occupied: npt.NDArray[np.uint64]
+    slots: npt.NDArray[np.uint64]
 
 
 def occupied_bits(
@@ -107,6 +118,121 @@ def occupied_bits(
 def _lowest_bit(bits: np.uint64) -> int:
     """The index of the lowest set bit of a non-zero word (one instruction)."""
     return int(trailing_zeros(bits))  # type: ignore[call-arg]  # a numba intrinsic
+
+
+@intrinsic
+def _popcount(typingctx, bits):  # type: ignore[no-untyped-def]
+    """The number of set bits of a uint64 (LLVM's ctpop: one instruction)."""
+    del typingctx
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        del context, signature
+        return builder.ctpop(args[0])
+
+    return types.uint64(types.uint64), codegen
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _count_bits(bits: np.uint64) -> int:
+    """The number of set bits of a word (one instruction)."""
+    return int(_popcount(bits))  # type: ignore[call-arg]  # a numba intrinsic
+
+
+#: Places in a brick of :data:`SLOT_BRICK` cells a side (one bit each).
+SLOT_BRICK = 4
+
+
+@numba.njit(cache=True, nogil=True)
+def slot_masks(
+    centres: FloatArray,
+    start: npt.NDArray[np.int64],
+    origin: FloatArray,
+    cell: float,
+    brick: int,
+    masks: npt.NDArray[np.uint64],
+) -> bool:
+    """Each brick's occupied places as bits (:attr:`Bricks.slots`), into ``masks``.
+
+    Returns whether every brick's cells are in place order and on distinct
+    places (else the masks are not to be used; the caller sorts and retries).
+    """
+    for b in range(len(start) - 1):
+        bits = np.uint64(0)
+        previous = -1
+        for k in range(start[b], start[b + 1]):
+            i = math.floor((centres[k, 0] - origin[0]) / cell) % brick
+            j = math.floor((centres[k, 1] - origin[1]) / cell) % brick
+            m = math.floor((centres[k, 2] - origin[2]) / cell) % brick
+            slot = (i * brick + j) * brick + m
+            if slot <= previous:
+                return False
+            previous = slot
+            bits |= np.uint64(1) << np.uint64(slot)
+        masks[b] = bits
+    return True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _capsule_excess(
+    x: float,
+    y: float,
+    z: float,
+    radius: float,
+    half_length: float,
+    directions: FloatArray,
+    half: float,
+    margin: float,
+) -> tuple[float, int, float, float, float]:
+    """A point's distance to a capsule along z (in its frame), group and normal.
+
+    The group is the direction of ``directions`` nearest to the capsule's
+    outward unit normal toward the point; not looked for (0, and a zero
+    normal) where the distance less ``half`` is ``margin`` or more.
+    """
+    on_axis = min(max(z, -half_length), half_length)
+    ox, oy, oz = x, y, z - on_axis
+    length = math.sqrt(ox * ox + oy * oy + oz * oz)
+    if length - radius - half >= margin:  # too far to keep: no group needed
+        return length - radius, 0, 0.0, 0.0, 0.0
+    if length < 1e-12:  # on the axis: take x
+        ox, oy, oz, length = 1.0, 0.0, 0.0, 1.0
+    ox, oy, oz = ox / length, oy / length, oz / length
+    group = 0
+    top = -np.inf
+    for g in range(len(directions)):
+        v = directions[g, 0] * ox + directions[g, 1] * oy + directions[g, 2] * oz
+        if v > top:
+            top, group = v, g
+    return length - radius, group, ox, oy, oz
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _slots_in_box(
+    x0: float,
+    y0: float,
+    z0: float,
+    offsets: FloatArray,
+    lx: float,
+    ly: float,
+    lz: float,
+    ux: float,
+    uy: float,
+    uz: float,
+) -> np.uint64:
+    """Which of a brick's 64 places lie inside a box, as bits.
+
+    (x0, y0, z0) is the brick's corner and ``offsets`` (3, 64) its places'
+    centres from it, in the box's frame. One branch-free loop over fixed
+    arrays, which the compiler vectorises.
+    """
+    inside = np.uint64(0)
+    for slot in range(64):
+        x = x0 + offsets[0, slot]
+        y = y0 + offsets[1, slot]
+        z = z0 + offsets[2, slot]
+        hit = (x > lx) & (x < ux) & (y > ly) & (y < uy) & (z > lz) & (z < uz)
+        inside |= np.uint64(hit) << np.uint64(slot)
+    return inside
 
 
 class Shapes(NamedTuple):
@@ -320,7 +446,9 @@ def candidates(
     per group. Hull distances from ``exact_within`` [m] on are lower bounds
     (the module's docstring). Writes to ``out`` and returns the number written.
     """
-    centres, start, origin, size, dims, occupied = bricks
+    centres, start, origin, size, dims, occupied, slots = bricks
+    has_slots = len(slots) > 0
+    one = np.uint64(1)
     kind, to_frame, lower, upper, capsule = (
         shapes.kind,
         shapes.to_frame,
@@ -349,7 +477,9 @@ def candidates(
     best_out = np.zeros((most, 3))
     touched = np.empty(most, dtype=np.int64)
     M = np.empty((4, 4))
-    brick_radius = 0.5 * math.sqrt(3.0) * size
+    # A slot brick's places' centres from its corner, in a shape's frame.
+    offsets = np.empty((3, SLOT_BRICK**3))
+    cell = size / SLOT_BRICK
     slack = 0.5 * math.sqrt(3.0) * step  # a point's distance to its grid point
     inv_step = 1.0 / step
     count = 0
@@ -367,6 +497,23 @@ def candidates(
         r10, r11, r12 = M[1, 0], M[1, 1], M[1, 2]
         r20, r21, r22 = M[2, 0], M[2, 1], M[2, 2]
         tx, ty, tz = M[0, 3], M[1, 3], M[2, 3]
+        if has_slots:
+            for i in range(SLOT_BRICK):
+                for j in range(SLOT_BRICK):
+                    for m in range(SLOT_BRICK):
+                        slot = (i * SLOT_BRICK + j) * SLOT_BRICK + m
+                        ox, oy, oz = (
+                            (i + 0.5) * cell,
+                            (j + 0.5) * cell,
+                            (m + 0.5) * cell,
+                        )
+                        offsets[0, slot] = r00 * ox + r10 * oy + r20 * oz
+                        offsets[1, slot] = r01 * ox + r11 * oy + r21 * oz
+                        offsets[2, slot] = r02 * ox + r12 * oy + r22 * oz
+        # How far a brick reaches from its centre along the shape's axes.
+        bx_reach = 0.5 * size * (abs(r00) + abs(r10) + abs(r20))
+        by_reach = 0.5 * size * (abs(r01) + abs(r11) + abs(r21))
+        bz_reach = 0.5 * size * (abs(r02) + abs(r12) + abs(r22))
         # The shape's box, grown by the reach (margin + half a cell).
         lx, ly, lz = lower[s, 0], lower[s, 1], lower[s, 2]
         ux, uy, uz = upper[s, 0], upper[s, 1], upper[s, 2]
@@ -384,9 +531,8 @@ def candidates(
         bz0, bz1 = _brick_range(mz - wz, mz + wz, origin[2], size, dims[2])
         is_capsule = kind[s] == CAPSULE
         radius, half_length = capsule[s, 0], capsule[s, 1]
-        p0 = plane_start[s]
         # The hull's part of the stacked tables (empty for a capsule).
-        hull_planes = planes[p0 : plane_start[s + 1]]
+        hull_planes = planes[plane_start[s] : plane_start[s + 1]]
         hull_faces = faces[grid_start[s] : grid_start[s + 1]]
         hull_values = values[grid_start[s] : grid_start[s + 1]]
         gx, gy, gz = grid_origin[s, 0], grid_origin[s, 1], grid_origin[s, 2]
@@ -395,6 +541,7 @@ def candidates(
         # A cell is rejected when its grid point's value (a lower bound, in
         # VALUE_UNIT) shows it further than the margin even after the slack.
         cutoff = (slack + half + margin) / VALUE_UNIT
+        exact = exact_within + half
         n_touched = 0
         for bx in range(bx0, bx1 + 1):
             for by in range(by0, by1 + 1):
@@ -411,7 +558,7 @@ def candidates(
                         bz = (word << 6) + _lowest_bit(bits)
                         bits &= bits - np.uint64(1)
                         b = row + bz
-                        # Skip a brick whose bounding sphere misses the box.
+                        # Skip a brick that misses the box along its axes.
                         dx = origin[0] + (bx + 0.5) * size - tx
                         dy = origin[1] + (by + 0.5) * size - ty
                         dz = origin[2] + (bz + 0.5) * size - tz
@@ -419,15 +566,81 @@ def candidates(
                         y = r01 * dx + r11 * dy + r21 * dz
                         z = r02 * dx + r12 * dy + r22 * dz
                         if (
-                            x < lx - brick_radius
-                            or x > ux + brick_radius
-                            or y < ly - brick_radius
-                            or y > uy + brick_radius
-                            or z < lz - brick_radius
-                            or z > uz + brick_radius
+                            x < lx - bx_reach
+                            or x > ux + bx_reach
+                            or y < ly - by_reach
+                            or y > uy + by_reach
+                            or z < lz - bz_reach
+                            or z > uz + bz_reach
                         ):
                             continue
-                        for k in range(start[b], start[b + 1]):
+                        first = start[b]
+                        if has_slots:
+                            # The brick's corner in the shape's frame; its
+                            # places from there, all 64 tested at once.
+                            dx -= 0.5 * size
+                            dy -= 0.5 * size
+                            dz -= 0.5 * size
+                            x0 = r00 * dx + r10 * dy + r20 * dz
+                            y0 = r01 * dx + r11 * dy + r21 * dz
+                            z0 = r02 * dx + r12 * dy + r22 * dz
+                            held = slots[b]
+                            inside = held & _slots_in_box(
+                                x0, y0, z0, offsets, lx, ly, lz, ux, uy, uz
+                            )
+                            while inside:
+                                bit = _lowest_bit(inside)
+                                inside &= inside - one
+                                x = x0 + offsets[0, bit]
+                                y = y0 + offsets[1, bit]
+                                z = z0 + offsets[2, bit]
+                                if is_capsule:
+                                    depth, group, ox, oy, oz = _capsule_excess(
+                                        x,
+                                        y,
+                                        z,
+                                        radius,
+                                        half_length,
+                                        directions,
+                                        half,
+                                        margin,
+                                    )
+                                else:
+                                    depth, group = _hull_excess(
+                                        x,
+                                        y,
+                                        z,
+                                        hull_planes,
+                                        hull_faces,
+                                        hull_values,
+                                        gx,
+                                        gy,
+                                        gz,
+                                        ny,
+                                        nz,
+                                        last,
+                                        inv_step,
+                                        cutoff,
+                                        exact,
+                                    )
+                                if depth - half >= margin or depth >= best[group]:
+                                    continue
+                                if best_cell[group] < 0:
+                                    touched[n_touched] = group
+                                    n_touched += 1
+                                best[group] = depth
+                                # Cells are in place order: those before it.
+                                below = held & ((one << np.uint64(bit)) - one)
+                                best_cell[group] = first + _count_bits(below)
+                                if not is_capsule:
+                                    ox = hull_planes[group, 0]
+                                    oy = hull_planes[group, 1]
+                                    oz = hull_planes[group, 2]
+                                best_out[group, 0] = ox
+                                best_out[group, 1] = oy
+                                best_out[group, 2] = oz
+                            continue
+                        for k in range(first, start[b + 1]):
                             # R^T (c - t): the cell in the shape's frame.
                             dx = centres[k, 0] - tx
                             dy = centres[k, 1] - ty
@@ -447,25 +660,16 @@ def candidates(
                             ):
                                 continue
                             if is_capsule:
-                                on_axis = min(max(z, -half_length), half_length)
-                                ox, oy, oz = x, y, z - on_axis
-                                length = math.sqrt(ox * ox + oy * oy + oz * oz)
-                                if length < 1e-12:  # on the axis: take x
-                                    ox, oy, oz, length = 1.0, 0.0, 0.0, 1.0
-                                depth = length - radius
-                                if depth - half >= margin:
-                                    continue
-                                ox, oy, oz = ox / length, oy / length, oz / length
-                                group = 0
-                                top = -np.inf
-                                for g in range(len(directions)):
-                                    v = (
-                                        directions[g, 0] * ox
-                                        + directions[g, 1] * oy
-                                        + directions[g, 2] * oz
-                                    )
-                                    if v > top:
-                                        top, group = v, g
+                                depth, group, ox, oy, oz = _capsule_excess(
+                                    x,
+                                    y,
+                                    z,
+                                    radius,
+                                    half_length,
+                                    directions,
+                                    half,
+                                    margin,
+                                )
                             else:
                                 depth, group = _hull_excess(
                                     x,
@@ -482,22 +686,22 @@ def candidates(
                                     last,
                                     inv_step,
                                     cutoff,
-                                    exact_within + half,
+                                    exact,
                                 )
-                                if depth - half >= margin:
-                                    continue
+                            if depth - half >= margin or depth >= best[group]:
+                                continue
+                            if best_cell[group] < 0:
+                                touched[n_touched] = group
+                                n_touched += 1
+                            best[group] = depth
+                            best_cell[group] = k
+                            if not is_capsule:
                                 ox = hull_planes[group, 0]
                                 oy = hull_planes[group, 1]
                                 oz = hull_planes[group, 2]
-                            if depth < best[group]:
-                                if best_cell[group] < 0:
-                                    touched[n_touched] = group
-                                    n_touched += 1
-                                best[group] = depth
-                                best_cell[group] = k
-                                best_out[group, 0] = ox
-                                best_out[group, 1] = oy
-                                best_out[group, 2] = oz
+                            best_out[group, 0] = ox
+                            best_out[group, 1] = oy
+                            best_out[group, 2] = oz
         for i in range(n_touched):
             g = touched[i]
             k = best_cell[g]
@@ -525,7 +729,7 @@ def metaball_normals(
     F is the metaball field of :class:`~cbp.collision.environment.MetaballRefiner`
     over the cells within ``radius`` of each point.
     """
-    centres, start, origin, size, dims, _ = bricks
+    centres, start, origin, size, dims = bricks[:5]
     r2 = radius * radius
     ranges = np.empty((3, 2), dtype=np.int64)
     for i in range(len(at)):
@@ -627,6 +831,10 @@ def cell_hits(
     return out.head(count)
 
 
+#: Up to this many candidates of a shape are sorted by insertion (no allocation).
+_FEW = 32
+
+
 @numba.njit(cache=True, nogil=True)
 def reduce_cells(
     found: Candidates,
@@ -644,16 +852,28 @@ def reduce_cells(
     shape, centre, outward, distance = found
     out_shape, robot, obstacle, normal, out_distance = out
     keep = np.empty(max(per_shape, 1), dtype=np.int64)
+    order = np.empty(n, dtype=np.int64)
     count = 0
     start = 0
     while start < n:
         end = start
         while end < n and shape[end] == shape[start]:
             end += 1
-        # Stable, as np.lexsort: equal distances keep the candidates' order.
-        order = np.argsort(distance[start:end], kind="mergesort") + start
+        # By distance, stable as np.lexsort (equal distances keep the
+        # candidates' order); a shape has a few, sorted without allocating.
+        if end - start > _FEW:
+            order[: end - start] = (
+                np.argsort(distance[start:end], kind="mergesort") + start
+            )
+        else:
+            for k in range(start, end):
+                i = k - start
+                while i > 0 and distance[order[i - 1]] > distance[k]:
+                    order[i] = order[i - 1]
+                    i -= 1
+                order[i] = k
         kept = 0
-        for k in order:
+        for k in order[: end - start]:
             if kept >= per_shape:
                 break
             reach_k = distance[k] + half

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 
 import coal
@@ -241,6 +242,53 @@ def test_far_cells_change_nothing(geometry, robots) -> None:
     sa, sb = np.lexsort((a[3], a[0])), np.lexsort((b[3], b[0]))
     np.testing.assert_array_equal(a[0][sa], b[0][sb])
     np.testing.assert_allclose(a[3][sa], b[3][sb], atol=1e-12)
+
+
+def test_bricks_of_places_find_what_the_cells_find(geometry, robots) -> None:
+    """Testing a brick's 64 places at once gives the per-cell test's contacts.
+
+    The cells are given shuffled (the index puts each brick's in place order);
+    the same index without its place bits is read cell by cell.
+    """
+    robot = robots["panda"]
+    rng = np.random.default_rng(4)
+    cells = np.r_[
+        _shell(np.array([0.45, 0.0, 0.45]), 0.1),
+        _shell(np.array([0.2, 0.3, 0.6]), 0.06),
+    ]
+    index = CellIndex(cells[rng.permutation(len(cells))], CELL)
+    assert index.brick == 4
+    # Each brick's cells in place order, its bits set where they are.
+    for b in np.flatnonzero(np.diff(index.start))[:50]:
+        run = index.centres[index.start[b] : index.start[b + 1]]
+        ijk = np.floor((run - index.origin) / CELL).astype(int) % 4
+        place = (ijk[:, 0] * 4 + ijk[:, 1]) * 4 + ijk[:, 2]
+        assert (np.diff(place) > 0).all()
+        assert int(index.slots[b]) == sum(1 << int(p) for p in place)
+    per_cell = copy.copy(index)
+    per_cell.__dict__.pop("bricks", None)
+    per_cell.slots = np.zeros(0, dtype=np.uint64)
+    table = ShapeTable.build(geometry.shapes, 0.065)
+    model = geometry.geometry_model()
+    data = pin.GeometryData(model)
+    compared = 0
+    for q in sample_configurations(robot, np.random.default_rng(1), 6):
+        state = RobotState(robot, q)
+        pin.updateGeometryPlacements(robot.model, state.data, model, data)
+        a = table.candidates(index, list(data.oMg), 0.06)
+        b = table.candidates(per_cell, list(data.oMg), 0.06)
+        for got, want in zip(a, b, strict=True):
+            np.testing.assert_allclose(got, want, atol=1e-12)
+        compared += len(a.shape)
+    assert compared > 20
+
+
+def test_cells_given_twice_are_read_one_by_one() -> None:
+    """Two centres in one cell: no place bits (one bit per place), same cells."""
+    cells = np.array([[0.005, 0.005, 0.005], [0.015, 0.005, 0.005]])
+    index = CellIndex(np.r_[cells, cells[:1]], CELL)
+    assert len(index.slots) == 0
+    assert len(index) == 3
 
 
 def test_occupied_bits_mark_the_non_empty_bricks() -> None:
