@@ -206,6 +206,25 @@ def _capsule_excess(
     return length - radius, group, ox, oy, oz
 
 
+@numba.njit(cache=True, nogil=True)
+def _place_offsets(M: FloatArray, cell: float, offsets: FloatArray) -> None:
+    """A brick's 64 place centres from its corner, in the frame M (4, 4) places.
+
+    Place (i, j, k) is at ((i, j, k) + 0.5) cells along the world axes, which
+    are the rows of M's rotation in that frame; written to ``offsets`` (3, 64).
+    """
+    for a in range(3):
+        ex, ey, ez = cell * M[0, a], cell * M[1, a], cell * M[2, a]
+        base = 0.5 * (ex + ey + ez)
+        for i in range(SLOT_BRICK):
+            along_i = base + i * ex
+            for j in range(SLOT_BRICK):
+                along_j = along_i + j * ey
+                first = (i * SLOT_BRICK + j) * SLOT_BRICK
+                for m in range(SLOT_BRICK):
+                    offsets[a, first + m] = along_j + m * ez
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _slots_in_box(
     x0: float,
@@ -497,19 +516,7 @@ def candidates(
         r10, r11, r12 = M[1, 0], M[1, 1], M[1, 2]
         r20, r21, r22 = M[2, 0], M[2, 1], M[2, 2]
         tx, ty, tz = M[0, 3], M[1, 3], M[2, 3]
-        if has_slots:
-            for i in range(SLOT_BRICK):
-                for j in range(SLOT_BRICK):
-                    for m in range(SLOT_BRICK):
-                        slot = (i * SLOT_BRICK + j) * SLOT_BRICK + m
-                        ox, oy, oz = (
-                            (i + 0.5) * cell,
-                            (j + 0.5) * cell,
-                            (m + 0.5) * cell,
-                        )
-                        offsets[0, slot] = r00 * ox + r10 * oy + r20 * oz
-                        offsets[1, slot] = r01 * ox + r11 * oy + r21 * oz
-                        offsets[2, slot] = r02 * ox + r12 * oy + r22 * oz
+        placed = False  # the places' offsets, for this shape (when needed)
         # How far a brick reaches from its centre along the shape's axes.
         bx_reach = 0.5 * size * (abs(r00) + abs(r10) + abs(r20))
         by_reach = 0.5 * size * (abs(r01) + abs(r11) + abs(r21))
@@ -585,6 +592,9 @@ def candidates(
                             y0 = r01 * dx + r11 * dy + r21 * dz
                             z0 = r02 * dx + r12 * dy + r22 * dz
                             held = slots[b]
+                            if not placed:
+                                _place_offsets(M, cell, offsets)
+                                placed = True
                             inside = held & _slots_in_box(
                                 x0, y0, z0, offsets, lx, ly, lz, ux, uy, uz
                             )

@@ -18,6 +18,11 @@ from cbp.robot import FloatArray, IntArray
 
 __all__ = ["ContactRow", "ContactSet"]
 
+#: ``other_shape`` of obstacle contacts: views of one read-only array of -1
+#: (the sets' arrays are never modified; a view costs less than a new array).
+_NO_OTHER = np.full(256, -1, dtype=np.intp)
+_NO_OTHER.flags.writeable = False
+
 #: One contact as a row: (shape, other shape or -1, point, other point, normal,
 #: distance), the fields of :class:`ContactSet` (built from rows in one call).
 ContactRow = tuple[int, int, FloatArray, FloatArray, FloatArray, float]
@@ -118,9 +123,10 @@ class ContactSet:
         distance: FloatArray,
     ) -> ContactSet:
         """Contacts with obstacles (``other_shape`` -1 throughout)."""
+        n = len(shape)
         return cls(
             shape,
-            np.full(len(shape), -1, dtype=np.intp),
+            _NO_OTHER[:n] if n <= len(_NO_OTHER) else np.full(n, -1, dtype=np.intp),
             point,
             other_point,
             normal,
