@@ -40,6 +40,7 @@ from cbp.executors.settings import CatSettings
 from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import Plan, Planner, run_trajectory_executor
 from cbp.goals import write_recorded
+from cbp.plugin import HoldsContacts
 from cbp.robot import FloatArray
 from cbp.scenario import Scenario, load_scenario
 from cbp.sim.trajectory import JointTrajectory
@@ -142,6 +143,8 @@ class _SwitchingPlanner:
         self.method = method
         self.wanted = method
         self.paused = False
+        #: The contact sets last merged by :meth:`contacts`, and the result.
+        self._merged: tuple[list[ContactSet], ContactSet] = ([], ContactSet.empty())
         self._planner(method)  # a method that cannot start fails before the run
 
     def _planner(self, method: str) -> Planner:
@@ -164,20 +167,34 @@ class _SwitchingPlanner:
         return self._planner(self.method).plan(q, goal, budget, run)
 
     def contacts(self) -> ContactSet | None:
-        """The contacts of the method in control's contact rows, if it has them."""
+        """The obstacle contacts the method in control's contact rows hold.
+
+        Those of every constraint that holds contacts (``contact_normals``, a
+        user's own), with the environment: not the robot's own pairs. None when
+        the method has no such rows or nothing is latched yet. The same set
+        object until a row latches new contacts (the page redraws on change).
+        """
         planner = self._planners.get(self.method)
         cat = getattr(planner, "cat", planner)  # hybrid's CAT, or CAT itself
         engine = getattr(cat, "engine", None)
         if engine is None:
             return None
+        latched: list[ContactSet] = []
         for entry in engine.entries:
-            if entry.plugin.type_name == "contact_normals":
+            if isinstance(entry.plugin, HoldsContacts):
                 try:
-                    contacts: ContactSet = entry.plugin.contacts
+                    latched.append(entry.plugin.contacts)
                 except CbpError:  # nothing latched yet
-                    return None
-                return contacts
-        return None
+                    continue
+        if not latched:
+            return None
+        last, merged = self._merged
+        if len(last) != len(latched) or any(
+            a is not b for a, b in zip(last, latched, strict=True)
+        ):
+            merged = ContactSet.concatenate([c.environment_part() for c in latched])
+            self._merged = (latched, merged)
+        return merged
 
     def close(self) -> None:
         for planner in self._planners.values():

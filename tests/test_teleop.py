@@ -20,6 +20,7 @@ from cbp.compare import compare
 from cbp.errors import ConfigError
 from cbp.goals import recorded_goal_overrides
 from cbp.metrics import run_metrics
+from cbp.plugin import HoldsContacts
 from cbp.teleop import GOAL_FILE, LiveGoal, TeleopSession
 from tests.conftest import free_port, headless_chromium, run_cbp
 
@@ -343,3 +344,59 @@ def test_the_page_draws_the_map_and_unknown_space_on_the_toggle() -> None:
     finally:
         page.close()
         session.run.finish()
+
+
+def test_the_page_gets_the_obstacle_contacts_of_every_contact_row() -> None:
+    """Obstacle contacts of each constraint that holds contacts; no self pairs.
+
+    CAT's configuration has two (contact_normals, self_collision); a user's
+    own contact constraint (another type name) is added. The page's set is
+    their obstacle contacts, the same object until a row latches anew.
+    """
+    from cbp.engine import Engine
+    from cbp.qp import Entry
+    from plugins.constraints.contact_normals_constraint import (
+        ContactNormalsConstraint,
+        ContactParams,
+    )
+
+    class Mine(ContactNormalsConstraint):
+        type_name = "my_contacts"
+
+    session = TeleopSession(BOARDS, "cat")
+    planner = session.planner
+    cat = planner._planner("cat")
+    robot, world = session.scenario.robot, session.scenario.collision_world()
+    mine = Mine(ContactParams(), robot, "mine")
+    mine.attach_world(world)
+    cat.engine = engine = Engine(
+        robot, [*cat.engine.entries, Entry.make(mine)], solver="daqp"
+    )
+    holders = {
+        e.plugin.type_name: e.plugin
+        for e in engine.entries
+        if isinstance(e.plugin, HoldsContacts)
+    }
+    assert set(holders) == {"contact_normals", "self_collision", "my_contacts"}
+    # Toward a goal inside a board until the arm is near it (steps, no simulator).
+    session.scenario.goal_task().set_target(np.array([0.55, -0.24, 0.03]), np.eye(3))
+    q = session.scenario.q0.copy()
+    for _ in range(300):
+        q = robot.integrate(q, engine.step(q, 0.02))
+        if len(holders["contact_normals"].contacts) and len(
+            holders["self_collision"].contacts
+        ):
+            break
+    assert len(holders["self_collision"].contacts) > 0
+    obstacles = holders["contact_normals"].contacts
+    assert len(obstacles) > 0
+    shown = planner.contacts()
+    assert shown is not None
+    assert (shown.other_shape == -1).all()  # no self pairs
+    # contact_normals' and the user's rows (the same world: the same contacts).
+    np.testing.assert_array_equal(
+        np.sort(shown.distance), np.sort(np.r_[obstacles.distance, obstacles.distance])
+    )
+    assert planner.contacts() is shown  # unchanged: not merged again
+    engine.step(q, 0.02)
+    assert planner.contacts() is not shown
