@@ -22,6 +22,7 @@ from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.errors import InvalidTargetError
 from cbp.executors.clock import ClockKind
+from cbp.executors.declared import DeclaredObjects, ObjectKey, object_key
 from cbp.executors.faults import Faults
 from cbp.goals import GoalSource
 from cbp.perception.camera import DepthCamera, DepthFrame
@@ -32,7 +33,6 @@ from cbp.plugin import GoalReceiver
 from cbp.progress import report_time
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
-from cbp.sim.settings import ObjectSpec
 from cbp.sim.simulation import Simulation
 from cbp.spatial import checked_se3
 from cbp.state import RobotState
@@ -49,26 +49,6 @@ CLEARANCE_RANGE = 0.3
 #: Declared objects that appear or move reach the collision world this often
 #: (simulated time) [s]: as a tracker of known objects would report them.
 OBJECT_UPDATE = 0.01
-
-
-#: Which of some objects are in the scene at a time, and where.
-ObjectKey = tuple[tuple[bool, tuple[float, ...], tuple[float, ...]], ...]
-
-
-def _object_key(objects: list[ObjectSpec], t: float) -> ObjectKey:
-    """Which of ``objects`` are present at ``t``, where, and how they move then.
-
-    Equal keys: nothing changed (an object that stops keeps its place but not
-    its velocity).
-    """
-    return tuple(
-        (
-            o.present(t),
-            tuple(o.placement_at(t).translation),
-            tuple(o.velocity_at(t)),
-        )
-        for o in objects
-    )
 
 
 @dataclass
@@ -135,17 +115,17 @@ class SimulatedRun:
         self._goal_space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
         self._goal_blocked = False
         use_camera = spec.perception.source == "depth_camera"
-        #: Declared objects that appear or move: the declared world follows them
-        #: (with cameras, the map does).
-        self._dynamic = (
-            [] if use_camera else [o for o in spec.world.objects if o.dynamic]
-        )
-        self._declared_key = _object_key(self._dynamic, 0.0)
-        self._predict_motion = spec.collision.predict_motion
         self.look_ahead = 0.0
         self.world: CollisionWorld | None = None
         if needs_world or scenario.needs_collision_world or use_camera:
             self.world = scenario.collision_world()
+        #: Declared objects that appear or move: the declared world follows them
+        #: (with cameras, the map does).
+        self._declared = (
+            DeclaredObjects(scenario, self.world)
+            if self.world is not None and not use_camera
+            else None
+        )
         self.mapper: MapUpdater | None = None
         self.cameras: list[DepthCamera] = []
         self._next_frame: list[float] = []
@@ -380,7 +360,9 @@ class SimulatedRun:
     def advance(self, t: float) -> None:
         """Simulate (and perceive) until ``t``."""
         report_time(t, self.duration)
-        if self._dynamic and self.world is not None:
+        declared = self._declared
+        moving = declared is not None and bool(declared.dynamic)
+        if moving:
             # Declared objects that appear or move: the world is brought up to
             # date every OBJECT_UPDATE of simulated time.
             while self.sim.t + OBJECT_UPDATE < t:
@@ -389,31 +371,14 @@ class SimulatedRun:
                 self.update_declared(self.sim.t)
         self.perceive_until(t)
         self.sim.run_until(t)
-        if self._dynamic:
+        if moving:
             self.update_declared(self.sim.t)
 
     def update_declared(self, t: float) -> None:
         """Give the world the declared objects as they are at ``t``."""
-        if self.world is None:
+        if self._declared is None:
             return
-        key = _object_key(self._dynamic, t)
-        if key == self._declared_key:
-            return
-        appeared = [
-            obj.name
-            for obj, now, then in zip(
-                self._dynamic, key, self._declared_key, strict=True
-            )
-            if now[0] and not then[0]
-        ]
-        self._declared_key = key
-        self.world.set_environment(
-            PrimitiveEnvironment(
-                self.scenario.environment_objects(t),
-                self.look_ahead if self._predict_motion else 0.0,
-            )
-        )
-        for name in appeared:
+        for name in self._declared.update(t, self.look_ahead):
             self.event(t, f"object '{name}' appeared")
 
     # ------------------------------------------------------------------ results
@@ -499,7 +464,7 @@ class SimulatedRun:
         key: ObjectKey = ()
         for i in range(0, t.size, stride):
             if dynamic:
-                now = _object_key(dynamic, float(t[i]))
+                now = object_key(dynamic, float(t[i]))
                 if now != key:
                     key = now
                     world.set_environment(

@@ -30,6 +30,7 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.executors.clock import Budget, make_budget
+from cbp.executors.declared import stopping_time
 from cbp.executors.settings import ExecutorTiming
 from cbp.executors.simulated import SimulatedRun
 from cbp.robot import FloatArray
@@ -89,8 +90,7 @@ def run_trajectory_executor(
     amax = robot.acceleration_limits * timing.acceleration_scale
     lo, hi = timing.bounds()
     period = timing.period
-    # The longest a joint takes to stop from its top speed [s].
-    stop_time = float(np.max(vmax / amax))
+    stop_time = stopping_time(robot, vmax, amax)
     t = 0.0
     sim = run.sim
     faults = run.faults

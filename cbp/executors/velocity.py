@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from cbp.errors import PluginOutputError, SolveError
+from cbp.executors.declared import DeclaredObjects, stopping_time
 from cbp.executors.faults import Faults
 from cbp.executors.settings import VelocitySettings
 from cbp.expressions import TimeFunction
@@ -126,6 +127,15 @@ class VelocityLoop:
                 )
             )
         self.braking = robot.acceleration_limits * self.settings.dt
+        #: Declared objects that appear or move, followed by the contact rows'
+        #: world; measured a tick and the robot's stopping time ahead.
+        world = scenario.collision_world() if scenario.needs_collision_world else None
+        self.declared = (
+            DeclaredObjects(scenario, world)
+            if world is not None and scenario.spec.perception.source != "depth_camera"
+            else None
+        )
+        self.look_ahead = self.settings.dt + stopping_time(robot)
         #: The last command (the robot starts at rest); updated in place.
         self.command = np.zeros(robot.nv) if command is None else command
 
@@ -152,6 +162,9 @@ class VelocityLoop:
         u = self.command
         q = sim.q
         start = time.perf_counter()
+        if self.declared is not None:
+            for name in self.declared.update(t, self.look_ahead):
+                self.events.append((t, f"object '{name}' appeared"))
         try:
             dq = self.engine.step(q, dt, u)
         except (SolveError, PluginOutputError) as exc:

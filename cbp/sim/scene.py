@@ -133,6 +133,26 @@ class PybulletScene:
         self.object_ids[obj.name] = body
         return int(body)
 
+    def update_objects(
+        self, objects: list[ObjectSpec], t: float, friction: float | None = None
+    ) -> None:
+        """Add the objects of ``objects`` due by ``t``; move the moving ones.
+
+        Each is where its timeline puts it at ``t`` (``appear_at``, ``motion``);
+        a body added is given ``friction`` (lateral), if set.
+        """
+        for obj in objects:
+            if not obj.present(t):
+                continue
+            if obj.name not in self.object_ids:
+                body = self.add_object(obj, obj.placement_at(t))
+                if friction is not None:
+                    pb.changeDynamics(
+                        body, -1, lateralFriction=friction, physicsClientId=self.client
+                    )
+            elif obj.motion is not None:
+                self.move_object(obj.name, obj.placement_at(t))
+
     def move_object(self, name: str, placement: pin.SE3) -> None:
         """Put an object at ``placement`` (kinematically: it pushes what it hits)."""
         pb.resetBasePositionAndOrientation(

@@ -217,7 +217,9 @@ class Simulation:
             body, self._indices, pb.TORQUE_CONTROL, forces=tau, physicsClientId=c
         )
         if self._dynamic:
-            self._update_objects(self.t + self.dt)
+            self.scene.update_objects(
+                self._dynamic, self.t + self.dt, self.settings.friction
+            )
         pb.stepSimulation(physicsClientId=c)
         self.t = (self.steps + 1) * self.dt
         self.steps += 1
@@ -241,23 +243,6 @@ class Simulation:
                 interval.wrist_force,
             )
             self._interval = ContactSample()
-
-    def _update_objects(self, t: float) -> None:
-        """Add the objects due by ``t``; put the moving ones where they are then."""
-        scene = self.scene
-        for obj in self._dynamic:
-            if not obj.present(t):
-                continue
-            if obj.name not in scene.object_ids:
-                body = scene.add_object(obj, obj.placement_at(t))
-                pb.changeDynamics(
-                    body,
-                    -1,
-                    lateralFriction=self.settings.friction,
-                    physicsClientId=self.client,
-                )
-            elif obj.motion is not None:
-                scene.move_object(obj.name, obj.placement_at(t))
 
     @property
     def q(self) -> FloatArray:

@@ -16,7 +16,7 @@ from cbp.collision import (
     PrimitiveEnvironment,
     RobotGeometry,
 )
-from cbp.executors.simulated import _object_key
+from cbp.executors.declared import object_key
 from cbp.scenario import load_scenario
 from cbp.state import RobotState
 
@@ -119,4 +119,4 @@ def test_declared_objects_carry_their_velocity_while_they_move() -> None:
     assert (
         box.placement_at(stop).translation == box.placement_at(stop + 1).translation
     ).all()
-    assert _object_key([box], stop - 1e-6) != _object_key([box], stop + 1.0)
+    assert object_key([box], stop - 1e-6) != object_key([box], stop + 1.0)

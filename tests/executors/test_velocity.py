@@ -214,3 +214,74 @@ def test_cbp_run_writes_the_orbit_outputs(tmp_path: Path) -> None:
         "velocities",
     ):
         assert (out / f"{name}.png").stat().st_size > 0
+
+
+def test_objects_that_appear_or_move_reach_the_simulation_and_the_contacts(
+    tmp_path: Path,
+) -> None:
+    """The velocity executor follows ``appear_at`` and ``motion`` as CAT's does.
+
+    Both simulations add and move the objects' bodies; the contact rows' world
+    holds them where they are, a moving one measured a tick and the robot's
+    stopping time ahead.
+    """
+    import pybullet as pb
+
+    from cbp.collision import PrimitiveEnvironment
+    from cbp.executors.declared import stopping_time
+    from cbp.executors.velocity import VelocityLoop
+    from cbp.sim.mobile import MobileSimulation
+
+    path = tmp_path / "youbot_contacts.yaml"
+    path.write_text(
+        textwrap.dedent(
+            """
+            name: youbot_contacts
+            robot: {name: kuka_youbot}
+            method: {name: velocity, velocity: {dt: 0.02}}
+            simulation: {rate_hz: 500.0}
+            duration: 1.0
+            tasks:
+              - {type: joint_step, name: effort}
+            constraints:
+              - {type: contact_normals}
+              - {type: joint_velocity}
+            world:
+              objects:
+                - {name: wall, shape: box, size: [0.1, 1.0, 1.0],
+                   pose: {position: [1.5, 0.0, 0.5]}, appear_at: 0.2}
+                - name: crate
+                  shape: box
+                  size: [0.2, 0.2, 0.2]
+                  pose: {position: [-1.5, 0.0, 0.1]}
+                  motion: {velocity: [0.0, 0.5, 0.0], start: 0.0, stop: 2.0}
+            """
+        )
+    )
+    scenario = load_scenario(path)
+    sim = MobileSimulation(
+        scenario.robot,
+        scenario.spec.world.objects,
+        scenario.q0,
+        scenario.spec.simulation,
+        path.parent,
+    )
+    try:
+        loop = VelocityLoop(scenario, sim)
+        for k in range(20):  # 0.4 s
+            loop.tick(0.02 * k)
+        assert "wall" in sim.scene.object_ids  # added at 0.2 s
+        crate = sim.scene.object_ids["crate"]
+        y = pb.getBasePositionAndOrientation(crate, physicsClientId=sim.client)[0][1]
+        assert y == pytest.approx(0.5 * sim.t, abs=0.01)
+    finally:
+        sim.close()
+    assert any("object 'wall' appeared" in m for _, m in loop.events)
+    environment = scenario.collision_world().environment
+    assert isinstance(environment, PrimitiveEnvironment)
+    assert [o.name for o in environment.objects] == ["wall", "crate"]
+    moving = environment.objects[1]
+    np.testing.assert_allclose(moving.velocity, [0.0, 0.5, 0.0])
+    # Where it was at the last tick (0.38 s).
+    assert moving.placement.translation[1] == pytest.approx(0.5 * 0.38, abs=1e-9)
+    assert environment.look_ahead == pytest.approx(0.02 + stopping_time(scenario.robot))
