@@ -24,8 +24,9 @@ class CollisionSettings:
     """Distance added around the links [m]; default: robot.yaml's."""
     predict_motion: bool = True
     """Plan against declared objects that move (``motion:``) where they will be
-    when the plan runs: the trajectory executors measure them two command
-    periods ahead along their velocity
+    when the plan runs: measured ahead along their velocity by two command
+    periods and the robot's stopping time from top speed (the trajectory
+    executors), or a tick and that stopping time (the velocity executor)
     (:class:`~cbp.collision.objects.PrimitiveEnvironment`'s ``look_ahead``).
     False: where they are now, as an occupancy map sees them (it has no
     velocities)."""
