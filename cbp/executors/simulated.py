@@ -22,7 +22,7 @@ from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.errors import InvalidTargetError
 from cbp.executors.clock import ClockKind
-from cbp.executors.declared import DeclaredObjects, ObjectKey, object_key
+from cbp.executors.declared import DeclaredObjects
 from cbp.executors.faults import Faults
 from cbp.goals import GoalSource
 from cbp.perception.camera import DepthCamera, DepthFrame
@@ -447,7 +447,6 @@ class SimulatedRun:
         if not declared:
             out[:] = np.inf
             return out
-        dynamic = [o for o in declared if o.dynamic]
         geometry = RobotGeometry(
             self.robot, padding=0.0, attachments=self.scenario.attachments()
         )
@@ -459,19 +458,11 @@ class SimulatedRun:
             PrimitiveEnvironment(self.scenario.environment_objects(0.0)),
             settings,
         )
+        objects = DeclaredObjects(self.scenario, world)  # where they are, no look-ahead
         sample = float(np.median(np.diff(t))) if t.size > 1 else CLEARANCE_PERIOD
         stride = max(1, round(CLEARANCE_PERIOD / max(sample, 1e-6)))
-        key: ObjectKey = ()
         for i in range(0, t.size, stride):
-            if dynamic:
-                now = object_key(dynamic, float(t[i]))
-                if now != key:
-                    key = now
-                    world.set_environment(
-                        PrimitiveEnvironment(
-                            self.scenario.environment_objects(float(t[i]))
-                        )
-                    )
+            objects.update(float(t[i]))
             contacts = world.check(q[i]).contacts
             out[i] = (
                 min(float(np.min(contacts.distance)), CLEARANCE_RANGE)

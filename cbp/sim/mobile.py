@@ -56,8 +56,6 @@ class MobileSimulation:
         self.robot = robot
         self.settings = settings or SimulationSettings()
         self.scene = PybulletScene(robot, objects, folder, gui)
-        #: Objects that appear or move during the run, handled every step.
-        self._dynamic = [obj for obj in objects if obj.dynamic]
         self.client = self.scene.client
         self.dt = 1.0 / self.settings.rate_hz
         pb.setTimeStep(self.dt, physicsClientId=self.client)
@@ -112,8 +110,8 @@ class MobileSimulation:
                 forces=self._forces,
                 physicsClientId=self.client,
             )
-            if self._dynamic:
-                self.scene.update_objects(self._dynamic, self.t + self.dt)
+            if self.scene.dynamic:
+                self.scene.update_objects(self.t + self.dt)
             pb.stepSimulation(physicsClientId=self.client)
             self.steps += 1
             self.t = self.steps * self.dt

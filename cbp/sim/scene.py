@@ -68,6 +68,8 @@ class PybulletScene:
                 )
         self.object_ids: dict[str, int] = {}
         self.folder = folder or Path.cwd()
+        self.dynamic = [obj for obj in objects if obj.dynamic]
+        """The objects that appear or move during a run (:meth:`update_objects`)."""
         for obj in objects:
             if obj.present(0.0):
                 self.add_object(obj, obj.placement_at(0.0))
@@ -133,15 +135,13 @@ class PybulletScene:
         self.object_ids[obj.name] = body
         return int(body)
 
-    def update_objects(
-        self, objects: list[ObjectSpec], t: float, friction: float | None = None
-    ) -> None:
-        """Add the objects of ``objects`` due by ``t``; move the moving ones.
+    def update_objects(self, t: float, friction: float | None = None) -> None:
+        """Add the objects due by ``t`` (:attr:`dynamic`); move the moving ones.
 
         Each is where its timeline puts it at ``t`` (``appear_at``, ``motion``);
         a body added is given ``friction`` (lateral), if set.
         """
-        for obj in objects:
+        for obj in self.dynamic:
             if not obj.present(t):
                 continue
             if obj.name not in self.object_ids:

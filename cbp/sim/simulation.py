@@ -100,8 +100,6 @@ class Simulation:
         self.robot = robot
         self.settings = settings or SimulationSettings()
         self.scene = PybulletScene(robot, objects, folder, gui)
-        #: Objects that appear or move during the run, handled every step.
-        self._dynamic = [obj for obj in objects if obj.dynamic]
         c = self.scene.client
         self.client = c
         self.dt = 1.0 / self.settings.rate_hz
@@ -216,10 +214,8 @@ class Simulation:
         pb.setJointMotorControlArray(
             body, self._indices, pb.TORQUE_CONTROL, forces=tau, physicsClientId=c
         )
-        if self._dynamic:
-            self.scene.update_objects(
-                self._dynamic, self.t + self.dt, self.settings.friction
-            )
+        if self.scene.dynamic:
+            self.scene.update_objects(self.t + self.dt, self.settings.friction)
         pb.stepSimulation(physicsClientId=c)
         self.t = (self.steps + 1) * self.dt
         self.steps += 1
