@@ -56,9 +56,7 @@ class CellIndex:
         b = ijk // brick
         key = (b[:, 0] * self.dims[1] + b[:, 1]) * self.dims[2] + b[:, 2]
         # By brick, and within a brick by place (i, j, k) (:attr:`Bricks.slots`).
-        local = ijk % brick
-        place = (local[:, 0] * brick + local[:, 1]) * brick + local[:, 2]
-        order = np.lexsort((place, key))
+        order = np.lexsort((_places(ijk, brick), key))
         self.centres = np.ascontiguousarray(centres[order])
         """Centres sorted by brick (N, 3)."""
         counts = np.bincount(key, minlength=int(np.prod(self.dims)))
@@ -150,9 +148,14 @@ def _place_bits(index: CellIndex) -> np.ndarray:
     ijk = np.floor((index.centres - index.origin) / index.cell).astype(np.int64)
     if len(np.unique(ijk, axis=0)) < len(ijk):
         return np.zeros(0, dtype=np.uint64)
-    local = ijk % index.brick
-    place = (local[:, 0] * index.brick + local[:, 1]) * index.brick + local[:, 2]
     brick_of = np.repeat(np.arange(len(index.start) - 1), np.diff(index.start))
-    index.centres = np.ascontiguousarray(index.centres[np.lexsort((place, brick_of))])
+    order = np.lexsort((_places(ijk, index.brick), brick_of))
+    index.centres = np.ascontiguousarray(index.centres[order])
     slot_masks(index.centres, index.start, index.origin, index.cell, index.brick, masks)
     return masks
+
+
+def _places(ijk: IntArray, brick: int) -> IntArray:
+    """Each cell's place in its brick, (i * brick + j) * brick + k (ijk: (N, 3))."""
+    local = ijk % brick
+    return (local[:, 0] * brick + local[:, 1]) * brick + local[:, 2]

@@ -123,12 +123,12 @@ class OccupancyGrid:
         self.robot_points_removed = 0
         self.last: FrameSummary | None = None
         self._started = False  # the robot's first space has been freed
-        # The self-filter's reach around each robot shape [m].
-        if geometry is not None:  # the shapes' boxes in their frames
+        if geometry is not None:  # the shapes' boxes in their frames (carving)
             lower = np.array([s.lower for s in geometry.shapes]).reshape(-1, 3)
             upper = np.array([s.upper for s in geometry.shapes]).reshape(-1, 3)
             self._box_centres = 0.5 * (lower + upper)
             self._box_halves = 0.5 * (upper - lower)
+        # The self-filter's reach around each robot shape [m].
         self._robot_reach = (
             np.ascontiguousarray(geometry.visual_excess + spec.robot_margin)
             if geometry is not None
