@@ -36,9 +36,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 import numpy.typing as npt
-from numba import types
 from numba.cpython.unsafe.numbers import trailing_zeros
-from numba.extending import intrinsic
 
 from cbp.robot import FloatArray, IntArray
 
@@ -118,24 +116,6 @@ def occupied_bits(
 def _lowest_bit(bits: np.uint64) -> int:
     """The index of the lowest set bit of a non-zero word (one instruction)."""
     return int(trailing_zeros(bits))  # type: ignore[call-arg]  # a numba intrinsic
-
-
-@intrinsic
-def _popcount(typingctx, bits):  # type: ignore[no-untyped-def]
-    """The number of set bits of a uint64 (LLVM's ctpop: one instruction)."""
-    del typingctx
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        del context, signature
-        return builder.ctpop(args[0])
-
-    return types.uint64(types.uint64), codegen
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _count_bits(bits: np.uint64) -> int:
-    """The number of set bits of a word (one instruction)."""
-    return int(_popcount(bits))  # type: ignore[call-arg]  # a numba intrinsic
 
 
 #: Places in a brick of :data:`SLOT_BRICK` cells a side (one bit each).
@@ -319,6 +299,21 @@ class Contacts(NamedTuple):
             np.empty(count),
         )
 
+    @classmethod
+    def packed(cls, shape: IntArray, floats: FloatArray, count: int) -> Contacts:
+        """The first ``count`` contacts of :func:`cell_contacts_flat`'s output.
+
+        Views of ``shape`` (K,) and of ``floats`` (4, K, 3): robot points,
+        obstacle points and normals, then distances in ``floats[3, :, 0]``.
+        """
+        return cls(
+            shape[:count],
+            floats[0, :count],
+            floats[1, :count],
+            floats[2, :count],
+            floats[3, :count, 0],
+        )
+
     def head(self, count: int) -> Contacts:
         """The first ``count`` contacts (views)."""
         return Contacts(
@@ -352,7 +347,6 @@ def _hull_excess(
     gz: float,
     ny: int,
     nz: int,
-    last: tuple[int, int, int],
     inv_step: float,
     cutoff: float,
     exact_within: float,
@@ -360,22 +354,21 @@ def _hull_excess(
     """A point's excess over a hull's faces (in its frame), and the face.
 
     ``planes``, ``faces`` and ``values`` are the hull's; its grid starts at
-    (gx, gy, gz) with ``ny`` x ``nz`` points per x slab, and ``last`` the largest
-    first index of a grid cell per axis. The excess is the largest over the faces
-    stored at the eight grid points around the point; it is ``inf`` (face -1)
-    when the nearest grid point's value shows the excess is at least ``cutoff``
-    (both in ``VALUE_UNIT``) less the distance to that point (the excess changes
-    by at most the distance moved). Where the excess over the nearest grid
-    point's face is at least ``exact_within`` [m], that excess is returned.
+    (gx, gy, gz) with ``ny`` x ``nz`` points per x slab. The point must lie in
+    the hull's grown box: the grid reaches a step beyond it on every side, so
+    no index is clamped (clamping took 5 % of a query). The excess is the
+    largest over the faces stored at the eight grid points around the point; it
+    is ``inf`` (face -1) when the nearest grid point's value shows the excess is
+    at least ``cutoff`` (both in ``VALUE_UNIT``) less the distance to that point
+    (the excess changes by at most the distance moved). Where the excess over
+    the nearest grid point's face is at least ``exact_within`` [m], that excess
+    is returned.
     """
     fx = (x - gx) * inv_step
     fy = (y - gy) * inv_step
     fz = (z - gz) * inv_step
     # The nearest grid point first: most cells stop there.
-    near = (
-        min(max(int(fx + 0.5), 0), last[0] + 1) * ny
-        + min(max(int(fy + 0.5), 0), last[1] + 1)
-    ) * nz + min(max(int(fz + 0.5), 0), last[2] + 1)
+    near = (int(fx + 0.5) * ny + int(fy + 0.5)) * nz + int(fz + 0.5)
     if values[near] >= cutoff:  # in VALUE_UNIT
         return np.inf, -1
     face = int(faces[near])
@@ -387,9 +380,7 @@ def _hull_excess(
     )
     if depth >= exact_within:  # far: a lower bound is enough
         return depth, face
-    ix = min(max(int(fx), 0), last[0])
-    iy = min(max(int(fy), 0), last[1])
-    iz = min(max(int(fz), 0), last[2])
+    ix, iy, iz = int(fx), int(fy), int(fz)
     for cx in range(2):
         for cy in range(2):
             base = ((ix + cx) * ny + iy + cy) * nz + iz
@@ -419,12 +410,18 @@ def hull_excesses(
     """Points' excess over hull ``s``'s faces (points in its frame), and the face.
 
     Measured as :func:`candidates` measures cells (``exact_within`` as there).
+    The points must lie in the hull's grown box (``shapes.lower``, ``upper``);
+    one outside raises ValueError (its grid index would be out of range).
     """
+    lower, upper = shapes.lower[s], shapes.upper[s]
+    for k in range(len(points)):
+        for a in range(3):
+            if not lower[a] <= points[k, a] <= upper[a]:
+                raise ValueError("a point outside the hull's grown box")
     planes = shapes.planes[shapes.plane_start[s] : shapes.plane_start[s + 1]]
     faces = shapes.faces[shapes.grid_start[s] : shapes.grid_start[s + 1]]
     values = shapes.values[shapes.grid_start[s] : shapes.grid_start[s + 1]]
     origin, dims = shapes.grid_origin[s], shapes.grid_dims[s]
-    last = (dims[0] - 2, dims[1] - 2, dims[2] - 2)
     inv_step = 1.0 / shapes.step
     for k in range(len(points)):
         depth[k], face[k] = _hull_excess(
@@ -439,7 +436,6 @@ def hull_excesses(
             origin[2],
             dims[1],
             dims[2],
-            last,
             inv_step,
             np.inf,
             exact_within,
@@ -491,9 +487,11 @@ def candidates(
     most = len(directions)
     for s in range(len(kind)):
         most = max(most, plane_start[s + 1] - plane_start[s])
+    # Per group: the distance, the outward normal and the centre of its
+    # closest cell so far (the centre is kept, not read back from a cell index:
+    # at the end, those reads were cache misses scattered over the map).
     best = np.full(most, np.inf)
-    best_cell = np.full(most, -1, dtype=np.int64)
-    best_out = np.zeros((most, 3))
+    best_out = np.zeros((most, 6))
     touched = np.empty(most, dtype=np.int64)
     M = np.empty((4, 4))
     # A slot brick's places' centres from its corner, in a shape's frame.
@@ -544,7 +542,6 @@ def candidates(
         hull_values = values[grid_start[s] : grid_start[s + 1]]
         gx, gy, gz = grid_origin[s, 0], grid_origin[s, 1], grid_origin[s, 2]
         ny, nz = grid_dims[s, 1], grid_dims[s, 2]
-        last = (grid_dims[s, 0] - 2, ny - 2, nz - 2)  # a grid cell's first point
         # A cell is rejected when its grid point's value (a lower bound, in
         # VALUE_UNIT) shows it further than the margin even after the slack.
         cutoff = (slack + half + margin) / VALUE_UNIT
@@ -565,7 +562,8 @@ def candidates(
                         bz = (word << 6) + _lowest_bit(bits)
                         bits &= bits - np.uint64(1)
                         b = row + bz
-                        # Skip a brick that misses the box along its axes.
+                        # Skip a brick that misses the box along its axes (one
+                        # branch: two thirds of the bricks are skipped here).
                         dx = origin[0] + (bx + 0.5) * size - tx
                         dy = origin[1] + (by + 0.5) * size - ty
                         dz = origin[2] + (bz + 0.5) * size - tz
@@ -573,21 +571,23 @@ def candidates(
                         y = r01 * dx + r11 * dy + r21 * dz
                         z = r02 * dx + r12 * dy + r22 * dz
                         if (
-                            x < lx - bx_reach
-                            or x > ux + bx_reach
-                            or y < ly - by_reach
-                            or y > uy + by_reach
-                            or z < lz - bz_reach
-                            or z > uz + bz_reach
+                            (x < lx - bx_reach)
+                            | (x > ux + bx_reach)
+                            | (y < ly - by_reach)
+                            | (y > uy + by_reach)
+                            | (z < lz - bz_reach)
+                            | (z > uz + bz_reach)
                         ):
                             continue
-                        first = start[b]
                         if has_slots:
                             # The brick's corner in the shape's frame; its
                             # places from there, all 64 tested at once.
                             dx -= 0.5 * size
                             dy -= 0.5 * size
                             dz -= 0.5 * size
+                            corner_x = dx + tx
+                            corner_y = dy + ty
+                            corner_z = dz + tz
                             x0 = r00 * dx + r10 * dy + r20 * dz
                             y0 = r01 * dx + r11 * dy + r21 * dz
                             z0 = r02 * dx + r12 * dy + r22 * dz
@@ -595,9 +595,19 @@ def candidates(
                             if not placed:
                                 _place_offsets(M, cell, offsets)
                                 placed = True
-                            inside = held & _slots_in_box(
-                                x0, y0, z0, offsets, lx, ly, lz, ux, uy, uz
-                            )
+                            if (
+                                (x > lx + bx_reach)
+                                & (x < ux - bx_reach)
+                                & (y > ly + by_reach)
+                                & (y < uy - by_reach)
+                                & (z > lz + bz_reach)
+                                & (z < uz - bz_reach)
+                            ):  # the whole brick is inside the box
+                                inside = held
+                            else:
+                                inside = held & _slots_in_box(
+                                    x0, y0, z0, offsets, lx, ly, lz, ux, uy, uz
+                                )
                             while inside:
                                 bit = _lowest_bit(inside)
                                 inside &= inside - one
@@ -628,20 +638,16 @@ def candidates(
                                         gz,
                                         ny,
                                         nz,
-                                        last,
                                         inv_step,
                                         cutoff,
                                         exact,
                                     )
                                 if depth - half >= margin or depth >= best[group]:
                                     continue
-                                if best_cell[group] < 0:
+                                if best[group] == np.inf:
                                     touched[n_touched] = group
                                     n_touched += 1
                                 best[group] = depth
-                                # Cells are in place order: those before it.
-                                below = held & ((one << np.uint64(bit)) - one)
-                                best_cell[group] = first + _count_bits(below)
                                 if not is_capsule:
                                     ox = hull_planes[group, 0]
                                     oy = hull_planes[group, 1]
@@ -649,12 +655,18 @@ def candidates(
                                 best_out[group, 0] = ox
                                 best_out[group, 1] = oy
                                 best_out[group, 2] = oz
+                                # The place's centre: (i, j, k) of bit
+                                # (i * 4 + j) * 4 + k, from the brick's corner.
+                                i, j, m = bit >> 4, (bit >> 2) & 3, bit & 3
+                                best_out[group, 3] = corner_x + (i + 0.5) * cell
+                                best_out[group, 4] = corner_y + (j + 0.5) * cell
+                                best_out[group, 5] = corner_z + (m + 0.5) * cell
                             continue
                         # Bricks without place bits: each cell read and rotated.
                         # The measuring and keeping below repeat the lines above:
                         # as an inlined helper (which writes the kept arrays, or
                         # takes tuples of them) the pass took 2-3x as long.
-                        for k in range(first, start[b + 1]):
+                        for k in range(start[b], start[b + 1]):
                             # R^T (c - t): the cell in the shape's frame.
                             dx = centres[k, 0] - tx
                             dy = centres[k, 1] - ty
@@ -697,18 +709,16 @@ def candidates(
                                     gz,
                                     ny,
                                     nz,
-                                    last,
                                     inv_step,
                                     cutoff,
                                     exact,
                                 )
                             if depth - half >= margin or depth >= best[group]:
                                 continue
-                            if best_cell[group] < 0:
+                            if best[group] == np.inf:
                                 touched[n_touched] = group
                                 n_touched += 1
                             best[group] = depth
-                            best_cell[group] = k
                             if not is_capsule:
                                 ox = hull_planes[group, 0]
                                 oy = hull_planes[group, 1]
@@ -716,21 +726,22 @@ def candidates(
                             best_out[group, 0] = ox
                             best_out[group, 1] = oy
                             best_out[group, 2] = oz
+                            best_out[group, 3] = centres[k, 0]
+                            best_out[group, 4] = centres[k, 1]
+                            best_out[group, 5] = centres[k, 2]
         for i in range(n_touched):
             g = touched[i]
-            k = best_cell[g]
             ox, oy, oz = best_out[g, 0], best_out[g, 1], best_out[g, 2]
             out_shape[count] = s
-            out_centre[count, 0] = centres[k, 0]
-            out_centre[count, 1] = centres[k, 1]
-            out_centre[count, 2] = centres[k, 2]
+            out_centre[count, 0] = best_out[g, 3]
+            out_centre[count, 1] = best_out[g, 4]
+            out_centre[count, 2] = best_out[g, 5]
             out_outward[count, 0] = r00 * ox + r01 * oy + r02 * oz
             out_outward[count, 1] = r10 * ox + r11 * oy + r12 * oz
             out_outward[count, 2] = r20 * ox + r21 * oy + r22 * oz
             out_distance[count] = best[g] - half
             count += 1
             best[g] = np.inf
-            best_cell[g] = -1
     return count
 
 
@@ -983,13 +994,17 @@ def cell_contacts_flat(*args):  # type: ignore[no-untyped-def]
     """:func:`cell_contacts` with its named tuples' fields passed one by one.
 
     The arguments are the fields of the Bricks, then of the Shapes, then the
-    other arguments up to ``capacity``, then the fields of ``out``. Numba's
-    dispatcher types arrays in compiled code but named tuples in Python: the
-    same call with named tuples costs about 2 us more.
+    other arguments up to ``capacity``, then the output: the shapes (K,) and
+    one float array (4, K, 3) of the robot points, obstacle points, normals and
+    (in ``[3, :, 0]``) distances (:meth:`Contacts.packed`). Numba's dispatcher
+    types arrays in compiled code but named tuples in Python: the same call
+    with named tuples costs about 2 us more, and three more arrays to allocate
+    and slice about 1 us.
     """
+    shape, floats = args[_R:]
     return cell_contacts(  # type: ignore[call-arg]  # a tuple of known length
         Bricks(*args[:_B]),
         Shapes(*args[_B:_S]),
         *args[_S:_R],
-        Contacts(*args[_R:]),
+        Contacts(shape, floats[0], floats[1], floats[2], floats[3][:, 0]),
     )

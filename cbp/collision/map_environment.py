@@ -21,7 +21,7 @@ from cbp.collision.cell_index import CellIndex
 from cbp.collision.contacts import ContactSet
 from cbp.collision.environment import Environment
 from cbp.collision.geometry import LinkShape, PlacedShapes
-from cbp.collision.shape_table import ShapeTable, compile_kernels
+from cbp.collision.shape_table import CellContactQuery, ShapeTable, compile_kernels
 from cbp.robot import FloatArray
 
 __all__ = ["BlockedGrid", "MetaballRefiner", "OccupancyEnvironment"]
@@ -154,7 +154,10 @@ class OccupancyEnvironment(Environment):
         self.blocked = blocked
         self.surfaces_only = blocked is not None
         self._identity = pin.SE3.Identity()
-        self._last_table: tuple[object, float, ShapeTable | None] = (None, 0.0, None)
+        self._last_query: tuple[tuple[object, ...], CellContactQuery | None] = (
+            (),
+            None,
+        )
 
     def __len__(self) -> int:
         """Number of occupied cells."""
@@ -205,32 +208,39 @@ class OccupancyEnvironment(Environment):
         if not len(self.centres):
             return ContactSet.empty()
         shapes = robot.shapes
-        half = 0.5 * self.cell
-        # The table of the last query's shapes, kept as one tuple (one atomic
-        # read, whatever thread queries), else the shared cache's.
-        last_shapes, last_margin, table = self._last_table
-        if table is None or shapes is not last_shapes or margin != last_margin:
-            table = ShapeTable.for_shapes(shapes, margin + half)
-            self._last_table = (shapes, margin, table)
-        # On the shape's surface, on the cell toward the shape, the normal from
-        # the cell toward the shape; a few per shape, spread over directions;
-        # a metaball refinement in the same compiled call, another after it.
         refiner = self.refiner
         metaball = refiner if isinstance(refiner, MetaballRefiner) else None
-        hits = table.contacts(
-            self.index,
-            robot.placements,
-            margin,
-            per_shape,
-            _COS_SPREAD,
-            (2.0 * self.cell) ** 2,
-            None
-            if metaball is None
-            else (
-                metaball.radius_cells * self.cell,
-                metaball.offset_cells * self.cell,
-            ),
-        )
+        # The query bound to the last shapes and settings, kept as one tuple
+        # (one atomic read, whatever thread queries).
+        key = (shapes, margin, per_shape, refiner)
+        last, query = self._last_query
+        if (
+            query is None
+            or shapes is not last[0]
+            or margin != last[1]
+            or per_shape != last[2]
+            or refiner is not last[3]
+        ):
+            # On the shape's surface, on the cell toward the shape, the normal
+            # from the cell toward the shape; a few per shape, spread over
+            # directions; a metaball refinement in the same compiled call,
+            # another after it.
+            table = ShapeTable.for_shapes(shapes, margin + 0.5 * self.cell)
+            query = table.contact_query(
+                self.index,
+                margin,
+                per_shape,
+                _COS_SPREAD,
+                (2.0 * self.cell) ** 2,
+                None
+                if metaball is None
+                else (
+                    metaball.radius_cells * self.cell,
+                    metaball.offset_cells * self.cell,
+                ),
+            )
+            self._last_query = (key, query)
+        hits = query(robot.placements)
         if not len(hits.shape):
             return ContactSet.empty()
         normal = hits.normal

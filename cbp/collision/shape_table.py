@@ -38,7 +38,13 @@ from cbp.collision.cell_kernels import (
 from cbp.collision.geometry import LinkShape, ShapePlacements
 from cbp.robot import FloatArray, IntArray
 
-__all__ = ["DIRECTIONS", "FACE_GRID_STEP", "ShapeTable", "compile_kernels"]
+__all__ = [
+    "DIRECTIONS",
+    "FACE_GRID_STEP",
+    "CellContactQuery",
+    "ShapeTable",
+    "compile_kernels",
+]
 
 #: Face-grid step [m]: fine enough that a ridge's neighbourhood is a few mm wide.
 FACE_GRID_STEP = 0.0075
@@ -238,7 +244,7 @@ class ShapeTable:
             cell (K,).
         """
         half = 0.5 * index.cell
-        self._check_reach(margin, half)
+        self.check_reach(margin, half)
         frames = _frames(placements)
         capacity = self.capacity
         out = Candidates(
@@ -273,33 +279,32 @@ class ShapeTable:
 
         :meth:`candidates`, then :func:`~cbp.collision.cell_kernels.cell_hits`
         and, with ``refine`` (kernel radius, offset) [m], the metaball normals
-        (:func:`~cbp.collision.cell_kernels.cell_contacts`).
+        (:func:`~cbp.collision.cell_kernels.cell_contacts`). A caller that
+        queries the same cells with the same settings again and again binds
+        them once (:meth:`contact_query`).
         """
-        half = 0.5 * index.cell
-        self._check_reach(margin, half)
-        capacity = self.capacity
-        room = min(capacity, max(per_shape, 1) * len(self.kind))
-        out = Contacts.room(room)
-        radius, offset = refine if refine is not None else (0.0, 0.0)
-        count = cell_contacts_flat(
-            *index.bricks,
-            *self.arrays,
-            _frames(placements),
-            half,
-            DIRECTIONS,
-            float(margin),
-            EXACT_WITHIN,
-            int(per_shape),
-            float(cos_max),
-            float(spacing2),
-            float(radius),
-            float(offset),
-            capacity,
-            *out,
-        )
-        return out.head(count)
+        query = self.contact_query(index, margin, per_shape, cos_max, spacing2, refine)
+        return query(placements)
 
-    def _check_reach(self, margin: float, half: float) -> None:
+    def contact_query(
+        self,
+        index: CellIndex,
+        margin: float,
+        per_shape: int,
+        cos_max: float,
+        spacing2: float,
+        refine: tuple[float, float] | None = None,
+    ) -> CellContactQuery:
+        """:meth:`contacts` with everything but the placements bound."""
+        return CellContactQuery(
+            self, index, margin, per_shape, cos_max, spacing2, refine
+        )
+
+    def check_reach(self, margin: float, half: float) -> None:
+        """Raise ValueError unless ``margin`` + ``half`` a cell is within the reach.
+
+        The boxes and face grids cover the table's reach and no more.
+        """
         if margin + half > self.reach + 1e-9:
             raise ValueError(
                 f"margin {margin} + half a cell {half} exceeds the table's reach "
@@ -313,7 +318,8 @@ class ShapeTable:
 
         Args:
             s: a hull's index in the table.
-            points: points in the hull's frame, inside its grown box (n, 3).
+            points: points in the hull's frame, inside its grown box (n, 3);
+                one outside raises ValueError.
             exact_within: from this excess on [m], the nearest grid point's face
                 only, as :meth:`candidates` (default: all in full).
 
@@ -327,6 +333,58 @@ class ShapeTable:
         face = np.empty(len(points), dtype=np.intp)
         hull_excesses(self.arrays, s, points, float(exact_within), depth, face)
         return depth, face
+
+
+class CellContactQuery:
+    """A table's contact query against one cell index, its settings bound.
+
+    Calling it with the shapes' placements gives :meth:`ShapeTable.contacts`;
+    the arguments that do not change from query to query are checked and
+    packed once (a map environment keeps one per map and settings: per query,
+    the packing cost about a microsecond of the 35 the compiled pass takes).
+    Holds no state between calls, so threads may share it.
+    """
+
+    __slots__ = ("_leading", "_room", "_trailing")
+
+    def __init__(
+        self,
+        table: ShapeTable,
+        index: CellIndex,
+        margin: float,
+        per_shape: int,
+        cos_max: float,
+        spacing2: float,
+        refine: tuple[float, float] | None = None,
+    ) -> None:
+        """Check the reach and pack the arguments (see :meth:`ShapeTable.contacts`)."""
+        half = 0.5 * index.cell
+        table.check_reach(margin, half)
+        radius, offset = refine if refine is not None else (0.0, 0.0)
+        self._leading = (*index.bricks, *table.arrays)
+        self._trailing = (
+            half,
+            DIRECTIONS,
+            float(margin),
+            EXACT_WITHIN,
+            int(per_shape),
+            float(cos_max),
+            float(spacing2),
+            float(radius),
+            float(offset),
+            table.capacity,
+        )
+        self._room = min(table.capacity, max(per_shape, 1) * len(table.kind))
+
+    def __call__(self, placements: list[pin.SE3]) -> Contacts:
+        """The contacts of the shapes at ``placements`` (table order)."""
+        room = self._room
+        shape = np.empty(room, dtype=np.intp)
+        floats = np.empty((4, room, 3))
+        count = cell_contacts_flat(
+            *self._leading, _frames(placements), *self._trailing, shape, floats
+        )
+        return Contacts.packed(shape, floats, count)
 
 
 def _frames(placements: list[pin.SE3]) -> FloatArray:

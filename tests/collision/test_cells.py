@@ -20,6 +20,7 @@ from cbp.collision.cell_index import CellIndex
 from cbp.collision.cell_kernels import (
     EXACT_WITHIN,
     VALUE_UNIT,
+    Contacts,
     cell_hits,
     occupied_bits,
     spread_contacts,
@@ -167,6 +168,18 @@ def test_far_points_are_measured_on_one_face_from_below(geometry) -> None:
     assert error.max() < 2 * SLACK
     assert np.mean(error < 1e-12) > 0.75  # the nearest point's face, mostly
     assert np.quantile(error, 0.99) < 2e-3
+
+
+def test_a_point_outside_the_grown_box_is_refused(geometry) -> None:
+    """The face grid covers the grown box and no more: nothing is read past it."""
+    table = ShapeTable.build(geometry.shapes, 0.07)
+    s = next(s for s, *_ in _points_in_hull_boxes(geometry, table, seed=0))
+    inside = 0.5 * (table.lower[s] + table.upper[s])
+    table.hull_excess(s, inside[None])
+    outside = inside.copy()
+    outside[2] = table.upper[s, 2] + 1e-3
+    with pytest.raises(ValueError, match="grown box"):
+        table.hull_excess(s, np.array([inside, outside]))
 
 
 def test_grid_values_bound_the_excess_from_below(geometry) -> None:
@@ -422,6 +435,13 @@ def test_one_call_gives_what_the_steps_give(geometry, robots) -> None:
                     getattr(got, name), getattr(hits, name), err_msg=name
                 )
             np.testing.assert_allclose(got.normal, normal, atol=1e-12)
+            # The query bound once answers the same, call after call.
+            query = table.contact_query(index, margin, 3, cos_max, spacing2, option)
+            for again in (query(placements), query(placements)):
+                for name in Contacts._fields:
+                    np.testing.assert_array_equal(
+                        getattr(again, name), getattr(got, name), err_msg=name
+                    )
         compared += len(hits.shape)
     assert compared > 20
 
@@ -448,6 +468,24 @@ def test_occupancy_query_uses_every_shape_kind(robots) -> None:
         np.testing.assert_allclose(
             np.einsum("ij,ij->i", gap, hits.normal), hits.distance, atol=1e-9
         )
+
+
+def test_a_map_query_follows_its_settings(geometry, robots) -> None:
+    """The query a map keeps is bound again when the margin, count or refiner change."""
+    robot = robots["panda"]
+    state = RobotState(robot, robot.home())
+    placed = CollisionWorld(geometry).placed(state)
+    env = OccupancyEnvironment(_two_boxes(), CELL, MetaballRefiner())
+    few = env.query(placed, 0.3, 1)
+    many = env.query(placed, 0.3, 3)
+    assert len(many) > len(few) == len(set(few.shape.tolist()))
+    env.refiner = None  # the hulls' face normals, unrefined
+    raw = env.query(placed, 0.3, 3)
+    np.testing.assert_array_equal(raw.point, many.point)
+    assert np.abs(raw.normal - many.normal).max() > 1e-3
+    near = env.query(placed, 0.1, 3)
+    assert len(near) < len(many)
+    assert np.all(near.distance < 0.1)
 
 
 def test_a_world_prepares_the_snapshots_it_takes(robots) -> None:
