@@ -10,6 +10,7 @@ constraints of the next one (CAT Sec. IV-C).
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ from cbp.collision.checker import FreeSpaceChecker
 from cbp.collision.contacts import ContactRow, ContactSet
 from cbp.collision.environment import Environment, signed_distance
 from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
+from cbp.collision.motion import SweepBound
 from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.settings import CollisionSettings
 from cbp.robot import FloatArray
@@ -34,6 +36,10 @@ __all__ = [
     "ContactSet",
     "StepCheck",
 ]
+
+
+#: :attr:`CollisionWorld.sweep_step` when the links are not padded [m].
+_UNPADDED_SWEEP_STEP = 0.002
 
 
 @dataclass(frozen=True)
@@ -180,6 +186,37 @@ class CollisionWorld:
             return StepCheck(True, check.penetration, check.contacts)
         self.reject(check)
         return check
+
+    @functools.cached_property
+    def sweep(self) -> SweepBound:
+        """How far the robot's shapes move along joint-space segments.
+
+        Raises ValueError (on first use) for a robot with joints other than
+        revolute and prismatic ones.
+        """
+        return SweepBound(self.geometry)
+
+    @property
+    def sweep_step(self) -> float:
+        """The most a motion's checked configurations may be apart [m].
+
+        By :attr:`sweep`'s bound: the padding, so that the unpadded robot
+        keeps half of it between them (:mod:`cbp.collision.motion`); 2 mm
+        when the links are not padded (then it may touch by up to 1 mm).
+        """
+        return self.padding if self.padding > 0 else _UNPADDED_SWEEP_STEP
+
+    def motion_free(self, a: FloatArray, b: FloatArray) -> bool:
+        """Whether the straight joint-space motion from ``a`` to ``b`` is free.
+
+        ``b`` and the configurations :attr:`sweep` places between them
+        :attr:`sweep_step` apart are checked (:meth:`is_free`); ``a`` is not
+        (the motion starts there). Planners that charge their checks to a
+        budget call :meth:`is_free` on :meth:`SweepBound.between` themselves.
+        """
+        return all(
+            self.is_free(q) for q in self.sweep.between(a, b, self.sweep_step)
+        ) and self.is_free(b)
 
     def is_free(self, q: FloatArray) -> bool:
         """Whether ``q`` is collision-free, in one pinocchio call (planners, IK).

@@ -40,6 +40,7 @@ the plans (timed from rest).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Literal
 
@@ -267,6 +268,12 @@ class HybridPlanner:
             if self._solved and budget.left() > 0 and lead is not None:
                 points, note = self.rrt.path(budget)
                 assert self._from is not None
+                if points is None:
+                    assert self._target is not None
+                    run.event(t, f"hybrid: {note}; planning again")
+                    self._solved = False
+                    self.rrt.begin(self._from[-1], self._target)
+                    return Plan(None, 0, f"hybrid: {note}")
                 points = np.vstack([lead[:-1], self._from[:-1], points])
                 return self._splice(points, note, t, run)
         finally:
@@ -408,15 +415,17 @@ class HybridPlanner:
         # (with cameras the map may have grown).
         ahead = np.linalg.norm(self._plan - q, axis=1)
         rest = self._plan[int(np.argmin(ahead)) :]
-        for point in rest:
-            if not self.search.collision_free(point, budget):
-                run.event(
-                    t,
-                    "hybrid: the rest of the plan is no longer free; control "
-                    "returns to CAT",
-                )
-                self._to_cat()
-                return None
+        search = self.search
+        if not search.collision_free(rest[0], budget) or not all(
+            search.motion_free(a, b, budget) for a, b in itertools.pairwise(rest)
+        ):
+            run.event(
+                t,
+                "hybrid: the rest of the plan is no longer free; control "
+                "returns to CAT",
+            )
+            self._to_cat()
+            return None
         return Plan(None, 0, "hybrid: following the plan")
 
     def _give_up(self, t: float) -> None:

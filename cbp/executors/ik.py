@@ -61,11 +61,13 @@ def interpolate_checked(
 ) -> Plan:
     """A joint-space line from ``q`` toward ``target``, checked at every point.
 
-    Ends before the first configuration in collision, or where the budget runs
-    out.
+    The points are at most ``step`` [rad] apart in every joint, and close
+    enough that the unpadded links keep half the padding between them
+    (:meth:`IkSearch.motion_steps`). Ends before the first configuration in
+    collision, or where the budget runs out.
     """
     delta = target - q
-    n = max(1, int(np.ceil(np.max(np.abs(delta)) / step)))
+    n = max(int(np.ceil(np.max(np.abs(delta)) / step)), search.motion_steps(q, target))
     path = [q]
     for k in range(1, n + 1):
         if budget.spent():

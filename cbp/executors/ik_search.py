@@ -167,6 +167,31 @@ class IkSearch:
             return q
         return None
 
+    def motion_free(
+        self, a: FloatArray, b: FloatArray, budget: Budget | None = None
+    ) -> bool:
+        """Whether the joint-space line from ``a`` to ``b`` is free all along.
+
+        ``b`` and the configurations between, close enough that the unpadded
+        links keep half the padding between checks
+        (:meth:`~cbp.collision.world.CollisionWorld.motion_free`), each charged
+        to ``budget``; ``a`` is taken as checked.
+        """
+        world = self.world
+        if world is None:
+            return True
+        between = world.sweep.between(a, b, world.sweep_step)
+        return all(self.collision_free(q, budget) for q in between) and (
+            self.collision_free(b, budget)
+        )
+
+    def motion_steps(self, a: FloatArray, b: FloatArray) -> int:
+        """Segments to cut the line from ``a`` to ``b`` into, as :meth:`motion_free`."""
+        if self.world is None:
+            return 1
+        distance = self.world.sweep.distance(a, b)
+        return max(1, int(np.ceil(distance / self.world.sweep_step)))
+
     def collision_free(self, q: FloatArray, budget: Budget | None = None) -> bool:
         """No padded link penetrates an obstacle or another link.
 

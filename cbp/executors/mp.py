@@ -6,9 +6,14 @@ collision-free configuration (:class:`~cbp.executors.ik_search.IkSearch`), and
 RRT-Connect plans a joint-space path to it from the point of the current
 trajectory after the deadline. States are valid when no padded link penetrates
 an obstacle or another link (the scenario's collision world); motions are
-checked at OMPL's resolution. The path is shortened by OMPL's path simplifier
-(rope shortcut and vertex reduction, or its full simplification), resampled,
-timed to stop at its end and spliced in by the shared trajectory loop; while
+checked at OMPL's resolution while planning. The path is shortened by OMPL's
+path simplifier (rope shortcut and vertex reduction, or its full
+simplification) and resampled; then each of its segments is checked all along,
+at configurations close enough that the unpadded links keep half the padding
+between them (:mod:`cbp.collision.motion`: OMPL's resolution, 0.065 rad on the
+Panda, lets the hand move 5 cm between checks). A plan that touches between
+its checked states is dropped and planned again next period. It is timed to
+stop at its end and spliced in by the shared trajectory loop; while
 the goal stays the same the plan is followed, not replaced. A plan that does not
 finish in the budget counts as a miss, so the period grows.
 """
@@ -139,11 +144,16 @@ class RrtConnect:
             self._budget = None
         return solved and bool(setup.haveExactSolutionPath())
 
-    def path(self, budget: Budget) -> tuple[FloatArray, str]:
+    def path(self, budget: Budget) -> tuple[FloatArray | None, str]:
         """The solved plan: simplified in what is left of ``budget``, resampled.
 
+        Every segment of the resampled path is then checked all along
+        (:meth:`IkSearch.motion_free`), whatever the budget: the robot moves
+        along them.
+
         Returns:
-            The points (the first exactly the start) and a note.
+            The points (the first exactly the start) and a note; None for the
+            points when a segment touches (the note says so).
         """
         setup: Any = self._setup
         s = self.settings
@@ -160,16 +170,17 @@ class RrtConnect:
                     self._simplifier.ropeShortcutPath(path)
                     self._simplifier.reduceVertices(path)
             points = _resample(self._states(path, q), s.waypoint_step)
-            note = "planned"
-            # Resampled points fall between the states OMPL checked; where one
-            # touches, use OMPL's own interpolation: exactly the checked states.
-            if not all(self.search.collision_free(p, budget) for p in points[1:]):
-                path.interpolate()
-                points = self._states(path, q)
-                note = "planned (checked states only: a resampled point touched)"
+            # OMPL checked states along the segments at its resolution; the
+            # robot sweeps everything between. (Falling back to OMPL's own
+            # interpolation, as this did, kept the same segments.)
+            search = self.search
+            if not all(
+                search.motion_free(a, b, budget) for a, b in itertools.pairwise(points)
+            ):
+                return None, "the plan touches between the states OMPL checked"
         finally:
             self._budget = None
-        return points, note
+        return points, "planned"
 
     def _until(self, budget: Budget, seconds: float) -> object:
         """OMPL's termination condition: ``seconds`` more of ``budget`` used."""
@@ -245,6 +256,9 @@ class MpPlanner:
         if not self.rrt.grow(budget, budget.left() * (1.0 - s.simplify_fraction)):
             return Plan(None, self.checks - checks, "no plan in time", timed_out=True)
         points, note = self.rrt.path(budget)
+        if points is None:
+            run.event(run.sim.t, f"mp: {note}; planning again")
+            return Plan(None, self.checks - checks, note)
         timing = s.timing
         record_plan(
             run,

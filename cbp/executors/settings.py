@@ -157,7 +157,9 @@ class IkSettings:
     search: IkSearchSettings = field(default_factory=IkSearchSettings)
     """The IK search."""
     interpolation_step: float = 0.02
-    """Largest joint change between two collision-checked configurations [rad]."""
+    """Largest joint change between two collision-checked configurations [rad];
+    they are closer where the links would otherwise sweep more than the padding
+    between them (:mod:`cbp.collision.motion`)."""
 
     def __post_init__(self) -> None:
         """Positive step."""
@@ -178,8 +180,10 @@ class PlannerSettings:
     nothing improves or the budget ends). Measured in the shelf: shortcut paths
     are as short, at a twelfth of the validity checks."""
     check_resolution: float = 0.005
-    """Motion validation: checked every this fraction of the joint space's
-    extent (OMPL's state validity checking resolution)."""
+    """Motion validation while planning: checked every this fraction of the
+    joint space's extent (OMPL's state validity checking resolution; 0.065 rad
+    on the Panda). The final path is checked all along whatever this is
+    (:mod:`cbp.collision.motion`)."""
     range: float = 1.0
     """RRT-Connect's step length [rad] (0: OMPL's default, a fifth of the joint
     space's extent: 2.7 rad on the Panda). Measured in the shelf (``cbp bench``):

@@ -113,6 +113,34 @@ def test_a_failed_search_is_tried_again(monkeypatch) -> None:
 
 
 @pytest.mark.slow
+def test_a_plan_refused_by_the_sweep_check_is_planned_again(monkeypatch) -> None:
+    """The first plan touches between its checked states (injected): a new one."""
+    original = hybrid_module.RrtConnect.path
+    calls = [0]
+
+    def path(self, budget):  # type: ignore[no-untyped-def]
+        calls[0] += 1
+        points, note = original(self, budget)
+        if calls[0] == 1:
+            return None, "the plan touches between the states OMPL checked"
+        return points, note
+
+    monkeypatch.setattr(hybrid_module.RrtConnect, "path", path)
+    scenario = load_scenario(
+        SCENARIOS / "cat_local_minimum.yaml",
+        overrides={"method.cat.timing.clock": "virtual"},
+    )
+    trace = run_hybrid(scenario)
+    m = run_metrics(trace, scenario.robot)
+    events = "\n".join(msg for _, msg in trace.events)
+    assert "touches between the states OMPL checked; planning again" in events
+    assert calls[0] >= 2
+    assert m["plans"] == 1
+    assert m["reached"], m
+    assert m["peak_contact_force_n"] == 0.0
+
+
+@pytest.mark.slow
 def test_the_plan_goes_to_the_nearest_configuration_found(monkeypatch) -> None:
     """Of the all-joints-free starts' solutions, the nearest in time is planned to.
 
