@@ -51,7 +51,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: How far a link is taken to look larger than its collision shapes when its
-#: visual meshes cannot be read [m] (the self-filter's reach before version 0.4).
+#: visual meshes cannot be read [m] (the self-filter's reach before it was
+#: measured from the shapes).
 UNREAD_VISUAL_EXCESS = 0.03
 
 

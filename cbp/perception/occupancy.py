@@ -242,8 +242,8 @@ class OccupancyGrid:
         space it has not been in.
 
         With ``robot_space: nearby`` every call frees the padded shapes plus
-        2 cm plus one cell (the space the self-filter took for the robot before
-        version 0.4): unsafe, see :attr:`PerceptionSpec.robot_space`.
+        2 cm plus one cell (the space the self-filter took for the robot before it
+        was measured from the shapes): unsafe, see :attr:`PerceptionSpec.robot_space`.
         """
         if self.geometry is None:
             return 0

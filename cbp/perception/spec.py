@@ -122,7 +122,8 @@ class PerceptionSpec:
     unknown: Literal["occupied", "free"] = "occupied"
     """How the map counts the space no camera has seen (and the robot has not
     held): ``occupied`` (an obstacle, for every collision-aware method) or
-    ``free`` (the behaviour before version 0.3, for comparison)."""
+    ``free`` (the behaviour before unknown space was tracked, for
+    comparison)."""
     cell_size: float = 0.01
     """Occupancy map resolution [m]."""
     bounds: tuple[Vec3, Vec3] = ((-1.0, -1.0, -0.1), (1.5, 1.0, 1.5))
@@ -139,15 +140,15 @@ class PerceptionSpec:
     covers depth noise and the error between the robot's modelled and actual
     pose. Every reading farther out is mapped, even inside the padding, so an
     obstacle that comes at the arm stays in view until it is this close (a
-    reading the filter drops leaves its cell as it was). Before version 0.4 it
-    was 0.02 beyond the padded shapes: an obstacle pushed into the arm vanished
-    3 cm before it touched."""
+    reading the filter drops leaves its cell as it was). Before it was
+    measured from the shapes it was 0.02 beyond the padded shapes: an obstacle
+    pushed into the arm vanished 3 cm before it touched."""
     robot_space: Literal["held", "nearby"] = "held"
     """Which unseen space the robot's presence frees. ``held`` (the default): at
     the first frame its padded shapes and two cells more (a run starts clear of
     obstacles, as the loader checks for declared ones), after that only the
     cells its padded shapes hold, so it never frees space it has not been in.
-    ``nearby`` (before version 0.4): on every frame the padded shapes plus
+    ``nearby`` (the behaviour before ``held``): on every frame the padded shapes plus
     2 cm plus one cell. That lets the arm move beside space no
     camera sees (its own shadow) and is unsafe: each frame frees centimetres
     beyond where the arm may stand, so it can walk into an obstacle nothing has

@@ -121,9 +121,9 @@ def test_an_obstacle_inside_the_padding_is_mapped_and_the_arm_is_not(robots) -> 
     """The self-filter drops readings within robot_margin of the arm's shapes only.
 
     A wall stands 7 mm beside the hand: inside the 1 cm padding, beyond the 5 mm
-    margin. Before version 0.4 the filter dropped every reading within the
-    padding plus 2 cm, so the wall's face beside the hand was never mapped (an
-    obstacle pushed into the arm vanished before it touched).
+    margin. Before it was measured from the shapes the filter dropped every
+    reading within the padding plus 2 cm, so the wall's face beside the hand was
+    never mapped (an obstacle pushed into the arm vanished before it touched).
     """
     robot = robots["panda"]
     geometry = RobotGeometry(robot)
@@ -169,7 +169,7 @@ def test_an_obstacle_inside_the_padding_is_mapped_and_the_arm_is_not(robots) -> 
     assert summary.robot_points > 1000
     on_wall = _objects([wall]).clearance(centres) <= grid.cell
     assert on_wall.all()  # nothing of the arm is mapped
-    # Cells of the wall's face inside the padding (12 here; none before 0.4).
+    # Cells of the wall's face inside the padding (12 here; none with the old filter).
     in_padding = geometry.contains(state, centres)
     assert np.count_nonzero(in_padding) >= 5
 

@@ -147,7 +147,7 @@ def test_an_obstacle_no_camera_sees_is_never_entered(robot_space: str) -> None:
 
     The run says that unseen space holds the arm, and beside which links.
 
-    With ``robot_space: nearby`` (before 0.4) every frame freed a few centimetres
+    With ``robot_space: nearby`` (the old behaviour) every frame freed a few centimetres
     of unseen space around the arm, which then moved into them, frame after
     frame, and pressed the board (measured 177 N): the test shows that hazard.
     Virtual time, so each run is the same.

@@ -125,9 +125,9 @@ def test_a_box_pushed_into_the_arm_stays_in_view_until_it_touches() -> None:
 
     The box's face comes within the arm's padding; the self-filter keeps its
     readings (they are farther than robot_margin from the arm's shapes), so the
-    map holds the box where it is. Before version 0.4 the filter dropped
-    everything within 3 cm of the arm and the box pressed the forearm with
-    233 N here (declared box where it is, no prediction: 22 N). Virtual clock:
+    map holds the box where it is. Before it was measured from the shapes the
+    filter dropped everything within 3 cm of the arm and the box pressed the
+    forearm with 233 N here (declared box where it is, no prediction: 22 N). Virtual clock:
     the frames as in the declared run's time.
     """
     path = SCENARIOS / "cat_pushed_obstacle.yaml"
