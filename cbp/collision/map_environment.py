@@ -8,6 +8,7 @@ octree of the same cells.
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 from dataclasses import dataclass
@@ -151,6 +152,9 @@ class OccupancyEnvironment(Environment):
         )
         self.resolution = 0.5 * self.cell
         self.refiner = refiner
+        #: Per robot shape, how much nearer its contacts are reported [m]
+        #: (obstacles that come at it, measured ahead: :meth:`ahead`).
+        self.nearer: FloatArray | None = None
         self.blocked = blocked
         self.surfaces_only = blocked is not None
         self._identity = pin.SE3.Identity()
@@ -162,6 +166,16 @@ class OccupancyEnvironment(Environment):
     def __len__(self) -> int:
         """Number of occupied cells."""
         return len(self.centres)
+
+    def ahead(self, nearer: FloatArray | None) -> OccupancyEnvironment:
+        """The same cells, each shape's contacts ``nearer`` (per shape) [m].
+
+        A new snapshot object sharing this one's cells and index (its users
+        tell snapshots apart by identity); None: as measured.
+        """
+        out = copy.copy(self)
+        out.nearer = None if nearer is None else np.asarray(nearer, dtype=float)
+        return out
 
     def prepare(self, shapes: list[LinkShape], margin: float) -> None:
         """Compile the query (once per process) and pack the shapes (once)."""
@@ -246,8 +260,11 @@ class OccupancyEnvironment(Environment):
         normal = hits.normal
         if refiner is not None and metaball is None:
             normal = refiner.refine(self.index, hits.obstacle, normal)
+        distance = hits.distance
+        if self.nearer is not None:
+            distance = distance - self.nearer[hits.shape]
         return ContactSet.obstacles(
-            hits.shape, hits.robot, hits.obstacle, normal, hits.distance
+            hits.shape, hits.robot, hits.obstacle, normal, distance
         )
 
     def clearance(self, points: FloatArray) -> FloatArray:

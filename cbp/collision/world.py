@@ -304,6 +304,21 @@ class CollisionWorld:
             self.geometry.shapes, placements, centres, self.geometry.radii, halves
         )
 
+    def placed_apart(self, state: RobotState) -> PlacedShapes:
+        """:meth:`placed` from ``state``'s frames, without the world's buffers.
+
+        For another thread (the map's): :meth:`placed` writes the world's
+        pinocchio geometry data. ``state`` must have its frames placed.
+        """
+        oMf = state.data.oMf
+        placements = ShapePlacements(
+            [oMf[s.frame_id] * s.placement for s in self.geometry.shapes]
+        )
+        centres, halves = self.shape_bounds(placements)
+        return PlacedShapes(
+            self.geometry.shapes, placements, centres, self.geometry.radii, halves
+        )
+
     def self_contacts(self, robot: PlacedShapes) -> ContactSet:
         """The contacts between the robot's own shapes (padded distances).
 

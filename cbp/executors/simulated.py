@@ -28,6 +28,7 @@ from cbp.goals import GoalSource
 from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.kernels import UNKNOWN
 from cbp.perception.mapper import MapUpdater
+from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.plugin import GoalReceiver
 from cbp.progress import report_time
@@ -115,7 +116,7 @@ class SimulatedRun:
         self._goal_space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
         self._goal_blocked = False
         use_camera = spec.perception.source == "depth_camera"
-        self.look_ahead = 0.0
+        self._look_ahead = 0.0
         self.world: CollisionWorld | None = None
         if needs_world or scenario.needs_collision_world or use_camera:
             self.world = scenario.collision_world()
@@ -150,10 +151,30 @@ class SimulatedRun:
                 frame = self._checked_frame(i, 0.0)
                 if frame is not None:
                     first.submit(frame, self.sim.q.copy())
-            self.mapper = MapUpdater(grid, self.world, synchronous=clock == "virtual")
+            perception = spec.perception
+            estimator = (
+                ApproachEstimator(self.world, perception.motion_window)
+                if perception.motion_window > 0 and spec.collision.predict_motion
+                else None
+            )
+            self.mapper = MapUpdater(
+                grid, self.world, synchronous=clock == "virtual", estimator=estimator
+            )
             self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
 
     # ------------------------------------------------------------------ goal input
+
+    @property
+    def look_ahead(self) -> float:
+        """How long the plan being made runs on the robot [s] (see the class)."""
+        return self._look_ahead
+
+    @look_ahead.setter
+    def look_ahead(self, seconds: float) -> None:
+        """Set it; the map measures approaching obstacles that far ahead too."""
+        self._look_ahead = seconds
+        if self.mapper is not None:
+            self.mapper.look_ahead = seconds
 
     @property
     def duration(self) -> float:
@@ -295,7 +316,7 @@ class SimulatedRun:
             self.sim.run_until(due[i])
             frame = self._checked_frame(i, due[i])
             if frame is not None:
-                self.mapper.submit(frame, self.sim.q.copy())
+                self.mapper.submit(frame, self.sim.q.copy(), due[i])
             if self.mapper.error is not None:
                 error, self.mapper.error = self.mapper.error, None
                 self.event(self.sim.t, f"map update failed, previous map kept: {error}")

@@ -7,7 +7,9 @@ integrates the waiting frames into the one grid (one per camera: the newest),
 builds an environment snapshot and swaps it into the collision world; a frame
 that arrives while the worker is busy replaces its camera's waiting one (the map
 skips frames rather than lag). Queries in flight keep the snapshot they started
-with.
+with. With an :class:`~cbp.perception.motion.ApproachEstimator`, each snapshot
+published reports its contacts nearer by how far the obstacles approaching each
+robot shape come over :attr:`MapUpdater.look_ahead`.
 """
 
 from __future__ import annotations
@@ -15,8 +17,12 @@ from __future__ import annotations
 import threading
 import time
 
+import numpy as np
+
+from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.perception.camera import DepthFrame
+from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
@@ -32,26 +38,37 @@ class MapUpdater:
         world: the collision world whose environment is replaced.
         synchronous: integrate in :meth:`submit` itself (for tests and
             deterministic replays) instead of a worker thread.
+        estimator: measures how fast the map's obstacles approach the robot
+            (None: snapshots as mapped).
 
     Attributes:
         updates: snapshots published so far.
         skipped: frames replaced before the worker took them.
         last_update_s: wall time of the last integration + snapshot [s].
+        look_ahead: how far ahead approaching obstacles are measured [s] (the
+            executor sets it every command period, as for declared objects).
     """
 
     def __init__(
-        self, grid: OccupancyGrid, world: CollisionWorld, synchronous: bool = False
+        self,
+        grid: OccupancyGrid,
+        world: CollisionWorld,
+        synchronous: bool = False,
+        estimator: ApproachEstimator | None = None,
     ) -> None:
         """Start the worker (unless synchronous)."""
         self.grid = grid
         self.world = world
         self.synchronous = synchronous
+        self.estimator = estimator
+        self.look_ahead = 0.0
+        self._mapped: OccupancyEnvironment | None = None  # the last, as mapped
         self.updates = 0
         self.skipped = 0
         self.last_update_s = 0.0
         self.error: BaseException | None = None
         self._state = RobotState(world.geometry.robot)
-        self._pending: dict[str, tuple[DepthFrame, FloatArray]] = {}
+        self._pending: dict[str, tuple[DepthFrame, FloatArray, float]] = {}
         self._cond = threading.Condition()
         self._stop = False
         self._busy = False
@@ -62,15 +79,18 @@ class MapUpdater:
             )
             self._thread.start()
 
-    def submit(self, frame: DepthFrame, q: FloatArray) -> None:
-        """Queue a frame taken at configuration ``q``; never waits for the map."""
+    def submit(self, frame: DepthFrame, q: FloatArray, t: float = 0.0) -> None:
+        """Queue a frame taken at configuration ``q`` and time ``t`` [s].
+
+        Never waits for the map.
+        """
         if self.synchronous:
-            self._integrate([(frame, q)])
+            self._integrate([(frame, q, t)])
             return
         with self._cond:
             if frame.camera in self._pending:
                 self.skipped += 1
-            self._pending[frame.camera] = (frame, q)
+            self._pending[frame.camera] = (frame, q, t)
             self._cond.notify()
 
     def wait_idle(self, timeout: float = 10.0) -> bool:
@@ -103,12 +123,20 @@ class MapUpdater:
                     self._busy = False
                     self._cond.notify_all()
 
-    def _integrate(self, frames: list[tuple[DepthFrame, FloatArray]]) -> None:
+    def _integrate(self, frames: list[tuple[DepthFrame, FloatArray, float]]) -> None:
         start = time.perf_counter()
-        for frame, q in frames:
+        for frame, q, _ in frames:
             self._state.update(q)
             self.grid.integrate(frame, self._state)
-        self.world.set_environment(self.grid.environment())
+        mapped = self.grid.environment()
+        published: OccupancyEnvironment = mapped
+        if self.estimator is not None:
+            t = max(t for _, _, t in frames)
+            speeds = self.estimator.update(t, self._state, self._mapped, mapped)
+            if np.any(speeds > 0):
+                published = mapped.ahead(speeds * self.look_ahead)
+        self._mapped = mapped
+        self.world.set_environment(published)
         self.updates += 1
         self.last_update_s = time.perf_counter() - start
 
