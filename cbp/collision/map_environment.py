@@ -240,7 +240,8 @@ class OccupancyEnvironment(Environment):
             # directions; a metaball refinement in the same compiled call,
             # another after it.
             table = ShapeTable.for_shapes(shapes, margin + 0.5 * self.cell)
-            query = table.contact_query(
+            query = CellContactQuery(
+                table,
                 self.index,
                 margin,
                 per_shape,

@@ -281,24 +281,12 @@ class ShapeTable:
         and, with ``refine`` (kernel radius, offset) [m], the metaball normals
         (:func:`~cbp.collision.cell_kernels.cell_contacts`). A caller that
         queries the same cells with the same settings again and again binds
-        them once (:meth:`contact_query`).
+        them once (:class:`CellContactQuery`).
         """
-        query = self.contact_query(index, margin, per_shape, cos_max, spacing2, refine)
-        return query(placements)
-
-    def contact_query(
-        self,
-        index: CellIndex,
-        margin: float,
-        per_shape: int,
-        cos_max: float,
-        spacing2: float,
-        refine: tuple[float, float] | None = None,
-    ) -> CellContactQuery:
-        """:meth:`contacts` with everything but the placements bound."""
-        return CellContactQuery(
+        query = CellContactQuery(
             self, index, margin, per_shape, cos_max, spacing2, refine
         )
+        return query(placements)
 
     def check_reach(self, margin: float, half: float) -> None:
         """Raise ValueError unless ``margin`` + ``half`` a cell is within the reach.

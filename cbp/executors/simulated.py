@@ -319,7 +319,7 @@ class SimulatedRun:
                 self.mapper.submit(frame, self.sim.q.copy(), due[i])
             if self.mapper.error is not None:
                 error, self.mapper.error = self.mapper.error, None
-                self.event(self.sim.t, f"map update failed, previous map kept: {error}")
+                self.event(self.sim.t, f"map update: {error}")
             due[i] += 1.0 / camera.spec.rate_hz
 
     def _checked_frame(self, i: int, t: float) -> DepthFrame | None:

@@ -117,7 +117,7 @@ class MapUpdater:
             try:
                 self._integrate(frames)
             except BaseException as exc:  # reported by the executor, never lost
-                self.error = exc
+                self.error = RuntimeError(f"failed, previous map kept: {exc!r}")
             finally:
                 with self._cond:
                     self._busy = False
@@ -132,9 +132,14 @@ class MapUpdater:
         published: OccupancyEnvironment = mapped
         if self.estimator is not None:
             t = max(t for _, _, t in frames)
-            speeds = self.estimator.update(t, self._state, self._mapped, mapped)
-            if np.any(speeds > 0):
-                published = mapped.ahead(speeds * self.look_ahead)
+            try:
+                speeds = self.estimator.update(t, self._state, self._mapped, mapped)
+                if np.any(speeds > 0):
+                    published = mapped.ahead(speeds * self.look_ahead)
+            except Exception as exc:  # the map itself is still published
+                self.error = RuntimeError(
+                    f"approach estimate failed, map published without it: {exc}"
+                )
         self._mapped = mapped
         self.world.set_environment(published)
         self.updates += 1

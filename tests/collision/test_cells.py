@@ -27,7 +27,12 @@ from cbp.collision.cell_kernels import (
 )
 from cbp.collision.contacts import ContactSet
 from cbp.collision.geometry import LinkShape
-from cbp.collision.shape_table import DIRECTIONS, FACE_GRID_STEP, ShapeTable
+from cbp.collision.shape_table import (
+    DIRECTIONS,
+    FACE_GRID_STEP,
+    CellContactQuery,
+    ShapeTable,
+)
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
 
@@ -436,7 +441,7 @@ def test_one_call_gives_what_the_steps_give(geometry, robots) -> None:
                 )
             np.testing.assert_allclose(got.normal, normal, atol=1e-12)
             # The query bound once answers the same, call after call.
-            query = table.contact_query(index, margin, 3, cos_max, spacing2, option)
+            query = CellContactQuery(table, index, margin, 3, cos_max, spacing2, option)
             for again in (query(placements), query(placements)):
                 for name in Contacts._fields:
                     np.testing.assert_array_equal(

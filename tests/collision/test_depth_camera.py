@@ -15,6 +15,7 @@ from cbp.collision import (
 from cbp.perception.camera import DepthCamera
 from cbp.perception.kernels import OCCUPIED
 from cbp.perception.mapper import MapUpdater
+from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, PerceptionSpec
 from cbp.scenario import ObjectSpec
@@ -80,6 +81,28 @@ def test_cells_lie_on_the_box_and_table_and_none_on_the_robot(scene, robots) -> 
     assert grid.robot_points_removed > 1000
     inside_robot = geometry.contains(state, centres, margin=-geometry.padding)
     assert not inside_robot.any()
+
+
+def test_a_failing_approach_estimate_still_publishes_the_map(scene, robots) -> None:
+    """The estimate is an addition: when it fails the map goes out without it."""
+
+    class Failing(ApproachEstimator):
+        def update(self, *args):  # type: ignore[no-untyped-def]
+            raise FloatingPointError("injected")
+
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    world = CollisionWorld(geometry)
+    grid = OccupancyGrid(SPEC, geometry)
+    mapper = MapUpdater(grid, world, estimator=Failing(world, 1.0))
+    try:
+        mapper.submit(DepthCamera(scene.client, CAMERA).capture(), robot.home(), 0.1)
+        assert mapper.wait_idle()
+    finally:
+        mapper.close()
+    assert world.environment is grid.environment()  # published, as mapped
+    assert "approach estimate failed" in str(mapper.error)
+    assert "injected" in str(mapper.error)
 
 
 def test_a_removed_box_clears_within_the_stated_frames(scene, robots) -> None:
