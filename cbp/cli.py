@@ -372,7 +372,9 @@ def _run(
     try:
         scenario = load_scenario(path, overrides=overrides)
         name = method or scenario.spec.method.name
-        executor = executor_info(name).load()
+        info = executor_info(name)
+        info.check(scenario)
+        executor = info.load()
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2

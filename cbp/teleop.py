@@ -518,6 +518,7 @@ class InputSession:
                     f"{path}: robot '{scenario.robot.name}', not "
                     f"'{first.robot.name}' as in {paths[0]}"
                 )
+            EXECUTORS["velocity"].check(scenario)
         self.sim = MobileSimulation(
             first.robot,
             first.spec.world.objects,

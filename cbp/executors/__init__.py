@@ -25,7 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from cbp.errors import require_choice
+from cbp.errors import ConfigError, require_choice
 from cbp.executors.settings import (
     CatSettings,
     HybridSettings,
@@ -72,6 +72,9 @@ class ExecutorInfo:
             (:mod:`cbp.executors.trajectory`); its module's ``make_planner``
             gives the planner to other loops (``cbp teleop`` switches among
             these).
+        perceives: it runs the depth cameras and their map
+            (``perception.source: depth_camera``); the others refuse it
+            (:meth:`check`).
     """
 
     name: str
@@ -80,6 +83,24 @@ class ExecutorInfo:
     summary: str
     comparable: bool = False
     periodic: bool = False
+    perceives: bool = False
+
+    def check(self, scenario: Scenario) -> None:
+        """Refuse a scenario this executor cannot run as written.
+
+        Raises:
+            ConfigError: the scenario asks for the depth cameras and this
+                executor builds no map (it would run blind to the obstacles
+                the cameras were to show).
+        """
+        if scenario.spec.perception.source == "depth_camera" and not self.perceives:
+            perceiving = ", ".join(n for n, e in EXECUTORS.items() if e.perceives)
+            raise ConfigError(
+                f"the {self.name} executor builds no map from depth cameras; "
+                f"use perception.source: ground_truth, or a method that does "
+                f"({perceiving})",
+                f"{scenario.path}: perception.source",
+            )
 
     def load(self) -> Executor:
         """Import the executor's module and return its ``run_<name>`` function."""
@@ -118,6 +139,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "period, spliced trajectories (CAT paper)",
             comparable=True,
             periodic=True,
+            perceives=True,
         ),
         ExecutorInfo(
             "ik",
@@ -127,6 +149,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "joint-space line",
             comparable=True,
             periodic=True,
+            perceives=True,
         ),
         ExecutorInfo(
             "mp",
@@ -135,6 +158,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "OMPL RRT-Connect to the IK goal, replanned at an adaptive period",
             comparable=True,
             periodic=True,
+            perceives=True,
         ),
         ExecutorInfo(
             "hybrid",
@@ -144,6 +168,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "(control returns to CAT when the goal moves or the plan ends)",
             comparable=True,
             periodic=True,
+            perceives=True,
         ),
         ExecutorInfo(
             "jt",
@@ -151,6 +176,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             "jt",
             "Jacobian-transpose torque control at 1 kHz, no collision avoidance",
             comparable=True,
+            perceives=True,
         ),
         ExecutorInfo(
             "velocity",

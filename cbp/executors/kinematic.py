@@ -25,6 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.errors import InvalidTargetError
+from cbp.executors import executor_info
 from cbp.executors.faults import Faults
 from cbp.executors.settings import KinematicSettings
 from cbp.executors.stepping import Step, ValidatedStepper
@@ -41,7 +42,11 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
     """Run the scenario for its duration and return the trace.
 
     There is no simulator, so ``gui`` has nothing to show.
+
+    Raises:
+        ConfigError: the scenario asks for the depth cameras (none here).
     """
+    executor_info("kinematic").check(scenario)
     robot = scenario.robot
     engine = scenario.make_engine()
     stream = scenario.goal_stream()

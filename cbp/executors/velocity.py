@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from cbp.errors import PluginOutputError, SolveError
+from cbp.executors import executor_info
 from cbp.executors.declared import DeclaredObjects, stopping_time
 from cbp.executors.faults import Faults
 from cbp.executors.settings import VelocitySettings
@@ -47,7 +48,12 @@ log = logging.getLogger(__name__)
 
 
 def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
-    """Run ``scenario`` with the velocity executor; return the trace."""
+    """Run ``scenario`` with the velocity executor; return the trace.
+
+    Raises:
+        ConfigError: the scenario asks for the depth cameras (no map here).
+    """
+    executor_info("velocity").check(scenario)
     settings = scenario.spec.method.settings(VelocitySettings)
     sim = MobileSimulation(
         scenario.robot,

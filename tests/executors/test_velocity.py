@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cbp.errors import ScenarioError
+from cbp.errors import ConfigError, ScenarioError
+from cbp.executors.kinematic import run_kinematic
 from cbp.executors.velocity import run_velocity
 from cbp.metrics import run_metrics
 from cbp.scenario import Scenario, load_scenario
@@ -285,3 +286,29 @@ def test_objects_that_appear_or_move_reach_the_simulation_and_the_contacts(
     # Where it was at the last tick (0.38 s).
     assert moving.placement.translation[1] == pytest.approx(0.5 * 0.38, abs=1e-9)
     assert environment.look_ahead == pytest.approx(0.02 + stopping_time(scenario.robot))
+
+
+def test_the_cameras_are_refused_where_no_map_is_built(tmp_path: Path) -> None:
+    """The velocity and kinematic executors would run blind: a located error."""
+    path = tmp_path / "orbit_cameras.yaml"
+    path.write_text(
+        textwrap.dedent(
+            f"""\
+            name: orbit_cameras
+            include: {SCENARIOS / "youbot_orbit_case1.yaml"}
+            perception:
+              source: depth_camera
+              cameras:
+                - {{name: head, position: [-0.5, 0.0, 1.5], target: [0.5, 0.0, 0.2]}}
+            """
+        )
+    )
+    scenario = load_scenario(path)
+    with pytest.raises(ConfigError, match="builds no map from depth cameras"):
+        run_velocity(scenario)
+    with pytest.raises(ConfigError, match=r"perception\.source"):
+        run_kinematic(scenario)
+    result = run_cbp("run", str(path), "--out", str(tmp_path / "out"))
+    assert result.returncode == 2
+    assert f"{path}: perception.source" in result.stderr
+    assert not (tmp_path / "out").exists()  # refused before anything ran
