@@ -226,7 +226,6 @@ class OccupancyEnvironment(Environment):
         metaball = refiner if isinstance(refiner, MetaballRefiner) else None
         # The query bound to the last shapes and settings, kept as one tuple
         # (one atomic read, whatever thread queries).
-        key = (shapes, margin, per_shape, refiner)
         last, query = self._last_query
         if (
             query is None
@@ -254,7 +253,7 @@ class OccupancyEnvironment(Environment):
                     metaball.offset_cells * self.cell,
                 ),
             )
-            self._last_query = (key, query)
+            self._last_query = ((shapes, margin, per_shape, refiner), query)
         hits = query(robot.placements)
         if not len(hits.shape):
             return ContactSet.empty()

@@ -94,6 +94,10 @@ class SweepBound:
         """An upper bound on how far any point moves from ``a`` to ``b`` [m]."""
         return float(self.reach.dot(np.abs(np.asarray(b) - np.asarray(a))))
 
+    def segments(self, a: FloatArray, b: FloatArray, step: float) -> int:
+        """How many equal parts of at most ``step`` [m] (by :meth:`distance`)."""
+        return max(1, math.ceil(self.distance(a, b) / step))
+
     def between(self, a: FloatArray, b: FloatArray, step: float) -> FloatArray:
         """Configurations strictly between ``a`` and ``b``, at most ``step`` apart.
 
@@ -102,6 +106,6 @@ class SweepBound:
         :meth:`distance`; none when ``a`` and ``b`` already are.
         """
         a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-        n = max(1, math.ceil(self.distance(a, b) / step))
+        n = self.segments(a, b, step)
         fractions = np.arange(1, n)[:, None] / n
         return a + fractions * (b - a)

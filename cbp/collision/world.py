@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import coal
@@ -206,17 +207,27 @@ class CollisionWorld:
         """
         return self.padding if self.padding > 0 else _UNPADDED_SWEEP_STEP
 
-    def motion_free(self, a: FloatArray, b: FloatArray) -> bool:
+    def motion_free(
+        self,
+        a: FloatArray,
+        b: FloatArray,
+        is_free: Callable[[FloatArray], bool] | None = None,
+    ) -> bool:
         """Whether the straight joint-space motion from ``a`` to ``b`` is free.
 
         ``b`` and the configurations :attr:`sweep` places between them
-        :attr:`sweep_step` apart are checked (:meth:`is_free`); ``a`` is not
-        (the motion starts there). Planners that charge their checks to a
-        budget call :meth:`is_free` on :meth:`SweepBound.between` themselves.
+        :attr:`sweep_step` apart are checked, in order, up to the first that is
+        not free; ``a`` is not (the motion starts there).
+
+        Args:
+            a: where the motion starts.
+            b: where it ends.
+            is_free: the check of one configuration (default :meth:`is_free`;
+                planners pass one that charges their budget).
         """
-        return all(
-            self.is_free(q) for q in self.sweep.between(a, b, self.sweep_step)
-        ) and self.is_free(b)
+        check = is_free or self.is_free
+        between = self.sweep.between(a, b, self.sweep_step)
+        return all(check(q) for q in between) and check(b)
 
     def is_free(self, q: FloatArray) -> bool:
         """Whether ``q`` is collision-free, in one pinocchio call (planners, IK).

@@ -177,20 +177,16 @@ class IkSearch:
         (:meth:`~cbp.collision.world.CollisionWorld.motion_free`), each charged
         to ``budget``; ``a`` is taken as checked.
         """
-        world = self.world
-        if world is None:
+        if self.world is None:
             return True
-        between = world.sweep.between(a, b, world.sweep_step)
-        return all(self.collision_free(q, budget) for q in between) and (
-            self.collision_free(b, budget)
-        )
+        return self.world.motion_free(a, b, lambda q: self.collision_free(q, budget))
 
     def motion_steps(self, a: FloatArray, b: FloatArray) -> int:
         """Segments to cut the line from ``a`` to ``b`` into, as :meth:`motion_free`."""
-        if self.world is None:
+        world = self.world
+        if world is None:
             return 1
-        distance = self.world.sweep.distance(a, b)
-        return max(1, int(np.ceil(distance / self.world.sweep_step)))
+        return world.sweep.segments(a, b, world.sweep_step)
 
     def collision_free(self, q: FloatArray, budget: Budget | None = None) -> bool:
         """No padded link penetrates an obstacle or another link.
