@@ -12,7 +12,8 @@ simplification) and resampled; then each of its segments is checked all along,
 at configurations close enough that the unpadded links keep half the padding
 between them (:mod:`cbp.collision.motion`: OMPL's resolution, 0.065 rad on the
 Panda, lets the hand move 5 cm between checks). A plan that touches between
-its checked states is dropped and planned again next period. It is timed to
+its checked states is dropped and planned again (in the same period while
+its budget lasts). It is timed to
 stop at its end and spliced in by the shared trajectory loop; while
 the goal stays the same the plan is followed, not replaced. A plan that does not
 finish in the budget counts as a miss, so the period grows.
@@ -252,13 +253,19 @@ class MpPlanner:
         if not self.search.collision_free(q, budget):
             return Plan(None, 0, "start in collision: no plan")
         checks = self.checks
-        self.rrt.begin(q, target)
-        if not self.rrt.grow(budget, budget.left() * (1.0 - s.simplify_fraction)):
-            return Plan(None, self.checks - checks, "no plan in time", timed_out=True)
-        points, note = self.rrt.path(budget)
-        if points is None:
+        while True:
+            self.rrt.begin(q, target)
+            if not self.rrt.grow(budget, budget.left() * (1.0 - s.simplify_fraction)):
+                note = "no plan in time"
+                return Plan(None, self.checks - checks, note, timed_out=True)
+            points, note = self.rrt.path(budget)
+            if points is not None:
+                break
+            # A plan that touches between OMPL's states is dropped; a new tree
+            # is grown while the budget lasts (the next period otherwise).
             run.event(run.sim.t, f"mp: {note}; planning again")
-            return Plan(None, self.checks - checks, note)
+            if budget.spent():
+                return Plan(None, self.checks - checks, note)
         timing = s.timing
         record_plan(
             run,

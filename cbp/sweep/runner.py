@@ -222,15 +222,23 @@ def _run_pool(
     retries: int,
     done: Callable[[RunSpec, dict[str, Any]], None],
 ) -> float:
-    """Without Ray: a process pool; a pool broken by a dead worker is rebuilt."""
+    """Without Ray: a process pool; a pool broken by a dead worker is rebuilt.
+
+    Workers are spawned, not forked: a fork copies the parent's threads' locks
+    in whatever state they were (Ray's, a map thread's, a web server's), and the
+    child can die or hang on one before it runs anything.
+    """
+    import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
+
+    context = multiprocessing.get_context("spawn")
 
     tries = {run.id: 0 for run in pending}
     queue = list(pending)
     while queue:
         lost: list[RunSpec] = []
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
             futures = {pool.submit(execute_run, asdict(r), str(out)): r for r in queue}
             queue = []
             try:

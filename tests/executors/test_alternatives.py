@@ -103,6 +103,36 @@ def test_mp_plans_over_the_board(boards: Scenario, simplify: str) -> None:
     assert all(search.motion_free(a, b) for a, b in itertools.pairwise(plan.path))
 
 
+def test_mp_plans_again_in_the_period_when_a_plan_touches(
+    boards: Scenario, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A plan dropped by the sweep check (injected) is replaced in the same call."""
+    original = RrtConnect.path
+    calls = [0]
+
+    def path(self, budget):  # type: ignore[no-untyped-def]
+        calls[0] += 1
+        if calls[0] == 1:
+            return None, "the plan touches between the states OMPL checked"
+        return original(self, budget)
+
+    monkeypatch.setattr(RrtConnect, "path", path)
+    run = SimulatedRun(boards, "mp", needs_world=True)
+    try:
+        planner = MpPlanner(boards, run, boards.spec.method.mp)
+        goal = pin.SE3(
+            pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.12, 0.15])
+        )
+        plan = planner.plan(boards.q0.copy(), goal, WallBudget(2.0), run)
+        planner.close()
+    finally:
+        run.finish()
+    assert calls[0] >= 2
+    assert plan.path is not None, plan.note
+    events = "\n".join(msg for _, msg in run.events)
+    assert "touches between the states OMPL checked; planning again" in events
+
+
 def _across_a_plate(robot) -> tuple[np.ndarray, np.ndarray, CollisionWorld]:
     """The shoulder turning 1.2 rad, free at both ends, across a 3 mm plate."""
     a = robot.home()

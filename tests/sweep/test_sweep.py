@@ -166,7 +166,8 @@ def test_the_pool_backend_and_a_run_that_raises(tmp_path: Path) -> None:
         path, tmp_path / "out", workers=2, progress=False, backend="pool"
     )
     assert outcome.backend == "process pool"
-    assert [r["status"] for r in outcome.records.values()] == ["ok", "ok"]
+    statuses = [r["status"] for r in outcome.records.values()]
+    assert statuses == ["ok", "ok"], [r.get("error") for r in outcome.records.values()]
     # A run whose scenario cannot be loaded raises in the worker: recorded.
     record = execute_run(
         {
