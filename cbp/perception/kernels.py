@@ -17,10 +17,15 @@ import numpy as np
 from cbp.collision.geometry import inside_any, inside_convex
 from cbp.robot import FloatArray, IntArray
 
+PixelHistory = tuple[FloatArray, FloatArray, FloatArray]
+"""A camera's pixels: the range seen free along each, the last reading's range
+[m], and when it last moved [s], each (H, W); (0, 0) arrays: not tracked."""
+
 __all__ = [
     "FREE",
     "OCCUPIED",
     "UNKNOWN",
+    "PixelHistory",
     "carve_shapes",
     "eroded_ranges",
     "insert_readings",
@@ -404,7 +409,11 @@ def insert_readings(
     cell: float,
     dirty: np.ndarray,
     brick: int,
-) -> tuple[int, int, int]:
+    moved: PixelHistory,
+    t: float,
+    hold: float,
+    held: FloatArray,
+) -> tuple[int, int, int, int]:
     """Mark the cells depth readings fall in occupied; count valid, robot, inserted.
 
     Each pixel that holds a reading nearer than the far plane is unprojected
@@ -417,8 +426,17 @@ def insert_readings(
     for it, not once per array operation. ``dirty`` and ``brick`` as in
     :func:`mark_seen`.
 
+    Space that comes to be hidden (``moved``, the camera's pixel history; empty
+    arrays: not tracked): where a pixel's reading, not the robot, is more than
+    two cells nearer than the range the camera saw free along it, something
+    came between, and the free cells behind the reading are made unknown, up
+    to the robot's shapes grown by ``held[s]`` or that range
+    (:func:`_hide_ray`). It is done again at every frame while the reading
+    moves and for ``hold`` seconds after (``t``: the frame's time); then the
+    nearer range is what the camera sees free along the pixel.
+
     Returns (pixels holding a reading, readings taken for the robot, readings
-    inserted).
+    inserted, cells hidden).
     """
     h, w = depth.shape
     nx, ny, nz = grid.shape
@@ -426,6 +444,10 @@ def insert_readings(
     valid = 0
     robot = 0
     inserted = 0
+    hidden = 0
+    seen_to, last, moved_at = moved
+    track = seen_to.shape[0] == h
+    gap = 2.0 * cell
     for r in range(h):
         y = 2.0 * (h - 1 - r) / h - 1.0
         for c in range(w):
@@ -434,6 +456,9 @@ def insert_readings(
                 continue
             valid += 1
             if z >= far_plane:
+                if track:  # seen free to the far plane
+                    seen_to[r, c] = max_range
+                    last[r, c] = max_range
                 continue
             x = 2.0 * c / w - 1.0
             zn = 2.0 * z - 1.0
@@ -442,11 +467,44 @@ def insert_readings(
             py = (u[1, 0] * x + u[1, 1] * y + u[1, 2] * zn + u[1, 3]) / ww
             pz = (u[2, 0] * x + u[2, 1] * y + u[2, 2] * zn + u[2, 3]) / ww
             dx, dy, dz = px - camera[0], py - camera[1], pz - camera[2]
-            if dx * dx + dy * dy + dz * dz > max_range * max_range:
+            distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if distance > max_range:
+                if track:
+                    seen_to[r, c] = max_range
+                    last[r, c] = max_range
                 continue
             if inside_any(px, py, pz, planes, plane_start, centres, radii, reach):
                 robot += 1
+                if track:  # seen free up to the robot; it hides nothing new
+                    seen_to[r, c] = max(seen_to[r, c], distance)
                 continue
+            if track:
+                if abs(distance - last[r, c]) > 0.5 * cell:
+                    moved_at[r, c] = t
+                last[r, c] = distance
+                if distance < seen_to[r, c] - gap:
+                    hidden += _hide_ray(
+                        camera,
+                        dx / distance,
+                        dy / distance,
+                        dz / distance,
+                        distance + cell,
+                        seen_to[r, c],
+                        planes,
+                        plane_start,
+                        centres,
+                        radii,
+                        held,
+                        grid,
+                        lower,
+                        cell,
+                        dirty,
+                        brick,
+                    )
+                    if t - moved_at[r, c] >= hold:  # it stopped: its shadow now
+                        seen_to[r, c] = distance
+                else:
+                    seen_to[r, c] = distance
             i = math.floor((px - lower[0]) / cell)
             j = math.floor((py - lower[1]) / cell)
             k = math.floor((pz - lower[2]) / cell)
@@ -457,4 +515,53 @@ def insert_readings(
             if grid[i, j, k] != OCCUPIED:
                 grid[i, j, k] = OCCUPIED
                 dirty[i // brick, j // brick, k // brick] = True
-    return valid, robot, inserted
+    return valid, robot, inserted, hidden
+
+
+@numba.njit(cache=True, nogil=True)
+def _hide_ray(
+    camera: FloatArray,
+    ux: float,
+    uy: float,
+    uz: float,
+    start: float,
+    stop: float,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    held: FloatArray,
+    grid: np.ndarray,
+    lower: FloatArray,
+    cell: float,
+    dirty: np.ndarray,
+    brick: int,
+) -> int:
+    """Make the free cells along a ray unknown, from ``start`` to ``stop`` [m].
+
+    In half-cell steps from ``camera`` along the unit direction (ux, uy, uz);
+    the march ends where it enters a robot shape grown by ``held`` (what lies
+    behind the robot was hidden by it, not by the new surface). Returns the
+    cells made unknown.
+    """
+    nx, ny, nz = grid.shape
+    step = 0.5 * cell
+    hidden = 0
+    s = start
+    while s < stop:
+        x = camera[0] + ux * s
+        y = camera[1] + uy * s
+        z = camera[2] + uz * s
+        s += step
+        if inside_any(x, y, z, planes, plane_start, centres, radii, held):
+            break
+        i = math.floor((x - lower[0]) / cell)
+        j = math.floor((y - lower[1]) / cell)
+        k = math.floor((z - lower[2]) / cell)
+        if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
+            continue
+        if grid[i, j, k] == FREE:
+            grid[i, j, k] = UNKNOWN
+            dirty[i // brick, j // brick, k // brick] = True
+            hidden += 1
+    return hidden

@@ -125,9 +125,9 @@ class MapUpdater:
 
     def _integrate(self, frames: list[tuple[DepthFrame, FloatArray, float]]) -> None:
         start = time.perf_counter()
-        for frame, q, _ in frames:
+        for frame, q, t in frames:
             self._state.update(q)
-            self.grid.integrate(frame, self._state)
+            self.grid.integrate(frame, self._state, t)
         mapped = self.grid.environment()
         published: OccupancyEnvironment = mapped
         if self.estimator is not None:

@@ -44,6 +44,7 @@ from cbp.perception.kernels import (
     FREE,
     OCCUPIED,
     UNKNOWN,
+    PixelHistory,
     carve_shapes,
     eroded_ranges,
     insert_readings,
@@ -71,6 +72,10 @@ _NO_ROBOT = (
 )
 
 
+#: A camera's pixel history when hidden space is not tracked.
+_UNTRACKED: PixelHistory = (np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)))
+
+
 @dataclass(frozen=True)
 class FrameSummary:
     """What one frame did to the map.
@@ -82,6 +87,8 @@ class FrameSummary:
         inserted: readings inserted as obstacles.
         seen: cells whose state the frame changed by seeing through them.
         carved: unknown cells made free because the robot held them.
+        hidden: free cells made unknown because something came between them
+            and the camera.
     """
 
     camera: str
@@ -90,6 +97,7 @@ class FrameSummary:
     inserted: int
     seen: int
     carved: int
+    hidden: int = 0
 
 
 class OccupancyGrid:
@@ -147,6 +155,14 @@ class OccupancyGrid:
         self._dirty = np.ones(tuple(int(n) for n in dims), dtype=np.bool_)
         self._shell = (np.empty((0, 3)), np.zeros(int(np.prod(dims)) + 1, np.int64))
         self._snapshot: OccupancyEnvironment | None = None
+        # Per camera: the view its pixel history was taken from, and the history.
+        self._moved: dict[str, tuple[FloatArray, PixelHistory]] = {}
+        # How far beyond each robot shape hidden space stops (its padding).
+        self._held = (
+            np.full(len(geometry.shapes), geometry.padding)
+            if geometry is not None
+            else np.zeros(0)
+        )
 
     # ------------------------------------------------------------------ reading
 
@@ -174,13 +190,19 @@ class OccupancyGrid:
 
     # ------------------------------------------------------------------ updates
 
-    def integrate(self, frame: DepthFrame, state: RobotState | None) -> FrameSummary:
+    def integrate(
+        self, frame: DepthFrame, state: RobotState | None, t: float | None = None
+    ) -> FrameSummary:
         """Add one frame: the robot's space, the space seen through, the readings.
 
         Args:
             frame: the depth image.
             state: the robot at capture time, for the self-filter and the space
                 it holds (None: no robot).
+            t: the frame's time [s]; with it, space the camera saw free and now
+                sees hidden behind something that came between is unknown
+                again (``perception.shadow_hold``; the module's docstring).
+                None: not tracked for this frame.
         """
         robot = _NO_ROBOT
         carved = 0
@@ -198,7 +220,7 @@ class OccupancyGrid:
         limits = frame.buffer_limits
         seen = self._see_through(frame, depth, limits)
         nearest, far_plane, far_buffer = limits
-        valid, removed, inserted = insert_readings(
+        valid, removed, inserted, hidden = insert_readings(
             depth,
             frame.unprojection,
             nearest,
@@ -213,6 +235,10 @@ class OccupancyGrid:
             self.cell,
             self._dirty,
             self._brick,
+            self._pixels(frame, t),
+            0.0 if t is None else t,
+            self.spec.shadow_hold,
+            self._held,
         )
         self.robot_points_removed += removed
         self.frames += 1
@@ -223,8 +249,25 @@ class OccupancyGrid:
             inserted=inserted,
             seen=seen,
             carved=carved,
+            hidden=hidden,
         )
         return self.last
+
+    def _pixels(self, frame: DepthFrame, t: float | None) -> PixelHistory:
+        """The camera's pixel history, begun anew when the camera moved.
+
+        Ranges along a pixel compare only from one pose: a camera on a moving
+        link starts over at every frame it moved (it hides nothing then).
+        """
+        if t is None or self.spec.shadow_hold <= 0:
+            return _UNTRACKED
+        kept = self._moved.get(frame.camera)
+        if kept is not None and np.array_equal(kept[0], frame.view):
+            return kept[1]
+        shape = frame.depth.shape
+        pixels = (np.full(shape, -np.inf), np.full(shape, -np.inf), np.zeros(shape))
+        self._moved[frame.camera] = (frame.view.copy(), pixels)
+        return pixels
 
     def carve_robot(self, state: RobotState, shapes: WorldShapes | None = None) -> int:
         """Mark the unknown cells the robot holds free; return how many.

@@ -170,6 +170,14 @@ class PerceptionSpec:
     something enters space seen free). Measured on ``cat_pushed_obstacle``:
     1 s estimates 2-4 cm/s for the 5 cm/s box, steadily; 0.5 s, with 1 cm
     cells, switched on and off and made it worse."""
+    shadow_hold: float = 1.0
+    """Space a fixed camera saw free and now sees hidden behind a nearer
+    surface (something came between: an obstacle moved in) is unknown again,
+    from that surface to the robot's padded shapes, while the surface moves and
+    this long after it stops [s]; then, as any shadow, it keeps the state it
+    was last seen in. Without it an obstacle that comes at the arm is mapped by
+    the faces the cameras see, and the rest of it moves into space the map
+    still holds free (a box lowered onto the arm: 8.5 kN). 0: off."""
     refine_normals: bool = True
     """Re-estimate contact normals from a metaball surface (CAT Sec. IV-B)."""
     metaball_radius_cells: float = 3.0
@@ -193,6 +201,10 @@ class PerceptionSpec:
             raise ConfigError(
                 f"camera names must be unique; repeated: {', '.join(repeated)}",
                 "cameras",
+            )
+        if not 0.0 <= self.shadow_hold <= 60.0:
+            raise ConfigError(
+                f"must be in [0, 60] s, got {self.shadow_hold}", "shadow_hold"
             )
         if not 0.0 <= self.motion_window <= 10.0:
             raise ConfigError(

@@ -312,3 +312,62 @@ def test_the_robot_never_frees_space_it_has_not_held(robots) -> None:
     """
     assert _creep(robots, "held") < np.radians(3.0)
     assert _creep(robots, "nearby") == pytest.approx(np.radians(60.0))
+
+
+# A plate between FRONT and BEFORE, added after the camera saw BEFORE free.
+PLATE = ObjectSpec(
+    name="plate",
+    shape="box",
+    size=(0.3, 0.02, 0.3),
+    pose=Pose(position=(0.6, -0.6, 0.15)),
+)
+
+
+def _plate_comes_between(scene, robots, spec: PerceptionSpec, moved: bool = False):
+    """Two frames of FRONT, the plate added between them; the grid after."""
+    robot = robots["panda"]
+    grid = OccupancyGrid(spec, RobotGeometry(robot))
+    state = RobotState(robot, robot.home())
+    grid.integrate(DepthCamera(scene.client, FRONT).capture(), state, 0.0)
+    assert grid.state_at(BEFORE)[0] == FREE
+    scene.add_object(PLATE, PLATE.pose.to_se3())
+    camera = replace(FRONT, position=(0.61, -1.2, 0.3)) if moved else FRONT
+    try:
+        frame = DepthCamera(scene.client, camera).capture()
+    finally:
+        scene.remove_object("plate")
+    return grid, grid.integrate(frame, state, 0.1), state
+
+
+def test_space_hidden_by_something_that_came_between_is_unknown(scene, robots) -> None:
+    """What the camera saw free and an obstacle now hides may hold the obstacle."""
+    grid, summary, state = _plate_comes_between(scene, robots, SPEC)
+    assert summary.hidden > 100
+    assert grid.state_at(BEFORE)[0] == UNKNOWN
+    # Up to the robot only: the space it holds stays free.
+    hand = state.data.oMf[state.robot.frame_id("panda_link4")].translation
+    assert grid.state_at(hand[None])[0] == FREE
+    # Not tracked: hidden space keeps the state it was last seen in.
+    for spec in (replace(SPEC, shadow_hold=0.0),):
+        grid, summary, _ = _plate_comes_between(scene, robots, spec)
+        assert summary.hidden == 0
+        assert grid.state_at(BEFORE)[0] == FREE
+
+
+def test_a_camera_that_moved_hides_nothing(scene, robots) -> None:
+    """Ranges along a pixel compare only from one pose (a camera on a link)."""
+    grid, summary, _ = _plate_comes_between(scene, robots, SPEC, moved=True)
+    assert summary.hidden == 0
+    assert grid.state_at(BEFORE)[0] == FREE
+
+
+def test_a_static_scene_hides_nothing(scene, robots) -> None:
+    robot = robots["panda"]
+    grid = OccupancyGrid(replace(SPEC, cameras=[FRONT, SIDE]), RobotGeometry(robot))
+    camera = {c.name: DepthCamera(scene.client, c) for c in (FRONT, SIDE)}
+    for k, q in enumerate(np.linspace(robot.home(), robot.home() + 0.3, 6)):
+        scene.set_configuration(q)
+        state = RobotState(robot, q)
+        for name in ("front", "side"):
+            summary = grid.integrate(camera[name].capture(), state, 0.1 * k)
+            assert summary.hidden == 0, (k, name)
