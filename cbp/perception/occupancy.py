@@ -13,6 +13,15 @@ default) unknown cells are obstacles for every collision-aware method, so the
 arm never moves into space nothing has seen: the far side of an obstacle, its
 shadow, or what the arm itself hides.
 
+An obstacle that moves shows the cameras its faces, not the rest of it, and
+the rest moves into space they saw free before. So each fixed camera keeps, per
+pixel, the range it saw free along it: where a reading (not the robot's) comes
+more than two cells nearer, something came between, and the free cells behind
+it are **unknown** again, up to the robot's padded shapes (what lies behind the
+robot was hidden by the robot). This repeats at every frame while the reading
+moves and for ``shadow_hold`` seconds after; then the space behind it is an
+ordinary shadow. A camera that moved (on a link) starts its pixels over.
+
 Why not OctoMap: ray-cast insertion of one 320x240 frame takes 120-250 ms on this
 machine and its default clamping keeps a moved obstacle for about nine frames
 (``../shared/notes/perception.md``). Here each pass is a compiled loop over the
