@@ -20,7 +20,8 @@ more than two cells nearer, something came between, and the free cells behind
 it are **unknown** again, up to the robot's padded shapes (what lies behind the
 robot was hidden by the robot). This repeats at every frame while the reading
 moves and for ``shadow_hold`` seconds after; then the space behind it is an
-ordinary shadow. A camera that moved (on a link) starts its pixels over.
+ordinary shadow. A fixed camera that was moved starts its pixels over; cameras
+mounted on the robot keep none (their view moves with the arm).
 
 Why not OctoMap: ray-cast insertion of one 320x240 frame takes 120-250 ms on this
 machine and its default clamping keeps a moved obstacle for about nine frames
@@ -164,6 +165,7 @@ class OccupancyGrid:
         self._dirty = np.ones(tuple(int(n) for n in dims), dtype=np.bool_)
         self._shell = (np.empty((0, 3)), np.zeros(int(np.prod(dims)) + 1, np.int64))
         self._snapshot: OccupancyEnvironment | None = None
+        self._mounted = {c.name for c in spec.all_cameras if c.parent is not None}
         # Per camera: the view its pixel history was taken from, and the history.
         self._moved: dict[str, tuple[FloatArray, PixelHistory]] = {}
         # How far beyond each robot shape hidden space stops (its padding).
@@ -265,10 +267,14 @@ class OccupancyGrid:
     def _pixels(self, frame: DepthFrame, t: float | None) -> PixelHistory:
         """The camera's pixel history, begun anew when the camera moved.
 
-        Ranges along a pixel compare only from one pose: a camera on a moving
-        link starts over at every frame it moved (it hides nothing then).
+        Ranges along a pixel compare only from one pose. Cameras mounted on
+        the robot keep none: their view changes with every motion of the arm,
+        so they would hide space only while it stands still, right beside
+        the hand (measured on ``cat_pushed_obstacle``, box pushed from the
+        side at 5 cm/s, wall clock: 28-346 N with the wrist camera hiding,
+        0-159 N without).
         """
-        if t is None or self.spec.shadow_hold <= 0:
+        if t is None or self.spec.shadow_hold <= 0 or frame.camera in self._mounted:
             return _UNTRACKED
         kept = self._moved.get(frame.camera)
         if kept is not None and np.array_equal(kept[0], frame.view):

@@ -181,7 +181,9 @@ class PerceptionSpec:
     this long after it stops [s]; then, as any shadow, it keeps the state it
     was last seen in. Without it an obstacle that comes at the arm is mapped by
     the faces the cameras see, and the rest of it moves into space the map
-    still holds free (a box lowered onto the arm: 8.5 kN). 0: off."""
+    still holds free (a box lowered onto the arm: 8.5 kN). Cameras mounted
+    on the robot keep no such history (their view moves with the arm). 0:
+    off."""
     refine_normals: bool = True
     """Re-estimate contact normals from a metaball surface (CAT Sec. IV-B)."""
     metaball_radius_cells: float = 3.0

@@ -361,6 +361,15 @@ def test_a_camera_that_moved_hides_nothing(scene, robots) -> None:
     assert grid.state_at(BEFORE)[0] == FREE
 
 
+def test_a_camera_on_the_robot_hides_nothing(scene, robots) -> None:
+    """Its view moves with the arm: it keeps no pixel history."""
+    on_hand = CameraSpec(name="front", parent="panda_hand")
+    spec = replace(SPEC, cameras=[on_hand])
+    grid, summary, _ = _plate_comes_between(scene, robots, spec)
+    assert summary.hidden == 0
+    assert grid.state_at(BEFORE)[0] == FREE
+
+
 def test_a_static_scene_hides_nothing(scene, robots) -> None:
     robot = robots["panda"]
     grid = OccupancyGrid(replace(SPEC, cameras=[FRONT, SIDE]), RobotGeometry(robot))
