@@ -80,9 +80,11 @@ def test_interpolation_stops_before_a_collision(boards: Scenario) -> None:
     assert np.max(np.abs(plan.path[-1] - target)) > 0.02
 
 
-@pytest.mark.parametrize("simplify", ["shortcut", "full"])
-def test_mp_plans_over_the_board(boards: Scenario, simplify: str) -> None:
-    """RRT-Connect + simplification: a valid path to the far side of a board."""
+def _plan_over_the_board(boards: Scenario, simplify: str = "shortcut"):
+    """One MP plan from the boards' start to the far side of the first board.
+
+    Returns the plan, the planner (closed) and the run (finished).
+    """
     run = SimulatedRun(boards, "mp", needs_world=True)
     try:
         settings = dataclasses.replace(boards.spec.method.mp, simplify=simplify)
@@ -94,6 +96,13 @@ def test_mp_plans_over_the_board(boards: Scenario, simplify: str) -> None:
         planner.close()
     finally:
         run.finish()
+    return plan, planner, run
+
+
+@pytest.mark.parametrize("simplify", ["shortcut", "full"])
+def test_mp_plans_over_the_board(boards: Scenario, simplify: str) -> None:
+    """RRT-Connect + simplification: a valid path to the far side of a board."""
+    plan, planner, _ = _plan_over_the_board(boards, simplify)
     assert plan.path is not None, plan.note
     np.testing.assert_allclose(plan.path[0], boards.q0)
     assert np.max(np.abs(np.diff(plan.path, axis=0))) <= 0.05 + 1e-9  # waypoints
@@ -117,16 +126,7 @@ def test_mp_plans_again_in_the_period_when_a_plan_touches(
         return original(self, budget)
 
     monkeypatch.setattr(RrtConnect, "path", path)
-    run = SimulatedRun(boards, "mp", needs_world=True)
-    try:
-        planner = MpPlanner(boards, run, boards.spec.method.mp)
-        goal = pin.SE3(
-            pin.rpy.rpyToMatrix(np.pi, 0, np.pi / 2), np.array([0.5, -0.12, 0.15])
-        )
-        plan = planner.plan(boards.q0.copy(), goal, WallBudget(2.0), run)
-        planner.close()
-    finally:
-        run.finish()
+    plan, _, run = _plan_over_the_board(boards)
     assert calls[0] >= 2
     assert plan.path is not None, plan.note
     events = "\n".join(msg for _, msg in run.events)
