@@ -309,11 +309,7 @@ class CollisionWorld:
 
     def placed(self, state: RobotState) -> PlacedShapes:
         """The robot's shapes at ``state``: world placements and bounds."""
-        placements = self.shape_placements(state)
-        centres, halves = self.shape_bounds(placements)
-        return PlacedShapes(
-            self.geometry.shapes, placements, centres, self.geometry.radii, halves
-        )
+        return self._bounded(self.shape_placements(state))
 
     def placed_apart(self, state: RobotState) -> PlacedShapes:
         """:meth:`placed` from ``state``'s frames, without the world's buffers.
@@ -322,9 +318,14 @@ class CollisionWorld:
         pinocchio geometry data. ``state`` must have its frames placed.
         """
         oMf = state.data.oMf
-        placements = ShapePlacements(
-            [oMf[s.frame_id] * s.placement for s in self.geometry.shapes]
+        return self._bounded(
+            ShapePlacements(
+                [oMf[s.frame_id] * s.placement for s in self.geometry.shapes]
+            )
         )
+
+    def _bounded(self, placements: ShapePlacements) -> PlacedShapes:
+        """The shapes at ``placements``, with their bounds."""
         centres, halves = self.shape_bounds(placements)
         return PlacedShapes(
             self.geometry.shapes, placements, centres, self.geometry.radii, halves

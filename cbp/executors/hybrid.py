@@ -40,7 +40,6 @@ the plans (timed from rest).
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 from typing import Literal
 
@@ -416,8 +415,8 @@ class HybridPlanner:
         ahead = np.linalg.norm(self._plan - q, axis=1)
         rest = self._plan[int(np.argmin(ahead)) :]
         search = self.search
-        if not search.collision_free(rest[0], budget) or not all(
-            search.motion_free(a, b, budget) for a, b in itertools.pairwise(rest)
+        if not search.collision_free(rest[0], budget) or not search.path_free(
+            rest, budget
         ):
             run.event(
                 t,

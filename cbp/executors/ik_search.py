@@ -12,6 +12,7 @@ close to it, so small goal changes give small joint changes.
 
 from __future__ import annotations
 
+import itertools
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -180,6 +181,16 @@ class IkSearch:
         if self.world is None:
             return True
         return self.world.motion_free(a, b, lambda q: self.collision_free(q, budget))
+
+    def path_free(self, points: FloatArray, budget: Budget | None = None) -> bool:
+        """Whether every segment between consecutive ``points`` is free all along.
+
+        :meth:`motion_free` for each, in order, up to the first that is not;
+        the first point is taken as checked.
+        """
+        return all(
+            self.motion_free(a, b, budget) for a, b in itertools.pairwise(points)
+        )
 
     def motion_steps(self, a: FloatArray, b: FloatArray) -> int:
         """Segments to cut the line from ``a`` to ``b`` into, as :meth:`motion_free`."""

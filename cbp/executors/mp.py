@@ -174,10 +174,7 @@ class RrtConnect:
             # OMPL checked states along the segments at its resolution; the
             # robot sweeps everything between. (Falling back to OMPL's own
             # interpolation, as this did, kept the same segments.)
-            search = self.search
-            if not all(
-                search.motion_free(a, b, budget) for a, b in itertools.pairwise(points)
-            ):
+            if not self.search.path_free(points, budget):
                 return None, "the plan touches between the states OMPL checked"
         finally:
             self._budget = None

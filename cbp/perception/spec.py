@@ -168,7 +168,8 @@ class PerceptionSpec:
     velocities. In scenes where nothing moves the estimate stays 0 (unseen
     space is an obstacle: cells turn into obstacles near the arm only when
     something enters space seen free). Measured on ``cat_pushed_obstacle``
-    (with ``shadow_hold``) in wall-clock runs, six each: a box lowered onto
+    in wall-clock runs, six each, with ``shadow_hold`` (the wrist camera
+    hiding space too, as it did then; it no longer does): a box lowered onto
     the arm at 5 cm/s pressed it with 0-399 N with 1 s and 0.3-24 kN with
     0.5 s; pushed from the side at 5 cm/s 28-346 N (1 s) and 0-58 N (0.5 s),
     at 10 cm/s 173-245 N (1 s) and 91-171 N (0.5 s). In virtual time (the map
