@@ -297,7 +297,7 @@ def _engine_step(robot: Any, solver: str) -> Callable[[int], object]:
     def step(i: int) -> object:
         target = GOALS[(i // 64) % len(GOALS)]
         goal.set_target(target.translation, target.rotation)
-        dq = engine.step(current["q"], DT)
+        dq = engine.step(current["q"], DT).dq
         current["q"] = robot.integrate(current["q"], dq)
         return dq
 
@@ -414,7 +414,7 @@ def _parts_rows(cfg: BenchConfig) -> list[Row]:
     ]
     boards: Any = load_scenario(SCENARIOS / "cat_boards.yaml")
     boards.q0[:] = _near_board(boards)
-    world = boards.collision_world()
+    world = boards.world_for_run()
     cat = boards.make_engine()
     _aim_at_final_goal(boards)
     near = boards.q0
@@ -542,7 +542,7 @@ def _cat_step(
         ContactParams,
     )
 
-    world = scenario.collision_world()
+    world = scenario.world_for_run()
     entries = list(scenario.entries)
     if capacity is not None:
         for k, entry in enumerate(entries):
@@ -563,7 +563,7 @@ def _cat_step(
         # that constrain the next one. Every RESTART steps the arm goes back to
         # the start, so that it stays among the obstacles.
         q = start if i % RESTART == 0 else current["q"]
-        dq = engine.step(q, 0.02)
+        dq = engine.step(q, 0.02).dq
         q_new = robot.integrate(q, dq)
         check = world.try_step(q_new)
         current["q"] = q_new if check.accepted else q
@@ -597,7 +597,7 @@ def _cat_rows(cfg: BenchConfig) -> list[Row]:
     shelf = load_scenario(SCENARIOS / "cat_shelf_reach.yaml")
     centres = _sample_objects(shelf, 0.01)
     env = OccupancyEnvironment(centres, 0.01, None)
-    world = shelf.collision_world()
+    world = shelf.world_for_run()
     world.set_environment(env)
     step, _ = _cat_step(shelf)
     median, p95 = measure(step, max(n // 4, 3), min(w, 10))
@@ -621,7 +621,7 @@ def _shelf_octree_world() -> tuple[Any, np.ndarray]:
     from cbp.scenario import load_scenario
 
     shelf = load_scenario(SCENARIOS / "cat_shelf_retreat.yaml")  # starts inside
-    world = shelf.collision_world()
+    world = shelf.world_for_run()
     cells = _sample_objects(shelf, 0.01)
     world.set_environment(OccupancyEnvironment(cells, 0.01, MetaballRefiner()))
     return world, shelf.q0
@@ -648,10 +648,10 @@ def _query_rows(cfg: BenchConfig) -> list[Row]:
     shelf = load_scenario(SCENARIOS / "cat_shelf_retreat.yaml")
     rows = []
     for case, world, q in (
-        ("full arm vs declared objects (boards)", boards.collision_world(), None),
+        ("full arm vs declared objects (boards)", boards.world_for_run(), None),
         (
             "full arm vs declared objects inside the shelf",
-            shelf.collision_world(),
+            shelf.world_for_run(),
             inside,
         ),
         (
@@ -697,9 +697,9 @@ def _run_query_rows(cfg: BenchConfig) -> list[Row]:
     """
     from cbp.collision import CollisionWorld, MetaballRefiner, OccupancyEnvironment
     from cbp.executors.cat import run_cat
-    from cbp.perception.camera import DepthCamera
     from cbp.perception.occupancy import OccupancyGrid
     from cbp.scenario import load_scenario
+    from cbp.sim.camera import DepthCamera
     from cbp.sim.scene import PybulletScene
     from cbp.state import RobotState
 
@@ -709,7 +709,7 @@ def _run_query_rows(cfg: BenchConfig) -> list[Row]:
     moved = np.r_[True, np.any(np.abs(np.diff(trace.q, axis=0)) > 1e-6, axis=1)]
     configurations = trace.q[moved]
     configurations = configurations[:: max(len(configurations) // 600, 1)]
-    declared = scenario.collision_world()
+    declared = scenario.world_for_run()
     # Worlds of the same robot geometry and settings, each with its obstacles.
     sampled = CollisionWorld(
         declared.geometry,
@@ -766,7 +766,7 @@ def _near_board(scenario: Any) -> np.ndarray:
     """A configuration of the boards scene with the hand 2 cm above board 1."""
     from cbp.executors.clock import WallBudget
     from cbp.executors.ik_search import IkSearch
-    from cbp.executors.settings import IkSearchSettings
+    from cbp.methods.settings import IkSearchSettings
 
     search = IkSearch(scenario.robot, "panda_hand", None, IkSearchSettings())
     goal = pin.SE3(
@@ -809,7 +809,7 @@ def _scaling_rows(cfg: BenchConfig) -> list[Row]:
         # per count, with room for exactly the rows it gets.
         scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
         scenario.q0[:] = _near_board(scenario)
-        probe = scenario.collision_world()
+        probe = scenario.world_for_run()
         found = probe.contacts(RobotState(scenario.robot, scenario.q0))
         if len(found) == 0:
             break
@@ -910,13 +910,13 @@ def _mp_row(cfg: BenchConfig) -> list[Row]:
 
     from cbp.executors.clock import WallBudget
     from cbp.executors.mp import MpPlanner
-    from cbp.executors.settings import MpSettings
-    from cbp.executors.simulated import SimulatedRun
+    from cbp.methods.settings import MpSettings
+    from cbp.run import build_run
     from cbp.scenario import load_scenario
 
     ou.RNG.setSeed(1)  # once, before any sampling: the runs differ, reproducibly
     scenario = load_scenario(SCENARIOS / "cat_shelf_reach.yaml")
-    run = SimulatedRun(scenario, "mp", needs_world=True)
+    run = build_run(scenario, method="mp")
     samples = []
     solved = dropped = 0
     try:
@@ -971,10 +971,10 @@ def _orbit_row(cfg: BenchConfig) -> list[Row]:
     def tick(i: int) -> object:
         for plugin, functions in inputs:
             plugin.set_input(np.array([f(dt * i) for f in functions]))
-        dq = engine.step(state["q"], dt, state["v"])
+        dq, _, easing, _ = engine.step(state["q"], dt, state["v"])
         state["q"] = pin.integrate(robot.model, state["q"], dq)
         state["v"] = dq / dt
-        eased[0] += engine.recovery is not None
+        eased[0] += easing is not None
         return dq
 
     n = cfg.repetitions
@@ -1002,9 +1002,9 @@ def _map_row(cfg: BenchConfig) -> list[Row]:
     integrates one frame (robot filtered out, seen space and the arm's space
     marked) and takes the snapshot the collision world queries.
     """
-    from cbp.perception.camera import DepthCamera
     from cbp.perception.occupancy import OccupancyGrid
     from cbp.scenario import load_scenario
+    from cbp.sim.camera import DepthCamera
     from cbp.sim.scene import PybulletScene
     from cbp.state import RobotState
 
@@ -1025,7 +1025,7 @@ def _map_row(cfg: BenchConfig) -> list[Row]:
             scene.set_configuration(q)
             states.append(RobotState(robot, q))
             frames.append(DepthCamera(scene.client, cameras[k % 2]).capture())
-    geometry = scenario.collision_world().geometry
+    geometry = scenario.world_for_run().geometry
     n = max(cfg.repetitions // 40, 3)
     cold_n = min(n, 10)  # a grid of the scene's bounds each: ~7 MB
     empty = iter([OccupancyGrid(spec, geometry) for _ in range(cold_n + 1)])

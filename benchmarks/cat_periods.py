@@ -20,7 +20,7 @@ import numpy as np
 from results_file import put_section  # this folder: scripts run from it
 
 from cbp.executors.cat import run_cat
-from cbp.executors.settings import CatSettings
+from cbp.methods.settings import CatSettings
 from cbp.scenario import load_scenario
 from cbp.trace import FULL_PERIOD_NOTE
 

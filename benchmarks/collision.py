@@ -19,10 +19,10 @@ from cbp.collision import (
     OccupancyEnvironment,
     RobotGeometry,
 )
-from cbp.perception.camera import DepthCamera
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, PerceptionSpec
 from cbp.scenario import load_scenario
+from cbp.sim.camera import DepthCamera
 from cbp.sim.scene import PybulletScene
 from cbp.state import RobotState
 
@@ -67,9 +67,7 @@ def main() -> None:
     cells = surface_cells(objects, 0.01)
     for approximation in ("hull", "capsule"):
         geometry = RobotGeometry(robot, approximation=approximation)
-        world = CollisionWorld(
-            geometry, scenario.collision_world().environment, settings
-        )
+        world = CollisionWorld(geometry, scenario.world_for_run().environment, settings)
         n = len(world.query(state, world.environment))
         med, p95 = timed(lambda w=world: w.query(state, w.environment), 300)
         rows.append(

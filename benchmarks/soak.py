@@ -34,11 +34,11 @@ import yaml
 from results_file import put_section  # this folder: scripts run from it
 
 from cbp.executors.cat import CatPlanner
-from cbp.executors.settings import CatSettings
-from cbp.executors.simulated import SimulatedRun
 from cbp.executors.trajectory import run_trajectory_executor
 from cbp.goals import write_recorded
+from cbp.methods.settings import CatSettings
 from cbp.metrics import run_metrics
+from cbp.run import build_run
 from cbp.scenario import load_scenario
 from cbp.scenes import HAND_DOWN, REGION, generate_scene
 from cbp.trace import FULL_PERIOD_NOTE
@@ -83,7 +83,7 @@ def soak(minutes: float, source: str, seed: int, folder: Path) -> dict[str, Any]
     path.write_text(yaml.safe_dump(document, sort_keys=False))
     scenario = load_scenario(path, overrides={"perception.source": source})
     settings = scenario.spec.method.settings(CatSettings)
-    run = SimulatedRun(scenario, "cat", clock=settings.timing.clock)
+    run = build_run(scenario, method="cat", clock=settings.timing.clock)
     samples: list[tuple[float, float]] = []  # (simulated time, RSS MB)
     done = threading.Event()
 

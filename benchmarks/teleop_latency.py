@@ -32,7 +32,7 @@ import numpy as np
 from results_file import put_section  # this folder: scripts run from it
 
 from cbp.teleop import TeleopSession, latency_summary
-from cbp.teleop_page import TeleopPage
+from cbp.teleop.goal_page import TeleopPage
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,7 +43,7 @@ def measure(
     """One session: ``goals`` jogs, 0.25 s apart; the figures.
 
     ``min_period``: the shortest adaptive period [s]; None: the session's
-    default (:data:`cbp.teleop.MIN_PERIOD`).
+    default (:data:`cbp.teleop.goal_session.MIN_PERIOD`).
     """
     overrides = (
         {} if min_period is None else {"method.cat.timing.min_period": str(min_period)}
@@ -82,8 +82,8 @@ def measure(
         **summary,
         "realtime": sim / wall,
         "page_hz": rate,
-        "misses": sum(1 for p in session.run.periods if p.missed),
-        "periods": len(session.run.periods),
+        "misses": sum(1 for p in session.parts.log.periods if p.missed),
+        "periods": len(session.parts.log.periods),
         "force": float(np.max(trace.contact_force))
         if trace.contact_force is not None
         else 0.0,

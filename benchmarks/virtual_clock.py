@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cbp.executors.clock import VirtualCosts, WallBudget
+from cbp.executors.clock import WallBudget
 from cbp.executors.ik_search import IkSearch
-from cbp.executors.settings import IkSettings
 from cbp.executors.stepping import ValidatedStepper
+from cbp.methods.settings import IkSettings, VirtualCosts
 from cbp.scenario import load_scenario
 from cbp.sim.trajectory import time_parameterize
 
@@ -38,7 +38,7 @@ def _per_call(fn, n: int = REPEAT) -> float:  # type: ignore[no-untyped-def]
 
 def main() -> None:
     scenario = load_scenario(BOARDS)
-    world = scenario.collision_world()
+    world = scenario.world_for_run()
     engine = scenario.make_engine()
     goal_task = scenario.goal_task()
     stream = scenario.goal_stream()

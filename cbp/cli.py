@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from cbp.errors import CbpError
-from cbp.executors import COMPARABLE, EXECUTORS
+from cbp.methods import COMPARABLE, METHODS
 from cbp.registry import Registry
 from cbp.schema import type_name
 
@@ -48,7 +48,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument(
         "--method",
         default=None,
-        help=f"executor: {', '.join(EXECUTORS)} (default: the scenario's method.name)",
+        help=f"executor: {', '.join(METHODS)} (default: the scenario's method.name)",
     )
     run.add_argument("--gui", action="store_true", help="show PyBullet's window")
     _add_set(
@@ -220,7 +220,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         overrides = _overrides(args.set)
         if overrides is None:
             return 2
-        from cbp.teleop_page import serve_teleop
+        from cbp.teleop.serve import serve_teleop
 
         return serve_teleop(
             args.scenario, args.method, args.host, args.port, args.out, overrides
@@ -366,22 +366,23 @@ def _run(
     gui: bool,
     overrides: dict[str, str],
 ) -> int:
-    from cbp.executors import executor_info
+    from cbp.executors import load_executor
     from cbp.scenario import load_scenario
 
     try:
         scenario = load_scenario(path, overrides=overrides)
         name = method or scenario.spec.method.name
-        info = executor_info(name)
-        info.check(scenario)
-        executor = info.load()
+        executor = load_executor(name)
+        METHODS[name].refuse_source(
+            scenario.spec.perception.source, f"{scenario.path}: perception.source"
+        )
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
     out = out or Path("out") / scenario.spec.name
-    from cbp.executors.faults import EXIT_ABORTED
     from cbp.files import check_output_folder
     from cbp.report import summary_line, write_outputs
+    from cbp.run.faults import EXIT_ABORTED
 
     try:
         check_output_folder(out)
@@ -451,7 +452,7 @@ def _compare(
             f"{_num(m['total_time_s'])} s  peak force {m['peak_contact_force_n']:.1f} N"
         )
     print(f"Report: {result.out / 'report.md'}")
-    from cbp.executors.faults import EXIT_ABORTED
+    from cbp.run.faults import EXIT_ABORTED
 
     aborted = [name for name, m in result.metrics.items() if m.get("aborted")]
     if aborted:

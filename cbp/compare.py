@@ -19,9 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from cbp.executors import COMPARABLE, executor_info
+from cbp.executors import load_executor
 from cbp.files import check_output_folder
 from cbp.goals import write_recorded
+from cbp.methods import COMPARABLE, method_info
 from cbp.progress import Progress
 from cbp.scenario import Scenario, load_scenario
 from cbp.trace import Trace
@@ -66,7 +67,7 @@ def record_goal(scenario: Scenario, path: Path) -> bool:
 
 
 def _run_one(path: Path, overrides: Mapping[str, str], method: str) -> Trace:
-    run = executor_info(method, COMPARABLE).load()
+    run = load_executor(method, COMPARABLE)
     return run(load_scenario(path, overrides=overrides), False)
 
 
@@ -83,7 +84,7 @@ def compare(
 
     Args:
         path: the scenario file.
-        methods: comparable method names (:data:`cbp.executors.COMPARABLE`).
+        methods: comparable method names (:data:`cbp.methods.COMPARABLE`).
         out: output folder (default ``out/<scenario name>``).
         jobs: methods run in this many processes at once. Timing-dependent
             methods (CAT, IK, MP plan within wall-clock budgets) are slowed by
@@ -95,7 +96,7 @@ def compare(
     from cbp.report import write_outputs
 
     for method in methods:
-        executor_info(method, COMPARABLE)  # an unknown name fails before any run
+        method_info(method, COMPARABLE)  # an unknown name fails before any run
     path = Path(path)
     overrides = dict(overrides or {})
     scenario = load_scenario(path, overrides=overrides)

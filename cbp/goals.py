@@ -26,7 +26,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, Protocol
+from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 import pinocchio as pin
@@ -40,9 +40,11 @@ from cbp.spatial import Pose
 __all__ = [
     "RECORDED_COLUMNS",
     "FunctionGoal",
+    "GoalSource",
     "GoalSpec",
     "GoalStream",
     "Keyframe",
+    "LiveGoalSource",
     "write_recorded",
 ]
 
@@ -148,6 +150,19 @@ class GoalSource(Protocol):
 
     def sample(self, t: float) -> tuple[FloatArray, FloatArray]:
         """Goal position (3,) and rotation (3, 3) at time ``t`` [s]."""
+        ...
+
+
+@runtime_checkable
+class LiveGoalSource(GoalSource, Protocol):
+    """A goal source an operator moves while the run goes on (the teleop page's).
+
+    A planner that works through a period may take a newer goal between its
+    steps (:meth:`cbp.run.GoalInput.changed`); a scenario's stream has none.
+    """
+
+    def changed(self) -> bool:
+        """Whether a goal newer than the last one sampled has arrived."""
         ...
 
 

@@ -21,19 +21,17 @@ from pathlib import Path
 
 import numpy as np
 
+from cbp.methods import method_colour
 from cbp.robot import FloatArray
 from cbp.trace import Trace
 
-__all__ = ["METHOD_COLORS", "plot_orbit", "plot_runs"]
+__all__ = ["colour", "plot_orbit", "plot_runs"]
 
-#: One color per method across every figure (as in the paper).
-METHOD_COLORS = {
-    "cat": "tab:blue",
-    "ik": "tab:green",
-    "mp": "tab:orange",
-    "jt": "tab:red",
-    "kinematic": "tab:purple",
-}
+
+def colour(method: str) -> tuple[float, float, float]:
+    """Method ``method``'s colour (the method table's) as matplotlib takes it."""
+    r, g, b = method_colour(method)
+    return (r / 255.0, g / 255.0, b / 255.0)
 
 
 def plot_runs(traces: Mapping[str, Trace], out: Path, title: str) -> list[Path]:
@@ -58,7 +56,7 @@ def plot_runs(traces: Mapping[str, Trace], out: Path, title: str) -> list[Path]:
                 ax.plot(
                     trace.t,
                     trace.contact_force,
-                    color=METHOD_COLORS.get(name),
+                    color=colour(name),
                     label=name,
                 )
         ax.set_xlabel("time [s]")
@@ -118,7 +116,7 @@ def _plot_tracking(traces: Mapping[str, Trace], out: Path, title: str) -> list[P
     ax.plot(first.t, goal_distance, "k--", label="goal")
     for name, trace in traces.items():
         distance = np.linalg.norm(trace.ee_position - start, axis=1)
-        ax.plot(trace.t, distance, color=METHOD_COLORS.get(name), label=name)
+        ax.plot(trace.t, distance, color=colour(name), label=name)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("distance from start [m]")
     ax.set_title(f"{title}: tracking")
@@ -128,7 +126,7 @@ def _plot_tracking(traces: Mapping[str, Trace], out: Path, title: str) -> list[P
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
     for name, trace in traces.items():
-        color = METHOD_COLORS.get(name)
+        color = colour(name)
         axes[0].plot(trace.t, trace.position_error * 100, color=color, label=name)
         axes[1].plot(trace.t, np.rad2deg(trace.rotation_error), color=color, label=name)
     axes[0].set_ylabel("position error [cm]")

@@ -81,6 +81,7 @@ from typing import (
     Any,
     ClassVar,
     Generic,
+    Literal,
     NamedTuple,
     Protocol,
     TypeVar,
@@ -113,6 +114,7 @@ __all__ = [
     "Plugin",
     "PluginParams",
     "ReportsSignals",
+    "RobotLimit",
     "TakesInput",
     "Task",
     "UsesCollisionWorld",
@@ -131,6 +133,8 @@ class PluginParams:
     """
 
 
+#: The robot limits an entry may keep (:attr:`Plugin.robot_limit`).
+RobotLimit = Literal["position", "velocity", "acceleration"]
 ParamsT = TypeVar("ParamsT", bound=PluginParams)
 T = TypeVar("T")
 
@@ -219,6 +223,12 @@ def _check_definition(cls: type[Plugin[Any]]) -> None:
             f"plugin {name}: unit must be a string such as 'm', 'rad' or 'm|rad' "
             f"(one per block of rows), or left out; got {cls.unit!r}"
         )
+    if cls.robot_limit not in (None, *typing.get_args(RobotLimit)):
+        raise PluginDefinitionError(
+            f"plugin {name}: robot_limit must be one of "
+            f"{', '.join(typing.get_args(RobotLimit))} or None (not a limit of "
+            f"the robot), got {cls.robot_limit!r}"
+        )
     gain = cls.default_gain
     if not (isinstance(gain, int | float) and 0.0 <= gain <= 1.0):
         raise PluginDefinitionError(
@@ -285,6 +295,13 @@ class Plugin(abc.ABC, Generic[ParamsT]):
     """Whether the engine may ease this entry's hard rows when the QP is
     infeasible (:meth:`cbp.engine.Engine.step`). False for a physical limit of
     the robot, which no easing makes true (``joint_acceleration``)."""
+    robot_limit: ClassVar[RobotLimit | None] = None
+    """Which of the robot's own limits this entry keeps, if it is one:
+    ``position`` (joint ranges), ``velocity`` or ``acceleration``. Executors ask
+    for this, not for a type name: velocity and acceleration limits bound a
+    step's size and are not obstacles to the goal (CAT's stall detection), and
+    the step guard checks the acceleration limits whether or not an entry
+    keeps them."""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """Check the contract when the class is defined (see the module docstring).

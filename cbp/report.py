@@ -23,54 +23,13 @@ from cbp.metrics import run_metrics
 from cbp.plots import plot_runs
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
-from cbp.schema import to_plain
+from cbp.scene_file import write_scene
 from cbp.trace import Trace
 
 __all__ = ["summary_line", "write_outputs"]
 
 #: Events listed in report.md per method (all of them are in metrics.json).
 REPORT_EVENTS = 50
-#: What a replay needs to draw the run (:func:`scene_description`).
-SCENE_FILE = "scene.json"
-
-
-#: Objects that appear or move are tracked this often in a scene description [s].
-TRACK_PERIOD = 0.05
-
-
-def scene_description(
-    scenario: Scenario, duration: float | None = None
-) -> dict[str, Any]:
-    """The robot and the objects of ``scenario``, for drawing a replay.
-
-    The URDF (absolute path) with the joints robot.yaml locks, and the declared
-    objects as written (shape, size, pose, appearance and motion). Objects that
-    appear or move have a ``track`` too: rows of (t, present, x, y, z, qx, qy,
-    qz, qw) every :data:`TRACK_PERIOD` over ``duration`` (default the
-    scenario's), for a replay to draw them where they were.
-    """
-    robot = scenario.robot
-    description = robot.description
-    end = scenario.spec.duration if duration is None else duration
-    tracks = {}
-    for o in scenario.spec.world.objects:
-        if not o.dynamic:
-            continue
-        rows = []
-        for t in np.arange(0.0, end + TRACK_PERIOD, TRACK_PERIOD):
-            placement = o.placement_at(float(t))
-            q = pin.Quaternion(placement.rotation)
-            present = float(o.present(float(t)))
-            rows.append([float(t), present, *placement.translation, q.x, q.y, q.z, q.w])
-        tracks[o.name] = np.round(np.array(rows), 6).tolist()
-    return {
-        "tracks": tracks,
-        "scenario": scenario.spec.name,
-        "urdf": str(robot.urdf_path.resolve()) if robot.urdf_path else None,
-        "locked_joints": dict(description.locked_joints) if description else {},
-        "objects": [to_plain(o) for o in scenario.spec.world.objects],
-        "folder": str(scenario.path.parent.resolve()),
-    }
 
 
 def write_outputs(
@@ -84,7 +43,7 @@ def write_outputs(
     ``trace.csv`` (``trace_<method>.csv`` when there are several methods),
     ``metrics.json`` (one object per method under its name, with its events),
     the figures of :func:`cbp.plots.plot_runs`, ``report.md``, ``scene.json``
-    (:func:`scene_description`, for ``cbp view``), and copies of
+    (:func:`cbp.scene_file.write_scene`, for ``cbp view``), and copies of
     ``extra_files`` (by name in the folder). They are written into a folder
     beside ``out`` and put in its place when complete
     (:func:`cbp.files.publish_folder`): an earlier output there is replaced as
@@ -101,7 +60,7 @@ def write_outputs(
     try:
         metrics = _write(scenario, traces, staging)
         end = max((float(t.t[-1]) for t in traces.values() if t.t.size), default=0.0)
-        (staging / SCENE_FILE).write_text(json.dumps(scene_description(scenario, end)))
+        write_scene(staging, scenario, end)
         for name, source in (extra_files or {}).items():
             shutil.copyfile(source, staging / name)
     except BaseException:

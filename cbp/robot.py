@@ -403,6 +403,22 @@ class RobotModel:
         """Acceleration limits (nv) [rad/s^2 or m/s^2]."""
         return self._acceleration
 
+    def stopping_time(
+        self,
+        velocity: FloatArray | None = None,
+        acceleration: FloatArray | None = None,
+    ) -> float:
+        """The longest a joint takes to stop from its top speed [s].
+
+        From the robot's limits, or the ``velocity`` and ``acceleration`` limits
+        given (an executor's scaled ones); joints without a finite, positive
+        pair are left out.
+        """
+        v = self._velocity if velocity is None else np.asarray(velocity)
+        a = self._acceleration if acceleration is None else np.asarray(acceleration)
+        known = np.isfinite(v) & np.isfinite(a) & (a > 0)
+        return float(np.max(v[known] / a[known])) if known.any() else 0.0
+
     # ------------------------------------------------------------------ configurations
 
     def neutral(self) -> FloatArray:

@@ -145,7 +145,7 @@ def write_scenes(out: Path, count: int, seed: int = 0) -> list[Path]:
         except ScenarioError:
             path.unlink()
             continue
-        world = scenario.collision_world()
+        world = scenario.world_for_run()
         goals = np.array([k["pose"]["position"] for k in document["goal"]["keyframes"]])
         # The hand's frame sits above the fingertips: keep 12 cm below it clear.
         tips = goals - np.array([0.0, 0.0, 0.12])

@@ -25,21 +25,14 @@ from typing import Any
 
 import numpy as np
 
+from cbp.drawing import draw_objects, joint_values
 from cbp.errors import ConfigError
+from cbp.methods import method_colour
 from cbp.robot import FloatArray
-from cbp.spatial import Pose
+from cbp.scene_file import read_scene
 
-__all__ = ["Replay", "RunRecording", "draw_objects", "load_recordings", "wxyz"]
+__all__ = ["Replay", "RunRecording", "load_recordings"]
 
-#: One colour per method, as in the figures (CAT blue, IK green, MP orange, JT
-#: red; hybrid purple), RGB 0-255.
-COLOURS = {
-    "cat": (31, 119, 180),
-    "ik": (44, 160, 44),
-    "mp": (255, 127, 14),
-    "jt": (214, 39, 40),
-    "hybrid": (148, 103, 189),
-}
 #: The plots show this many seconds up to the cursor.
 PLOT_WINDOW = 5.0
 #: Points per plotted curve at most.
@@ -77,16 +70,10 @@ def load_recordings(out: Path) -> tuple[dict[str, Any], list[RunRecording]]:
     Raises:
         ConfigError: not an output folder, or one written before scene.json.
     """
-    scene_path = out / "scene.json"
     metrics_path = out / "metrics.json"
     if not metrics_path.is_file():
         raise ConfigError(f"{out} is not a cbp output folder (no metrics.json)")
-    if not scene_path.is_file():
-        raise ConfigError(
-            f"{out} has no scene.json (written by cbp since the viewer came): run "
-            "the scenario again"
-        )
-    scene = json.loads(scene_path.read_text())
+    scene = read_scene(out)
     methods = list(json.loads(metrics_path.read_text()))
     recordings = []
     for method in methods:
@@ -134,7 +121,7 @@ class Replay:
             raise ConfigError("the run's robot has no URDF to draw")
         self._robots = []
         for recording in self.recordings:
-            colour = COLOURS.get(recording.method, (127, 127, 127))
+            colour = method_colour(recording.method)
             robot = ViserUrdf(
                 self.server,
                 Path(urdf),
@@ -178,9 +165,7 @@ class Replay:
             series = [viser.uplot.Series(label="t [s]")] + [
                 viser.uplot.Series(
                     label=r.method,
-                    stroke="#{:02x}{:02x}{:02x}".format(
-                        *COLOURS.get(r.method, (127, 127, 127))
-                    ),
+                    stroke="#{:02x}{:02x}{:02x}".format(*method_colour(r.method)),
                     width=2,
                 )
                 for r in self.recordings
@@ -207,14 +192,10 @@ class Replay:
         lines = [f"**t = {t:.3f} s**", ""]
         for recording, robot, joints in self._robots:
             k = recording.index(t)
-            locked = self.scene.get("locked_joints", {})
-            cfg = np.array(
-                [
-                    recording.q[j][k] if j in recording.q else locked.get(j, 0.0)
-                    for j in joints
-                ]
+            values = {name: float(q[k]) for name, q in recording.q.items()}
+            robot.update_cfg(
+                joint_values(joints, values, self.scene.get("locked_joints", {}))
             )
-            robot.update_cfg(cfg)
             c = recording.columns
             force = c.get("contact_force")
             clearance = c.get("clearance")
@@ -293,53 +274,6 @@ class Replay:
         self.server.stop()
 
 
-def draw_objects(server: Any, description: dict[str, Any]) -> dict[str, Any]:
-    """Draw the declared objects of a scene description.
-
-    ``description`` is :func:`cbp.report.scene_description`'s.
-    """
-    scene = server.scene
-    handles: dict[str, Any] = {}
-    for obj in description["objects"]:
-        pose = Pose(**obj["pose"]).to_se3()
-        quat = wxyz(pose.rotation)
-        name = f"/objects/{obj['name']}"
-        size = obj.get("size") or []
-        colour = (170, 170, 170)
-        if obj["shape"] == "box":
-            handles[obj["name"]] = scene.add_box(
-                name,
-                color=colour,
-                dimensions=tuple(size),
-                wxyz=quat,
-                position=tuple(pose.translation),
-            )
-        elif obj["shape"] == "sphere":
-            handles[obj["name"]] = scene.add_icosphere(
-                name, radius=size[0], color=colour, position=tuple(pose.translation)
-            )
-        elif obj["shape"] == "cylinder":
-            handles[obj["name"]] = scene.add_cylinder(
-                name,
-                radius=size[0],
-                height=size[1],
-                color=colour,
-                wxyz=quat,
-                position=tuple(pose.translation),
-            )
-        elif obj["shape"] == "mesh":
-            import trimesh
-
-            mesh = trimesh.load(
-                str(Path(description["folder"]) / obj["file"]), force="mesh"
-            )
-            mesh.apply_scale(obj.get("scale", [1.0, 1.0, 1.0]))
-            handles[obj["name"]] = scene.add_mesh_trimesh(
-                name, mesh, wxyz=quat, position=tuple(pose.translation)
-            )
-    return handles
-
-
 def _curve(recording: RunRecording, column: str) -> FloatArray:
     """A plotted column of a recording: goal error [mm] or a trace column."""
     c = recording.columns
@@ -348,14 +282,6 @@ def _curve(recording: RunRecording, column: str) -> FloatArray:
         return np.asarray(1e3 * np.linalg.norm(recording.goal[0] - hand, axis=1))
     values = c.get(column)
     return np.zeros_like(recording.t) if values is None else np.nan_to_num(values)
-
-
-def wxyz(rotation: FloatArray) -> tuple[float, float, float, float]:
-    """The quaternion (w, x, y, z), viser's order, of a rotation matrix."""
-    import pinocchio as pin
-
-    q = pin.Quaternion(rotation)
-    return (float(q.w), float(q.x), float(q.y), float(q.z))
 
 
 def serve(out: Path, port: int, export: Path | None) -> int:

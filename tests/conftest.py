@@ -1,4 +1,4 @@
-"""Session-scoped robots, a seeded random generator, and browser-test helpers."""
+"""Session-scoped robots, a seeded random generator, the virtual clock, browser helpers."""
 
 from __future__ import annotations
 
@@ -11,6 +11,18 @@ import numpy as np
 import pytest
 
 from cbp.robot import RobotModel
+from cbp.scenario import Scenario, load_scenario
+
+#: Scenario values that put every trajectory executor on the virtual clock:
+#: planning budgets are counted in work done, not wall-clock time, so a test's
+#: outcome does not depend on how busy the machine is. Tests of wall-clock
+#: behaviour itself (live sessions, the clocks' own tests) do without.
+VIRTUAL_CLOCK = {f"method.{m}.timing.clock": "virtual" for m in ("cat", "ik", "mp")}
+
+
+def load_virtual(path: object, overrides: dict[str, str] | None = None) -> Scenario:
+    """``load_scenario`` on the virtual clock (:data:`VIRTUAL_CLOCK`)."""
+    return load_scenario(path, overrides={**VIRTUAL_CLOCK, **(overrides or {})})  # type: ignore[arg-type]
 
 
 @pytest.fixture(scope="session")

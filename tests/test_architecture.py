@@ -1,6 +1,10 @@
 """The layering holds: no import cycle, no private name across modules, light import.
 
-No import cycle in ``cbp``, no private name of one module used by another, and
+No import cycle in ``cbp`` between modules (imports at run time) or between
+packages (every import: at run time, inside functions, and under ``if
+TYPE_CHECKING:``, names re-exported by a package followed to the module that
+defines them), no private name of one module used by another, the scenario
+package imports no executor, loading a scenario imports no simulator, and
 ``import cbp`` stays light.
 """
 
@@ -26,12 +30,21 @@ def _modules(package: str) -> dict[str, Path]:
     return out
 
 
-def _imports(path: Path) -> list[tuple[int, str, list[str]]]:
-    """(line, module, names) of every import outside ``if TYPE_CHECKING:``."""
+def _imports(
+    path: Path, type_checking: bool = False
+) -> list[tuple[int, str, list[str]]]:
+    """(line, module, names) of every import.
+
+    Those under ``if TYPE_CHECKING:`` only when ``type_checking``.
+    """
     tree = ast.parse(path.read_text(encoding="utf-8"))
     skipped: set[int] = set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+        if (
+            not type_checking
+            and isinstance(node, ast.If)
+            and "TYPE_CHECKING" in ast.unparse(node.test)
+        ):
             skipped |= {id(n) for child in node.body for n in ast.walk(child)}
     found = []
     for node in ast.walk(tree):
@@ -57,6 +70,60 @@ def _edges(modules: dict[str, Path]) -> dict[str, set[str]]:
                     prefix = ".".join(parts[:k])
                     if prefix in modules and prefix != name:
                         graph[name].add(prefix)
+    return graph
+
+
+def _reexports(modules: dict[str, Path]) -> dict[tuple[str, str], str]:
+    """(package, name) -> the module a package's ``__init__`` takes ``name`` from."""
+    out = {}
+    for package, path in modules.items():
+        if path.name != "__init__.py":
+            continue
+        for _, module, names in _imports(path, type_checking=True):
+            for name in names:
+                out[(package, name)] = module
+    return out
+
+
+def _defining_module(
+    module: str, name: str, modules: dict[str, Path], reexports: dict
+) -> str:
+    """The module ``from module import name`` reaches.
+
+    A submodule, the module a package re-exports ``name`` from (followed
+    through packages), or ``module`` itself.
+    """
+    seen = set()
+    while (module, name) in reexports and (module, name) not in seen:
+        seen.add((module, name))
+        module = reexports[(module, name)]
+    sub = f"{module}.{name}"
+    return sub if sub in modules else module
+
+
+def _unit(module: str) -> str | None:
+    """The package (or top-level module) of ``cbp`` that ``module`` belongs to."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "cbp" and len(parts) > 1 else None
+
+
+def _package_graph() -> dict[str, set[str]]:
+    """Package -> the packages it imports, by every import there is."""
+    modules = _modules("cbp")
+    reexports = _reexports(modules)
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        unit = _unit(name)
+        if unit is None:
+            continue
+        targets = graph.setdefault(unit, set())
+        for _, module, names in _imports(path, type_checking=True):
+            for target in [
+                _defining_module(module, n, modules, reexports) for n in names
+            ] or [module]:
+                other = _unit(target)
+                if other is not None and other != unit:
+                    targets.add(other)
     return graph
 
 
@@ -106,6 +173,44 @@ def test_no_import_cycle_in_cbp() -> None:
             if sub.startswith(package + "."):
                 graph[package].discard(sub)
     assert _cycles(graph) == []
+
+
+def test_no_import_cycle_between_packages() -> None:
+    """No set of cbp packages imports itself round, counting every import.
+
+    Type-checking imports and names re-exported by a package count: a loop
+    between packages is a loop whether or not Python runs it.
+    """
+    graph = _package_graph()
+    loops = _cycles(graph)
+    assert loops == [], [
+        f"{a} -> {b}" for loop in loops for a in loop for b in graph[a] if b in loop
+    ]
+
+
+def test_the_scenario_package_imports_no_executor() -> None:
+    """The scenario is data: no module of cbp/scenario/ imports cbp.executors."""
+    graph = _package_graph()
+    assert "cbp.executors" not in graph["cbp.scenario"]
+    assert "cbp.run" not in graph["cbp.scenario"]
+
+
+def test_the_world_model_does_not_import_the_simulator() -> None:
+    """Perception and collision import no cbp.sim; loading a scenario no PyBullet."""
+    graph = _package_graph()
+    assert "cbp.sim" not in graph["cbp.perception"]
+    assert "cbp.sim" not in graph["cbp.collision"]
+    assert "cbp.sim" not in graph["cbp.scenario"]
+    code = (
+        "import sys; from cbp.scenario import load_scenario; "
+        f"load_scenario({str(ROOT / 'scenarios' / 'cat_boards.yaml')!r}); "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'pybullet' "
+        "or m.startswith(('cbp.sim', 'cbp.executors', 'cbp.run'))))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    )
+    assert done.stdout.strip() == "[]"
 
 
 def test_no_private_name_crosses_a_module() -> None:

@@ -143,7 +143,7 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
     pytest.importorskip("viser", reason="the viewer extra is not installed")
     from selenium.webdriver.common.by import By
 
-    from cbp.teleop_page import TeleopPage
+    from cbp.teleop.goal_page import TeleopPage
 
     session = TeleopSession(BOARDS, "cat")
     page = TeleopPage(session, port=free_port())
@@ -174,7 +174,8 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
 
         # The page draws the robot where the simulation has it.
         snap = session.snapshot()
-        drawn = page.robot._urdf.cfg
+        drawn = page.state().robot_q
+        assert drawn is not None
         np.testing.assert_allclose(drawn[:7], snap.q[:7], atol=0.05)
 
         # A jog button moves the simulated hand by the step within a second.
@@ -216,7 +217,9 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         session.set_goal(inside, rotation)
         assert _wait(lambda: np.allclose(page.gizmo.position, inside), 1.0)
         assert page.ghost is not None
-        assert _wait(lambda: page._gripper.visible and page.ghost.show_collision, 8.0)
+        assert _wait(
+            lambda: page.state().gripper_visible and page.state().ghost_visible, 8.0
+        )
         snap = session.snapshot()
         assert snap.contacts is not None
         assert len(snap.contacts.distance) > 0  # CAT's contact rows are drawn
@@ -267,13 +270,13 @@ def test_orbit_and_pan_are_driven_live_and_switched(tmp_path: Path) -> None:
         session.set_input("distance", np.array([0.7]))
         session.set_input("user_velocity", np.array([0.1, 0.0]))
         assert _wait(lambda: session.t > 12.0, 15)
-        orbit = session.snapshot()["signals"]
+        orbit = session.snapshot().signals
         assert orbit["distance"] == pytest.approx(0.7, abs=0.01)
         session.switch("youbot_pan")
         session.set_input("user_velocity", np.array([0.0, 0.0, 0.05]))
         start = session.t
         assert _wait(lambda: session.t > start + 3.0, 10)
-        assert session.snapshot()["active"] == "youbot_pan"
+        assert session.snapshot().active == "youbot_pan"
     finally:
         traces = session.stop()
     assert set(traces) == {"youbot_orbit_case1", "youbot_pan"}
@@ -298,7 +301,7 @@ def test_orbit_and_pan_are_driven_live_and_switched(tmp_path: Path) -> None:
 def test_the_orbit_page_sends_sliders_and_switches_configurations() -> None:
     pytest.importorskip("viser", reason="the viewer extra is not installed")
     from cbp.teleop import InputSession
-    from cbp.teleop_page import InputsPage
+    from cbp.teleop.inputs_page import InputsPage
 
     scenarios = ROOT / "scenarios"
     session = InputSession(
@@ -327,23 +330,23 @@ def test_the_page_draws_the_map_and_unknown_space_on_the_toggle() -> None:
     """With cameras: the occupied cells, and the unknown ones when asked."""
     pytest.importorskip("viser", reason="the viewer extra is not installed")
     from cbp.perception.kernels import OCCUPIED
-    from cbp.teleop_page import MAX_CELLS, TeleopPage
+    from cbp.teleop.goal_page import MAX_CELLS, TeleopPage
 
     session = TeleopSession(BOARDS, "cat", {"perception.source": "depth_camera"})
     page = TeleopPage(session, port=free_port())
     try:
         page.update()
-        assert session.run.mapper is not None
-        occupied = session.run.mapper.grid.count(OCCUPIED)
+        assert session.parts.cameras is not None
+        occupied = session.parts.cameras.grid.count(OCCUPIED)
         assert occupied > 0
-        assert len(page._cells.points) == min(occupied, MAX_CELLS)
+        assert page.state().map_cells == min(occupied, MAX_CELLS)
         page.show_unknown.value = True
         page.update()
-        assert len(page._cells.points) > min(occupied, MAX_CELLS - 1)
-        assert len(page._cells.points) <= MAX_CELLS
+        assert page.state().map_cells > min(occupied, MAX_CELLS - 1)
+        assert page.state().map_cells <= MAX_CELLS
     finally:
         page.close()
-        session.run.finish()
+        session.parts.close()
 
 
 def test_the_page_gets_the_obstacle_contacts_of_every_contact_row() -> None:
@@ -365,8 +368,8 @@ def test_the_page_gets_the_obstacle_contacts_of_every_contact_row() -> None:
 
     session = TeleopSession(BOARDS, "cat")
     planner = session.planner
-    cat = planner._planner("cat")
-    robot, world = session.scenario.robot, session.scenario.collision_world()
+    cat = planner.planner("cat")
+    robot, world = session.scenario.robot, session.scenario.world_for_run()
     mine = Mine(ContactParams(), robot, "mine")
     mine.attach_world(world)
     cat.engine = engine = Engine(
@@ -382,7 +385,7 @@ def test_the_page_gets_the_obstacle_contacts_of_every_contact_row() -> None:
     session.scenario.goal_task().set_target(np.array([0.55, -0.24, 0.03]), np.eye(3))
     q = session.scenario.q0.copy()
     for _ in range(300):
-        q = robot.integrate(q, engine.step(q, 0.02))
+        q = robot.integrate(q, engine.step(q, 0.02).dq)
         if len(holders["contact_normals"].contacts) and len(
             holders["self_collision"].contacts
         ):

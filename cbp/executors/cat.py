@@ -20,12 +20,12 @@ import pinocchio as pin
 
 from cbp.errors import CbpError
 from cbp.executors.clock import Budget
-from cbp.executors.settings import CatSettings
-from cbp.executors.simulated import SimulatedRun
 from cbp.executors.stepping import ValidatedStepper
-from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.executors.trajectory import Plan, run_periodic
+from cbp.methods.settings import CatSettings
 from cbp.plugin import HoldsContacts
 from cbp.robot import FloatArray
+from cbp.run.parts import RunParts
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 
@@ -43,12 +43,12 @@ class CatPlanner:
         self.scenario = scenario
         self.settings = settings
         self.engine = scenario.make_engine()
-        #: The entries that bound a step's size only (joint_velocity): not
-        #: obstacles to the goal.
+        #: The entries that bound a step's size only (the robot's velocity
+        #: and acceleration limits): not obstacles to the goal.
         self.step_limits = {
             e.name
             for e in self.engine.entries
-            if e.plugin.type_name == "joint_velocity"
+            if e.plugin.robot_limit in ("velocity", "acceleration")
         }
         #: Hard entries other than the step limits that were active at the last
         #: step of the last period (contacts, joint limits): what holds the arm.
@@ -62,18 +62,21 @@ class CatPlanner:
         #: was last said [s].
         self._unseen_holds = False
         self._unseen_said = -np.inf
+        self._stepper: ValidatedStepper | None = None
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts
     ) -> Plan:
         """QP steps from ``q`` until the budget is spent or the motion stops."""
         s = self.settings
         if goal is None:
             return Plan(None, 0, "no goal yet")
-        world = run.world if self.scenario.needs_collision_world else None
-        stepper = ValidatedStepper(
-            self.engine, world, lambda message: run.event(run.sim.t, message)
-        )
+        stepper = self._stepper
+        if stepper is None:  # one per run: an easing is said once per change
+            world = run.world if self.scenario.needs_collision_world else None
+            stepper = self._stepper = ValidatedStepper(
+                self.engine, world, lambda message: run.event(run.sim.t, message)
+            )
         # A step is kept if it penetrates no deeper than the tolerance, or than
         # where it started (so a robot that starts in collision can leave it).
         stepper.start(q)
@@ -85,8 +88,8 @@ class CatPlanner:
             if budget.spent():
                 break
             steps += 1
-            if run.goal_changed():  # a live goal moved: steer toward it now
-                run.resend_goal()
+            if run.goal.changed():  # a live goal moved: steer toward it now
+                run.goal.resend(run.sim.t)
             step = stepper.step(q, s.step_dt)
             budget.charge("qp_step")
             if step.outcome == "failed":
@@ -112,13 +115,16 @@ class CatPlanner:
                 still = 0
         else:
             note = "max_steps reached"
-        problem = self.engine.problem
-        if steps and step.dq is not None and problem is not None:
-            self.blocked_by = problem.active_entries(step.dq) - self.step_limits
+        last = stepper.last
+        if steps and step.dq is not None and last is not None:
+            self.blocked_by = last.problem.active_entries(step.dq) - self.step_limits
         self._say_if_unseen_space_holds(run)
         return Plan(np.array(path), steps, note)
 
-    def _say_if_unseen_space_holds(self, run: SimulatedRun) -> None:
+    def close(self) -> None:
+        """Nothing to release (the engine is the scenario's)."""
+
+    def _say_if_unseen_space_holds(self, run: RunParts) -> None:
         """An event when contacts with space no camera has seen hold the arm.
 
         The arm then waits for a camera to see that space, which an obstacle
@@ -161,13 +167,11 @@ class CatPlanner:
         )
 
 
-def make_planner(scenario: Scenario, run: SimulatedRun) -> CatPlanner:
+def make_planner(scenario: Scenario, run: RunParts) -> CatPlanner:
     """CAT's planner for ``run``, with the scenario's ``method.cat`` settings."""
     return CatPlanner(scenario, scenario.spec.method.settings(CatSettings))
 
 
 def run_cat(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the CAT executor; return the trace."""
-    settings = scenario.spec.method.settings(CatSettings)
-    run = SimulatedRun(scenario, "cat", gui, clock=settings.timing.clock)
-    return run_trajectory_executor(run, make_planner(scenario, run), settings.timing)
+    return run_periodic(scenario, "cat", gui)

@@ -23,10 +23,9 @@ the ratio of each to its default).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Protocol
 
-from cbp.errors import require
+from cbp.methods.settings import ClockKind, VirtualCosts, Work
 
 __all__ = [
     "Budget",
@@ -37,30 +36,6 @@ __all__ = [
     "Work",
     "make_budget",
 ]
-
-#: How a planning budget is counted.
-ClockKind = Literal["wall", "virtual"]
-#: The kinds of work a planner charges.
-Work = Literal["qp_step", "ik_iteration", "collision_check", "trajectory_point"]
-
-
-@dataclass(frozen=True, kw_only=True)
-class VirtualCosts:
-    """The ``timing.virtual_costs:`` section: seconds charged per unit of work."""
-
-    qp_step: float = 145e-6
-    """One CAT step: the engine's QP, integration and step validation [s]."""
-    ik_iteration: float = 26e-6
-    """One damped-least-squares iteration of the IK search [s]."""
-    collision_check: float = 11e-6
-    """One yes-or-no collision check of a configuration (IK, MP) [s]."""
-    trajectory_point: float = 4e-6
-    """Timing one path point of the spliced trajectory [s]."""
-
-    def __post_init__(self) -> None:
-        """Positive costs."""
-        require(self, "> 0", "qp_step", "ik_iteration", "collision_check")
-        require(self, "> 0", "trajectory_point")
 
 
 class Budget(Protocol):

@@ -46,14 +46,15 @@ from typing import Literal
 import numpy as np
 import pinocchio as pin
 
+from cbp.engine import Engine
 from cbp.executors.cat import CatPlanner
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.mp import RrtConnect, record_plan
-from cbp.executors.settings import CatSettings, HybridSettings
-from cbp.executors.simulated import SimulatedRun
-from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.executors.trajectory import Plan, run_periodic
+from cbp.methods.settings import CatSettings, HybridSettings
 from cbp.robot import FloatArray
+from cbp.run.parts import RunParts
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
 
@@ -121,7 +122,7 @@ class StallDetector:
 class HybridPlanner:
     """CAT each period; after a stall, IK + RRT-Connect over several periods."""
 
-    def __init__(self, scenario: Scenario, run: SimulatedRun) -> None:
+    def __init__(self, scenario: Scenario, run: RunParts) -> None:
         """CAT's planner, the stall detector, the IK search and RRT-Connect."""
         spec = scenario.spec.method
         self.settings = spec.settings(HybridSettings)
@@ -157,12 +158,17 @@ class HybridPlanner:
         self._plan: FloatArray | None = None  # the plan being followed
         self._taken = False  # the loop spliced it in
         self._note = ""
-        run.counters.update(
+        run.log.counters.update(
             plans=0.0,
             planning_attempts=0.0,
             plan_path_length_rad=0.0,
             plan_duration_s=0.0,
         )
+
+    @property
+    def engine(self) -> Engine:
+        """The engine CAT steps (a live page shows its contacts)."""
+        return self.cat.engine
 
     def close(self) -> None:
         """Release OMPL's reference to the validity checker."""
@@ -171,7 +177,7 @@ class HybridPlanner:
     # ------------------------------------------------------------------ the period
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts
     ) -> Plan:
         """This period's path: CAT's, the planner's, or none (a plan is running)."""
         if goal is None:
@@ -194,7 +200,7 @@ class HybridPlanner:
         return self._tracking(q, goal, t, budget, run)
 
     def _tracking(
-        self, q: FloatArray, goal: pin.SE3, t: float, budget: Budget, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3, t: float, budget: Budget, run: RunParts
     ) -> Plan:
         """CAT's period, watched by the stall detector."""
         plan = self.cat.plan(q, goal, budget, run)
@@ -218,7 +224,7 @@ class HybridPlanner:
                 f"hybrid: CAT stalled {error * 1e3:.0f} mm (weighted) from the goal "
                 f"for {self.settings.stall_time:g} s, held by {blocked}; planning",
             )
-            run.counters["planning_attempts"] += 1
+            run.log.counters["planning_attempts"] += 1
             self._begin_planning(end, goal)
             # Brake now: the plan starts where the arm comes to rest.
             return Plan(None, plan.steps, "hybrid: stalled, braking to plan", stop=True)
@@ -250,7 +256,7 @@ class HybridPlanner:
         self._spent = 0.0
 
     def _planning(
-        self, q: FloatArray, goal: pin.SE3, budget: Budget, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3, budget: Budget, run: RunParts
     ) -> Plan:
         """One period of the search; the plan when it is ready and the arm at rest."""
         t = run.sim.t
@@ -289,7 +295,7 @@ class HybridPlanner:
         return Plan(None, 0, "hybrid: planning, the arm holds")
 
     def _search_configuration(
-        self, goal: pin.SE3, budget: Budget, run: SimulatedRun
+        self, goal: pin.SE3, budget: Budget, run: RunParts
     ) -> None:
         """Try the IK seeds in turn within ``budget``; begin RRT-Connect on success."""
         assert self._start is not None
@@ -334,9 +340,7 @@ class HybridPlanner:
         return float(np.max(np.abs(q - self._start) / self._vmax))
 
     @staticmethod
-    def _lead_in(
-        q: FloatArray, start: FloatArray, run: SimulatedRun
-    ) -> FloatArray | None:
+    def _lead_in(q: FloatArray, start: FloatArray, run: RunParts) -> FloatArray | None:
         """The rest of the trajectory being followed, from ``q`` to ``start``.
 
         The plan is spliced at the loop's starting point ``q`` without waiting
@@ -353,7 +357,7 @@ class HybridPlanner:
         match = np.flatnonzero(np.all(positions == q, axis=1))
         return positions[match[-1] :] if match.size else None
 
-    def _free_start(self, run: SimulatedRun, budget: Budget) -> FloatArray | None:
+    def _free_start(self, run: RunParts, budget: Budget) -> FloatArray | None:
         """The way from the resting point to where the plan may start.
 
         OMPL needs a start free of contact; CAT may rest within the penetration
@@ -374,9 +378,7 @@ class HybridPlanner:
                 return np.vstack([self._start[None], came[1 : k + 1]])
         return None
 
-    def _splice(
-        self, points: FloatArray, note: str, t: float, run: SimulatedRun
-    ) -> Plan:
+    def _splice(self, points: FloatArray, note: str, t: float, run: RunParts) -> Plan:
         """Hand the plan to the loop; from the next period, follow it."""
         self.mode = "following"
         self._plan = points
@@ -387,7 +389,7 @@ class HybridPlanner:
     # ------------------------------------------------------------------ following
 
     def _following(
-        self, q: FloatArray, t: float, budget: Budget, run: SimulatedRun
+        self, q: FloatArray, t: float, budget: Budget, run: RunParts
     ) -> Plan | None:
         """Keep following the plan (no new path), or None to give CAT the period."""
         assert self._plan is not None
@@ -462,17 +464,11 @@ class HybridPlanner:
         return self._data.oMf[self.frame_id].copy()
 
 
-def make_planner(scenario: Scenario, run: SimulatedRun) -> HybridPlanner:
+def make_planner(scenario: Scenario, run: RunParts) -> HybridPlanner:
     """The hybrid's planner for ``run`` (``method.hybrid``); close it after."""
     return HybridPlanner(scenario, run)
 
 
 def run_hybrid(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the hybrid executor; return the trace."""
-    timing = scenario.spec.method.settings(CatSettings).timing
-    run = SimulatedRun(scenario, "hybrid", gui, needs_world=True, clock=timing.clock)
-    planner = make_planner(scenario, run)
-    try:
-        return run_trajectory_executor(run, planner, timing)
-    finally:
-        planner.close()
+    return run_periodic(scenario, "hybrid", gui)

@@ -17,10 +17,10 @@ import pinocchio as pin
 
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch, SearchEvents
-from cbp.executors.settings import IkSettings
-from cbp.executors.simulated import SimulatedRun
-from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.executors.trajectory import Plan, run_periodic
+from cbp.methods.settings import IkSettings
 from cbp.robot import FloatArray
+from cbp.run.parts import RunParts
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 
@@ -30,14 +30,14 @@ __all__ = ["IkPlanner", "make_planner", "run_ik"]
 class IkPlanner:
     """IK for the goal (cached per goal), then a checked joint-space line to it."""
 
-    def __init__(self, scenario: Scenario, run: SimulatedRun, settings: IkSettings):
+    def __init__(self, scenario: Scenario, run: RunParts, settings: IkSettings):
         """Set up the IK search on the scenario's collision world."""
         self.settings = settings
         self.search = IkSearch(scenario.robot, run.ee_frame, run.world, settings.search)
         self.events = SearchEvents("ik")
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts
     ) -> Plan:
         """Solve (if the goal changed), then interpolate toward the solution."""
         if goal is None:
@@ -50,6 +50,9 @@ class IkPlanner:
         return interpolate_checked(
             q, target, self.settings.interpolation_step, self.search, budget
         )
+
+    def close(self) -> None:
+        """Nothing to release."""
 
 
 def interpolate_checked(
@@ -79,15 +82,11 @@ def interpolate_checked(
     return Plan(np.array(path), n, "at the IK solution")
 
 
-def make_planner(scenario: Scenario, run: SimulatedRun) -> IkPlanner:
+def make_planner(scenario: Scenario, run: RunParts) -> IkPlanner:
     """The IK method's planner for ``run``, with the ``method.ik`` settings."""
     return IkPlanner(scenario, run, scenario.spec.method.settings(IkSettings))
 
 
 def run_ik(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the IK method; return the trace."""
-    settings = scenario.spec.method.settings(IkSettings)
-    run = SimulatedRun(
-        scenario, "ik", gui, needs_world=True, clock=settings.timing.clock
-    )
-    return run_trajectory_executor(run, make_planner(scenario, run), settings.timing)
+    return run_periodic(scenario, "ik", gui)

@@ -20,11 +20,11 @@ import pinocchio as pin
 
 from cbp.collision.world import CollisionWorld
 from cbp.executors.clock import Budget
-from cbp.executors.settings import IkSearchSettings
+from cbp.methods.settings import IkSearchSettings
 from cbp.robot import FloatArray, RobotModel
 
 if TYPE_CHECKING:
-    from cbp.executors.simulated import SimulatedRun
+    from cbp.run.parts import RunParts
 
 __all__ = ["IkSearch", "SearchEvents"]
 
@@ -267,7 +267,7 @@ class SearchEvents:
         self._since = 0.0  # since when [s]
         self._reported = False
 
-    def failed(self, run: SimulatedRun, goal: pin.SE3, exhausted: bool) -> None:
+    def failed(self, run: RunParts, goal: pin.SE3, exhausted: bool) -> None:
         """No solution for ``goal`` this period; ``exhausted``: every start tried."""
         t = run.sim.t
         if self._goal is None or not goal.isApprox(self._goal, 1e-9):
@@ -295,7 +295,7 @@ class SearchEvents:
             "the arm holds, and the search is tried again each period",
         )
 
-    def solved(self, run: SimulatedRun) -> None:
+    def solved(self, run: RunParts) -> None:
         """The search found a solution (after a reported failure: say so)."""
         if self._reported:
             run.event(run.sim.t, f"{self.method}: a collision-free IK solution found")

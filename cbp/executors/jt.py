@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from cbp.executors.settings import JtSettings
-from cbp.executors.simulated import SimulatedRun
+from cbp.methods.settings import JtSettings
 from cbp.robot import FloatArray
+from cbp.run.parts import RunParts, build_run
 from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import JointTrajectory
 from cbp.trace import Trace
@@ -29,7 +29,7 @@ __all__ = ["JacobianTransposeController", "run_jt"]
 class JacobianTransposeController:
     """The torque law of eqs. 6-8, called by the simulator every physics step."""
 
-    def __init__(self, scenario: Scenario, run: SimulatedRun) -> None:
+    def __init__(self, scenario: Scenario, run: RunParts) -> None:
         """Resolve the frame; the posture target is the initial configuration."""
         self.settings = scenario.spec.method.settings(JtSettings)
         self.robot = scenario.robot
@@ -50,7 +50,7 @@ class JacobianTransposeController:
         )
         tau = np.asarray(pin.computeGeneralizedGravity(model, data, q)).copy()
         tau -= s.joint_damping * v
-        goal = self.run.goal(t)
+        goal = self.run.goal.goal(t)
         if goal is not None:
             M = data.oMf[self.frame_id]
             twist = J.dot(v)
@@ -76,7 +76,7 @@ def _cap(vector: FloatArray, limit: float) -> FloatArray:
 
 def run_jt(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the JT method; return the trace."""
-    run = SimulatedRun(scenario, "jt", gui)
+    run = build_run(scenario, method="jt", gui=gui)
     try:
         run.sim.set_torque_controller(JacobianTransposeController(scenario, run))
         # In slices of a command period, so that a failure is an event: the

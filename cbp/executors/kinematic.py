@@ -25,11 +25,11 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.errors import InvalidTargetError
-from cbp.executors import executor_info
-from cbp.executors.faults import Faults
-from cbp.executors.settings import KinematicSettings
 from cbp.executors.stepping import Step, ValidatedStepper
+from cbp.methods import METHODS
+from cbp.methods.settings import KinematicSettings
 from cbp.progress import report_time
+from cbp.run.faults import Faults
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
 
@@ -46,7 +46,9 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
     Raises:
         ConfigError: the scenario asks for the depth cameras (none here).
     """
-    executor_info("kinematic").check(scenario)
+    METHODS["kinematic"].refuse_source(
+        scenario.spec.perception.source, f"{scenario.path}: perception.source"
+    )
     robot = scenario.robot
     engine = scenario.make_engine()
     stream = scenario.goal_stream()
@@ -57,7 +59,7 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
     q = scenario.q0.copy()
     events: list[tuple[float, str]] = []
     t = 0.0
-    world = scenario.collision_world() if scenario.needs_collision_world else None
+    world = scenario.world
     stepper = ValidatedStepper(engine, world, lambda m: events.append((t, m)))
     faults = Faults(lambda at, m: events.append((at, m)))
     stepper.start(q)

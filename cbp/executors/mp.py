@@ -29,10 +29,10 @@ import pinocchio as pin
 
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch, SearchEvents
-from cbp.executors.settings import MpSettings, PlannerSettings
-from cbp.executors.simulated import SimulatedRun
-from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.executors.trajectory import Plan, run_periodic
+from cbp.methods.settings import MpSettings, PlannerSettings
 from cbp.robot import FloatArray, RobotModel
+from cbp.run.parts import RunParts
 from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import time_parameterize
 from cbp.trace import Trace
@@ -201,12 +201,14 @@ class RrtConnect:
 class MpPlanner:
     """RRT-Connect from the start point to the IK goal, then simplification."""
 
-    def __init__(self, scenario: Scenario, run: SimulatedRun, settings: MpSettings):
+    def __init__(self, scenario: Scenario, run: RunParts, settings: MpSettings):
         """The IK search and RRT-Connect on the run's collision world."""
         self.settings = settings
         self.search = IkSearch(scenario.robot, run.ee_frame, run.world, settings.search)
         self.events = SearchEvents("mp")
-        run.counters.update(plans=0.0, plan_path_length_rad=0.0, plan_duration_s=0.0)
+        run.log.counters.update(
+            plans=0.0, plan_path_length_rad=0.0, plan_duration_s=0.0
+        )
         # Reproducible sampling in virtual time (one MP run per process).
         self.rrt = RrtConnect(
             scenario.robot,
@@ -230,7 +232,7 @@ class MpPlanner:
         self.rrt.close()
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts
     ) -> Plan:
         """IK for the goal, then plan and simplify within the budget."""
         if goal is None:
@@ -274,7 +276,7 @@ class MpPlanner:
 
 
 def record_plan(
-    run: SimulatedRun, points: FloatArray, vmax: FloatArray, amax: FloatArray
+    run: RunParts, points: FloatArray, vmax: FloatArray, amax: FloatArray
 ) -> tuple[float, float]:
     """Count a global plan in the run's metrics; return its length and duration.
 
@@ -286,7 +288,7 @@ def record_plan(
     timed = time_parameterize(points, 0.0, zeros, zeros, vmax, amax)
     length = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
     duration = timed.end_time if timed is not None else float("nan")
-    counters = run.counters
+    counters = run.log.counters
     counters["plans"] = counters.get("plans", 0.0) + 1
     counters["plan_path_length_rad"] = (
         counters.get("plan_path_length_rad", 0.0) + length
@@ -308,19 +310,11 @@ def _always_valid(state: object) -> bool:
     return True
 
 
-def make_planner(scenario: Scenario, run: SimulatedRun) -> MpPlanner:
+def make_planner(scenario: Scenario, run: RunParts) -> MpPlanner:
     """The MP method's planner for ``run`` (``method.mp``); close it after."""
     return MpPlanner(scenario, run, scenario.spec.method.settings(MpSettings))
 
 
 def run_mp(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the MP method; return the trace."""
-    settings = scenario.spec.method.settings(MpSettings)
-    run = SimulatedRun(
-        scenario, "mp", gui, needs_world=True, clock=settings.timing.clock
-    )
-    planner = make_planner(scenario, run)
-    try:
-        return run_trajectory_executor(run, planner, settings.timing)
-    finally:
-        planner.close()
+    return run_periodic(scenario, "mp", gui)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from cbp.collision.world import CollisionWorld
-from cbp.engine import Engine
+from cbp.engine import Engine, StepResult
 from cbp.errors import PluginOutputError, SolveError
 from cbp.robot import FloatArray
 
@@ -58,8 +58,12 @@ class ValidatedStepper:
     Args:
         engine: the QP engine.
         world: the collision world that validates steps, or None (no check).
-        event: receives a message when the engine eases the QP (a relaxation
-            starts or ends).
+        event: receives a message when the engine eases the QP differently
+            from the step before (a relaxation starts or changes), once per
+            change over the stepper's life.
+
+    Attributes:
+        last: what the engine's last solved step returned, or None.
     """
 
     def __init__(
@@ -73,6 +77,8 @@ class ValidatedStepper:
         self.world = world
         self._event = event
         self.depth = 0.0
+        self.last: StepResult | None = None
+        self._eased: str | None = None
 
     def start(self, q: FloatArray) -> None:
         """Begin from ``q``: its penetration is the depth a step may back out of."""
@@ -82,11 +88,15 @@ class ValidatedStepper:
         """One step of ``dt`` from ``q``; see the module docstring."""
         engine = self.engine
         try:
-            dq = engine.step(q, dt)
+            result = engine.step(q, dt)
         except (SolveError, PluginOutputError) as exc:
             return Step("failed", q, None, self.depth, str(exc))
-        if engine.recovery_changed and engine.recovery is not None:
-            self._event(f"QP eased: {engine.recovery}")
+        self.last = result
+        eased = None if result.eased is None else result.eased.description
+        if eased != self._eased and eased is not None:
+            self._event(f"QP eased: {eased}")
+        self._eased = eased
+        dq = result.dq
         q_next = engine.robot.integrate(q, dq)
         if self.world is None:
             return Step("taken", q_next, dq, 0.0)

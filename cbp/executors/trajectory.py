@@ -23,21 +23,31 @@ to the low-level follower (CAT, and the IK and MP methods):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import pinocchio as pin
 
+from cbp.engine import Engine
 from cbp.executors.clock import Budget, make_budget
-from cbp.executors.declared import stopping_time
-from cbp.executors.settings import ExecutorTiming
-from cbp.executors.simulated import SimulatedRun
+from cbp.methods.settings import ExecutorTiming
 from cbp.robot import FloatArray
+from cbp.run.pacing import WallClockPacer
+from cbp.run.parts import RunParts, build_run
+from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import JointTrajectory, time_parameterize
 from cbp.trace import PeriodRecord, Trace
 
-__all__ = ["Plan", "Planner", "run_trajectory_executor", "stopping_trajectory"]
+__all__ = [
+    "Plan",
+    "Planner",
+    "StepsAnEngine",
+    "run_periodic",
+    "run_trajectory_executor",
+    "stopping_trajectory",
+]
 
 
 @dataclass
@@ -63,17 +73,64 @@ class Plan:
 
 
 class Planner(Protocol):
-    """Computes a path each command period (CAT, IK, MP)."""
+    """Computes a path each command period (CAT, IK, MP, hybrid)."""
 
     def plan(
-        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: SimulatedRun
+        self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts
     ) -> Plan:
         """Path from ``q`` toward ``goal`` within ``budget``, charging its work."""
         ...
 
+    def close(self) -> None:
+        """Release what the planner holds (threads, processes); idempotent."""
+        ...
+
+
+@runtime_checkable
+class StepsAnEngine(Protocol):
+    """A planner that steps a QP engine (CAT, and the hybrid's CAT).
+
+    A live page shows the contacts its contact rows hold.
+    """
+
+    @property
+    def engine(self) -> Engine:
+        """The engine it steps."""
+        ...
+
+
+def run_periodic(scenario: Scenario, method: str, gui: bool = False) -> Trace:
+    """Run ``scenario`` with periodic method ``method``; return the trace.
+
+    The one runner of every method that plans per command period (the
+    ``run_<name>`` of CAT, IK, MP and the hybrid): its parts from
+    :func:`~cbp.run.build_run`, its planner from the method's module, the
+    loop's timing from the scenario's ``method:`` section.
+    """
+    from cbp.executors import make_planner
+
+    timing = scenario.spec.method.timing(method)
+    parts = build_run(scenario, method=method, gui=gui, clock=timing.clock)
+    try:
+        planner = make_planner(method, scenario, parts)
+    except BaseException:
+        parts.close()
+        raise
+    return run_trajectory_executor(parts, planner, timing)
+
+
+def _never() -> bool:
+    return False
+
 
 def run_trajectory_executor(
-    run: SimulatedRun, planner: Planner, timing: ExecutorTiming
+    run: RunParts,
+    planner: Planner,
+    timing: ExecutorTiming,
+    *,
+    pacer: WallClockPacer | None = None,
+    stop_requested: Callable[[], bool] = _never,
+    commanded: Callable[[float], None] | None = None,
 ) -> Trace:
     """Run the scenario with ``planner`` each command period; return the trace.
 
@@ -81,24 +138,33 @@ def run_trajectory_executor(
     simulator) holds the robot: it brakes along the trajectory it is on
     (:func:`stopping_trajectory`), and the exception is an event. So does a
     period in which the run says the robot must hold
-    (:meth:`SimulatedRun.hold_reason`: a camera that gives no valid frames).
-    After :data:`~cbp.executors.faults.MAX_FAULTS_IN_A_ROW` failing periods the
+    (:meth:`RunParts.hold_reason`: a camera that gives no valid frames).
+    After :data:`~cbp.run.faults.MAX_FAULTS_IN_A_ROW` failing periods the
     run is aborted: the robot stops, and the trace ends there with the reason.
+    The planner is closed at the end.
+
+    Args:
+        run: the run's parts (:func:`cbp.run.build_run`).
+        planner: plans each period.
+        timing: the command period, budget and limits.
+        pacer: keeps the loop in step with the wall clock (a live session);
+            None runs as fast as the work allows.
+        stop_requested: asked at each period's start; True ends the run
+            there (an operator's stop).
+        commanded: called with the start time of each trajectory spliced in.
     """
     robot = run.robot
     vmax = robot.velocity_limits * timing.velocity_scale
     amax = robot.acceleration_limits * timing.acceleration_scale
     lo, hi = timing.bounds()
     period = timing.period
-    stop_time = stopping_time(robot, vmax, amax)
+    stop_time = robot.stopping_time(vmax, amax)
     t = 0.0
     sim = run.sim
     faults = run.faults
     try:
         while (
-            t < run.duration - 1e-9
-            and faults.aborted is None
-            and not run.stop_requested
+            t < run.duration - 1e-9 and faults.aborted is None and not stop_requested()
         ):
             t_f = t + period
             current = sim.trajectory
@@ -115,12 +181,12 @@ def run_trajectory_executor(
             # one replaces it, a period later; from there the robot may need its
             # stopping time to get out of the way. Moving obstacles are measured
             # that far ahead (as speed and separation monitoring counts them).
-            run.look_ahead = 2.0 * period + stop_time
+            look_ahead = 2.0 * period + stop_time
             new: JointTrajectory | None = None
             failed = False
             hold: str | None = None
             try:
-                goal = run.send_goal(t)
+                goal = run.goal.send(t)
                 hold = run.hold_reason(t)
                 if hold is not None:
                     plan = Plan(None, 0, hold)
@@ -140,7 +206,10 @@ def run_trajectory_executor(
                 new = stopping_trajectory(current, i, vmax, amax)
             compute = budget.elapsed()
             try:
-                run.advance(t_f)  # the robot moves on while the result is computed
+                # The robot moves on while the result is computed.
+                run.advance(t_f, look_ahead)
+                if pacer is not None:
+                    pacer.wait_until(t_f)
             except Exception as exc:
                 failed = True
                 note = faults.fault(t, "simulation", exc)
@@ -159,24 +228,28 @@ def run_trajectory_executor(
             else:
                 if new is not None:
                     sim.follow(current.splice(new))
-                    run.commanded(float(new.times[0]))
+                    if commanded is not None:
+                        commanded(float(new.times[0]))
                     spliced = True
                 next_period = (
                     max(period * timing.shrink, lo)
                     if compute < 0.5 * period
                     else period
                 )
-            run.periods.append(
+            run.log.periods.append(
                 PeriodRecord(t, period, plan.steps, compute, missed, spliced, note)
             )
             t, period = t_f, next_period
-        if faults.aborted is None and not run.stop_requested:
+        if faults.aborted is None and not stop_requested():
             run.advance(run.duration)
         else:
             # Let the robot come to rest on the (stopping) trajectory it is on.
             run.advance(min(max(sim.trajectory.end_time, t) + 0.1, run.duration))
     finally:
-        trace = run.finish()
+        try:
+            planner.close()
+        finally:
+            trace = run.finish()
     return trace
 
 

@@ -29,14 +29,14 @@ from typing import Any
 import numpy as np
 
 from cbp.errors import PluginOutputError, SolveError
-from cbp.executors import executor_info
-from cbp.executors.declared import DeclaredObjects, stopping_time
-from cbp.executors.faults import Faults
-from cbp.executors.settings import VelocitySettings
 from cbp.expressions import TimeFunction
+from cbp.methods import METHODS
+from cbp.methods.settings import VelocitySettings
 from cbp.plugin import ReportsSignals, TakesInput
 from cbp.progress import report_time
 from cbp.robot import FloatArray
+from cbp.run.declared import DeclaredObjects
+from cbp.run.faults import Faults
 from cbp.scenario.runtime import Scenario
 from cbp.sim.mobile import MobileSimulation
 from cbp.state import RobotState
@@ -53,7 +53,9 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
     Raises:
         ConfigError: the scenario asks for the depth cameras (no map here).
     """
-    executor_info("velocity").check(scenario)
+    METHODS["velocity"].refuse_source(
+        scenario.spec.perception.source, f"{scenario.path}: perception.source"
+    )
     settings = scenario.spec.method.settings(VelocitySettings)
     sim = MobileSimulation(
         scenario.robot,
@@ -122,9 +124,7 @@ class VelocityLoop:
         self.signals: dict[str, list[float]] = {}
         self.state = RobotState(robot)
         self.faults = Faults(lambda at, m: self.events.append((at, m)))
-        if not any(
-            e.plugin.type_name == "joint_acceleration" for e in scenario.entries
-        ):
+        if not any(e.plugin.robot_limit == "acceleration" for e in scenario.entries):
             self.events.append(
                 (
                     0.0,
@@ -135,13 +135,15 @@ class VelocityLoop:
         self.braking = robot.acceleration_limits * self.settings.dt
         #: Declared objects that appear or move, followed by the contact rows'
         #: world; measured a tick and the robot's stopping time ahead.
-        world = scenario.collision_world() if scenario.needs_collision_world else None
+        world = scenario.world
         self.declared = (
             DeclaredObjects(scenario, world)
             if world is not None and scenario.spec.perception.source != "depth_camera"
             else None
         )
-        self.look_ahead = self.settings.dt + stopping_time(robot)
+        self.look_ahead = self.settings.dt + robot.stopping_time()
+        #: How the last solved step was eased (each change is an event).
+        self._eased: str | None = None
         #: The last command (the robot starts at rest); updated in place.
         self.command = np.zeros(robot.nv) if command is None else command
 
@@ -172,7 +174,7 @@ class VelocityLoop:
             for name in self.declared.update(t, self.look_ahead):
                 self.events.append((t, f"object '{name}' appeared"))
         try:
-            dq = self.engine.step(q, dt, u)
+            result = self.engine.step(q, dt, u)
         except (SolveError, PluginOutputError) as exc:
             dq = _brake(u, self.braking) * dt
             self.failing += 1
@@ -189,8 +191,11 @@ class VelocityLoop:
                     (t, f"solved again after {self.failing} failed ticks")
                 )
             self.failing = 0
-            if self.engine.recovery_changed and self.engine.recovery is not None:
-                self.events.append((t, f"QP eased: {self.engine.recovery}"))
+            dq = result.dq
+            eased = None if result.eased is None else result.eased.description
+            if eased != self._eased and eased is not None:
+                self.events.append((t, f"QP eased: {eased}"))
+            self._eased = eased
         elapsed = time.perf_counter() - start
         # The end effector, and what the plugins report, at the tick's
         # measured configuration and with the inputs in effect.

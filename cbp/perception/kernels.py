@@ -359,7 +359,7 @@ def eroded_ranges(
 ) -> FloatArray:
     """Each pixel's range along the axis, the least over its 3 x 3 neighbours [m].
 
-    What :meth:`~cbp.perception.camera.DepthFrame.ranges` gives, with a pixel
+    What :meth:`~cbp.perception.frame.DepthFrame.ranges` gives, with a pixel
     holding no reading at -inf (it says nothing) and background at ``far``
     (seen to the far plane), eroded over 3 x 3 pixels (edges repeat the border
     pixel): a cell at a depth edge or on a grazing surface spans several pixels
@@ -418,7 +418,7 @@ def insert_readings(
 
     Each pixel that holds a reading nearer than the far plane is unprojected
     (``unproject``: the inverse of projection times view, as
-    :meth:`~cbp.perception.camera.DepthFrame.points` does), dropped when
+    :meth:`~cbp.perception.frame.DepthFrame.points` does), dropped when
     farther than ``max_range`` from ``camera`` or within ``reach[s]`` of a
     robot shape s (the shapes as :class:`~cbp.collision.geometry.WorldShapes`
     gives them; no shapes: no robot), and its cell made occupied with no

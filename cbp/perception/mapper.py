@@ -21,7 +21,7 @@ import numpy as np
 
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
-from cbp.perception.camera import DepthFrame
+from cbp.perception.frame import DepthFrame
 from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
@@ -93,8 +93,13 @@ class MapUpdater:
             self._pending[frame.camera] = (frame, q, t)
             self._cond.notify()
 
-    def wait_idle(self, timeout: float = 10.0) -> bool:
-        """Block until no frame is waiting or being integrated (for tests)."""
+    def wait_idle(self, timeout: float = 120.0) -> bool:
+        """Block until no frame is waiting or being integrated (for tests).
+
+        ``timeout`` [s] guards against a worker that hangs; it is long enough
+        for a first frame that compiles the map's loops on a loaded machine.
+        False if it passed.
+        """
         deadline = time.monotonic() + timeout
         with self._cond:
             while self._pending or self._busy:

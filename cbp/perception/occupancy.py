@@ -49,7 +49,7 @@ from cbp.collision.map_environment import (
     MetaballRefiner,
     OccupancyEnvironment,
 )
-from cbp.perception.camera import DepthFrame
+from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import (
     FREE,
     OCCUPIED,

@@ -11,6 +11,7 @@ the nearest valid choice (:class:`~cbp.errors.ScenarioError`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -25,8 +26,8 @@ from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
 from cbp.expressions import check_over, compile_time_function, run_times
 from cbp.files import load_mesh
 from cbp.goals import GoalStream
-from cbp.perception.camera import camera_parent
-from cbp.plugin import Plugin, TakesInput
+from cbp.perception.frame import camera_parent
+from cbp.plugin import Plugin, TakesInput, UsesCollisionWorld
 from cbp.qp import Entry
 from cbp.registry import Registry
 from cbp.robot import FloatArray, RobotModel
@@ -112,15 +113,21 @@ def load_scenario(
             )
     doc.raise_if_problems()
     assert robot is not None
-    scenario = Scenario(path=path, spec=spec, robot=robot, entries=entries, q0=q0)
+    scenario = Scenario(
+        path=path, spec=spec, robot=robot, entries=tuple(entries), q0=q0
+    )
     if scenario.needs_collision_world:
         try:
-            scenario.collision_world()
+            world = scenario.new_world()
         except ConfigError as exc:
             where = f" ({exc.location})" if exc.location else ""
             raise ScenarioError(
                 str(path), [f"collision world{where}: {exc.message}"]
             ) from exc
+        for entry in entries:
+            if isinstance(entry.plugin, UsesCollisionWorld):
+                entry.plugin.attach_world(world)
+        scenario = dataclasses.replace(scenario, world=world)
     if not spec.robot.allow_initial_contact:
         _check_initial_contact(doc, scenario, root)
         doc.raise_if_problems()
@@ -141,8 +148,8 @@ def _check_initial_contact(doc: Document, scenario: Scenario, root: yaml.Node) -
     if not objects:
         return
     geometry = (
-        scenario.collision_world().geometry
-        if scenario.needs_collision_world
+        scenario.world.geometry
+        if scenario.world is not None
         else RobotGeometry(scenario.robot)
     )
     state = RobotState(scenario.robot, scenario.q0)
@@ -444,6 +451,4 @@ def _check_inputs(
 
 def _input_tick(spec: ScenarioSpec) -> float:
     """How often the operator inputs are sampled [s]: the velocity executor's tick."""
-    from cbp.executors.settings import VelocitySettings
-
-    return spec.method.settings(VelocitySettings).dt
+    return spec.method.velocity.dt

@@ -1,15 +1,19 @@
 # SPDX-License-Identifier: Apache-2.0
-"""A loaded scenario: the robot, the bound entries, and what executors build from them.
+"""A loaded scenario: the robot, the bound entries, and what a run is built from.
 
 :class:`Scenario` is what :func:`cbp.scenario.load_scenario` returns and every
-executor takes: the parsed schema, the robot model, the task and constraint
-entries, the initial configuration, and factories for the engine, the collision
-world, the goal stream and the operator inputs.
+executor takes: frozen data (the parsed schema, the robot model, the task and
+constraint entries, the initial configuration, and the collision world the
+entries that read contacts are attached to), with factories that build new
+things from it and change nothing (an engine, another collision world, the
+goal stream, the operator inputs). A run is assembled from it by
+:func:`cbp.run.build_run`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,7 +28,7 @@ from cbp.collision.world import CollisionWorld
 from cbp.engine import Engine
 from cbp.expressions import TimeFunction, compile_time_function
 from cbp.goals import GoalStream
-from cbp.perception.camera import camera_parent
+from cbp.perception.frame import camera_parent
 from cbp.plugin import GoalReceiver, TakesInput, Task, UsesCollisionWorld
 from cbp.qp import Entry
 from cbp.robot import FloatArray, RobotModel
@@ -33,7 +37,7 @@ from cbp.scenario.spec import ScenarioSpec
 __all__ = ["Scenario", "goal_receivers"]
 
 
-@dataclass
+@dataclass(frozen=True)
 class Scenario:
     """A loaded scenario: its schema, the robot, and the bound entries.
 
@@ -43,19 +47,27 @@ class Scenario:
         robot: the loaded robot model.
         entries: tasks then constraints, with their engine settings.
         q0: the initial configuration.
+        world: the collision world the entries that read contacts are
+            attached to (made by :func:`~cbp.scenario.load_scenario`; None
+            when no entry reads contacts). Its environment is the declared
+            objects; a run with cameras replaces it with the map's snapshots.
     """
 
     path: Path
     spec: ScenarioSpec
     robot: RobotModel
-    entries: list[Entry]
+    entries: tuple[Entry, ...]
     q0: FloatArray
-    _world: CollisionWorld | None = field(default=None, repr=False)
+    world: CollisionWorld | None = field(default=None, repr=False)
 
     @property
     def needs_collision_world(self) -> bool:
         """Whether some entry reads contacts."""
         return any(isinstance(e.plugin, UsesCollisionWorld) for e in self.entries)
+
+    def world_for_run(self) -> CollisionWorld:
+        """The world a run checks against: the entries' own, else a new one."""
+        return self.world if self.world is not None else self.new_world()
 
     def environment_objects(self, t: float = 0.0) -> list[EnvironmentObject]:
         """The declared objects as collision objects (mesh files resolved).
@@ -112,28 +124,27 @@ class Scenario:
             )
         return bodies
 
-    def collision_world(self) -> CollisionWorld:
-        """The scenario's collision world (built once), attached to its plugins.
+    def new_world(self) -> CollisionWorld:
+        """A new collision world of this scenario, attached to nothing.
 
-        Its environment is the declared objects; an executor with a depth camera
-        replaces it with occupancy-map snapshots as they come. The robot's
-        shapes include :meth:`attachments`.
+        The robot's padded shapes (with :meth:`attachments`) against the
+        declared objects as they are at time 0.
         """
-        if self._world is None:
-            geometry = RobotGeometry(
-                self.robot,
-                padding=self.spec.collision.padding,
-                attachments=self.attachments(),
-            )
-            environment = PrimitiveEnvironment(self.environment_objects())
-            self._world = CollisionWorld(geometry, environment, self.spec.collision)
-            for entry in self.entries:
-                if isinstance(entry.plugin, UsesCollisionWorld):
-                    entry.plugin.attach_world(self._world)
-        return self._world
+        geometry = RobotGeometry(
+            self.robot,
+            padding=self.spec.collision.padding,
+            attachments=self.attachments(),
+        )
+        environment = PrimitiveEnvironment(self.environment_objects())
+        return CollisionWorld(geometry, environment, self.spec.collision)
 
     def make_engine(self) -> Engine:
-        """A fresh engine for these entries (plugins are shared, not copied)."""
+        """A new engine for these entries.
+
+        The plugins are the scenario's (shared, not copied: their targets and
+        latches are the scenario's), so engines of one scenario step one at a
+        time.
+        """
         return Engine(
             self.robot,
             self.entries,
@@ -180,7 +191,7 @@ class Scenario:
         return self.robot.end_effector
 
 
-def goal_receivers(entries: list[Entry], name: str | None) -> list[Any]:
+def goal_receivers(entries: Sequence[Entry], name: str | None) -> list[Any]:
     """The task entries that can take the goal.
 
     The one named ``name``, or every :class:`~cbp.plugin.GoalReceiver` task

@@ -3,24 +3,32 @@
 
 :func:`cbp.scenario.load_scenario` builds these from YAML with located errors
 (:mod:`cbp.schema`); tasks and constraints are bound to plugins there. The
-``method:`` section is made from the executor table
-(:data:`cbp.executors.EXECUTORS`): ``name`` and one settings section per
-executor.
+``method:`` section has one settings section per row of the method table
+(:data:`cbp.methods.METHODS`); the scenario package imports no executor.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 from cbp.collision.settings import CollisionSettings
 from cbp.errors import ConfigError, require_choice
-from cbp.executors import EXECUTORS
 from cbp.goals import GoalSpec
+from cbp.methods import METHODS, method_info
+from cbp.methods.settings import (
+    CatSettings,
+    ExecutorTiming,
+    HybridSettings,
+    IkSettings,
+    JtSettings,
+    KinematicSettings,
+    MpSettings,
+    VelocitySettings,
+)
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import BaseType
-from cbp.sim.settings import ObjectSpec, SimulationSettings
+from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.solvers import SOLVERS
 
 __all__ = [
@@ -71,52 +79,54 @@ class SolverSpec:
             )
 
 
-class _MethodBase:
-    """What every ``method:`` section has besides the executors' settings."""
+@dataclass(frozen=True, kw_only=True)
+class MethodSpec:
+    """The ``method:`` section: which method runs the scenario, and its settings.
 
-    name: str
+    One settings section per row of the method table (:data:`cbp.methods.METHODS`,
+    which says what each method does); only the named method's is used.
+    """
+
+    name: str = "kinematic"
+    """The method: one of :data:`cbp.methods.METHODS`."""
+    kinematic: KinematicSettings = field(default_factory=KinematicSettings)
+    """Settings of the kinematic executor."""
+    cat: CatSettings = field(default_factory=CatSettings)
+    """Settings of constraint-aware teleoperation."""
+    ik: IkSettings = field(default_factory=IkSettings)
+    """Settings of the IK executor."""
+    mp: MpSettings = field(default_factory=MpSettings)
+    """Settings of the motion planner (OMPL)."""
+    hybrid: HybridSettings = field(default_factory=HybridSettings)
+    """Settings of CAT with planning where it stalls."""
+    jt: JtSettings = field(default_factory=JtSettings)
+    """Settings of Jacobian-transpose control."""
+    velocity: VelocitySettings = field(default_factory=VelocitySettings)
+    """Settings of the velocity executor (mobile manipulator)."""
 
     def __post_init__(self) -> None:
-        """A known executor."""
-        require_choice(self.name, EXECUTORS, "method", "name")
+        """A known method."""
+        require_choice(self.name, METHODS, "method", "name")
 
     def settings(self, cls: type[T]) -> T:
         """The settings section of type ``cls`` (``method.settings(CatSettings)``)."""
-        for info in EXECUTORS.values():
-            if info.settings is cls:
-                value: T = getattr(self, info.name)
+        for row in METHODS.values():
+            if row.settings is cls:
+                value: T = getattr(self, row.name)
                 return value
-        raise KeyError(f"no executor has settings of type {cls.__name__}")
+        raise KeyError(f"no method has settings of type {cls.__name__}")
 
+    def timing(self, name: str) -> ExecutorTiming:
+        """The loop timing of periodic method ``name`` (the hybrid runs CAT's).
 
-if TYPE_CHECKING:
-
-    @dataclass(frozen=True, kw_only=True)
-    class MethodSpec(_MethodBase):
-        """The ``method:`` section: which executor runs the scenario, and settings."""
-
-        name: str = "kinematic"
-
-else:
-    MethodSpec = dataclasses.make_dataclass(
-        "MethodSpec",
-        [
-            ("name", str, field(default="kinematic")),
-            *(
-                (info.name, info.settings, field(default_factory=info.settings))
-                for info in EXECUTORS.values()
-            ),
-        ],
-        bases=(_MethodBase,),
-        frozen=True,
-        kw_only=True,
-    )
-    MethodSpec.__module__ = __name__
-    MethodSpec.__doc__ = (
-        "The ``method:`` section: ``name`` (the executor: "
-        + "; ".join(f"``{n}``: {i.summary}" for n, i in EXECUTORS.items())
-        + ") and one settings section per executor."
-    )
+        Raises:
+            ValueError: ``name`` does not plan per command period.
+        """
+        row = method_info(name)
+        if row.timing is None:
+            raise ValueError(f"the {name} executor has no per-period planner")
+        timing: ExecutorTiming = getattr(self, row.timing).timing
+        return timing
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from cbp.robot import FloatArray, RobotModel
+from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.sim.bullet import pb
 from cbp.sim.scene import PybulletScene
-from cbp.sim.settings import ObjectSpec, SimulationSettings
 
 __all__ = ["MobileSimulation"]
 

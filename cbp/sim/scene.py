@@ -14,8 +14,8 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.robot import FloatArray, RobotModel
+from cbp.scenario.scene import ObjectSpec
 from cbp.sim.bullet import pb
-from cbp.sim.settings import ObjectSpec
 
 __all__ = ["PybulletScene"]
 

@@ -31,10 +31,10 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.robot import FloatArray, RobotModel
+from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.sim.bullet import pb
 from cbp.sim.recorder import Recorder
 from cbp.sim.scene import PybulletScene
-from cbp.sim.settings import ObjectSpec, SimulationSettings
 from cbp.sim.trajectory import JointTrajectory
 
 __all__ = ["ContactSample", "Simulation", "TorqueController"]

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cbp.plots import METHOD_COLORS
+from cbp.plots import colour
 
 if TYPE_CHECKING:
     from cbp.sweep.runner import SweepOutcome
@@ -197,7 +197,7 @@ def _plots(rows: list[dict[str, Any]], swept: list[str], out: Path) -> list[Path
                     [r[metric] for r in mine],
                     "o",
                     alpha=0.6,
-                    color=METHOD_COLORS.get(m),
+                    color=colour(m),
                     label=m,
                 )
             ax.set_xlabel(key)

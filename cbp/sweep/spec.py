@@ -40,7 +40,7 @@ from typing import Any, Literal
 import numpy as np
 
 from cbp.errors import ScenarioError, require
-from cbp.executors import EXECUTORS
+from cbp.methods import METHODS
 from cbp.scenario.spec import ScenarioSpec
 from cbp.schema import Document
 
@@ -146,10 +146,10 @@ def load_sweep(path: str | Path) -> SweepSpec:
     doc.raise_if_problems()
     problems = []
     for i, method in enumerate(spec.methods):
-        if method not in EXECUTORS:
+        if method not in METHODS:
             problems.append(
                 f"methods[{i}]: unknown method '{method}'; expected one of "
-                + ", ".join(EXECUTORS)
+                + ", ".join(METHODS)
             )
     if not spec.scenarios and spec.scenes is None:
         problems.append("name at least one scenario in 'scenarios' or 'scenes'")
@@ -258,7 +258,7 @@ def _draws(samples: SampleSpec) -> list[dict[str, Any]]:
 
 
 def _settings_fields(method: str) -> set[str]:
-    return {f.name for f in dataclasses.fields(EXECUTORS[method].settings)}
+    return {f.name for f in dataclasses.fields(METHODS[method].settings)}
 
 
 def _yaml(value: Any) -> str:

@@ -79,13 +79,13 @@ def execute_run(run: dict[str, Any], out: str) -> dict[str, Any]:
 
 def _run(run: dict[str, Any], folder: Path) -> dict[str, Any]:
     """Load, run and write outputs into ``folder``; the record's run fields."""
-    from cbp.executors import executor_info
+    from cbp.executors import load_executor
     from cbp.report import write_outputs
     from cbp.scenario import load_scenario
 
     scenario = load_scenario(run["scenario"], overrides=run["overrides"])
     method = run["method"]
-    executor = executor_info(method).load()
+    executor = load_executor(method)
     trace = executor(scenario, False)
     metrics = write_outputs(scenario, {method: trace}, folder)[method]
     return {

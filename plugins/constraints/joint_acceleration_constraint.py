@@ -10,7 +10,7 @@ import numpy as np
 
 from cbp.errors import ConfigError
 from cbp.joint_space import StepDisplacement, check_scaled_limits, limits_by_joint
-from cbp.plugin import Constraint, FloatArray, PluginParams
+from cbp.plugin import Constraint, FloatArray, PluginParams, RobotLimit
 from cbp.robot import RobotModel, compact_rows
 from cbp.state import RobotState
 
@@ -70,6 +70,7 @@ class JointAccelerationConstraint(
 
     type_name: ClassVar[str] = "joint_acceleration"
     unit: ClassVar[str] = "rad"
+    robot_limit: ClassVar[RobotLimit | None] = "acceleration"
     easable: ClassVar[bool] = False  # the robot cannot accelerate faster
 
     def __init__(

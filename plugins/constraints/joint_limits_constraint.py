@@ -9,7 +9,7 @@ from typing import ClassVar
 import numpy as np
 
 from cbp.errors import ConfigError, located
-from cbp.plugin import Constraint, FloatArray, PluginParams
+from cbp.plugin import Constraint, FloatArray, PluginParams, RobotLimit
 from cbp.robot import RobotModel
 from cbp.state import RobotState
 
@@ -42,6 +42,7 @@ class JointLimitsConstraint(Constraint[JointLimitsParams]):
 
     type_name: ClassVar[str] = "joint_limits"
     unit: ClassVar[str] = "rad"
+    robot_limit: ClassVar[RobotLimit | None] = "position"
     constant_jacobian = True  # a selection of tangent coordinates
 
     def __init__(

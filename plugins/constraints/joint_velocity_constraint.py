@@ -9,7 +9,7 @@ from typing import ClassVar
 import numpy as np
 
 from cbp.joint_space import StepDisplacement, check_scaled_limits, limits_by_joint
-from cbp.plugin import Constraint, FloatArray, PluginParams
+from cbp.plugin import Constraint, FloatArray, PluginParams, RobotLimit
 from cbp.robot import RobotModel, compact_rows
 from cbp.state import RobotState
 
@@ -44,6 +44,7 @@ class JointVelocityConstraint(
 
     type_name: ClassVar[str] = "joint_velocity"
     unit: ClassVar[str] = "rad"
+    robot_limit: ClassVar[RobotLimit | None] = "velocity"
 
     def __init__(
         self, params: JointVelocityParams, robot: RobotModel, name: str = ""

@@ -37,17 +37,17 @@ def test_the_hand_allowed_to_touch_the_box_goes_into_it() -> None:
         c = world.check(q).contacts
         return {world.geometry.shapes[i].link for i in c.shape[c.distance < 0]}
 
-    assert touching(load_scenario(PUSH).collision_world()) & fingers
-    assert not touching(scenario.collision_world()) & fingers
+    assert touching(load_scenario(PUSH).world_for_run()) & fingers
+    assert not touching(scenario.world_for_run()) & fingers
     # The planners' yes-or-no check skips the same pairs.
     touching_links = (
-        "[" + ", ".join(sorted(touching(load_scenario(PUSH).collision_world()))) + "]"
+        "[" + ", ".join(sorted(touching(load_scenario(PUSH).world_for_run()))) + "]"
     )
     everything = load_scenario(
         PUSH, overrides={"world.objects.box.allow_contact": touching_links}
     )
-    assert everything.collision_world().is_free(q)
-    assert not load_scenario(PUSH).collision_world().is_free(q)
+    assert everything.world_for_run().is_free(q)
+    assert not load_scenario(PUSH).world_for_run().is_free(q)
 
 
 def test_an_unknown_link_is_a_located_error() -> None:

@@ -31,8 +31,8 @@ def _wrist(scenario) -> CameraSpec:
 
 
 def test_the_wrist_camera_housing_joins_the_robot_while_cameras_are_used() -> None:
-    with_cameras = _scenario("depth_camera").collision_world().geometry
-    declared = _scenario("ground_truth").collision_world().geometry
+    with_cameras = _scenario("depth_camera").world_for_run().geometry
+    declared = _scenario("ground_truth").world_for_run().geometry
     names = [s.name for s in with_cameras.shapes]
     assert names[-1] == "camera_wrist"
     assert "camera_wrist" not in [s.name for s in declared.shapes]
@@ -50,7 +50,7 @@ def test_the_wrist_camera_housing_joins_the_robot_while_cameras_are_used() -> No
 def test_an_obstacle_at_the_camera_is_a_contact_of_its_housing() -> None:
     """An obstacle at the optical centre is nearer the housing than any link."""
     scenario = _scenario("depth_camera")
-    world = scenario.collision_world()
+    world = scenario.world_for_run()
     state = RobotState(scenario.robot, scenario.q0)
     spec = _wrist(scenario)
     hand = state.data.oMf[scenario.robot.frame_id("panda_hand")]

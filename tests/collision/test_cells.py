@@ -541,7 +541,7 @@ from cbp.collision import OccupancyEnvironment
 from cbp.collision.rows import contact_jacobian_rows
 from cbp.qp import fill_qp
 shelf = load_scenario(SCENARIOS / "cat_shelf_retreat.yaml")
-shelf.collision_world().set_environment(octree.environment)
+shelf.world_for_run().set_environment(octree.environment)
 step, world = _cat_step(shelf)
 for i in range(10):
     step(i)

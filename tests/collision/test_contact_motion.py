@@ -42,7 +42,7 @@ def test_the_hand_slides_along_the_face_when_the_goal_moves_sideways(run) -> Non
 
 def test_a_rejected_step_constrains_the_retry(robots) -> None:
     scenario = load_scenario(SCENARIO)
-    world = scenario.collision_world()
+    world = scenario.world_for_run()
     robot = scenario.robot
     q = robot.home()
     ok = world.check(q)

@@ -12,13 +12,13 @@ from cbp.collision import (
     PrimitiveEnvironment,
     RobotGeometry,
 )
-from cbp.perception.camera import DepthCamera
 from cbp.perception.kernels import OCCUPIED
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, PerceptionSpec
 from cbp.scenario import ObjectSpec
+from cbp.sim.camera import DepthCamera
 from cbp.sim.scene import PybulletScene
 from cbp.spatial import Pose
 from cbp.state import RobotState

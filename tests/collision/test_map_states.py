@@ -9,12 +9,13 @@ import pytest
 
 from cbp.collision import CollisionWorld, RobotGeometry
 from cbp.collision.checker import FreeSpaceChecker
-from cbp.perception.camera import DepthCamera, DepthFrame
+from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, PerceptionSpec
 from cbp.scenario import ObjectSpec
+from cbp.sim.camera import DepthCamera
 from cbp.sim.scene import PybulletScene
 from cbp.spatial import Pose
 from cbp.state import RobotState

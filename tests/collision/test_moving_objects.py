@@ -16,7 +16,7 @@ from cbp.collision import (
     PrimitiveEnvironment,
     RobotGeometry,
 )
-from cbp.executors.declared import object_key
+from cbp.run.declared import object_key
 from cbp.scenario import load_scenario
 from cbp.state import RobotState
 

@@ -56,9 +56,7 @@ def test_backends_agree_on_engine_built_problems(
     for q in sample_configurations(robot, rng, n=6, margin=0.05):
         entries = _entries(robot, rng, velocity_priority=velocity_priority)
         engine = Engine(robot, entries, solver="daqp")
-        reference = engine.step(q, 0.01)
-        problem = engine.problem
-        assert problem is not None
+        reference, problem, _, _ = engine.step(q, 0.01)
         full = make_solver("daqp").solve(problem)
         for name in SOLVERS:
             x = make_solver(name).solve(problem)
@@ -79,7 +77,7 @@ def test_hard_task_is_met_exactly(robots, rng) -> None:
     entries = _entries(robot, rng, goal_priority="hard")
     q = robot.home()
     engine = Engine(robot, entries)
-    dq = engine.step(q, 0.1)
+    dq = engine.step(q, 0.1).dq
     goal = entries[0].plugin
     state = RobotState(robot, q)
     value, J = goal.linearize(state)
@@ -94,7 +92,7 @@ def test_joint_limit_rows_reproduce_cat_eq4(robots) -> None:
     posture = PostureTask(PostureParams(target={"panda_joint4": -4.0}), robot)
     limits = JointLimitsConstraint(JointLimitsParams(), robot)
     engine = Engine(robot, [Entry.make(posture, gain=1.0), Entry.make(limits)])
-    dq = engine.step(q, 1.0)  # slow enough for the step guard
+    dq = engine.step(q, 1.0).dq  # slow enough for the step guard
     assert q[3] + dq[3] == pytest.approx(robot.lower_limits[3], abs=1e-9)
 
 
@@ -147,8 +145,7 @@ def test_zero_gain_keeps_infinite_bounds_inactive(robots) -> None:
             Entry.make(posture),
         ],
     )
-    engine.step(q, 0.01)
-    problem = engine.problem
+    problem = engine.step(q, 0.01).problem
     assert problem is not None
     np.testing.assert_array_equal(problem.lower[:7], np.zeros(7))
     np.testing.assert_array_equal(problem.upper[:7], np.zeros(7))
@@ -228,12 +225,10 @@ def test_constant_jacobians_are_folded_without_changing_the_problem(
     folded_engine = Engine(robot, entries, solver="daqp")
     plain_engine = Engine(robot, plain, solver="daqp")
     for q in sample_configurations(robot, rng, n=5, margin=0.05):
-        np.testing.assert_allclose(
-            folded_engine.step(q, 0.01), plain_engine.step(q, 0.01), atol=1e-9
-        )
-        folded, reference = folded_engine.problem, plain_engine.problem
-        assert folded is not None
-        assert reference is not None
+        folded_step = folded_engine.step(q, 0.01)
+        plain_step = plain_engine.step(q, 0.01)
+        np.testing.assert_allclose(folded_step.dq, plain_step.dq, atol=1e-9)
+        folded, reference = folded_step.problem, plain_step.problem
         for name in ("H", "g", "A", "lower", "upper"):
             np.testing.assert_allclose(
                 getattr(folded, name), getattr(reference, name), atol=1e-12
@@ -388,18 +383,15 @@ def test_rows_asking_for_more_than_the_limits_allow_are_eased(robots) -> None:
         ],
     )
     dt = 0.01
-    dq = engine.step(q, dt)
-    assert engine.recovery is not None
-    assert engine.recovery_changed
-    assert "limits" in engine.recovery
-    assert "eased" in engine.recovery
+    result = engine.step(q, dt)
+    assert result.eased is not None
+    assert "limits" in result.eased.description
+    assert "eased" in result.eased.description
+    assert result.eased.scale is None  # capped (backing out), not scaled
+    dq = result.dq
     bound = robot.velocity_limits[3] * dt
     # Backing out (toward the range), at half the bound, and no further than it.
     assert 0.5 * bound - 1e-9 <= dq[3] <= bound + 1e-9
-    engine.step(q, dt)  # the same easing again: not news
-    assert engine.recovery is not None
-    assert not engine.recovery_changed
+    assert engine.step(q, dt).eased == result.eased  # the same easing again
     # Within the range again, the step is solved as assembled.
-    engine.step(robot.home(), dt)
-    assert engine.recovery is None
-    assert engine.recovery_changed
+    assert engine.step(robot.home(), dt).eased is None

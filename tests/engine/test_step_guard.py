@@ -86,7 +86,7 @@ def test_a_step_past_a_joint_limit_is_rejected_and_one_back_is_kept(robots) -> N
     # A joint already past its limit may move back, not further out.
     q[3] = robot.lower_limits[3] - 0.02
     push = 0.01
-    dq = engine.step(q, 0.01)
+    dq = engine.step(q, 0.01).dq
     assert dq[3] == pytest.approx(0.01)
     push = -0.001
     with pytest.raises(UnsafeStepError):
@@ -106,9 +106,9 @@ def test_a_step_a_little_too_fast_is_slowed_to_the_limits(robots) -> None:
         return x
 
     engine.solver = FaultySolver(engine.solver, twice)
-    dq = engine.step(robot.home(), dt)
-    assert engine.slowed == pytest.approx(2.0 / 1.01, rel=1e-6)
-    assert abs(dq[0]) <= engine.speed_bound[0] * dt + 1e-15
+    dq, _, _, slowed = engine.step(robot.home(), dt)
+    assert slowed == pytest.approx(2.0 / 1.01, rel=1e-6)
+    assert abs(dq[0]) <= engine.guard.speed_bound[0] * dt + 1e-15
     assert dq[1] / dq[0] == pytest.approx(0.25)  # the same direction
     assert GARBAGE_RATIO > 2.0
 
@@ -131,7 +131,7 @@ def test_a_step_that_accelerates_too_hard_is_rejected(robots) -> None:
     # The same step from a velocity it is within reach of passes.
     v = np.zeros(robot.nv)
     v[2] = jump
-    assert engine.step(robot.home(), dt, v)[2] == pytest.approx(jump * dt)
+    assert engine.step(robot.home(), dt, v).dq[2] == pytest.approx(jump * dt)
     # Without a velocity the guard checks no acceleration (kinematic executors
     # time their own trajectories).
     engine.step(robot.home(), dt)
@@ -216,9 +216,10 @@ def test_cat_crosses_the_boards_through_solver_faults(monkeypatch, fault) -> Non
     """One answer in seven is bad: no joint past its limit, no contact."""
     from cbp.executors.cat import run_cat
     from cbp.metrics import run_metrics
+    from tests.conftest import load_virtual
 
     made = _with_faults(monkeypatch, fault, every=7)
-    scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
+    scenario = load_virtual(SCENARIOS / "cat_boards.yaml")
     trace = run_cat(scenario)
     assert sum(f.faults for f in made) > 50
     robot = scenario.robot

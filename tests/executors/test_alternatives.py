@@ -16,12 +16,12 @@ from cbp.executors.ik import interpolate_checked
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.jt import run_jt
 from cbp.executors.mp import MpPlanner, RrtConnect
-from cbp.executors.settings import IkSearchSettings, PlannerSettings
-from cbp.executors.simulated import SimulatedRun
+from cbp.methods.settings import IkSearchSettings, PlannerSettings
 from cbp.metrics import run_metrics
+from cbp.run import build_run
 from cbp.scenario import Scenario, load_scenario
 from tests.collision.test_motion import plate_across_the_hand
-from tests.conftest import run_cbp
+from tests.conftest import VIRTUAL_CLOCK, run_cbp
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 DOWN = np.diag([1.0, -1.0, -1.0])
@@ -34,7 +34,7 @@ def boards() -> Scenario:
 
 def _search(scenario: Scenario) -> IkSearch:
     return IkSearch(
-        scenario.robot, "panda_hand", scenario.collision_world(), IkSearchSettings()
+        scenario.robot, "panda_hand", scenario.world_for_run(), IkSearchSettings()
     )
 
 
@@ -84,7 +84,7 @@ def _plan_over_the_board(boards: Scenario, simplify: str = "shortcut"):
 
     Returns the plan, the planner (closed) and the run (finished).
     """
-    run = SimulatedRun(boards, "mp", needs_world=True)
+    run = build_run(boards, method="mp")
     try:
         settings = dataclasses.replace(boards.spec.method.mp, simplify=simplify)
         planner = MpPlanner(boards, run, settings)
@@ -128,7 +128,7 @@ def test_mp_plans_again_in_the_period_when_a_plan_touches(
     plan, _, run = _plan_over_the_board(boards)
     assert calls[0] >= 2
     assert plan.path is not None, plan.note
-    events = "\n".join(msg for _, msg in run.events)
+    events = "\n".join(msg for _, msg in run.log.events)
     assert "touches between the states OMPL checked; planning again" in events
 
 
@@ -243,6 +243,7 @@ def test_ik_that_finds_no_solution_in_the_map_says_why_once() -> None:
                 "perception.source": "depth_camera",
                 "perception.cameras": HEAD_CAMERA_ONLY,
                 "perception.unknown": unknown,
+                **VIRTUAL_CLOCK,
             },
         )
         trace = run_ik(scenario)
@@ -264,7 +265,7 @@ def test_a_failed_search_is_not_repeated_until_something_changes(
     """Same goal, configuration and world: no second search; a new world: one."""
     from cbp.collision import PrimitiveEnvironment
 
-    run = SimulatedRun(boards, "ik", needs_world=True)
+    run = build_run(boards, method="ik")
     try:
         search = IkSearch(boards.robot, run.ee_frame, run.world, IkSearchSettings())
         out_of_reach = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))
@@ -292,9 +293,10 @@ def test_a_failed_search_is_not_repeated_until_something_changes(
 
 def test_a_search_cut_short_goes_on_where_it_stopped(boards: Scenario) -> None:
     """Over several small budgets the search tries each start once, then stops."""
-    from cbp.executors.clock import VirtualBudget, VirtualCosts
+    from cbp.executors.clock import VirtualBudget
+    from cbp.methods.settings import VirtualCosts
 
-    run = SimulatedRun(boards, "ik", needs_world=True)
+    run = build_run(boards, method="ik")
     try:
         search = IkSearch(boards.robot, run.ee_frame, run.world, IkSearchSettings())
         out_of_reach = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))

@@ -13,8 +13,7 @@ from cbp.errors import SolveError
 from cbp.executors.cat import run_cat
 from cbp.goals import write_recorded
 from cbp.metrics import run_metrics
-from cbp.scenario import load_scenario
-from tests.conftest import run_cbp
+from tests.conftest import load_virtual, run_cbp
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "scenarios"
@@ -23,7 +22,7 @@ DOWN = np.diag([1.0, -1.0, -1.0])
 
 def test_free_space_step_reaches_the_goal_without_contact() -> None:
     """A short free-space step: reached, in time, many QP steps per period."""
-    scenario = load_scenario(
+    scenario = load_virtual(
         SCENARIOS / "cat_free_step.yaml", overrides={"duration": "2.2"}
     )
     trace = run_cat(scenario)
@@ -63,7 +62,7 @@ def test_nan_goal_keeps_the_previous_goal_and_says_so(tmp_path: Path) -> None:
     write_recorded(
         tmp_path / "goal.csv", times, positions, np.array([DOWN] * len(times))
     )
-    trace = run_cat(load_scenario(_scenario_with_goal_file(tmp_path, "goal.csv")))
+    trace = run_cat(load_virtual(_scenario_with_goal_file(tmp_path, "goal.csv")))
     rejected = [m for _, m in trace.events if m.startswith("goal rejected")]
     assert len(rejected) == 4
     assert np.all(np.isfinite(trace.q))
@@ -89,7 +88,7 @@ def test_failed_qp_holds_the_last_safe_trajectory(tmp_path: Path, monkeypatch) -
         np.array([[0.6, 0.2, 0.3]] * 2),
         np.array([DOWN] * 2),
     )
-    scenario = load_scenario(_scenario_with_goal_file(tmp_path, "goal.csv"))
+    scenario = load_virtual(_scenario_with_goal_file(tmp_path, "goal.csv"))
     trace = run_cat(scenario)
     failures = [m for _, m in trace.events if m.startswith("QP step failed")]
     assert len(failures) >= 50

@@ -24,7 +24,7 @@ from cbp.errors import ScenarioError
 from cbp.executors.cat import run_cat
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
-from cbp.sim.settings import ObjectSpec
+from cbp.scenario.scene import ObjectSpec
 from cbp.state import RobotState
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
@@ -196,10 +196,10 @@ def test_a_box_pushed_four_times_as_fast_is_kept_off_by_its_velocity() -> None:
 
 def run_with(method: str, path: Path):
     """Run ``path`` with another executor through the executor registry."""
-    from cbp.executors import EXECUTORS
+    from cbp.executors import load_executor
 
     scenario = load_scenario(path, overrides={"method.name": method})
-    return EXECUTORS[method].load()(scenario, False)
+    return load_executor(method)(scenario, False)
 
 
 @pytest.mark.slow

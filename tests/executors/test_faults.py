@@ -19,16 +19,17 @@ import pytest
 
 from cbp.executors import cat as cat_module
 from cbp.executors.cat import run_cat
-from cbp.executors.faults import EXIT_ABORTED, MAX_FAULTS_IN_A_ROW
 from cbp.executors.kinematic import run_kinematic
 from cbp.executors.velocity import run_velocity
 from cbp.goals import GoalStream
 from cbp.metrics import run_metrics
-from cbp.perception.camera import DepthCamera, DepthFrame
+from cbp.perception.frame import DepthFrame
 from cbp.report import write_outputs
-from cbp.scenario import Scenario, load_scenario
+from cbp.run.faults import EXIT_ABORTED, MAX_FAULTS_IN_A_ROW
+from cbp.scenario import Scenario
+from cbp.sim.camera import DepthCamera
 from cbp.sim.recorder import Recorder
-from tests.conftest import run_cbp
+from tests.conftest import load_virtual, run_cbp
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "scenarios"
@@ -65,7 +66,7 @@ def _raise_in_engine(monkeypatch, when) -> None:
 
 def test_kinematic_run_holds_through_a_raising_step_and_goes_on(monkeypatch) -> None:
     _raise_in_engine(monkeypatch, lambda k: k % 50 == 0)
-    scenario = load_scenario(SCENARIOS / "panda_reach.yaml")
+    scenario = load_virtual(SCENARIOS / "panda_reach.yaml")
     trace = run_kinematic(scenario)
     m = run_metrics(trace, scenario.robot)
     assert m["aborted"] is None
@@ -79,7 +80,7 @@ def test_kinematic_run_aborts_after_faults_in_a_row_and_writes_everything(
     monkeypatch, tmp_path: Path
 ) -> None:
     _raise_in_engine(monkeypatch, lambda k: k > 100)
-    scenario = load_scenario(SCENARIOS / "panda_reach.yaml")
+    scenario = load_virtual(SCENARIOS / "panda_reach.yaml")
     trace = run_kinematic(scenario)
     assert trace.aborted is not None
     assert f"failed {MAX_FAULTS_IN_A_ROW} times in a row" in trace.aborted
@@ -129,7 +130,7 @@ def test_cat_holds_through_a_raising_planner_without_contact(monkeypatch) -> Non
         return plan(self, q, goal, budget, run)
 
     monkeypatch.setattr(cat_module.CatPlanner, "plan", faulty)
-    scenario = load_scenario(SCENARIOS / "cat_boards.yaml", overrides={"duration": "4"})
+    scenario = load_virtual(SCENARIOS / "cat_boards.yaml", overrides={"duration": "4"})
     trace = run_cat(scenario)
     m = run_metrics(trace, scenario.robot)
     assert "planning failed (InjectedError: planner bug); robot held" in _events(trace)
@@ -145,19 +146,19 @@ def test_cat_holds_through_a_raising_planner_without_contact(monkeypatch) -> Non
 
 
 def test_cat_aborts_when_the_simulator_keeps_failing(monkeypatch) -> None:
-    scenario = load_scenario(
+    scenario = load_virtual(
         SCENARIOS / "cat_free_step.yaml", overrides={"duration": "2"}
     )
-    from cbp.executors.simulated import SimulatedRun
+    from cbp.run import RunParts
 
-    advance = SimulatedRun.advance
+    advance = RunParts.advance
 
-    def faulty(self, t):
+    def faulty(self, t, look_ahead=0.0):
         if t > 1.0 and t < 1.9:
             raise InjectedError("physics")
-        return advance(self, t)
+        return advance(self, t, look_ahead)
 
-    monkeypatch.setattr(SimulatedRun, "advance", faulty)
+    monkeypatch.setattr(RunParts, "advance", faulty)
     trace = run_cat(scenario)
     assert trace.aborted is not None
     assert "simulation failed" in trace.aborted
@@ -174,7 +175,7 @@ def test_a_goal_input_that_raises_keeps_the_previous_goal(monkeypatch) -> None:
         return sample(self, t)
 
     monkeypatch.setattr(GoalStream, "sample", faulty)
-    scenario = load_scenario(
+    scenario = load_virtual(
         SCENARIOS / "cat_free_step.yaml", overrides={"duration": "2.5"}
     )
     trace = run_cat(scenario)
@@ -191,7 +192,7 @@ def test_a_goal_input_that_raises_keeps_the_previous_goal(monkeypatch) -> None:
 
 def test_the_velocity_executor_brakes_the_base_when_it_aborts(monkeypatch) -> None:
     _raise_in_engine(monkeypatch, lambda k: k > 20)
-    scenario = load_scenario(SCENARIOS / "youbot_pan.yaml", overrides={"duration": "3"})
+    scenario = load_virtual(SCENARIOS / "youbot_pan.yaml", overrides={"duration": "3"})
     trace = run_velocity(scenario)
     assert trace.aborted is not None
     assert trace.u is not None
@@ -239,7 +240,7 @@ def _blind_after(monkeypatch, t_blind: float, kind: str) -> None:
 def test_a_blinded_camera_is_an_event_and_stops_the_arm(monkeypatch, kind) -> None:
     """Bad frames from t = 0.5 s: dropped, the arm stops within the timeout."""
     _blind_after(monkeypatch, 0.5, kind)
-    scenario = load_scenario(
+    scenario = load_virtual(
         SCENARIOS / "cat_boards.yaml",
         overrides={"duration": "3", "perception.source": "depth_camera"},
     )
@@ -316,9 +317,7 @@ def test_outputs_never_replace_a_folder_that_is_not_an_output(tmp_path: Path) ->
 
 
 def test_write_outputs_publishes_whole_folders_under_threads(tmp_path: Path) -> None:
-    scenario = load_scenario(
-        SCENARIOS / "panda_reach.yaml", overrides={"duration": "1"}
-    )
+    scenario = load_virtual(SCENARIOS / "panda_reach.yaml", overrides={"duration": "1"})
     trace = run_kinematic(scenario)
     out = tmp_path / "out"
     errors: list[BaseException] = []

@@ -9,7 +9,7 @@ import pytest
 from cbp.executors import hybrid as hybrid_module
 from cbp.executors.cat import run_cat
 from cbp.executors.hybrid import StallDetector, run_hybrid
-from cbp.executors.settings import HybridSettings
+from cbp.methods.settings import HybridSettings
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
 from tests.executors.test_cat import SCENARIOS
@@ -61,9 +61,8 @@ def test_active_entries_name_the_rows_at_their_bounds() -> None:
     limits = scenario.robot.upper_limits
     q[3] = limits[3] - 0.03  # the elbow at its limit (cat.yaml's margin: 0.03)
     engine.plugin("hand").set_target(np.array([0.3, 0.0, 0.6]), np.eye(3))
-    engine.step(q, 0.02)
-    assert engine.problem is not None
-    active = engine.problem.active_entries(np.zeros(scenario.robot.nv))
+    problem = engine.step(q, 0.02).problem
+    active = problem.active_entries(np.zeros(scenario.robot.nv))
     assert "joint_limits" in active
     assert "contact_normals" not in active  # no contact near the start
 

@@ -1,41 +1,61 @@
-"""The executor table: every periodic executor gives its planner to other loops."""
+"""The method table: every periodic method gives its planner to other loops."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
-from cbp.executors import EXECUTORS, PERIODIC
-from cbp.executors.simulated import SimulatedRun
+from cbp.executors import make_planner
+from cbp.executors.trajectory import run_trajectory_executor
+from cbp.methods import METHODS, PERIODIC
+from cbp.run import build_run
 from cbp.scenario import load_scenario
+from cbp.scenario.spec import MethodSpec
 from tests.executors.test_cat import SCENARIOS
 
 
-def test_periodic_executors_are_the_trajectory_loop_planners() -> None:
+def test_periodic_methods_are_the_trajectory_loop_planners() -> None:
+    """The periodic rows are CAT, IK, MP and hybrid; JT has no planner."""
     assert PERIODIC == ("cat", "ik", "mp", "hybrid")
+    scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
     with pytest.raises(ValueError, match="no per-period planner"):
-        EXECUTORS["jt"].make_planner(None, None)  # type: ignore[arg-type]
+        make_planner("jt", scenario, None)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="no per-period planner"):
+        scenario.spec.method.timing("jt")
+
+
+def test_the_method_section_has_one_settings_field_per_method() -> None:
+    """MethodSpec is written once, and its fields are the table's rows."""
+    fields = {f.name: f.type for f in dataclasses.fields(MethodSpec)}
+    assert list(fields) == ["name", *METHODS]
+    spec = MethodSpec()
+    for name, row in METHODS.items():
+        assert isinstance(getattr(spec, name), row.settings)
+
+
+def test_methods_that_plan_with_ompl_run_in_a_fresh_process() -> None:
+    """The table says which methods seed OMPL once per process: MP and hybrid."""
+    assert {n for n, m in METHODS.items() if m.fresh_process} == {"mp", "hybrid"}
+
+
+def test_every_method_has_its_own_colour() -> None:
+    """One colour per method, for every figure and page."""
+    colours = [m.colour for m in METHODS.values()]
+    assert len(set(colours)) == len(colours)
 
 
 @pytest.mark.parametrize("method", PERIODIC)
 def test_make_planner_gives_a_planner_the_trajectory_loop_runs(method: str) -> None:
     """A short run of the boards with the table's planner, as cbp teleop runs it."""
-    from cbp.executors.settings import CatSettings
-    from cbp.executors.trajectory import run_trajectory_executor
-
     scenario = load_scenario(
         SCENARIOS / "cat_boards.yaml",
         overrides={"method.name": method, "duration": "0.5"},
     )
-    run = SimulatedRun(scenario, method, needs_world=True)
-    planner = EXECUTORS[method].make_planner(scenario, run)
+    parts = build_run(scenario, method=method, needs_world=True)
+    planner = make_planner(method, scenario, parts)
     assert type(planner).__name__.lower().startswith(method)
-    try:
-        timing = scenario.spec.method.settings(CatSettings).timing
-        trace = run_trajectory_executor(run, planner, timing)
-    finally:
-        close = getattr(planner, "close", None)
-        if close is not None:
-            close()
+    trace = run_trajectory_executor(parts, planner, scenario.spec.method.timing("cat"))
     assert trace.t[-1] == pytest.approx(0.5, abs=0.05)
     assert trace.aborted is None
     assert not any("robot held" in message for _, message in trace.events), trace.events

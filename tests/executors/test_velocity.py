@@ -229,7 +229,6 @@ def test_objects_that_appear_or_move_reach_the_simulation_and_the_contacts(
     import pybullet as pb
 
     from cbp.collision import PrimitiveEnvironment
-    from cbp.executors.declared import stopping_time
     from cbp.executors.velocity import VelocityLoop
     from cbp.sim.mobile import MobileSimulation
 
@@ -278,14 +277,16 @@ def test_objects_that_appear_or_move_reach_the_simulation_and_the_contacts(
     finally:
         sim.close()
     assert any("object 'wall' appeared" in m for _, m in loop.events)
-    environment = scenario.collision_world().environment
+    environment = scenario.world_for_run().environment
     assert isinstance(environment, PrimitiveEnvironment)
     assert [o.name for o in environment.objects] == ["wall", "crate"]
     moving = environment.objects[1]
     np.testing.assert_allclose(moving.velocity, [0.0, 0.5, 0.0])
     # Where it was at the last tick (0.38 s).
     assert moving.placement.translation[1] == pytest.approx(0.5 * 0.38, abs=1e-9)
-    assert environment.look_ahead == pytest.approx(0.02 + stopping_time(scenario.robot))
+    assert environment.look_ahead == pytest.approx(
+        0.02 + scenario.robot.stopping_time()
+    )
 
 
 def test_the_cameras_are_refused_where_no_map_is_built(tmp_path: Path) -> None:

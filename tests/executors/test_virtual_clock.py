@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from cbp.executors.cat import run_cat
-from cbp.executors.clock import VirtualBudget, VirtualCosts, WallBudget
+from cbp.executors.clock import VirtualBudget, WallBudget
+from cbp.methods.settings import VirtualCosts
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
 

@@ -24,7 +24,7 @@ def test_written_scenes_load_and_start_clear(tmp_path) -> None:
     assert len(paths) == 3
     for path in paths:
         scenario = load_scenario(path)  # refused if the arm starts in contact
-        world = scenario.collision_world()
+        world = scenario.world_for_run()
         assert world.check(scenario.q0).penetration == 0.0
         assert 3 <= len(scenario.spec.world.objects) - 1 <= 7
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cbp.robot import RobotModel
-from cbp.sim.settings import ObjectSpec
+from cbp.scenario.scene import ObjectSpec
 from cbp.sim.simulation import Simulation
 from cbp.sim.trajectory import time_parameterize
 from cbp.spatial import Pose

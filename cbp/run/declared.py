@@ -9,35 +9,15 @@ their velocities, for the executors that plan against declared objects.
 
 from __future__ import annotations
 
-import numpy as np
-
 from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.world import CollisionWorld
-from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.runtime import Scenario
-from cbp.sim.settings import ObjectSpec
+from cbp.scenario.scene import ObjectSpec
 
-__all__ = ["DeclaredObjects", "ObjectKey", "object_key", "stopping_time"]
+__all__ = ["DeclaredObjects", "ObjectKey", "object_key"]
 
 #: Which of some objects are in the scene at a time, where, and how they move.
 ObjectKey = tuple[tuple[bool, tuple[float, ...], tuple[float, ...]], ...]
-
-
-def stopping_time(
-    robot: RobotModel,
-    velocity: FloatArray | None = None,
-    acceleration: FloatArray | None = None,
-) -> float:
-    """The longest a joint takes to stop from its top speed [s].
-
-    From the robot's limits, or the ``velocity`` and ``acceleration`` limits
-    given (an executor's scaled ones); joints without a finite, positive pair
-    are left out.
-    """
-    v = robot.velocity_limits if velocity is None else np.asarray(velocity)
-    a = robot.acceleration_limits if acceleration is None else np.asarray(acceleration)
-    known = np.isfinite(v) & np.isfinite(a) & (a > 0)
-    return float(np.max(v[known] / a[known])) if known.any() else 0.0
 
 
 def object_key(objects: list[ObjectSpec], t: float) -> ObjectKey:

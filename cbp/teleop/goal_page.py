@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The teleoperation page of a :class:`~cbp.teleop.TeleopSession`, served by viser.
+"""The page of a goal session (:class:`~cbp.teleop.TeleopSession`), served by viser.
 
 The scene: the robot's collision meshes at the measured configuration, the
 declared objects, with cameras the map's occupied cells (and, on a toggle,
@@ -16,38 +16,24 @@ browser that disconnects leaves the goal where it was.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import logging
 import math
-import sys
-import threading
-import time
 from collections import deque
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cbp.errors import CbpError, ConfigError
+from cbp.drawing import add_gripper, draw_objects, joint_values, wxyz
 from cbp.perception.kernels import OCCUPIED, UNKNOWN
-from cbp.report import scene_description
+from cbp.scene_file import scene_description
 from cbp.state import RobotState
-from cbp.teleop import (
-    METHODS,
-    InputSession,
-    Snapshot,
-    TeleopSession,
-    latency_summary,
-)
-from cbp.viewer import draw_objects, wxyz
+from cbp.teleop.goal_session import METHODS, Snapshot, TeleopSession
+from cbp.teleop.page import Page
 
-__all__ = ["InputsPage", "TeleopPage", "serve_teleop"]
+__all__ = ["GoalPageState", "TeleopPage"]
 
-log = logging.getLogger(__name__)
-
-#: Page updates per second.
-UPDATE_RATE = 20.0
 #: The map's cells are redrawn this often [s].
 MAP_PERIOD = 0.5
 #: Seconds of history in the live plot.
@@ -116,69 +102,32 @@ _TURNS = [
 ]
 
 
-class _Page:
-    """What both pages share: the server, its address, and an update loop.
+@dataclass(frozen=True)
+class GoalPageState:
+    """What the goal page shows, as a record tests and tools can read.
 
-    Subclasses build the scene and the panel and define :meth:`update` and
-    :attr:`session` (whose ``running`` ends the loop).
+    Attributes:
+        robot_q: the configuration the robot is drawn at (URDF actuated
+            joints, in the URDF's order), or None without a URDF.
+        goal_position: where the goal's gizmo is (3,) [m].
+        unreachable: the goal is drawn out of reach (a gripper, with the
+            posture the arm stopped in).
+        gripper_visible: whether the goal's gripper is shown.
+        ghost_visible: whether the reachable posture is shown.
+        map_cells: cells of the map drawn (0 without cameras).
+        readout: the readout's text.
     """
 
-    session: Any
-
-    def __init__(self, host: str, port: int) -> None:
-        """Start serving (the scene is built by the subclass)."""
-        import viser
-
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        #: Set by the page's "stop and save" button.
-        self.stopped = threading.Event()
-        self._close = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    @property
-    def url(self) -> str:
-        """The page's address."""
-        return f"http://{self.server.get_host()}:{self.server.get_port()}"
-
-    def update(self) -> None:
-        """Bring the page up to date with the session."""
-        raise NotImplementedError
-
-    def run(self) -> None:
-        """Update the page until :meth:`close`, the stop button or the session's end."""
-        period = 1.0 / UPDATE_RATE
-        due = time.perf_counter()
-        failing: str | None = None
-        while not self._close.is_set() and not self.stopped.is_set():
-            try:
-                self.update()
-            except Exception as exc:  # the page must not stop the session
-                message = f"{type(exc).__name__}: {exc}"
-                if message != failing:
-                    log.warning("page update failed: %s", message)
-                failing = message
-            else:
-                failing = None
-            if not self.session.running:
-                break
-            # On a fixed schedule; an update that ran late is not made up.
-            due = max(due + period, time.perf_counter() - period)
-            self._close.wait(max(0.0, due - time.perf_counter()))
-
-    def start(self) -> None:
-        """Update the page in a thread of its own."""
-        self._thread = threading.Thread(target=self.run, name="page", daemon=True)
-        self._thread.start()
-
-    def close(self) -> None:
-        """Stop updating and serving."""
-        self._close.set()
-        if self._thread is not None:
-            self._thread.join(5.0)
-        self.server.stop()
+    robot_q: np.ndarray | None
+    goal_position: np.ndarray
+    unreachable: bool
+    gripper_visible: bool
+    ghost_visible: bool
+    map_cells: int
+    readout: str
 
 
-class TeleopPage(_Page):
+class TeleopPage(Page[TeleopSession]):
     """Serve ``session`` in the browser.
 
     Args:
@@ -195,8 +144,7 @@ class TeleopPage(_Page):
         import viser.uplot
         from viser.extras import ViserUrdf
 
-        self.session = session
-        super().__init__(host, port)
+        super().__init__(session, host, port)
         description = scene_description(session.scenario, duration=0.0)
         urdf = description.get("urdf")
         self._locked = description.get("locked_joints", {})
@@ -213,6 +161,7 @@ class TeleopPage(_Page):
             else None
         )
         self._joints = self.robot.get_actuated_joint_names() if self.robot else []
+        self._drawn_q = np.zeros(len(self._joints))
         self._q_names = session.scenario.robot.coordinate_names("q")
         draw_objects(self.server, description)
         camera = self.server.initial_camera
@@ -281,7 +230,7 @@ class TeleopPage(_Page):
             if urdf is not None
             else None
         )
-        self._gripper = _add_gripper(self.server, "/goal/gripper")
+        self._gripper = add_gripper(self.server, "/goal/gripper")
         self._state = RobotState(session.scenario.robot)
         self._hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
         self._drawn_path: object = None
@@ -328,7 +277,8 @@ class TeleopPage(_Page):
         session = self.session
         snap = session.snapshot()
         if self.robot is not None:
-            self.robot.update_cfg(self._cfg(snap.q))
+            self._drawn_q = self._cfg(snap.q)
+            self.robot.update_cfg(self._drawn_q)
         if session.goal.count != self._shown_goal:  # sent from elsewhere
             self._after_goal(session.goal.count)
         goal, _ = session.goal.pose()
@@ -357,12 +307,24 @@ class TeleopPage(_Page):
             self.plot.data = (data[0], data[1], data[2])
         self._draw_map(snap.t, snap.hand)
 
+    def state(self) -> GoalPageState:
+        """What the page shows now."""
+        return GoalPageState(
+            robot_q=(
+                None if self.robot is None else np.array(self._drawn_q, dtype=float)
+            ),
+            goal_position=np.array(self.gizmo.position, dtype=float),
+            unreachable=self.unreachable,
+            gripper_visible=bool(self._gripper.visible),
+            ghost_visible=self.ghost is not None and bool(self.ghost.show_collision),
+            map_cells=0 if self._cells is None else len(self._cells.points),
+            readout=str(self.readout.content),
+        )
+
     def _cfg(self, q: np.ndarray) -> np.ndarray:
         """The URDF's actuated joints' values for the robot's configuration."""
-        by_name = dict(zip(self._q_names, q, strict=True))
-        return np.array(
-            [by_name.get(j, self._locked.get(j, 0.0)) for j in self._joints]
-        )
+        values = dict(zip(self._q_names, (float(v) for v in q), strict=True))
+        return joint_values(self._joints, values, self._locked)
 
     def _draw_contacts(self, snap: Snapshot) -> None:
         """CAT's contacts: a normal at each robot witness point, by distance.
@@ -445,9 +407,9 @@ class TeleopPage(_Page):
 
     def _draw_map(self, t: float, hand: np.ndarray) -> None:
         """Redraw the map's cells when the map or the toggle changed."""
-        run = self.session.run
-        world = run.world
-        if run.mapper is None or world is None:
+        parts = self.session.parts
+        world = parts.world
+        if parts.cameras is None or world is None:
             return
         environment = world.environment
         unknown = bool(self.show_unknown.value)
@@ -460,7 +422,7 @@ class TeleopPage(_Page):
         # The grid's own states (the environment holds the obstacle shell, in
         # which occupied and unknown cells are not told apart). The map thread
         # may be writing a frame meanwhile: the page shows a cell a frame late.
-        grid = run.mapper.grid
+        grid = parts.cameras.grid
         centres = grid.centres(OCCUPIED)
         colours = np.tile(np.array([[200, 90, 40]], dtype=np.uint8), (len(centres), 1))
         if unknown:
@@ -478,171 +440,6 @@ class TeleopPage(_Page):
         )
 
 
-def serve_teleop(
-    scenarios: list[Path],
-    method: str,
-    host: str,
-    port: int,
-    out: Path | None,
-    overrides: dict[str, str],
-) -> int:
-    """``cbp teleop``: serve the session until the page's stop or Ctrl-C.
-
-    One scenario of a trajectory executor: a goal session
-    (:class:`TeleopPage`). Velocity-executor scenarios (one or several
-    configurations of one robot, switched on the page): an input session
-    (:class:`InputsPage`). Then the outputs are written. Exit 2 for a scenario
-    or method that cannot start (nothing runs).
-    """
-    from cbp.files import check_output_folder
-    from cbp.scenario import load_scenario
-
-    page: TeleopPage | InputsPage
-    try:
-        first = load_scenario(scenarios[0])
-        velocity = first.spec.method.name == "velocity"
-        if not velocity and len(scenarios) > 1:
-            raise ConfigError(
-                "several scenarios are configurations of the velocity executor "
-                "to switch between; a goal session takes one"
-            )
-        out = out or Path("out") / f"{first.spec.name}_teleop"
-        check_output_folder(out)
-        if velocity:
-            inputs = InputSession(scenarios, overrides)
-            page = InputsPage(inputs, host=host, port=port)
-            inputs.start()
-        else:
-            session = TeleopSession(scenarios[0], method, overrides)
-            page = TeleopPage(session, host=host, port=port)
-            session.start()
-    except CbpError as exc:
-        print(exc, file=sys.stderr)
-        return 2
-    print(f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)")
-    try:
-        with contextlib.suppress(KeyboardInterrupt):
-            page.run()
-    finally:
-        page.close()
-    if velocity:
-        inputs.write(inputs.stop(), out)
-        print(f"wrote {out}")
-        return 0
-    session.stop()
-    goal_file = session.write(out)
-    latency = latency_summary(session.latency_ms())
-    print(
-        f"wrote {out}; the operator's goals: {goal_file} "
-        f"(replay: cbp compare {scenarios[0]} --goal {goal_file})"
-    )
-    if latency["n"]:
-        print(
-            f"goal-to-command latency: median {latency['median_ms']:.1f} ms, "
-            f"p95 {latency['p95_ms']:.1f} ms over {latency['n']} goals"
-        )
-    return 0
-
-
-class InputsPage(_Page):
-    """The page of an :class:`~cbp.teleop.InputSession` (orbit and pan object).
-
-    The robot (its base placed from the planar joint), the declared objects, a
-    dropdown of the configurations, a slider per input value (camera-frame
-    velocities, desired distance: from 0 to twice a positive starting value,
-    else within +-0.2), stop and save, and a readout of the active
-    configuration's signals and the latest events.
-    """
-
-    def __init__(
-        self, session: InputSession, host: str = "127.0.0.1", port: int = 8080
-    ) -> None:
-        """Build the scene and the panel."""
-        from viser.extras import ViserUrdf
-
-        self.session = session
-        super().__init__(host, port)
-        scenario = session.scenarios[0]
-        description = scene_description(scenario, duration=0.0)
-        draw_objects(self.server, description)
-        self.base = self.server.scene.add_frame("/robot", show_axes=False)
-        self.robot = ViserUrdf(
-            self.server,
-            Path(description["urdf"]),
-            root_node_name="/robot",
-            load_meshes=False,
-            load_collision_meshes=True,
-            collision_mesh_color_override=(0.95, 0.6, 0.1),
-        )
-        self._joints = self.robot.get_actuated_joint_names()
-        self._q_names = scenario.robot.coordinate_names("q")
-        camera = self.server.initial_camera
-        camera.position = (-1.0, -2.5, 2.0)
-        camera.look_at = (0.6, 0.0, 0.3)
-        gui = self.server.gui
-        self.config = gui.add_dropdown(
-            "configuration", tuple(session.loops), initial_value=session.active
-        )
-        self.config.on_update(lambda _: self._switch())
-        self.stop_button = gui.add_button("stop and save")
-        self.stop_button.on_click(lambda _: self.stopped.set())
-        self.sliders: dict[str, dict[str, list[Any]]] = {}
-        self.folders: dict[str, Any] = {}
-        for config, inputs in session.inputs.items():
-            folder = gui.add_folder(f"{config} inputs")
-            self.folders[config] = folder
-            self.sliders[config] = {}
-            with folder:
-                for entry, values in inputs.items():
-                    handles = []
-                    for i, value in enumerate(values):
-                        top = 2.0 * value if value > 0 else 0.2
-                        bottom = 0.0 if value > 0 else -0.2
-                        slider = gui.add_slider(
-                            f"{entry}[{i}]",
-                            min=bottom,
-                            max=top,
-                            step=(top - bottom) / 200,
-                            initial_value=float(value),
-                        )
-                        slider.on_update(self._setter(config, entry))
-                        handles.append(slider)
-                    self.sliders[config][entry] = handles
-            folder.visible = config == session.active
-        self.readout = gui.add_markdown("")
-
-    def _setter(self, config: str, entry: str) -> Any:
-        """A slider handler that sends every value of ``entry`` of ``config``."""
-
-        def send(_: Any) -> None:
-            values = [s.value for s in self.sliders[config][entry]]
-            self.session.set_input(entry, np.array(values), config)
-
-        return send
-
-    def _switch(self) -> None:
-        self.session.switch(self.config.value)
-        for config, folder in self.folders.items():
-            folder.visible = config == self.config.value
-
-    def update(self) -> None:
-        """Bring the page up to date with the session."""
-        snap = self.session.snapshot()
-        q = snap["q"]
-        by_name = dict(zip(self._q_names, q, strict=True))
-        # The planar base: x, y, cos(yaw), sin(yaw).
-        yaw = math.atan2(q[3], q[2])
-        self.base.position = (float(q[0]), float(q[1]), 0.0)
-        self.base.wxyz = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
-        self.robot.update_cfg(np.array([by_name.get(j, 0.0) for j in self._joints]))
-        lines = [f"**t = {snap['t']:.2f} s**, configuration **{snap['active']}**", ""]
-        lines += [f"- {k}: {v:.3f}" for k, v in sorted(snap["signals"].items())]
-        if snap["events"]:
-            lines += ["", "latest events:"]
-            lines += [f"- {t:.2f} s: {m}" for t, m in snap["events"]]
-        self.readout.content = "\n".join(lines)
-
-
 def _clearance(snap: Snapshot) -> str:
     """The distance of the nearest contact CAT holds, as text; "-" without one."""
     contacts = snap.contacts
@@ -650,20 +447,3 @@ def _clearance(snap: Snapshot) -> str:
         return "-"
     nearest = round(1e3 * float(np.min(contacts.distance)), 1) + 0.0  # no -0.0
     return f"{nearest:.1f} mm"
-
-
-def _add_gripper(server: Any, name: str) -> Any:
-    """A two-finger gripper of boxes under frame ``name`` (opening along y, z out)."""
-    frame = server.scene.add_frame(name, show_axes=False, visible=False)
-    colour = (200, 60, 60)
-    server.scene.add_box(
-        f"{name}/palm", colour, (0.02, 0.16, 0.03), position=(0.0, 0.0, -0.04)
-    )
-    for side in (-1, 1):
-        server.scene.add_box(
-            f"{name}/finger{side}",
-            colour,
-            (0.015, 0.015, 0.05),
-            position=(0.0, 0.06 * side, 0.0),
-        )
-    return frame

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Simulated depth cameras in PyBullet (fixed or on a link), images back to points.
+"""Depth frames: one depth image and what turns it into points, whatever rendered it.
 
 PyBullet's ER_TINY_RENDERER samples pixel (u, v) at NDC x = 2u/W - 1,
 y = 2(H - 1 - v)/H - 1 (not at pixel centres), and returns its matrices
@@ -22,15 +22,10 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 
-from cbp.errors import ConfigError, FrameNotFoundError
-from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray, RobotModel
-from cbp.sim.bullet import pb
-from cbp.state import RobotState
 
-__all__ = ["RENDER_NEAR_FRACTION", "DepthCamera", "DepthFrame", "camera_parent"]
+__all__ = ["RENDER_NEAR_FRACTION", "DepthFrame", "camera_parent"]
 
 RENDER_NEAR_FRACTION = 1e-3
 """The rendering clip plane as a fraction of the far plane: 2.5 mm for a 2.5 m
@@ -194,108 +189,3 @@ def camera_parent(parent: str, robot: RobotModel) -> str:
     any arm.
     """
     return robot.end_effector if parent == "end_effector" else parent
-
-
-class DepthCamera:
-    """A camera rendering depth images of a PyBullet client: fixed or mounted.
-
-    Args:
-        client: PyBullet client id.
-        spec: pose (or parent frame and offset), resolution, field of view and
-            clipping planes.
-        robot: the robot a mounted camera's ``parent`` frame belongs to.
-
-    Raises:
-        ConfigError: a mounted camera without a robot, or with an unknown frame.
-    """
-
-    def __init__(
-        self, client: int, spec: CameraSpec, robot: RobotModel | None = None
-    ) -> None:
-        """Compute the projection (and a fixed camera's view) once."""
-        self.client = client
-        self.spec = spec
-        self.name = spec.name
-        self._clip_near = min(spec.near, RENDER_NEAR_FRACTION * spec.far)
-        self._projection_list = pb.computeProjectionMatrixFOV(
-            spec.fov_deg, spec.width / spec.height, self._clip_near, spec.far
-        )
-        # PyBullet's matrices are column-major.
-        self.projection = np.array(self._projection_list).reshape(4, 4).T
-        self._frame: int | None = None
-        self._offset = spec.offset.to_se3()
-        if spec.parent is not None:
-            if robot is None:
-                raise ConfigError(
-                    f"camera '{spec.name}' is mounted on '{spec.parent}' but there "
-                    "is no robot",
-                    "parent",
-                )
-            try:
-                self._frame = robot.frame_id(camera_parent(spec.parent, robot))
-            except FrameNotFoundError as exc:
-                raise ConfigError(str(exc), "parent") from None
-            self._view_list: list[float] = []
-            self.view = np.eye(4)
-        else:
-            assert spec.position is not None
-            assert spec.target is not None
-            self._set_view(spec.position, spec.target, spec.up)
-
-    @property
-    def mounted(self) -> bool:
-        """Whether the camera moves with the robot."""
-        return self._frame is not None
-
-    def optical_pose(self, state: RobotState | None = None) -> pin.SE3:
-        """The optical frame in the world (+z along the axis, +y down the image).
-
-        A mounted camera's pose is taken from ``state`` (the robot when the
-        frame is taken).
-        """
-        if self._frame is None:
-            R = self.view[:3, :3].T.dot(np.diag([1.0, -1.0, -1.0]))
-            return pin.SE3(R, -self.view[:3, :3].T.dot(self.view[:3, 3]))
-        if state is None:
-            raise ValueError(f"camera '{self.name}' is mounted: pass the robot state")
-        return state.data.oMf[self._frame] * self._offset
-
-    def capture(self, state: RobotState | None = None) -> DepthFrame:
-        """Render one depth image (tiny renderer; no window needed).
-
-        Args:
-            state: the robot at capture time (mounted cameras; kinematics
-                updated).
-        """
-        if self._frame is not None:
-            M = self.optical_pose(state)
-            eye = M.translation
-            self._set_view(eye, eye + M.rotation[:, 2], -M.rotation[:, 1])
-        s = self.spec
-        _, _, _, depth, _ = pb.getCameraImage(
-            s.width,
-            s.height,
-            viewMatrix=self._view_list,
-            projectionMatrix=self._projection_list,
-            renderer=pb.ER_TINY_RENDERER,
-            flags=pb.ER_NO_SEGMENTATION_MASK,
-            physicsClientId=self.client,
-        )
-        buffer = np.asarray(depth, dtype=float).reshape(s.height, s.width)
-        return DepthFrame(
-            buffer,
-            self.view.copy(),
-            self.projection,
-            self._clip_near,
-            s.far,
-            self.name,
-            min_range=s.near,
-        )
-
-    def _set_view(self, eye: object, target: object, up: object) -> None:
-        self._view_list = pb.computeViewMatrix(
-            [float(v) for v in eye],  # type: ignore[attr-defined]
-            [float(v) for v in target],  # type: ignore[attr-defined]
-            [float(v) for v in up],  # type: ignore[attr-defined]
-        )
-        self.view = np.array(self._view_list).reshape(4, 4).T

@@ -1,5 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Settings of the trajectory executors, as written under ``method:``."""
+"""Settings of every method, as written under ``method.<name>:`` in a scenario.
+
+Plain data: the executors that run them live in :mod:`cbp.executors`.
+"""
 
 from __future__ import annotations
 
@@ -7,10 +10,10 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from cbp.errors import ConfigError, require, require_between
-from cbp.executors.clock import ClockKind, VirtualCosts
 
 __all__ = [
     "CatSettings",
+    "ClockKind",
     "ExecutorTiming",
     "HybridSettings",
     "IkSearchSettings",
@@ -20,7 +23,34 @@ __all__ = [
     "MpSettings",
     "PlannerSettings",
     "VelocitySettings",
+    "VirtualCosts",
+    "Work",
 ]
+
+
+#: How a planning budget is counted.
+ClockKind = Literal["wall", "virtual"]
+#: The kinds of work a planner charges.
+Work = Literal["qp_step", "ik_iteration", "collision_check", "trajectory_point"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class VirtualCosts:
+    """The ``timing.virtual_costs:`` section: seconds charged per unit of work."""
+
+    qp_step: float = 145e-6
+    """One CAT step: the engine's QP, integration and step validation [s]."""
+    ik_iteration: float = 26e-6
+    """One damped-least-squares iteration of the IK search [s]."""
+    collision_check: float = 11e-6
+    """One yes-or-no collision check of a configuration (IK, MP) [s]."""
+    trajectory_point: float = 4e-6
+    """Timing one path point of the spliced trajectory [s]."""
+
+    def __post_init__(self) -> None:
+        """Positive costs."""
+        require(self, "> 0", "qp_step", "ik_iteration", "collision_check")
+        require(self, "> 0", "trajectory_point")
 
 
 #: Shortest and longest control step or tick an executor accepts [s].

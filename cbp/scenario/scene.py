@@ -1,5 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
-"""What the simulator is built from: scene objects and physics settings."""
+"""What a scenario declares of its scene: objects, their motion, the physics.
+
+Plain data, read by the simulator (:mod:`cbp.sim`) and the collision world alike.
+"""
 
 from __future__ import annotations
 

@@ -1,0 +1,178 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The step guard: what reaches a robot is finite and within its limits.
+
+Every answer of the QP passes :meth:`StepGuard.check` before the engine
+returns it (:meth:`cbp.engine.Engine.step`), whatever the solver, the plugins
+or the easing did.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numba
+import numpy as np
+
+from cbp.errors import UnsafeStepError
+from cbp.robot import FloatArray, RobotModel
+
+__all__ = ["GARBAGE_RATIO", "StepGuard"]
+
+#: A step more than this many times faster than a joint's velocity limit allows
+#: is garbage (a solver fault), not a step to slow down: the guard rejects it.
+GARBAGE_RATIO = 10.0
+
+
+class StepGuard:
+    """Checks one step against the robot's velocity, acceleration and joint limits.
+
+    Args:
+        robot: the robot model.
+        limit_tolerance: how far beyond a joint's position limit a step may end
+            [rad or m] (solvers meet bounds to about 1e-9).
+        max_step: the largest step of a joint that has no velocity limit, per
+            second of the step's duration [rad/s or m/s].
+        joint_name: names the joint of a tangent (``"v"``) or configuration
+            (``"q"``) coordinate, for messages.
+
+    Attributes:
+        speed_bound: per joint (nv) [per s]: the velocity limit with 1 % for
+            the solver's tolerance; ``max_step`` where there is none.
+        acceleration_bound: per joint (nv) [per s^2], with 1 % for the
+            solver's tolerance; checked when a step is given the velocity.
+        limit_tolerance: as given.
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        limit_tolerance: float,
+        max_step: float,
+        joint_name: Callable[[int, str], str],
+    ) -> None:
+        """Compute the bounds once."""
+        self.robot = robot
+        self.limit_tolerance = float(limit_tolerance)
+        velocity = np.asarray(robot.velocity_limits, dtype=float)
+        self.speed_bound = np.where(
+            np.isfinite(velocity), 1.01 * velocity + 1e-9, float(max_step)
+        )
+        self.acceleration_bound = (
+            1.01 * np.asarray(robot.acceleration_limits, dtype=float) + 1e-9
+        )
+        self._has_limits = bool(
+            np.isfinite(robot.lower_limits).any()
+            or np.isfinite(robot.upper_limits).any()
+        )
+        self._joint_name = joint_name
+
+    def check(
+        self, q: FloatArray, dq: FloatArray, dt: float, v: FloatArray | None = None
+    ) -> tuple[FloatArray, float]:
+        """``dq`` if it is safe, slowed if only too fast; and by how much.
+
+        Safe: finite; no joint faster than its velocity limit over ``dt``
+        (:attr:`speed_bound`); when the velocity ``v`` at ``q`` is given, no
+        joint's velocity changing from it faster than its acceleration limit
+        (:attr:`acceleration_bound`); ``q`` ⊕ ``dq`` within the position limits
+        by :attr:`limit_tolerance`, or, for a joint that starts beyond its
+        limit, no further beyond than it starts. A step up to
+        :data:`GARBAGE_RATIO` times too fast is scaled down as a whole to the
+        velocity limits (same direction: it still meets every row it met whose
+        bound allows standing still); a faster one is garbage and rejected. A
+        step that accelerates too hard cannot be scaled into shape and is
+        rejected.
+
+        Returns:
+            The step, and how many times too fast it was before it was slowed
+            (1.0: it was not).
+
+        Raises:
+            UnsafeStepError: the step is not finite, is garbage, accelerates a
+                joint past its limit, or ends beyond a joint limit; the message
+                names the joint and the amount.
+        """
+        robot = self.robot
+        slowed = 1.0
+        dq = np.ascontiguousarray(dq, dtype=float)
+        if dq.shape != (robot.nv,):
+            raise UnsafeStepError(f"step rejected: {dq.shape} values, not {robot.nv}")
+        i, worst = _speed_ratio(dq, self.speed_bound, float(dt))
+        if i < 0:
+            raise UnsafeStepError(
+                f"step rejected: the solver's answer is not finite ({dq})"
+            )
+        if worst > GARBAGE_RATIO:
+            raise UnsafeStepError(
+                f"step rejected: joint {self._joint_name(i, 'v')} would move "
+                f"{abs(dq[i]):.4g} in {dt:.4g} s, {worst:.3g} times its limit "
+                f"({self.speed_bound[i]:.4g}/s)"
+            )
+        if worst > 1.0:
+            dq = dq / worst
+            slowed = worst
+        if v is not None:
+            j, harder = _acceleration_ratio(dq, v, self.acceleration_bound, float(dt))
+            if harder > 1.0:
+                raise UnsafeStepError(
+                    f"step rejected: joint {self._joint_name(j, 'v')} would change "
+                    f"its velocity from {v[j]:.4g} to {dq[j] / dt:.4g} in "
+                    f"{dt:.4g} s, {harder:.3g} times its acceleration limit "
+                    f"({self.acceleration_bound[j]:.4g}/s^2)"
+                )
+        if not self._has_limits:
+            return dq, slowed
+        q_next = q + dq if robot.is_euclidean else robot.integrate(q, dq)
+        lower, upper = robot.lower_limits, robot.upper_limits
+        k, beyond = _past_limits(q, q_next, lower, upper, self.limit_tolerance)
+        if k >= 0:
+            raise UnsafeStepError(
+                f"step rejected: coordinate {self._joint_name(k, 'q')} would "
+                f"end {beyond:.4g} beyond its limits [{lower[k]:.4g}, "
+                f"{upper[k]:.4g}]"
+            )
+        return dq, slowed
+
+
+@numba.njit(cache=True, nogil=True)
+def _speed_ratio(dq: FloatArray, bound: FloatArray, dt: float) -> tuple[int, float]:
+    """(the fastest coordinate, its |dq| / (bound dt)); (-1, nan) if not finite."""
+    worst, at = 0.0, 0
+    for i in range(dq.size):
+        if not math.isfinite(dq[i]):
+            return -1, math.nan
+        ratio = abs(dq[i]) / (bound[i] * dt)
+        if ratio > worst:
+            worst, at = ratio, i
+    return at, worst
+
+
+@numba.njit(cache=True, nogil=True)
+def _acceleration_ratio(
+    dq: FloatArray, v: FloatArray, bound: FloatArray, dt: float
+) -> tuple[int, float]:
+    """(the hardest-accelerating coordinate, its |dq/dt - v| / (bound dt))."""
+    worst, at = 0.0, 0
+    for i in range(dq.size):
+        ratio = abs(dq[i] / dt - v[i]) / (bound[i] * dt)
+        if ratio > worst:
+            worst, at = ratio, i
+    return at, worst
+
+
+@numba.njit(cache=True, nogil=True)
+def _past_limits(
+    q: FloatArray, q_next: FloatArray, lower: FloatArray, upper: FloatArray, tol: float
+) -> tuple[int, float]:
+    """The coordinate that ends furthest past its limits, and how far.
+
+    Only by more than ``tol`` and further than it starts; (-1, 0) if none.
+    """
+    worst, at = 0.0, -1
+    for i in range(q.size):
+        beyond = max(lower[i] - q_next[i], q_next[i] - upper[i])
+        started = max(lower[i] - q[i], q[i] - upper[i])
+        if beyond > max(tol, started + 1e-12, worst):
+            worst, at = beyond, i
+    return at, worst

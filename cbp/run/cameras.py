@@ -1,0 +1,195 @@
+# SPDX-License-Identifier: Apache-2.0
+"""A run's depth cameras: frames captured on schedule, checked, and mapped.
+
+Each camera captures at its rate in simulated time; a frame is checked
+(:meth:`~cbp.perception.frame.DepthFrame.problem`) and handed with the robot's
+configuration to the map (:class:`~cbp.perception.mapper.MapUpdater`): at once
+on the virtual clock (the map a planner sees then depends on simulated time
+only), in the map's worker on the wall clock (never blocking the loop). A
+camera whose last valid frame is older than ``perception.camera_timeout``
+holds the robot until it gives one again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cbp.collision.objects import PrimitiveEnvironment
+from cbp.collision.world import CollisionWorld
+from cbp.methods.settings import ClockKind
+from cbp.perception.frame import DepthFrame
+from cbp.perception.kernels import UNKNOWN
+from cbp.perception.mapper import MapUpdater
+from cbp.perception.motion import ApproachEstimator
+from cbp.perception.occupancy import OccupancyGrid
+from cbp.perception.spec import PerceptionSpec
+from cbp.robot import FloatArray
+from cbp.run.events import RunLog
+from cbp.sim.camera import DepthCamera
+from cbp.sim.simulation import Simulation
+from cbp.state import RobotState
+
+__all__ = ["Cameras"]
+
+
+class Cameras:
+    """The depth cameras of a run and the map they feed.
+
+    Args:
+        sim: the simulation the cameras render.
+        spec: the scenario's ``perception:`` section.
+        world: the collision world whose environment becomes the map's
+            snapshots.
+        clock: ``virtual`` integrates each frame as it is captured, ``wall``
+            in the map's worker.
+        log: the run's log, for events.
+        predict_motion: measure how fast mapped obstacles approach the robot
+            (``collision.predict_motion``).
+
+    The robot looks once before it moves: every camera's first frame is in the
+    map when this returns.
+
+    Attributes:
+        cameras: the cameras, in the scenario's order.
+        mapper: the map updater.
+    """
+
+    def __init__(
+        self,
+        sim: Simulation,
+        spec: PerceptionSpec,
+        world: CollisionWorld,
+        clock: ClockKind,
+        log: RunLog,
+        predict_motion: bool,
+    ) -> None:
+        """Build the cameras and the grid; map the first frames."""
+        self._sim = sim
+        self._spec = spec
+        self._log = log
+        robot = world.geometry.robot
+        self._state = RobotState(robot)
+        world.set_environment(PrimitiveEnvironment([]))
+        self.cameras = [DepthCamera(sim.client, c, robot) for c in spec.all_cameras]
+        n = len(self.cameras)
+        #: Per camera: time of its last valid frame, and whether it is failing.
+        self._last_valid = [0.0] * n
+        self._failing = [False] * n
+        self._stale: str | None = None
+        grid = OccupancyGrid(spec, world.geometry)
+        first = MapUpdater(grid, world, synchronous=True)
+        for i in range(n):
+            frame = self._checked_frame(i, 0.0)
+            if frame is not None:
+                first.submit(frame, sim.q.copy())
+        estimator = (
+            ApproachEstimator(world, spec.motion_window)
+            if spec.motion_window > 0 and predict_motion
+            else None
+        )
+        self.mapper = MapUpdater(
+            grid, world, synchronous=clock == "virtual", estimator=estimator
+        )
+        self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
+
+    @property
+    def grid(self) -> OccupancyGrid:
+        """The occupancy grid the cameras feed."""
+        return self.mapper.grid
+
+    def unseen(self, points: FloatArray) -> np.ndarray:
+        """Which points (n, 3) lie in unseen space that counts as an obstacle.
+
+        Space no camera has seen and the robot has not held; all False with
+        ``perception.unknown: free``.
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if not self._spec.unknown_blocks:
+            return np.zeros(len(points), dtype=bool)
+        return np.asarray(self.mapper.grid.state_at(points) == UNKNOWN)
+
+    def perceive_until(self, t: float, look_ahead: float) -> None:
+        """Capture the frames due before ``t`` and hand them to the map.
+
+        Args:
+            t: simulated time to perceive up to [s].
+            look_ahead: how far ahead the map measures approaching obstacles
+                [s] (the plan being made runs that long).
+        """
+        self.mapper.look_ahead = look_ahead
+        due = self._next_frame
+        sim = self._sim
+        while True:
+            i = min(range(len(due)), key=due.__getitem__)
+            if due[i] > t:
+                break
+            sim.run_until(due[i])
+            frame = self._checked_frame(i, due[i])
+            if frame is not None:
+                self.mapper.submit(frame, sim.q.copy(), due[i])
+            if self.mapper.error is not None:
+                error, self.mapper.error = self.mapper.error, None
+                self._log.event(sim.t, f"map update: {error}")
+            due[i] += 1.0 / self.cameras[i].spec.rate_hz
+
+    def hold_reason(self, t: float) -> str | None:
+        """Why the robot must hold at ``t``, or None.
+
+        A camera whose last valid frame is older than
+        ``perception.camera_timeout`` holds the robot until it gives one again
+        (the map would otherwise go stale where the robot is heading). Each
+        change is an event.
+        """
+        timeout = self._spec.camera_timeout
+        stale = [
+            camera.name
+            for camera, last in zip(self.cameras, self._last_valid, strict=True)
+            if t - last > timeout
+        ]
+        reason = (
+            f"no valid frame from camera {', '.join(repr(n) for n in stale)} for "
+            f"more than {timeout:g} s: robot stopped"
+            if stale
+            else None
+        )
+        if reason != self._stale:
+            self._log.event(
+                t, reason or "every camera gives valid frames: robot resumes"
+            )
+            self._stale = reason
+        return reason
+
+    def close(self) -> None:
+        """Stop the map's worker."""
+        self.mapper.close()
+
+    def _checked_frame(self, i: int, t: float) -> DepthFrame | None:
+        """Camera ``i``'s frame at ``t`` if it is valid; else None and an event.
+
+        A frame is valid when at least ``perception.min_valid_fraction`` of its
+        pixels hold a reading (:meth:`DepthFrame.problem`). The first bad frame
+        of a run of them is an event, and so is the first good one after.
+        """
+        camera = self.cameras[i]
+        try:
+            frame = self._capture(camera)
+            problem = frame.problem(self._spec.min_valid_fraction)
+        except Exception as exc:  # a camera that fails is a camera without frames
+            frame, problem = None, f"capture failed ({type(exc).__name__}: {exc})"
+        if problem is None:
+            if self._failing[i]:
+                self._log.event(t, f"camera '{camera.name}' gives valid frames again")
+                self._failing[i] = False
+            self._last_valid[i] = t
+            return frame
+        if not self._failing[i]:
+            self._log.event(t, f"camera '{camera.name}': frame dropped, {problem}")
+            self._failing[i] = True
+        return None
+
+    def _capture(self, camera: DepthCamera) -> DepthFrame:
+        """One frame of ``camera``; a mounted one from the robot as it is now."""
+        if not camera.mounted:
+            return camera.capture()
+        self._state.update(self._sim.q.copy())
+        return camera.capture(self._state)

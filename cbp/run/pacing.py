@@ -1,0 +1,77 @@
+# SPDX-License-Identifier: Apache-2.0
+"""One wall-clock pacer for every live loop: simulated time kept in step with now.
+
+A live session runs its simulation no faster than the wall clock, so the
+operator sees the arm move in real time: after each step to simulated time
+``t`` the loop waits until ``t`` seconds have passed since it started. A loop
+that falls behind catches up (it does not wait) unless ``max_lag`` says how
+far behind it may fall before the lost time is given up (a page's redraws,
+which need not be made up).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+__all__ = ["WallClockPacer"]
+
+
+class WallClockPacer:
+    """Waits until the wall clock reaches a loop's simulated time.
+
+    Args:
+        max_lag: the longest the loop may be behind before the pacer gives up
+            the lost time [s] (inf: always catch up).
+        wake: an event that ends any wait at once (a stop request).
+
+    The wall-clock origin is taken at the first :meth:`wait_until` (or
+    :meth:`start`): the loop's time then is now.
+    """
+
+    def __init__(
+        self, max_lag: float = math.inf, wake: threading.Event | None = None
+    ) -> None:
+        """Not started yet."""
+        if not max_lag > 0:
+            raise ValueError(f"max_lag must be > 0, got {max_lag}")
+        self.max_lag = max_lag
+        self.wake = wake
+        self._origin: float | None = None
+
+    def start(self, t: float = 0.0) -> None:
+        """Take the wall clock's origin now, where the loop's time is ``t``."""
+        self._origin = time.perf_counter() - t
+
+    @property
+    def started(self) -> bool:
+        """Whether the origin is taken."""
+        return self._origin is not None
+
+    def wall_time(self, t: float) -> float:
+        """The ``time.perf_counter()`` reading at which the loop's time is ``t``."""
+        if self._origin is None:
+            self.start(t)
+        assert self._origin is not None
+        return self._origin + t
+
+    def wait_until(self, t: float) -> float:
+        """Wait until the loop's time ``t`` is now; return how late it was [s].
+
+        Returns at once when the loop is behind (the lateness, > 0) or when
+        ``wake`` is set.
+        """
+        due = self.wall_time(t)
+        now = time.perf_counter()
+        late = now - due
+        if late > self.max_lag:
+            assert self._origin is not None
+            self._origin += late - self.max_lag
+        if late >= 0:
+            return late
+        if self.wake is not None:
+            self.wake.wait(-late)
+        else:
+            time.sleep(-late)
+        return 0.0

@@ -1,0 +1,250 @@
+# SPDX-License-Identifier: Apache-2.0
+"""One place that assembles a simulated run: :func:`build_run`.
+
+A run is made of parts: the PyBullet simulation, the collision world, the
+goal input (a scenario's stream or an operator's live goal), the cameras and
+their map, the declared objects that appear or move, the run's log and its
+fault counter, and the clock planning budgets are counted on. The scenario is
+data; :func:`build_run` makes the parts from it and returns them as one frozen
+:class:`RunParts`, and a loop (the trajectory executors' period loop, the
+torque loop of JT) drives a planner with them. A different goal source or
+clock is an argument, not a subclass.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cbp.collision.world import CollisionWorld
+from cbp.goals import GoalSource
+from cbp.methods import method_info
+from cbp.methods.settings import ClockKind
+from cbp.progress import report_time
+from cbp.robot import FloatArray, RobotModel
+from cbp.run.cameras import Cameras
+from cbp.run.declared import DeclaredObjects
+from cbp.run.events import RunLog
+from cbp.run.faults import Faults
+from cbp.run.goal_input import GoalInput
+from cbp.run.recording import make_trace
+from cbp.scenario.runtime import Scenario
+from cbp.sim.simulation import Simulation
+from cbp.trace import Trace
+
+__all__ = ["OBJECT_UPDATE", "RunParts", "build_run"]
+
+#: Declared objects that appear or move reach the collision world this often
+#: (simulated time) [s]: as a tracker of known objects would report them.
+OBJECT_UPDATE = 0.01
+
+
+@dataclass(frozen=True)
+class RunParts:
+    """The parts of one simulated run (:func:`build_run` makes them).
+
+    Attributes:
+        scenario: the loaded scenario.
+        sim: the simulation.
+        world: the collision world (None when neither an entry, the method
+            nor the cameras need one).
+        goal: the operator's goal as the run takes it.
+        cameras: the depth cameras and their map (None without cameras).
+        declared: the declared objects that appear or move, kept up to date
+            in the world (None with cameras: the map discovers them).
+        log: events, command periods and counters.
+        faults: failures in a row, and whether the run was aborted.
+        clock: how planning budgets are counted (``wall`` or ``virtual``).
+    """
+
+    scenario: Scenario
+    sim: Simulation
+    world: CollisionWorld | None
+    goal: GoalInput
+    cameras: Cameras | None
+    declared: DeclaredObjects | None
+    log: RunLog
+    faults: Faults
+    clock: ClockKind
+
+    @property
+    def method(self) -> str:
+        """The method that runs."""
+        return self.log.method
+
+    @property
+    def robot(self) -> RobotModel:
+        """The robot."""
+        return self.scenario.robot
+
+    @property
+    def duration(self) -> float:
+        """Length of the run [s]."""
+        return self.scenario.spec.duration
+
+    @property
+    def ee_frame(self) -> str:
+        """The frame that tracks the goal (the goal task's, else the robot's)."""
+        return self.scenario.ee_frame
+
+    def event(self, t: float, message: str) -> None:
+        """Record (and log) something that went wrong and was handled."""
+        self.log.event(t, message)
+
+    def unseen(self, points: FloatArray) -> np.ndarray:
+        """Which points (n, 3) lie in unseen space that counts as an obstacle.
+
+        All False without cameras or with ``perception.unknown: free``.
+        """
+        if self.cameras is None:
+            return np.zeros(len(np.asarray(points).reshape(-1, 3)), dtype=bool)
+        return self.cameras.unseen(points)
+
+    def hold_reason(self, t: float) -> str | None:
+        """Why the robot must hold at ``t`` (a camera without valid frames), or None."""
+        return None if self.cameras is None else self.cameras.hold_reason(t)
+
+    def advance(self, t: float, look_ahead: float = 0.0) -> None:
+        """Simulate (and perceive) until ``t``.
+
+        Args:
+            t: simulated time to reach [s].
+            look_ahead: how long the plan being made runs on the robot [s]:
+                moving obstacles, declared (``collision.predict_motion``) or
+                mapped, are measured that far ahead.
+        """
+        report_time(t, self.duration)
+        declared = self.declared
+        sim = self.sim
+        if declared is not None and declared.dynamic:
+            # Declared objects that appear or move: the world is brought up to
+            # date every OBJECT_UPDATE of simulated time.
+            while sim.t + OBJECT_UPDATE < t:
+                self._perceive_until(sim.t + OBJECT_UPDATE, look_ahead)
+                sim.run_until(sim.t + OBJECT_UPDATE)
+                self._update_declared(sim.t, look_ahead)
+            self._perceive_until(t, look_ahead)
+            sim.run_until(t)
+            self._update_declared(sim.t, look_ahead)
+        else:
+            self._perceive_until(t, look_ahead)
+            sim.run_until(t)
+
+    def finish(self) -> Trace:
+        """Stop the map and the simulator; return the trace."""
+        if self.cameras is not None:
+            self.cameras.close()
+        recording = self.sim.recording()
+        self.sim.close()
+        return make_trace(
+            self.scenario,
+            recording,
+            self.goal.changes,
+            self.log,
+            self.faults.aborted,
+            self.ee_frame,
+        )
+
+    def close(self) -> None:
+        """Stop the map and the simulator without making a trace."""
+        if self.cameras is not None:
+            self.cameras.close()
+        self.sim.close()
+
+    def _perceive_until(self, t: float, look_ahead: float) -> None:
+        if self.cameras is not None:
+            self.cameras.perceive_until(t, look_ahead)
+
+    def _update_declared(self, t: float, look_ahead: float) -> None:
+        assert self.declared is not None
+        for name in self.declared.update(t, look_ahead):
+            self.log.event(t, f"object '{name}' appeared")
+
+
+def build_run(
+    scenario: Scenario,
+    *,
+    method: str,
+    clock: ClockKind = "wall",
+    gui: bool = False,
+    goal: GoalSource | None = None,
+    needs_world: bool = False,
+) -> RunParts:
+    """Assemble the parts of a simulated run of ``scenario`` by ``method``.
+
+    Args:
+        scenario: the loaded scenario.
+        method: the method that runs (:data:`cbp.methods.METHODS`).
+        clock: ``virtual`` integrates each depth frame into the map as it is
+            captured (what a planner sees then depends on simulated time only),
+            ``wall`` in the map's worker (never blocking the loop).
+        gui: show PyBullet's window.
+        goal: the goal source, instead of the scenario's stream (an
+            operator's live goal).
+        needs_world: build the collision world even when neither an entry nor
+            the method needs one (a session that may switch methods).
+
+    Raises:
+        ConfigError: an unknown method, or one that builds no map asked to run
+            with the depth cameras.
+    """
+    row = method_info(method)
+    spec = scenario.spec
+    row.refuse_source(spec.perception.source, f"{scenario.path}: perception.source")
+    use_cameras = spec.perception.source == "depth_camera"
+    log = RunLog(method)
+    sim = Simulation(
+        scenario.robot,
+        spec.world.objects,
+        scenario.q0,
+        spec.simulation,
+        scenario.path.parent,
+        gui,
+    )
+    try:
+        world = (
+            scenario.world_for_run()
+            if needs_world
+            or row.checks_collisions
+            or scenario.needs_collision_world
+            or use_cameras
+            else None
+        )
+        cameras = (
+            Cameras(
+                sim,
+                spec.perception,
+                world,
+                clock,
+                log,
+                spec.collision.predict_motion,
+            )
+            if use_cameras and world is not None
+            else None
+        )
+    except BaseException:
+        sim.close()
+        raise
+    declared = (
+        DeclaredObjects(scenario, world)
+        if world is not None and cameras is None
+        else None
+    )
+    return RunParts(
+        scenario=scenario,
+        sim=sim,
+        world=world,
+        goal=GoalInput(
+            scenario.goal_stream() if goal is None else goal,
+            scenario.goal_task(),
+            log,
+            world,
+            perceived=cameras is not None,
+        ),
+        cameras=cameras,
+        declared=declared,
+        log=log,
+        faults=Faults(log.event),
+        clock=clock,
+    )

@@ -1,0 +1,115 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The page of an input session (orbit and pan object), served by viser."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cbp.drawing import draw_objects, joint_values
+from cbp.scene_file import scene_description
+from cbp.teleop.input_session import InputSession
+from cbp.teleop.page import Page
+
+__all__ = ["InputsPage"]
+
+
+class InputsPage(Page[InputSession]):
+    """The page of an :class:`~cbp.teleop.InputSession` (orbit and pan object).
+
+    The robot (its base placed from the planar joint), the declared objects, a
+    dropdown of the configurations, a slider per input value (camera-frame
+    velocities, desired distance: from 0 to twice a positive starting value,
+    else within +-0.2), stop and save, and a readout of the active
+    configuration's signals and the latest events.
+    """
+
+    def __init__(
+        self, session: InputSession, host: str = "127.0.0.1", port: int = 8080
+    ) -> None:
+        """Build the scene and the panel."""
+        from viser.extras import ViserUrdf
+
+        super().__init__(session, host, port)
+        scenario = session.scenarios[0]
+        description = scene_description(scenario, duration=0.0)
+        draw_objects(self.server, description)
+        self.base = self.server.scene.add_frame("/robot", show_axes=False)
+        self.robot = ViserUrdf(
+            self.server,
+            Path(description["urdf"]),
+            root_node_name="/robot",
+            load_meshes=False,
+            load_collision_meshes=True,
+            collision_mesh_color_override=(0.95, 0.6, 0.1),
+        )
+        self._joints = self.robot.get_actuated_joint_names()
+        self._q_names = scenario.robot.coordinate_names("q")
+        camera = self.server.initial_camera
+        camera.position = (-1.0, -2.5, 2.0)
+        camera.look_at = (0.6, 0.0, 0.3)
+        gui = self.server.gui
+        self.config = gui.add_dropdown(
+            "configuration", tuple(session.loops), initial_value=session.active
+        )
+        self.config.on_update(lambda _: self._switch())
+        self.stop_button = gui.add_button("stop and save")
+        self.stop_button.on_click(lambda _: self.stopped.set())
+        self.sliders: dict[str, dict[str, list[Any]]] = {}
+        self.folders: dict[str, Any] = {}
+        for config, inputs in session.inputs.items():
+            folder = gui.add_folder(f"{config} inputs")
+            self.folders[config] = folder
+            self.sliders[config] = {}
+            with folder:
+                for entry, values in inputs.items():
+                    handles = []
+                    for i, value in enumerate(values):
+                        top = 2.0 * value if value > 0 else 0.2
+                        bottom = 0.0 if value > 0 else -0.2
+                        slider = gui.add_slider(
+                            f"{entry}[{i}]",
+                            min=bottom,
+                            max=top,
+                            step=(top - bottom) / 200,
+                            initial_value=float(value),
+                        )
+                        slider.on_update(self._setter(config, entry))
+                        handles.append(slider)
+                    self.sliders[config][entry] = handles
+            folder.visible = config == session.active
+        self.readout = gui.add_markdown("")
+
+    def _setter(self, config: str, entry: str) -> Any:
+        """A slider handler that sends every value of ``entry`` of ``config``."""
+
+        def send(_: Any) -> None:
+            values = [s.value for s in self.sliders[config][entry]]
+            self.session.set_input(entry, np.array(values), config)
+
+        return send
+
+    def _switch(self) -> None:
+        self.session.switch(self.config.value)
+        for config, folder in self.folders.items():
+            folder.visible = config == self.config.value
+
+    def update(self) -> None:
+        """Bring the page up to date with the session."""
+        snap = self.session.snapshot()
+        q = snap.q
+        values = dict(zip(self._q_names, (float(v) for v in q), strict=True))
+        # The planar base: x, y, cos(yaw), sin(yaw).
+        yaw = math.atan2(q[3], q[2])
+        self.base.position = (float(q[0]), float(q[1]), 0.0)
+        self.base.wxyz = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        self.robot.update_cfg(joint_values(self._joints, values, {}))
+        lines = [f"**t = {snap.t:.2f} s**, configuration **{snap.active}**", ""]
+        lines += [f"- {k}: {v:.3f}" for k, v in sorted(snap.signals.items())]
+        if snap.events:
+            lines += ["", "latest events:"]
+            lines += [f"- {t:.2f} s: {m}" for t, m in snap.events]
+        self.readout.content = "\n".join(lines)

@@ -1,0 +1,78 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The operator's live goal: set from any thread, sampled by the control loop."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from cbp.robot import FloatArray
+
+__all__ = ["LiveGoal"]
+
+
+class LiveGoal:
+    """The operator's goal: set from any thread, sampled by the control loop.
+
+    Nothing is checked here: the run checks every sample as it does a
+    scenario's stream (a malformed goal is rejected with an event).
+
+    Args:
+        position: the starting goal position (3,) [m].
+        rotation: the starting goal rotation (3, 3).
+        rate_hz: the rate at which the control loop samples it [Hz].
+    """
+
+    def __init__(
+        self, position: FloatArray, rotation: FloatArray, rate_hz: float = 30.0
+    ) -> None:
+        """Start at the given pose."""
+        self._lock = threading.Lock()
+        self._position = np.array(position, dtype=float)
+        self._rotation = np.array(rotation, dtype=float)
+        self._rate_hz = float(rate_hz)
+        #: Number of goals set so far (the starting one is 0).
+        self.count = 0
+        self._arrival: dict[int, float] = {0: time.perf_counter()}
+        self._sampled = 0
+
+    @property
+    def rate_hz(self) -> float:
+        """Rate at which the control loop samples the goal [Hz]."""
+        return self._rate_hz
+
+    def set(self, position: FloatArray, rotation: FloatArray) -> int:
+        """Make (position, rotation) the goal; return its number."""
+        with self._lock:
+            self._position = np.array(position, dtype=float).reshape(3)
+            self._rotation = np.array(rotation, dtype=float).reshape(3, 3)
+            self.count += 1
+            self._arrival[self.count] = time.perf_counter()
+            return self.count
+
+    def pose(self) -> tuple[FloatArray, FloatArray]:
+        """The latest goal (copies)."""
+        with self._lock:
+            return self._position.copy(), self._rotation.copy()
+
+    def sample(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """The latest goal; the control loop's sample at ``t`` [s]."""
+        with self._lock:
+            self._sampled = self.count
+            return self._position.copy(), self._rotation.copy()
+
+    def changed(self) -> bool:
+        """Whether a goal was set after the last sample."""
+        return self.count != self._sampled
+
+    def take_sampled(self) -> tuple[int, float] | None:
+        """The number and arrival time of the latest sampled goal, once each."""
+        with self._lock:
+            n = self._sampled
+            arrival = self._arrival.pop(n, None)
+            # Goals superseded before they were sampled have no latency.
+            for old in [k for k in self._arrival if k < n]:
+                del self._arrival[old]
+        return None if arrival is None else (n, arrival)

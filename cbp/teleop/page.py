@@ -1,0 +1,97 @@
+# SPDX-License-Identifier: Apache-2.0
+"""What every live page shares: a viser server, a stop button, an update loop."""
+
+from __future__ import annotations
+
+import abc
+import logging
+import threading
+from typing import Generic, Protocol, TypeVar
+
+from cbp.run import WallClockPacer
+
+__all__ = ["UPDATE_RATE", "Page", "Session"]
+
+log = logging.getLogger(__name__)
+
+#: Page updates per second.
+UPDATE_RATE = 20.0
+
+
+class Session(Protocol):
+    """What a page needs of any session: whether it still runs."""
+
+    @property
+    def running(self) -> bool:
+        """Whether the session's loop runs."""
+        ...
+
+
+S = TypeVar("S", bound=Session)
+
+
+class Page(abc.ABC, Generic[S]):
+    """What both pages share: the server, its address, and an update loop.
+
+    Subclasses build the scene and the panel and define :meth:`update`; the
+    loop ends when the session stops running.
+
+    Args:
+        session: the session the page shows.
+        host: where to serve.
+        port: the port (0: any free one).
+    """
+
+    def __init__(self, session: S, host: str, port: int) -> None:
+        """Start serving (the scene is built by the subclass)."""
+        import viser
+
+        self.session = session
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        #: Set by the page's "stop and save" button.
+        self.stopped = threading.Event()
+        self._close = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        """The page's address."""
+        return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
+    @abc.abstractmethod
+    def update(self) -> None:
+        """Bring the page up to date with the session."""
+
+    def run(self) -> None:
+        """Update the page until :meth:`close`, the stop button or the session's end."""
+        period = 1.0 / UPDATE_RATE
+        # On a fixed schedule; an update that ran late is not made up.
+        pacer = WallClockPacer(max_lag=period, wake=self._close)
+        k = 0
+        failing: str | None = None
+        while not self._close.is_set() and not self.stopped.is_set():
+            try:
+                self.update()
+            except Exception as exc:  # the page must not stop the session
+                message = f"{type(exc).__name__}: {exc}"
+                if message != failing:
+                    log.warning("page update failed: %s", message)
+                failing = message
+            else:
+                failing = None
+            if not self.session.running:
+                break
+            k += 1
+            pacer.wait_until(k * period)
+
+    def start(self) -> None:
+        """Update the page in a thread of its own."""
+        self._thread = threading.Thread(target=self.run, name="page", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop updating and serving."""
+        self._close.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self.server.stop()
