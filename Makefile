@@ -4,9 +4,12 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 DEV_STAMP := $(VENV)/.installed-dev
+DOCS_STAMP := $(VENV)/.installed-docs
+# MkDocs plugins print a notice about MkDocs 2 on every build; these silence it.
+DOCS_ENV := DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1
 OUT ?= out/demo
 
-.PHONY: demo test test-slow test-all lint bench fuzz browser teleop clean
+.PHONY: demo test test-slow test-all lint bench fuzz browser teleop docs docs-build clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -20,6 +23,10 @@ $(DEV_STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[dev,bench,sweep,viewer]"
 	touch $@ $(STAMP)
 
+$(DOCS_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e ".[docs]"
+	touch $@ $(STAMP)
+
 demo: $(STAMP)
 	$(BIN)/cbp compare scenarios/cat_boards.yaml --methods cat,ik,mp,jt --out $(OUT)
 	@echo "Report: $(OUT)/report.md"
@@ -27,6 +34,14 @@ demo: $(STAMP)
 # Drive the arm through the boards from the browser (prints the address).
 teleop: $(DEV_STAMP)
 	$(BIN)/cbp teleop scenarios/cat_boards.yaml
+
+# The documentation site at http://127.0.0.1:8000 (reference pages generated
+# from the code on every build); docs-build checks it as CI does.
+docs: $(DOCS_STAMP)
+	$(DOCS_ENV) $(BIN)/mkdocs serve
+
+docs-build: $(DOCS_STAMP)
+	$(DOCS_ENV) $(BIN)/mkdocs build --strict --site-dir out/site
 
 lint: $(DEV_STAMP)
 	$(BIN)/ruff check .
@@ -62,4 +77,4 @@ bench: $(DEV_STAMP)
 	$(BIN)/python benchmarks/cat_periods.py --append benchmarks/RESULTS.md
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) out site .pytest_cache .mypy_cache .ruff_cache
