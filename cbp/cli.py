@@ -114,7 +114,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     init.add_argument("--out", type=Path, required=True, help="the robot's folder")
     init.add_argument("--name", default=None, help="default: the URDF's robot name")
     init.add_argument(
-        "--end-effector", default=None, help="default: last link of the longest chain"
+        "--end-effector",
+        default=None,
+        help="default: the hand (where the fingers attach), else the last link",
+    )
+    init.add_argument(
+        "--control-gripper",
+        action="store_true",
+        help="keep the gripper's joints in the QP (default: locked, half open)",
+    )
+    init.add_argument(
+        "--no-copy",
+        action="store_true",
+        help="name the URDF where it is (a relative path) instead of copying it "
+        "and its meshes into the robot's folder",
     )
     init.add_argument(
         "--samples",
@@ -261,6 +274,7 @@ def _add_set(parser: argparse.ArgumentParser, help_text: str) -> None:
 
 def _robot_init(args: argparse.Namespace) -> int:
     from cbp.robot_init import describe_urdf, relative_urdf, write_robot_yaml
+    from cbp.urdf_files import copy_urdf
 
     pairs = _overrides(args.home)
     if pairs is None:
@@ -270,6 +284,10 @@ def _robot_init(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"--home: {exc}", file=sys.stderr)
         return 2
+    out: Path = args.out
+    if (out / "robot.yaml").exists():
+        print(f"{out / 'robot.yaml'} exists; choose a new folder", file=sys.stderr)
+        return 2
     try:
         setup = describe_urdf(
             args.urdf,
@@ -278,17 +296,32 @@ def _robot_init(args: argparse.Namespace) -> int:
             home=home or None,
             samples=args.samples,
             seed=args.seed,
-            urdf_entry=relative_urdf(args.urdf, args.out),
+            urdf_entry=relative_urdf(args.urdf, out) if args.no_copy else "robot.urdf",
+            lock_gripper=not args.control_gripper,
         )
+        copied = None if args.no_copy else copy_urdf(args.urdf, out)
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
-    path = write_robot_yaml(setup, args.out)
+    if copied is not None:
+        setup.assumptions.insert(
+            0,
+            f"copied {args.urdf.name} to robot.urdf and the {len(copied.meshes)} "
+            "files it names (meshes, materials) beside it (--no-copy to name it "
+            "where it is)",
+        )
+        setup.warnings += [
+            f"no file found for the URDF's mesh {m} (left as it was)"
+            for m in copied.missing
+        ]
+    path = write_robot_yaml(setup, out)
     print(f"wrote {path}; assumed:")
     for line in setup.assumptions:
         print(f"  - {line}")
+    for line in setup.warnings:
+        print(f"warning: {line}")
     print(
-        f"use it as robot: {{name: {args.out}}} in a scenario "
+        f"use it as robot: {{name: {out}}} in a scenario "
         "(include: cat for constraint-aware teleoperation)"
     )
     return 0

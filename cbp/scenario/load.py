@@ -84,6 +84,11 @@ def load_scenario(
             robot = load_robot(
                 robot_spec.name, base=robot_spec.base, relative_to=path.parent
             )
+        except ScenarioError as exc:  # robot.yaml's problems, at its lines
+            doc.problems += [
+                f"{exc.path}, {p}" if p.startswith("line ") else f"{exc.path}: {p}"
+                for p in exc.problems
+            ]
         except CbpError as exc:
             doc.report(_key_node(root, "robot", "name"), "robot.name", str(exc))
     entries: list[Entry] = []
