@@ -29,6 +29,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "reason is in metrics.json); 130 interrupted."
         ),
     )
+    parser.add_argument("--version", action="version", version=f"cbp {_version()}")
     noise = parser.add_mutually_exclusive_group()
     noise.add_argument(
         "-q", "--quiet", action="store_true", help="log errors only (no warnings)"
@@ -89,6 +90,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     check = sub.add_parser("check", help="validate scenario files without running them")
     check.add_argument("scenarios", type=Path, nargs="+")
+    _add_set(check, "override a value in every scenario checked (as for run)")
     sub.add_parser("plugins", help="list every plugin with its parameters")
     pairs = sub.add_parser(
         "robot-pairs",
@@ -231,7 +233,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _compare(args.scenario, args.methods, args.out, args.jobs, overrides)
     if args.command == "teleop":
         overrides = _overrides(args.set)
-        if overrides is None:
+        if overrides is None or _missing_extra("teleop", "viewer"):
             return 2
         from cbp.teleop_page import serve_teleop
 
@@ -241,10 +243,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "bench":
         return _bench(args.quick, args.out, args.results)
     if args.command == "check":
-        return _check(args.scenarios)
+        overrides = _overrides(args.set)
+        if overrides is None:
+            return 2
+        return _check(args.scenarios, overrides)
     if args.command == "robot":
         return _robot_init(args)
     if args.command == "view":
+        if _missing_extra("view", "viewer"):
+            return 2
         from cbp.viewer import serve
 
         try:
@@ -263,6 +270,40 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(path)
         return 0
     return _plugins()
+
+
+#: The modules each optional extra of pyproject.toml brings, by extra.
+EXTRAS = {"viewer": ("viser", "yourdfpy")}
+#: The example ``cbp examples`` suggests running first: CAT reaches across
+#: three boards without touching them (the demo's scenario).
+FIRST_EXAMPLE = "cat_boards.yaml"
+
+
+def _version() -> str:
+    """The installed distribution's version."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("cbp")
+    except PackageNotFoundError:
+        return "(not installed)"
+
+
+def _missing_extra(command: str, extra: str) -> bool:
+    """Say which extra to install when a module of ``extra`` cannot be imported."""
+    import importlib
+
+    for module in EXTRAS[extra]:
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError:
+            print(
+                f"cbp {command} needs the {extra} extra ({module} is not "
+                f"installed): pip install 'cbp[{extra}]'",
+                file=sys.stderr,
+            )
+            return True
+    return False
 
 
 def _add_set(parser: argparse.ArgumentParser, help_text: str) -> None:
@@ -342,7 +383,11 @@ def _examples(out: Path) -> int:
     print(f"copied {len(names)} scenarios (and configs/, sweeps/) to {out}:")
     for name in names:
         print(f"  {name}")
-    print(f"run one with: cbp run {out / names[0]}" if names else "")
+    if FIRST_EXAMPLE in names:
+        print(
+            f"run one with: cbp run {out / FIRST_EXAMPLE} (CAT over three boards, "
+            "without touching them)"
+        )
     return 0
 
 
@@ -533,13 +578,13 @@ def _num(value: float | None, scale: float = 1.0) -> str:
     return "n/a" if value is None else f"{value * scale:.1f}"
 
 
-def _check(paths: Sequence[Path]) -> int:
+def _check(paths: Sequence[Path], overrides: dict[str, str]) -> int:
     from cbp.scenario import load_scenario
 
     status = 0
     for path in paths:
         try:
-            load_scenario(path)
+            load_scenario(path, overrides=overrides)
         except CbpError as exc:
             print(exc, file=sys.stderr)
             status = 2

@@ -91,7 +91,9 @@ class Document:
         if mark is not None:  # nodes made by --set have none
             line = f"line {mark.line + 1}: "
             name = mark.name
-            if name != self.path:
+            if name.startswith("--set "):  # a command-line value: one line
+                line = f"{name}: "
+            elif name != self.path:
                 line = f"{name}, {line}"
             # A value from an included file: the include lines that bring it in,
             # from this file's.
