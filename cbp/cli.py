@@ -594,8 +594,8 @@ def _check(paths: Sequence[Path], overrides: dict[str, str]) -> int:
 
 
 def _plugins() -> int:
-    from plugins.constraints import CONSTRAINTS
-    from plugins.tasks import TASKS
+    from cbp.plugins.constraints import CONSTRAINTS
+    from cbp.plugins.tasks import TASKS
 
     registry: Registry[typing.Any]
     for registry in (TASKS, CONSTRAINTS):

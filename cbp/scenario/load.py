@@ -54,14 +54,15 @@ def load_scenario(
         path: the YAML file.
         overrides: values that replace the file's, by dotted path
             (``{"perception.source": "depth_camera"}``; values are YAML).
-        tasks: task registry (default: the in-tree ``plugins.tasks.TASKS``).
-        constraints: constraint registry (default ``plugins.constraints.CONSTRAINTS``).
+        tasks: task registry (default: the in-tree ``cbp.plugins.tasks.TASKS``).
+        constraints: constraint registry (default:
+            ``cbp.plugins.constraints.CONSTRAINTS``).
 
     Raises:
         ScenarioError: listing every problem in the file.
     """
-    from plugins.constraints import CONSTRAINTS
-    from plugins.tasks import TASKS
+    from cbp.plugins.constraints import CONSTRAINTS
+    from cbp.plugins.tasks import TASKS
 
     tasks = TASKS if tasks is None else tasks
     constraints = CONSTRAINTS if constraints is None else constraints
