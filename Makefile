@@ -29,7 +29,6 @@ $(DOCS_STAMP): pyproject.toml | $(BIN)/python
 
 demo: $(STAMP)
 	$(BIN)/cbp compare scenarios/cat_boards.yaml --methods cat,ik,mp,jt --out $(OUT)
-	@echo "Report: $(OUT)/report.md"
 
 # Drive the arm through the boards from the browser (prints the address).
 teleop: $(DEV_STAMP)

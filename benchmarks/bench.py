@@ -159,18 +159,18 @@ def measure_interleaved(
 
 def _engine(robot: Any, solver: str) -> tuple[Any, Any]:
     from cbp.engine import Engine
-    from cbp.qp import Entry
-    from plugins.constraints.joint_limits_constraint import (
+    from cbp.plugins.constraints.joint_limits_constraint import (
         JointLimitsConstraint,
         JointLimitsParams,
     )
-    from plugins.constraints.joint_velocity_constraint import (
+    from cbp.plugins.constraints.joint_velocity_constraint import (
         JointVelocityConstraint,
         JointVelocityParams,
     )
-    from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
-    from plugins.tasks.joint_step_task import JointStepParams, JointStepTask
-    from plugins.tasks.posture_task import PostureParams, PostureTask
+    from cbp.plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+    from cbp.plugins.tasks.joint_step_task import JointStepParams, JointStepTask
+    from cbp.plugins.tasks.posture_task import PostureParams, PostureTask
+    from cbp.qp import Entry
 
     goal = GoalPoseTask(GoalPoseParams(frame="panda_hand", clip="independent"), robot)
     entries = [
@@ -536,11 +536,11 @@ def _cat_step(
     ``capacity`` replaces the contact constraint's row capacity (for scaling).
     """
     from cbp.engine import Engine
-    from cbp.qp import Entry
-    from plugins.constraints.contact_normals_constraint import (
+    from cbp.plugins.constraints.contact_normals_constraint import (
         ContactNormalsConstraint,
         ContactParams,
     )
+    from cbp.qp import Entry
 
     world = scenario.world_for_run()
     entries = list(scenario.entries)

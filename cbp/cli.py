@@ -29,6 +29,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "reason is in metrics.json); 130 interrupted."
         ),
     )
+    parser.add_argument("--version", action="version", version=f"cbp {_version()}")
     noise = parser.add_mutually_exclusive_group()
     noise.add_argument(
         "-q", "--quiet", action="store_true", help="log errors only (no warnings)"
@@ -89,6 +90,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     check = sub.add_parser("check", help="validate scenario files without running them")
     check.add_argument("scenarios", type=Path, nargs="+")
+    _add_set(check, "override a value in every scenario checked (as for run)")
     sub.add_parser("plugins", help="list every plugin with its parameters")
     pairs = sub.add_parser(
         "robot-pairs",
@@ -114,7 +116,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     init.add_argument("--out", type=Path, required=True, help="the robot's folder")
     init.add_argument("--name", default=None, help="default: the URDF's robot name")
     init.add_argument(
-        "--end-effector", default=None, help="default: last link of the longest chain"
+        "--end-effector",
+        default=None,
+        help="default: the hand (where the fingers attach), else the last link",
+    )
+    init.add_argument(
+        "--control-gripper",
+        action="store_true",
+        help="keep the gripper's joints in the QP (default: locked, half open)",
+    )
+    init.add_argument(
+        "--no-copy",
+        action="store_true",
+        help="name the URDF where it is (a relative path) instead of copying it "
+        "and its meshes into the robot's folder",
     )
     init.add_argument(
         "--samples",
@@ -218,7 +233,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _compare(args.scenario, args.methods, args.out, args.jobs, overrides)
     if args.command == "teleop":
         overrides = _overrides(args.set)
-        if overrides is None:
+        if overrides is None or _missing_extra("teleop", "viewer"):
             return 2
         from cbp.teleop.serve import serve_teleop
 
@@ -228,10 +243,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "bench":
         return _bench(args.quick, args.out, args.results)
     if args.command == "check":
-        return _check(args.scenarios)
+        overrides = _overrides(args.set)
+        if overrides is None:
+            return 2
+        return _check(args.scenarios, overrides)
     if args.command == "robot":
         return _robot_init(args)
     if args.command == "view":
+        if _missing_extra("view", "viewer"):
+            return 2
         from cbp.viewer import serve
 
         try:
@@ -252,6 +272,40 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _plugins()
 
 
+#: The modules each optional extra of pyproject.toml brings, by extra.
+EXTRAS = {"viewer": ("viser", "yourdfpy")}
+#: The example ``cbp examples`` suggests running first: CAT reaches across
+#: three boards without touching them (the demo's scenario).
+FIRST_EXAMPLE = "cat_boards.yaml"
+
+
+def _version() -> str:
+    """The installed distribution's version."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("cbp")
+    except PackageNotFoundError:
+        return "(not installed)"
+
+
+def _missing_extra(command: str, extra: str) -> bool:
+    """Say which extra to install when a module of ``extra`` cannot be imported."""
+    import importlib
+
+    for module in EXTRAS[extra]:
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError:
+            print(
+                f"cbp {command} needs the {extra} extra ({module} is not "
+                f"installed): pip install 'cbp[{extra}]'",
+                file=sys.stderr,
+            )
+            return True
+    return False
+
+
 def _add_set(parser: argparse.ArgumentParser, help_text: str) -> None:
     """The repeatable ``--set KEY=VALUE`` scenario override (read by _overrides)."""
     parser.add_argument(
@@ -261,6 +315,7 @@ def _add_set(parser: argparse.ArgumentParser, help_text: str) -> None:
 
 def _robot_init(args: argparse.Namespace) -> int:
     from cbp.robot_init import describe_urdf, relative_urdf, write_robot_yaml
+    from cbp.urdf_files import copy_urdf
 
     pairs = _overrides(args.home)
     if pairs is None:
@@ -270,6 +325,10 @@ def _robot_init(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"--home: {exc}", file=sys.stderr)
         return 2
+    out: Path = args.out
+    if (out / "robot.yaml").exists():
+        print(f"{out / 'robot.yaml'} exists; choose a new folder", file=sys.stderr)
+        return 2
     try:
         setup = describe_urdf(
             args.urdf,
@@ -278,17 +337,32 @@ def _robot_init(args: argparse.Namespace) -> int:
             home=home or None,
             samples=args.samples,
             seed=args.seed,
-            urdf_entry=relative_urdf(args.urdf, args.out),
+            urdf_entry=relative_urdf(args.urdf, out) if args.no_copy else "robot.urdf",
+            lock_gripper=not args.control_gripper,
         )
+        copied = None if args.no_copy else copy_urdf(args.urdf, out)
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
-    path = write_robot_yaml(setup, args.out)
+    if copied is not None:
+        setup.assumptions.insert(
+            0,
+            f"copied {args.urdf.name} to robot.urdf and the {len(copied.meshes)} "
+            "files it names (meshes, materials) beside it (--no-copy to name it "
+            "where it is)",
+        )
+        setup.warnings += [
+            f"no file found for the URDF's mesh {m} (left as it was)"
+            for m in copied.missing
+        ]
+    path = write_robot_yaml(setup, out)
     print(f"wrote {path}; assumed:")
     for line in setup.assumptions:
         print(f"  - {line}")
+    for line in setup.warnings:
+        print(f"warning: {line}")
     print(
-        f"use it as robot: {{name: {args.out}}} in a scenario "
+        f"use it as robot: {{name: {out}}} in a scenario "
         "(include: cat for constraint-aware teleoperation)"
     )
     return 0
@@ -309,7 +383,11 @@ def _examples(out: Path) -> int:
     print(f"copied {len(names)} scenarios (and configs/, sweeps/) to {out}:")
     for name in names:
         print(f"  {name}")
-    print(f"run one with: cbp run {out / names[0]}" if names else "")
+    if FIRST_EXAMPLE in names:
+        print(
+            f"run one with: cbp run {out / FIRST_EXAMPLE} (CAT over three boards, "
+            "without touching them)"
+        )
     return 0
 
 
@@ -501,13 +579,13 @@ def _num(value: float | None, scale: float = 1.0) -> str:
     return "n/a" if value is None else f"{value * scale:.1f}"
 
 
-def _check(paths: Sequence[Path]) -> int:
+def _check(paths: Sequence[Path], overrides: dict[str, str]) -> int:
     from cbp.scenario import load_scenario
 
     status = 0
     for path in paths:
         try:
-            load_scenario(path)
+            load_scenario(path, overrides=overrides)
         except CbpError as exc:
             print(exc, file=sys.stderr)
             status = 2
@@ -517,8 +595,8 @@ def _check(paths: Sequence[Path]) -> int:
 
 
 def _plugins() -> int:
-    from plugins.constraints import CONSTRAINTS
-    from plugins.tasks import TASKS
+    from cbp.plugins.constraints import CONSTRAINTS
+    from cbp.plugins.tasks import TASKS
 
     registry: Registry[typing.Any]
     for registry in (TASKS, CONSTRAINTS):

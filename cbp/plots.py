@@ -11,13 +11,16 @@ CAT paper, one or several methods each (:func:`plot_runs`):
 Orbit paper, one run (:func:`plot_orbit`): distance, view error, roll,
 altitude, obstacle distance and velocities over time.
 
-Each figure is drawn when the traces have its columns (:class:`~cbp.trace.Trace`).
+Each figure is drawn when the traces have its columns (:class:`~cbp.trace.Trace`),
+in :func:`readable_axes` style.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import functools
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import ParamSpec, TypeVar
 
 import numpy as np
 
@@ -25,7 +28,30 @@ from cbp.methods import method_colour
 from cbp.robot import FloatArray
 from cbp.trace import Trace
 
-__all__ = ["colour", "plot_orbit", "plot_runs"]
+__all__ = ["colour", "plot_orbit", "plot_runs", "readable_axes"]
+
+P = ParamSpec("P")
+R = TypeVar("R")
+
+
+def readable_axes(draw: Callable[P, R]) -> Callable[P, R]:
+    """Decorate a function that draws figures: readable tick labels in them.
+
+    Tick labels show the values themselves: no "+1.000e3" offset and no "1e-5"
+    factor above an axis (a reader cannot apply them in their head); decimals
+    are written out down to 1e-9 and up to 1e9.
+    """
+
+    @functools.wraps(draw)
+    def styled(*args: P.args, **kwargs: P.kwargs) -> R:
+        import matplotlib
+
+        with matplotlib.rc_context(
+            {"axes.formatter.useoffset": False, "axes.formatter.limits": (-9, 9)}
+        ):
+            return draw(*args, **kwargs)
+
+    return styled
 
 
 def colour(method: str) -> tuple[float, float, float]:
@@ -34,6 +60,7 @@ def colour(method: str) -> tuple[float, float, float]:
     return (r / 255.0, g / 255.0, b / 255.0)
 
 
+@readable_axes
 def plot_runs(traces: Mapping[str, Trace], out: Path, title: str) -> list[Path]:
     """Write the figures ``traces`` (by method) have columns for into ``out``.
 
@@ -154,6 +181,7 @@ def _save(fig: object, path: Path) -> Path:
     return path
 
 
+@readable_axes
 def plot_orbit(trace: Trace, out: Path, title: str) -> list[Path]:
     """The orbit paper's figures (Figs. 7-18) for one run, as far as it has them.
 

@@ -24,6 +24,7 @@ from cbp.plots import plot_runs
 from cbp.robot import FloatArray
 from cbp.scenario.runtime import Scenario
 from cbp.scene_file import write_scene
+from cbp.story import SCENE_FIGURE, plot_scene, run_sentence
 from cbp.trace import Trace
 
 __all__ = ["summary_line", "write_outputs"]
@@ -86,12 +87,20 @@ def _write(
         for name, trace in traces.items()
     }
     (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n")
+    scene = plot_scene(
+        scenario.spec.world.objects, traces, out / SCENE_FIGURE, scenario.spec.name
+    )
     figures = plot_runs(traces, out, scenario.spec.name)
     keys = list(dict.fromkeys(k for m in metrics.values() for k in m))
+    story = [run_sentence(name, trace, metrics[name]) for name, trace in traces.items()]
     lines = [
         f"# {scenario.spec.name}: {', '.join(traces)}",
         "",
         scenario.spec.description.strip(),
+        "",
+        *(f"- {sentence}" for sentence in story if sentence),
+        "",
+        f"![the scene, the goal's path and each method's hand path]({scene.name})",
         "",
         "| metric | " + " | ".join(traces) + " |",
         "|---|" + "---|" * len(traces),
@@ -139,6 +148,8 @@ def summary_line(scenario: Scenario, method: str, metrics: Mapping[str, Any]) ->
 
 
 def _fmt(value: object) -> str:
+    if value is None:
+        return "n/a"
     if isinstance(value, float):
         return f"{value:.4g}"
     return str(value)

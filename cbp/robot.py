@@ -19,6 +19,8 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
+import yaml
+from yaml.nodes import Node
 
 from cbp.data import data_dir, is_file
 from cbp.errors import (
@@ -28,7 +30,7 @@ from cbp.errors import (
     RobotNotFoundError,
     close_matches,
 )
-from cbp.schema import load_file
+from cbp.schema import Document
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -241,28 +243,9 @@ class RobotModel:
             description: the robot.yaml contents, when loading a robot folder.
         """
         path = Path(urdf)
-        if not is_file(path):
-            raise ConfigError(f"URDF file not found: {path}")
-        try:
-            if base == "fixed":
-                model = pin.buildModelFromUrdf(str(path))
-            elif base == "planar":
-                model = pin.buildModelFromUrdf(str(path), pin.JointModelPlanar())
-            elif base == "floating":
-                model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-            else:
-                raise ConfigError(
-                    f"unknown base '{base}'; expected fixed, planar or floating"
-                )
-        except (RuntimeError, ValueError) as exc:
-            raise ConfigError(f"cannot load URDF {path}: {exc}") from exc
+        model = _build_model(path, base)
         if locked_joints:
-            full = cls(model, name=name)
-            ids = [full.joint_id(j) for j in locked_joints]
-            q_ref = pin.neutral(model)
-            for joint, value in locked_joints.items():
-                q_ref[model.joints[full.joint_id(joint)].idx_q] = value
-            model = pin.buildReducedModel(model, ids, q_ref)
+            model = _reduced(model, locked_joints, name)
         return cls(model, name=name, description=description, urdf_path=path, base=base)
 
     @classmethod
@@ -279,17 +262,30 @@ class RobotModel:
         path ``name`` is relative to ``relative_to`` when given.
         """
         folder = find_robot_folder(name, relative_to)
-        description = load_file(RobotDescription, folder / "robot.yaml")
-        robot = cls.from_urdf(
-            folder / description.urdf,
-            base=base or description.base,
-            locked_joints=description.locked_joints,
+        doc = Document.from_file(folder / "robot.yaml")
+        description = doc.build(RobotDescription, doc.root, "")
+        doc.raise_if_problems()
+        base = base or description.base
+        path = folder / description.urdf
+        try:
+            model = _build_model(path, base)
+        except ConfigError as exc:
+            doc.report(_value_node(doc.root, "urdf"), "urdf", exc.message)
+            doc.raise_if_problems()
+            raise  # unreachable: the problem was reported
+        _check_names(
+            doc, description, cls(model, name=description.name, urdf_path=path)
+        )
+        if description.locked_joints:
+            model = _reduced(model, description.locked_joints, description.name)
+        robot = cls(
+            model,
             name=description.name,
             description=description,
+            urdf_path=path,
+            base=base,
         )
         robot.folder = folder
-        for joint in description.home:
-            robot.joint_id(joint)  # a bad name in robot.yaml fails loudly here
         return robot
 
     # ------------------------------------------------------------------ sizes and names
@@ -303,6 +299,22 @@ class RobotModel:
         if self.description is not None:
             return self.description.end_effector
         return self.frame_names[-1]
+
+    @property
+    def urdf_name(self) -> str:
+        """How messages name the URDF: its file name, else the robot's name."""
+        if self.urdf_path is not None:
+            return self.urdf_path.name
+        return f"robot '{self.name}'"
+
+    @property
+    def source(self) -> Path | None:
+        """The file the robot was described in: its robot.yaml, else its URDF."""
+        if self.folder is not None and self.description is not None:
+            yaml_file = self.folder / "robot.yaml"
+            if is_file(yaml_file):
+                return yaml_file
+        return self.urdf_path
 
     @property
     def nq(self) -> int:
@@ -561,3 +573,115 @@ def compact_rows(rows: IntArray) -> IndexRows:
 def rows_count(rows: IndexRows, n: int) -> int:
     """Number of entries ``rows`` selects from a vector of length ``n``."""
     return len(range(n)[rows]) if isinstance(rows, slice) else int(rows.size)
+
+
+def _build_model(path: Path, base: BaseType) -> pin.Model:
+    """The URDF's model on a fixed, planar or floating base."""
+    if not is_file(path):
+        raise ConfigError(f"URDF file not found: {path}")
+    try:
+        if base == "fixed":
+            return pin.buildModelFromUrdf(str(path))
+        if base == "planar":
+            return pin.buildModelFromUrdf(str(path), pin.JointModelPlanar())
+        if base == "floating":
+            return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+    except (RuntimeError, ValueError) as exc:
+        raise ConfigError(f"cannot load URDF {path}: {exc}") from exc
+    raise ConfigError(f"unknown base '{base}'; expected fixed, planar or floating")
+
+
+def _reduced(
+    model: pin.Model, locked_joints: Mapping[str, float], name: str | None
+) -> pin.Model:
+    """The model without ``locked_joints``, each held at its given position."""
+    full = RobotModel(model, name=name)
+    ids = [full.joint_id(j) for j in locked_joints]
+    q_ref = pin.neutral(model)
+    for joint, value in locked_joints.items():
+        q_ref[model.joints[full.joint_id(joint)].idx_q] = value
+    return pin.buildReducedModel(model, ids, q_ref)
+
+
+def _value_node(root: Node | None, *keys: str) -> Node | None:
+    """The value at ``keys`` in a mapping tree, or None."""
+    node = root
+    for key in keys:
+        if not isinstance(node, yaml.MappingNode):
+            return None
+        node = next(
+            (
+                v
+                for k, v in node.value
+                if isinstance(k, yaml.ScalarNode) and k.value == key
+            ),
+            None,
+        )
+    return node
+
+
+def _key_nodes(root: Node | None, *keys: str) -> dict[str, Node]:
+    """Each key of the mapping at ``keys``, by name, for problems at that line."""
+    node = _value_node(root, *keys)
+    if not isinstance(node, yaml.MappingNode):
+        return {}
+    return {k.value: k for k, _ in node.value if isinstance(k, yaml.ScalarNode)}
+
+
+def _check_names(
+    doc: Document, description: RobotDescription, full: RobotModel
+) -> None:
+    """Every joint and link robot.yaml names is in the URDF (problems at their lines).
+
+    ``full`` is the model before locking joints; a joint robot.yaml locks cannot
+    have a home, a velocity or an acceleration limit.
+    """
+    locked = set(description.locked_joints)
+    joints, frames = full.joint_names, full.frame_names
+    for key, names in (
+        ("locked_joints", description.locked_joints),
+        ("home", description.home),
+        ("velocity_limits", description.velocity_limits),
+        ("acceleration_limits", description.acceleration_limits),
+    ):
+        nodes = _key_nodes(doc.root, key)
+        for joint in names:
+            if joint not in joints:
+                message = (
+                    f"no joint '{joint}' in {full.urdf_name}{_matches(joint, joints)}"
+                )
+            elif key != "locked_joints" and joint in locked:
+                message = (
+                    f"joint '{joint}' is locked (locked_joints), so it is not in the "
+                    "model: remove it here"
+                )
+            else:
+                continue
+            doc.report(nodes.get(joint), f"{key}.{joint}", message)
+    for key in ("end_effector", "wrist_link"):
+        frame = getattr(description, key)
+        if frame is not None and frame not in frames:
+            doc.report(
+                _value_node(doc.root, key),
+                key,
+                f"no frame '{frame}' in {full.urdf_name}{_matches(frame, frames)}",
+            )
+    collision = description.collision
+    listed = [
+        ("ignore_links", i, link) for i, link in enumerate(collision.ignore_links)
+    ]
+    listed += [
+        ("ignore_pairs", i, link)
+        for i, pair in enumerate(collision.ignore_pairs)
+        for link in pair
+    ]
+    for key, i, link in listed:
+        if link not in frames:
+            node = _value_node(doc.root, "collision", key)
+            item = node.value[i] if isinstance(node, yaml.SequenceNode) else None
+            doc.report(
+                item or node,
+                f"collision.{key}[{i}]",
+                f"no link '{link}' in {full.urdf_name}{_matches(link, frames)}",
+            )
+    doc.raise_if_problems()

@@ -4,8 +4,11 @@
 :func:`describe_urdf` reads a URDF (fixed base, revolute and prismatic joints)
 and chooses what ``robot.yaml`` needs:
 
-* the end effector: the named frame, else the last link of the longest chain
-  (the link farthest from the root, in joints);
+* the end effector: the named frame, else the hand: the link a gripper's
+  joints (fingers, knuckles) are attached to, else the last link of the longest
+  chain (the link farthest from the root, in joints);
+* locked joints: the gripper's, held at the middle of their range (a teleoperated
+  arm moves its hand; the fingers are not part of the QP);
 * home: the given posture, else the middle of every joint's range;
 * velocity limits: the URDF's (``<limit velocity=...>``); a joint without one
   gets :data:`DEFAULT_VELOCITY`;
@@ -15,8 +18,10 @@ and chooses what ``robot.yaml`` needs:
   do) in sampled configurations (MoveIt's setup-assistant method,
   :func:`~cbp.collision.geometry.find_ignorable_pairs`).
 
-``cbp robot init URDF --out DIR`` writes ``DIR/robot.yaml`` (the URDF named by
-a path relative to DIR) and prints what it assumed. A scenario may also name a
+``cbp robot init URDF --out DIR`` copies the URDF and its meshes into DIR
+(:mod:`cbp.urdf_files`), writes ``DIR/robot.yaml`` and prints what it assumed,
+with a warning for each joint whose range is narrower than twice a shipped
+configuration's joint-limit margin. A scenario may also name a
 URDF directly (``robot: {name: path/to/arm.urdf}``): the same choices are made
 in memory, without the pair sampling (adjacent links are skipped only).
 """
@@ -35,6 +40,7 @@ import yaml
 from cbp.data import is_file
 from cbp.errors import ConfigError, RobotNotFoundError
 from cbp.files import MAX_YAML_BYTES, check_file
+from cbp.hand import find_hand, mimic_joints
 from cbp.robot import BaseType, RobotDescription, RobotModel
 from cbp.schema import from_plain
 
@@ -47,6 +53,7 @@ __all__ = [
     "RobotSetup",
     "describe_urdf",
     "load_robot",
+    "margin_warnings",
     "write_robot_yaml",
 ]
 
@@ -63,10 +70,12 @@ class RobotSetup:
     Attributes:
         document: the robot.yaml contents.
         assumptions: one sentence per choice made for the user.
+        warnings: one sentence per thing that will not work as it is.
     """
 
     document: dict[str, Any]
     assumptions: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
 
 
 def describe_urdf(
@@ -78,18 +87,20 @@ def describe_urdf(
     samples: int = 2000,
     seed: int = 0,
     urdf_entry: str | None = None,
+    lock_gripper: bool = True,
 ) -> RobotSetup:
     """Choose robot.yaml's contents for ``urdf`` (see the module docstring).
 
     Args:
         urdf: the URDF file.
         name: the robot's name (default: the URDF's ``<robot name>``).
-        end_effector: the frame goal tasks move (default: the last link of the
-            longest chain).
+        end_effector: the frame goal tasks move (default: the hand, else the
+            last link of the longest chain).
         home: home posture by joint name (default: mid-range).
         samples: configurations sampled for self-collision pairs (0: none).
         seed: seed of the sampling.
         urdf_entry: how robot.yaml names the URDF (default: its path).
+        lock_gripper: lock the gripper's joints (found as for the hand).
 
     Raises:
         ConfigError: the URDF cannot be read, or a named frame or joint is not
@@ -102,14 +113,30 @@ def describe_urdf(
         raise ConfigError(f"cannot load URDF {urdf}: {exc}") from None
     if model.njoints < 2:
         raise ConfigError(f"URDF {urdf} has no movable joint")
-    robot = RobotModel(model, name=name or model.name)
     notes: list[str] = []
-    if end_effector is None:
-        end_effector = _last_link(model)
+    hand = find_hand(model)
+    locked: dict[str, float] = {}
+    if hand.gripper_joints and lock_gripper:
+        full = RobotModel(model)
+        middle = full.middle()
+        locked = {
+            j: round(float(middle[full.joint_q_slice(j)][0]), 4)
+            for j in hand.gripper_joints
+        }
+        for joint, (driver, factor, offset) in mimic_joints(urdf).items():
+            if joint in locked and driver in locked:  # where the driver puts it
+                locked[joint] = round(factor * locked[driver] + offset, 4)
         notes.append(
-            f"end effector: {end_effector}, the last link of the longest chain "
-            "(--end-effector to choose another)"
+            "locked joints (the gripper's, held at the middle of their range; "
+            "--control-gripper keeps them in the QP): "
+            + ", ".join(f"{j} {v:g}" for j, v in locked.items())
         )
+    elif hand.gripper_joints:
+        notes.append(f"gripper joints kept in the QP: {', '.join(hand.gripper_joints)}")
+    robot = RobotModel.from_urdf(urdf, locked_joints=locked, name=name or model.name)
+    if end_effector is None:
+        end_effector = hand.frame
+        notes.append(f"end effector: {hand.frame}, {hand.reason}")
     else:
         robot.frame_id(end_effector)  # a ConfigError naming the choices
     joints = robot.joint_names
@@ -139,14 +166,16 @@ def describe_urdf(
         "name": robot.name,
         "urdf": urdf_entry or str(urdf),
         "end_effector": end_effector,
-        "home": posture,
-        "acceleration_limits": dict.fromkeys(joints, DEFAULT_ACCELERATION),
     }
+    if locked:
+        document["locked_joints"] = locked
+    document["home"] = posture
+    document["acceleration_limits"] = dict.fromkeys(joints, DEFAULT_ACCELERATION)
     if velocity:
         document["velocity_limits"] = velocity
     # The collision geometry, loaded once: needed for the self-collision pairs
     # (its errors then stop here), wanted for the depth cameras' note.
-    geometry = _geometry(urdf, robot.name, required=samples > 0)
+    geometry = _geometry(robot, required=samples > 0)
     if samples > 0:
         from cbp.collision.geometry import find_ignorable_pairs
 
@@ -159,7 +188,49 @@ def describe_urdf(
         )
     if geometry is not None and geometry.shapes:
         notes.append(_visual_note(geometry))
-    return RobotSetup(document, notes)
+    return RobotSetup(document, notes, margin_warnings(robot))
+
+
+def margin_warnings(robot: RobotModel) -> list[str]:
+    """Joints too short for the joint-limit margin of a shipped configuration.
+
+    One sentence per (configuration, joint) whose range is narrower than twice
+    the margin: such a scenario fails to load with that robot.
+    """
+    from cbp.data import config_path, shipped_configs
+    from cbp.schema import Document
+
+    warnings = []
+    ranges = {}
+    for joint in robot.joint_names:
+        rows = robot.joint_q_slice(joint)
+        lo, hi = robot.lower_limits[rows], robot.upper_limits[rows]
+        if lo.size == 1 and np.isfinite(lo[0]) and np.isfinite(hi[0]):
+            ranges[joint] = (float(lo[0]), float(hi[0]))
+    for config in shipped_configs():
+        path = config_path(config)
+        assert path is not None
+        doc = Document.from_file(path)
+        doc.resolve_includes()
+        plain = doc.plain(doc.root) if doc.root is not None else {}
+        for entry in plain.get("constraints") or []:
+            if entry.get("type") != "joint_limits":
+                continue
+            params = entry.get("params") or {}
+            margin = float(params.get("margin", 0.0))
+            joints = params.get("joints") or list(ranges)
+            short = [
+                f"{joint} [{ranges[joint][0]:g}, {ranges[joint][1]:g}]"
+                for joint in joints
+                if joint in ranges and ranges[joint][1] - ranges[joint][0] < 2 * margin
+            ]
+            if short:
+                warnings.append(
+                    f"'include: {config}' keeps joints {margin:g} from their limits, "
+                    f"more than half the range of {', '.join(short)}: lock them "
+                    "(locked_joints) or set a smaller margin in your scenario"
+                )
+    return warnings
 
 
 def load_robot(
@@ -186,6 +257,7 @@ def load_robot(
     robot = RobotModel.from_urdf(
         path,
         base=base or description.base,
+        locked_joints=description.locked_joints,
         name=description.name,
         description=description,
     )
@@ -194,10 +266,12 @@ def load_robot(
 
 
 def write_robot_yaml(setup: RobotSetup, out: Path) -> Path:
-    """Write ``out/robot.yaml`` with the assumptions as a header comment."""
+    """Write ``out/robot.yaml`` with the assumptions and warnings as a header."""
     out.mkdir(parents=True, exist_ok=True)
     path = out / "robot.yaml"
-    header = "".join(f"# {line}\n" for line in setup.assumptions)
+    header = "".join(f"# {line}\n" for line in setup.assumptions) + "".join(
+        f"# warning: {line}\n" for line in setup.warnings
+    )
     path.write_text(
         "# Written by cbp robot init; assumptions:\n"
         + header
@@ -211,27 +285,12 @@ def relative_urdf(urdf: Path, out: Path) -> str:
     return os.path.relpath(urdf.resolve(), out.resolve())
 
 
-def _last_link(model: pin.Model) -> str:
-    """The body frame of the deepest joint (most joints from the root)."""
-    depth = [0] * model.njoints
-    for j in range(1, model.njoints):
-        depth[j] = depth[model.parents[j]] + 1
-    deepest = max(range(1, model.njoints), key=lambda j: (depth[j], j))
-    # The last body frame attached to that joint (links fixed to it included).
-    bodies = [
-        f.name
-        for f in model.frames
-        if f.parentJoint == deepest and f.type == pin.FrameType.BODY
-    ]
-    return str(bodies[-1])
-
-
-def _geometry(urdf: Path, name: str, required: bool) -> RobotGeometry | None:
+def _geometry(robot: RobotModel, required: bool) -> RobotGeometry | None:
     """The URDF's collision geometry; None when it cannot be read and not required."""
     from cbp.collision.geometry import RobotGeometry
 
     try:
-        return RobotGeometry(RobotModel.from_urdf(urdf, name=name))
+        return RobotGeometry(robot)
     except ConfigError:
         if required:
             raise

@@ -62,6 +62,8 @@ class Document:
         """Compose ``text`` into nodes; a syntax error becomes a ScenarioError."""
         self.path = path
         self.problems: list[str] = []
+        #: Included file -> (the file that includes it, the include line there).
+        self._included_by: dict[str, tuple[str, str]] = {}
         self.root: Node | None = _compose(text, path)
         self._loader = Loader("")
         self._loader.name = path
@@ -87,8 +89,18 @@ class Document:
         line = ""
         mark = node.start_mark if node is not None else None
         if mark is not None:  # nodes made by --set have none
-            where_file = f"{mark.name}, " if mark.name != self.path else ""
-            line = f"{where_file}line {mark.line + 1}: "
+            line = f"line {mark.line + 1}: "
+            name = mark.name
+            if name.startswith("--set "):  # a command-line value: one line
+                line = f"{name}: "
+            elif name != self.path:
+                line = f"{name}, {line}"
+            # A value from an included file: the include lines that bring it in,
+            # from this file's.
+            while name in self._included_by:
+                name, include = self._included_by[name]
+                at = include if name == self.path else f"{name}, {include}"
+                line = f"{at} -> {line}"
         self.problems.append(f"{line}{where or '<document>'}: {message}")
 
     def raise_if_problems(self) -> None:
@@ -154,6 +166,10 @@ class Document:
                 self.report(node, key, "; ".join(exc.problems))
                 continue
             merged.append(target)
+            self._included_by[str(target)] = (
+                str(path),
+                f"line {node.start_mark.line + 1} ({key}: {name})",
+            )
             self._merge_includes(included.root, target, key, merged)
             if not isinstance(included.root, yaml.MappingNode):
                 self.report(node, key, f"'{name}' must hold a mapping of scenario keys")

@@ -22,46 +22,49 @@ from cbp.collision import (
     RobotGeometry,
 )
 from cbp.plugin import Plugin
-from cbp.robot import FloatArray, RobotModel
-from cbp.state import RobotState
-from plugins.constraints.contact_normals_constraint import (
+from cbp.plugins.constraints.contact_normals_constraint import (
     ContactNormalsConstraint,
     ContactParams,
 )
-from plugins.constraints.joint_acceleration_constraint import (
+from cbp.plugins.constraints.joint_acceleration_constraint import (
     JointAccelerationConstraint,
     JointAccelerationParams,
 )
-from plugins.constraints.joint_limits_constraint import (
+from cbp.plugins.constraints.joint_limits_constraint import (
     JointLimitsConstraint,
     JointLimitsParams,
 )
-from plugins.constraints.joint_velocity_constraint import (
+from cbp.plugins.constraints.joint_velocity_constraint import (
     JointVelocityConstraint,
     JointVelocityParams,
 )
-from plugins.constraints.min_altitude_constraint import (
+from cbp.plugins.constraints.min_altitude_constraint import (
     MinAltitudeConstraint,
     MinAltitudeParams,
 )
-from plugins.constraints.no_roll_constraint import NoRollConstraint, NoRollParams
-from plugins.constraints.obstacle_distance_constraint import (
+from cbp.plugins.constraints.no_roll_constraint import NoRollConstraint, NoRollParams
+from cbp.plugins.constraints.obstacle_distance_constraint import (
     ObstacleDistanceConstraint,
     ObstacleDistanceParams,
 )
-from plugins.constraints.orbit_distance_constraint import (
+from cbp.plugins.constraints.orbit_distance_constraint import (
     OrbitDistanceConstraint,
     OrbitDistanceParams,
 )
-from plugins.constraints.self_collision_constraint import SelfCollisionConstraint
-from plugins.constraints.view_direction_constraint import (
+from cbp.plugins.constraints.self_collision_constraint import SelfCollisionConstraint
+from cbp.plugins.constraints.view_direction_constraint import (
     ViewDirectionConstraint,
     ViewDirectionParams,
 )
-from plugins.tasks.camera_velocity_task import CameraVelocityParams, CameraVelocityTask
-from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
-from plugins.tasks.joint_step_task import JointStepParams, JointStepTask
-from plugins.tasks.posture_task import PostureParams, PostureTask
+from cbp.plugins.tasks.camera_velocity_task import (
+    CameraVelocityParams,
+    CameraVelocityTask,
+)
+from cbp.plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+from cbp.plugins.tasks.joint_step_task import JointStepParams, JointStepTask
+from cbp.plugins.tasks.posture_task import PostureParams, PostureTask
+from cbp.robot import FloatArray, RobotModel
+from cbp.state import RobotState
 
 #: Robots every case runs on: a fixed arm, and bases where nq != nv.
 ALL_ROBOTS = ("panda", "panda_planar", "panda_floating")

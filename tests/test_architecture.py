@@ -11,18 +11,28 @@ package imports no executor, loading a scenario imports no simulator, and
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-LIBRARY = ("cbp", "plugins", "benchmarks")
+LIBRARY = ("cbp", "benchmarks")  # cbp/plugins links to plugins/
 
 
 def _modules(package: str) -> dict[str, Path]:
-    """Dotted module name -> file, for every module of ``package``."""
+    """Dotted module name -> file, for every module of ``package``.
+
+    Linked folders are followed (``cbp/plugins`` links to ``plugins/``).
+    """
     out = {}
-    for path in sorted((ROOT / package).rglob("*.py")):
+    paths = [
+        Path(folder, name)
+        for folder, _, names in os.walk(ROOT / package, followlinks=True)
+        for name in names
+        if name.endswith(".py")
+    ]
+    for path in sorted(paths):
         parts = list(path.relative_to(ROOT).with_suffix("").parts)
         if parts[-1] == "__init__":
             parts.pop()

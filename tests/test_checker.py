@@ -7,10 +7,10 @@ import pytest
 
 from cbp.errors import JacobianMismatchError
 from cbp.plugin import FloatArray
+from cbp.plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+from cbp.plugins.tasks.posture_task import PostureParams, PostureTask
 from cbp.state import RobotState
 from cbp.testing import check_jacobian, sample_configurations
-from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
-from plugins.tasks.posture_task import PostureParams, PostureTask
 
 
 class _TransposedRotation(GoalPoseTask):

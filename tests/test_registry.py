@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from cbp.errors import ConfigError, UnknownPluginError
-from plugins.constraints import CONSTRAINTS
-from plugins.tasks import TASKS
+from cbp.plugins.constraints import CONSTRAINTS
+from cbp.plugins.tasks import TASKS
 from tests.plugin_cases import PLUGIN_CASES
 
 PLUGINS_DIR = Path(__file__).resolve().parent.parent / "plugins"
@@ -31,7 +31,7 @@ def test_every_module_is_registered_under_its_file_name(kind: str, registry) -> 
     stems = sorted(p.stem for p in (PLUGINS_DIR / f"{kind}s").glob(f"*_{kind}.py"))
     assert [s.removesuffix(f"_{kind}") for s in stems] == registry.names()
     for cls in registry:
-        assert cls.__module__ == f"plugins.{kind}s.{cls.type_name}_{kind}"
+        assert cls.__module__ == f"cbp.plugins.{kind}s.{cls.type_name}_{kind}"
 
 
 def test_unknown_type_lists_names_and_nearest() -> None:
@@ -48,7 +48,7 @@ def test_dotted_path_loads_a_plugin_file_beside_the_scenario(tmp_path: Path) -> 
     (tmp_path / "my_plugins.py").write_text(
         textwrap.dedent(
             """
-            from plugins.tasks.posture_task import PostureTask
+            from cbp.plugins.tasks.posture_task import PostureTask
 
             class MyPosture(PostureTask):
                 type_name = "my_posture"
@@ -75,7 +75,7 @@ def test_entry_point_of_an_installed_distribution(tmp_path: Path, monkeypatch) -
     package.write_text(
         textwrap.dedent(
             """
-            from plugins.constraints.joint_limits_constraint import JointLimitsConstraint
+            from cbp.plugins.constraints.joint_limits_constraint import JointLimitsConstraint
 
             class WideLimits(JointLimitsConstraint):
                 type_name = "wide_limits"

@@ -357,11 +357,11 @@ def test_the_page_gets_the_obstacle_contacts_of_every_contact_row() -> None:
     their obstacle contacts, the same object until a row latches anew.
     """
     from cbp.engine import Engine
-    from cbp.qp import Entry
-    from plugins.constraints.contact_normals_constraint import (
+    from cbp.plugins.constraints.contact_normals_constraint import (
         ContactNormalsConstraint,
         ContactParams,
     )
+    from cbp.qp import Entry
 
     class Mine(ContactNormalsConstraint):
         type_name = "my_contacts"

@@ -9,6 +9,7 @@ runs one, includes a shipped configuration by name, and brings an arm by URDF.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import sysconfig
@@ -23,8 +24,15 @@ pytestmark = pytest.mark.slow
 
 
 def _run(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
+    # Without PYTHONPATH: a checkout on it would shadow the installed wheel.
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     done = subprocess.run(
-        [str(a) for a in args], cwd=cwd, capture_output=True, text=True, check=False
+        [str(a) for a in args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        check=False,
+        env=env,
     )
     assert done.returncode == 0, done.stdout + done.stderr
     return done
@@ -128,3 +136,42 @@ def test_a_scenario_includes_cat_by_name_and_brings_a_urdf(
     metrics = json.loads((sub / "out" / "metrics.json").read_text())["cat"]
     assert metrics["peak_contact_force_n"] == 0.0
     assert metrics["final_position_error_m"] < 0.02
+
+
+def test_the_api_works_in_a_project_with_its_own_plugins_package(
+    venv: Path, tmp_path: Path
+) -> None:
+    """The wheel installs its plugins as cbp.plugins: a project's `plugins` is its own."""
+    site = Path(
+        _run(
+            venv / "python",
+            "-c",
+            "import sysconfig; print(sysconfig.get_paths()['purelib'])",
+            cwd=tmp_path,
+        ).stdout.strip()
+    )
+    assert (site / "cbp" / "plugins" / "tasks" / "__init__.py").is_file()
+    assert not (site / "plugins").exists()
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "__init__.py").write_text("OURS = True\n")
+    code = textwrap.dedent(
+        """\
+        import plugins
+        from cbp.data import data_dir
+        from cbp.scenario import load_scenario
+
+        scenario = load_scenario(data_dir("scenarios") / "cat_boards.yaml")
+        print(plugins.OURS, sorted({type(e.plugin).__module__ for e in scenario.entries}))
+        """
+    )
+    out = _run(venv / "python", "-c", code, cwd=tmp_path).stdout
+    assert out.startswith("True ['cbp.plugins.constraints."), out
+    assert (
+        "venv"
+        in _run(
+            venv / "python",
+            "-c",
+            "import cbp.plugins; print(cbp.plugins.__file__)",
+            cwd=tmp_path,
+        ).stdout
+    )

@@ -55,14 +55,15 @@ def load_scenario(
         path: the YAML file.
         overrides: values that replace the file's, by dotted path
             (``{"perception.source": "depth_camera"}``; values are YAML).
-        tasks: task registry (default: the in-tree ``plugins.tasks.TASKS``).
-        constraints: constraint registry (default ``plugins.constraints.CONSTRAINTS``).
+        tasks: task registry (default: the in-tree ``cbp.plugins.tasks.TASKS``).
+        constraints: constraint registry (default:
+            ``cbp.plugins.constraints.CONSTRAINTS``).
 
     Raises:
         ScenarioError: listing every problem in the file.
     """
-    from plugins.constraints import CONSTRAINTS
-    from plugins.tasks import TASKS
+    from cbp.plugins.constraints import CONSTRAINTS
+    from cbp.plugins.tasks import TASKS
 
     tasks = TASKS if tasks is None else tasks
     constraints = CONSTRAINTS if constraints is None else constraints
@@ -85,6 +86,11 @@ def load_scenario(
             robot = load_robot(
                 robot_spec.name, base=robot_spec.base, relative_to=path.parent
             )
+        except ScenarioError as exc:  # robot.yaml's problems, at its lines
+            doc.problems += [
+                f"{exc.path}, {p}" if p.startswith("line ") else f"{exc.path}: {p}"
+                for p in exc.problems
+            ]
         except CbpError as exc:
             doc.report(_key_node(root, "robot", "name"), "robot.name", str(exc))
     entries: list[Entry] = []

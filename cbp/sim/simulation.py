@@ -116,12 +116,16 @@ class Simulation:
             [pb.getJointInfo(body, j, physicsClientId=c)[10] for j in self._indices]
         )
         self._effort[self._effort <= 0] = np.inf
+        # No joint damping either: the torque law (pinocchio's RNEA) has no model
+        # of a URDF's <dynamics damping>, which held an xArm's light wrist
+        # 0.67 rad away from its command.
         for link in range(-1, pb.getNumJoints(body, physicsClientId=c)):
             pb.changeDynamics(
                 body,
                 link,
                 linearDamping=0.0,
                 angularDamping=0.0,
+                jointDamping=0.0,
                 lateralFriction=self.settings.friction,
                 physicsClientId=c,
             )

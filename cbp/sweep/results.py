@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cbp.plots import colour
+from cbp.plots import colour, readable_axes
 
 if TYPE_CHECKING:
     from cbp.sweep.runner import SweepOutcome
@@ -161,6 +161,7 @@ def _cell(value: Any) -> Any:
     return value
 
 
+@readable_axes
 def _plots(rows: list[dict[str, Any]], swept: list[str], out: Path) -> list[Path]:
     """Box plots per method, and each metric against each swept value."""
     import matplotlib

@@ -35,6 +35,8 @@ API_MODULES = (
     "cbp.plugin",
     "cbp.testing",
     "cbp.engine",
+    "cbp.methods",
+    "cbp.run",
     "cbp.robot",
     "cbp.state",
     "cbp.scenario",
@@ -298,7 +300,7 @@ def schema_page(
 
 def scenario_page() -> str:
     """The scenario file reference, from :class:`cbp.scenario.ScenarioSpec`."""
-    from cbp.executors import EXECUTORS
+    from cbp.methods import METHODS
     from cbp.scenario import ScenarioSpec
 
     entry = [
@@ -319,7 +321,7 @@ def scenario_page() -> str:
         "",
         "| `method.name` | What it does |",
         "|---|---|",
-        *(f"| `{n}` | {_cell(i.summary)} |" for n, i in EXECUTORS.items()),
+        *(f"| `{n}` | {_cell(i.summary)} |" for n, i in METHODS.items()),
     ]
     intro = (
         "Generated from the schema's dataclasses (`cbp.scenario.ScenarioSpec` and "
@@ -332,7 +334,7 @@ def scenario_page() -> str:
         "win."
     )
     notes = {"method.name": "The executor that runs the scenario (below)."}
-    for name in EXECUTORS:
+    for name in METHODS:
         notes[f"method.{name}"] = f"Settings of the `{name}` executor."
     return schema_page(
         ScenarioSpec,

@@ -67,9 +67,21 @@ class JointLimitsConstraint(Constraint[JointLimitsParams]):
         self.q_idx, self.v_idx = q_idx, v_idx
         self._lower = robot.lower_limits[q_idx] + params.margin
         self._upper = robot.upper_limits[q_idx] - params.margin
-        if np.any(self._lower > self._upper):
+        short = np.flatnonzero(self._lower > self._upper)
+        if short.size:
+            names = robot.coordinate_names("q")
+            ranges = ", ".join(
+                f"{names[q_idx[i]]} [{robot.lower_limits[q_idx[i]]:g}, "
+                f"{robot.upper_limits[q_idx[i]]:g}]"
+                for i in short
+            )
+            source = f" ({robot.source})" if robot.source is not None else ""
             raise ConfigError(
-                f"margin {params.margin} is more than half of a joint's range", "margin"
+                f"margin {params.margin:g} is more than half the range of "
+                f"{ranges} of robot '{robot.name}'{source}: lock the joint "
+                "(robot.yaml's locked_joints), limit other joints (params.joints) "
+                "or set a smaller margin",
+                "margin",
             )
         self._J = np.zeros((q_idx.size, robot.nv))
         self._J[np.arange(q_idx.size), v_idx] = 1.0

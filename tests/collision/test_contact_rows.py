@@ -10,13 +10,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cbp.state import RobotState
-from cbp.testing import sample_configurations
-from plugins.constraints.contact_normals_constraint import (
+from cbp.plugins.constraints.contact_normals_constraint import (
     ContactNormalsConstraint,
     ContactParams,
 )
-from plugins.constraints.self_collision_constraint import SelfCollisionConstraint
+from cbp.plugins.constraints.self_collision_constraint import SelfCollisionConstraint
+from cbp.state import RobotState
+from cbp.testing import sample_configurations
 from tests.plugin_cases import collision_world
 
 

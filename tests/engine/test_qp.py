@@ -7,25 +7,25 @@ import pytest
 
 from cbp.engine import Engine
 from cbp.errors import ConfigError, PluginOutputError, SolveError
+from cbp.plugins.constraints.joint_acceleration_constraint import (
+    JointAccelerationConstraint,
+    JointAccelerationParams,
+)
+from cbp.plugins.constraints.joint_limits_constraint import (
+    JointLimitsConstraint,
+    JointLimitsParams,
+)
+from cbp.plugins.constraints.joint_velocity_constraint import (
+    JointVelocityConstraint,
+    JointVelocityParams,
+)
+from cbp.plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+from cbp.plugins.tasks.joint_step_task import JointStepParams, JointStepTask
+from cbp.plugins.tasks.posture_task import PostureParams, PostureTask
 from cbp.qp import Entry
 from cbp.solvers import SOLVERS, make_solver
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
-from plugins.constraints.joint_acceleration_constraint import (
-    JointAccelerationConstraint,
-    JointAccelerationParams,
-)
-from plugins.constraints.joint_limits_constraint import (
-    JointLimitsConstraint,
-    JointLimitsParams,
-)
-from plugins.constraints.joint_velocity_constraint import (
-    JointVelocityConstraint,
-    JointVelocityParams,
-)
-from plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
-from plugins.tasks.joint_step_task import JointStepParams, JointStepTask
-from plugins.tasks.posture_task import PostureParams, PostureTask
 
 
 def _entries(robot, rng, *, goal_priority="soft", velocity_priority="hard"):

@@ -18,9 +18,9 @@ from cbp.engine import GARBAGE_RATIO, Engine
 from cbp.errors import InvalidStateError, UnsafeStepError
 from cbp.executors.kinematic import run_kinematic
 from cbp.executors.velocity import run_velocity
+from cbp.plugins.tasks.posture_task import PostureParams, PostureTask
 from cbp.qp import Entry, QPProblem
 from cbp.scenario import Scenario, load_scenario
-from plugins.tasks.posture_task import PostureParams, PostureTask
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 

@@ -99,7 +99,7 @@ def test_cbp_run_exits_with_the_aborted_code(tmp_path: Path) -> None:
     """A plugin that raises every step: exit 3, all outputs written."""
     plugin = tmp_path / "raising_task.py"
     plugin.write_text(
-        "from plugins.tasks.posture_task import PostureTask\n"
+        "from cbp.plugins.tasks.posture_task import PostureTask\n"
         "class RaisingTask(PostureTask):\n"
         "    type_name = 'raising'\n"
         "    def compute_value(self, state):\n"

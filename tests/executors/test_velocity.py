@@ -70,7 +70,7 @@ def test_commands_stay_within_the_acceleration_limits(case: str) -> None:
 
 def test_the_orbit_constraint_brakes_before_a_joint_limit(robots) -> None:
     """A joint running at a limit slows so that it can stop before it."""
-    from plugins.constraints.joint_acceleration_constraint import (
+    from cbp.plugins.constraints.joint_acceleration_constraint import (
         JointAccelerationConstraint,
         JointAccelerationParams,
     )
