@@ -160,6 +160,16 @@ class PerceptionSpec:
     camera_timeout: float = 0.5
     """A camera that gives no valid frame for this long stops the robot (it
     holds until valid frames come again) [s]."""
+    max_far_fraction: float = 0.99
+    """A frame that reads nothing up to its far plane in at least this
+    fraction of its pixels is not believed (a blinded or failed sensor would
+    clear the map); 1: never refused for that."""
+    see_through_fraction: float = 0.5
+    """A fixed camera's frame is not believed when more than this fraction of
+    the robot's joints in its view read farther away than the joint (the
+    camera moved, or its pose is wrong); 1: never refused for that."""
+    see_through_tolerance: float = 0.05
+    """How much farther than a joint a pixel must read to see through it [m]."""
     motion_window: float = 1.0
     """Estimate how fast the mapped obstacles come at each robot shape over
     this window [s], and plan against them that much nearer, as declared
@@ -216,6 +226,14 @@ class PerceptionSpec:
         if not 0.0 <= self.motion_window <= 10.0:
             raise ConfigError(
                 f"must be in [0, 10] s, got {self.motion_window}", "motion_window"
+            )
+        for name in ("max_far_fraction", "see_through_fraction"):
+            if not 0.0 < getattr(self, name) <= 1.0:
+                raise ConfigError(f"must be in (0, 1], got {getattr(self, name)}", name)
+        if not 0.0 < self.see_through_tolerance <= 1.0:
+            raise ConfigError(
+                f"must be in (0, 1] m, got {self.see_through_tolerance}",
+                "see_through_tolerance",
             )
         if not 0.0 <= self.min_valid_fraction <= 1.0:
             raise ConfigError(

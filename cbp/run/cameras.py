@@ -7,7 +7,10 @@ configuration to the map (:class:`~cbp.perception.mapper.MapUpdater`): at once
 on the virtual clock (the map a planner sees then depends on simulated time
 only), in the map's worker on the wall clock (never blocking the loop). A
 camera whose last valid frame is older than ``perception.camera_timeout``
-holds the robot until it gives one again.
+holds the robot until it gives one again. A frame is valid when it is well
+formed (:meth:`~cbp.perception.frame.DepthFrame.problem`) and believable
+(:mod:`cbp.perception.plausibility`: not blind, not frozen, not seeing
+through the robot).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from cbp.perception.kernels import UNKNOWN
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
+from cbp.perception.plausibility import FrameCheck, PlausibilityLimits
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import FloatArray
 from cbp.run.events import RunLog
@@ -72,6 +76,10 @@ class Cameras:
         world.set_environment(PrimitiveEnvironment([]))
         self.cameras = [DepthCamera(sim.client, c, robot) for c in spec.all_cameras]
         n = len(self.cameras)
+        limits = PlausibilityLimits(
+            spec.max_far_fraction, spec.see_through_fraction, spec.see_through_tolerance
+        )
+        self._checks = [FrameCheck(c.name, c.mounted, limits) for c in self.cameras]
         #: Per camera: time of its last valid frame, and whether it is failing.
         self._last_valid = [0.0] * n
         self._failing = [False] * n
@@ -174,6 +182,10 @@ class Cameras:
         try:
             frame = self._capture(camera)
             problem = frame.problem(self._spec.min_valid_fraction)
+            if problem is None:
+                problem = self._checks[i].check(
+                    frame, self._state.q, self._joint_positions()
+                )
         except Exception as exc:  # a camera that fails is a camera without frames
             frame, problem = None, f"capture failed ({type(exc).__name__}: {exc})"
         if problem is None:
@@ -188,8 +200,16 @@ class Cameras:
         return None
 
     def _capture(self, camera: DepthCamera) -> DepthFrame:
-        """One frame of ``camera``; a mounted one from the robot as it is now."""
+        """One frame of ``camera``; a mounted one from the robot as it is now.
+
+        The robot's state is brought up to the capture (the checks read it).
+        """
+        self._state.update(self._sim.q.copy())
         if not camera.mounted:
             return camera.capture()
-        self._state.update(self._sim.q.copy())
         return camera.capture(self._state)
+
+    def _joint_positions(self) -> FloatArray:
+        """Where the robot's joints are at the last capture, (n, 3) [m]."""
+        placements = self._state.data.oMi
+        return np.array([placements[j].translation for j in range(1, len(placements))])

@@ -8,6 +8,7 @@ its limits and no contact force caused by the fault.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -220,13 +221,27 @@ def _blind_after(monkeypatch, t_blind: float, kind: str) -> None:
         clock["t"] = t_end
         return run_until(self, t_end)
 
+    last: dict[str, DepthFrame] = {}
+
     def faulty(self, state=None):
         frame = capture(self, state)
         if clock["t"] < t_blind:
+            last[self.name] = frame
             return frame
         if kind == "raise":
             raise InjectedError("camera unplugged")
-        depth = np.full_like(frame.depth, np.nan if kind == "nan" else 0.0)
+        if kind == "frozen":  # a stuck driver repeats its last frame
+            return last[self.name]
+        if kind == "bumped" and not self.mounted:  # turned, but claims its pose
+            turned = dataclasses.replace(
+                self.spec, target=tuple(np.add(self.spec.target, (0.0, 0.6, 0.0)))
+            )
+            seen = capture(DepthCamera(self.client, turned, None))
+            return dataclasses.replace(seen, view=frame.view, camera=frame.camera)
+        if kind == "bumped":
+            return frame
+        fill = {"nan": np.nan, "zero": 0.0, "far": 1.0}[kind]
+        depth = np.full_like(frame.depth, fill)
         return DepthFrame(
             depth, frame.view, frame.projection, frame.near, frame.far, frame.camera
         )
@@ -236,9 +251,14 @@ def _blind_after(monkeypatch, t_blind: float, kind: str) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["nan", "zero", "raise"])
+@pytest.mark.parametrize("kind", ["nan", "zero", "raise", "far", "frozen", "bumped"])
 def test_a_blinded_camera_is_an_event_and_stops_the_arm(monkeypatch, kind) -> None:
-    """Bad frames from t = 0.5 s: dropped, the arm stops within the timeout."""
+    """Bad frames from t = 0.5 s: dropped, the arm stops within the timeout.
+
+    Malformed frames (NaN, zero), a camera that raises, and frames that are
+    well formed but lie: nothing up to the far plane, the last frame again
+    while the arm moves, a fixed camera turned away that claims its old pose.
+    """
     _blind_after(monkeypatch, 0.5, kind)
     scenario = load_virtual(
         SCENARIOS / "cat_boards.yaml",

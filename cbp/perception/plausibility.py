@@ -1,0 +1,157 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Frames that lie: a camera's frame checked against what must be in it.
+
+A depth frame can be well formed and still false, and a false frame is worse
+than none: the map frees the space the camera says it sees through. A frame
+is refused (the camera then counts as giving no valid frame, and a camera
+without one for ``perception.camera_timeout`` stops the arm) when
+
+* it reads **nothing up to its far plane** in almost every pixel
+  (``perception.max_far_fraction``): a blinded or failed sensor, whose frame
+  would clear the map in front of it;
+* it is **frozen**: the very same image as the camera's last one, while the arm
+  moved in its view or the camera moved with the arm (a real sensor's noise
+  alone makes two frames differ; a stuck driver repeats its last frame);
+* a fixed camera **sees through the robot**: where the robot's joints must be
+  in the image, most pixels read farther away than the joints
+  (``perception.see_through_fraction``, ``see_through_tolerance``): the camera
+  was moved or its pose is wrong, and its frame would be mapped in the wrong
+  place. An obstacle between the camera and the arm reads nearer, not
+  farther, so occlusion does not count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cbp.perception.frame import DepthFrame
+from cbp.robot import FloatArray
+
+__all__ = ["FrameCheck", "PlausibilityLimits"]
+
+#: Depth-buffer values from here up read the far plane (nothing seen up to it).
+_FAR_PLANE = 1.0 - 1e-6
+#: The arm moved when a coordinate changed by more than this [rad or m].
+_MOVED = 1e-3
+#: A camera moved when its optical centre moved by more than this [m] ...
+_CAMERA_MOVED = 1e-3
+#: ... or its axes turned by more than this (sum of direction-cosine changes).
+_CAMERA_TURNED = 1e-3
+#: Robot points in view below this number do not decide whether a camera sees
+#: the robot where it must.
+_MIN_POINTS = 3
+
+
+@dataclass(frozen=True)
+class PlausibilityLimits:
+    """The limits a camera's frames are held to.
+
+    Attributes:
+        max_far_fraction: a frame with at least this fraction of its pixels
+            reading the far plane is refused (1 or more: never).
+        see_through_fraction: a fixed camera's frame is refused when more than
+            this fraction of the robot's joints in its view read farther away
+            than the joint (1 or more: never).
+        see_through_tolerance: how much farther a pixel must read than the
+            joint there to count as seeing through it [m].
+    """
+
+    max_far_fraction: float = 0.99
+    see_through_fraction: float = 0.5
+    see_through_tolerance: float = 0.05
+
+
+class FrameCheck:
+    """Checks one camera's frames, each against the one before.
+
+    Args:
+        camera: the camera's name, for messages.
+        mounted: the camera moves with the robot (it is not expected to see
+            the robot's joints at fixed places).
+        limits: the limits.
+    """
+
+    def __init__(self, camera: str, mounted: bool, limits: PlausibilityLimits):
+        """No frame seen yet."""
+        self.camera = camera
+        self.mounted = mounted
+        self.limits = limits
+        self._last: tuple[DepthFrame, FloatArray] | None = None
+
+    def check(self, frame: DepthFrame, q: FloatArray, joints: FloatArray) -> str | None:
+        """Why ``frame`` should not be believed, or None.
+
+        Args:
+            frame: the frame (already well formed: :meth:`DepthFrame.problem`).
+            q: the robot's configuration when it was taken.
+            joints: the robot's joint positions in the world then (n, 3) [m].
+        """
+        last, self._last = self._last, (frame, np.array(q, dtype=float))
+        far = float(np.count_nonzero(frame.depth >= _FAR_PLANE)) / frame.depth.size
+        if far >= self.limits.max_far_fraction and self.limits.max_far_fraction < 1.0:
+            return (
+                f"reads nothing up to its far plane in {far:.1%} of its pixels "
+                f"(perception.max_far_fraction: {self.limits.max_far_fraction:g}): "
+                "a blinded or failed sensor, not believed"
+            )
+        rows, cols, depth = frame.project(np.asarray(joints, dtype=float))
+        seen = (rows >= 0) & (depth > frame.closest) & (depth < frame.far)
+        if last is not None:
+            frozen = self._frozen(frame, q, last, bool(seen.any()))
+            if frozen is not None:
+                return frozen
+        if self.mounted or self.limits.see_through_fraction >= 1.0:
+            return None
+        return self._sees_through(frame, rows[seen], cols[seen], depth[seen])
+
+    def _frozen(
+        self,
+        frame: DepthFrame,
+        q: FloatArray,
+        last: tuple[DepthFrame, FloatArray],
+        robot_in_view: bool,
+    ) -> str | None:
+        """A problem when ``frame`` repeats the last one while something moved."""
+        before, q_before = last
+        if not np.array_equal(frame.depth, before.depth, equal_nan=True):
+            return None
+        if self.mounted:
+            moved = (
+                float(np.linalg.norm(frame.position - before.position)) > _CAMERA_MOVED
+                or float(np.abs(frame.view[:3, :3] - before.view[:3, :3]).sum())
+                > _CAMERA_TURNED
+            )
+            what = "the camera moved with the arm"
+        else:
+            moved = robot_in_view and float(np.max(np.abs(q - q_before))) > _MOVED
+            what = "the arm moved in its view"
+        if not moved:
+            return None
+        return f"frozen: the same image as its last frame while {what}"
+
+    def _sees_through(
+        self, frame: DepthFrame, rows: np.ndarray, cols: np.ndarray, depth: FloatArray
+    ) -> str | None:
+        """A problem when most joints in view read farther away than they are."""
+        if rows.size < _MIN_POINTS:
+            return None
+        buffer = frame.depth[rows, cols]
+        n, f = frame.near, frame.far
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            measured = np.where(
+                buffer >= _FAR_PLANE, np.inf, f * n / (f - (f - n) * buffer)
+            )
+        reading = np.isfinite(buffer)
+        if np.count_nonzero(reading) < _MIN_POINTS:
+            return None
+        through = reading & (measured > depth + self.limits.see_through_tolerance)
+        fraction = float(np.count_nonzero(through)) / float(np.count_nonzero(reading))
+        if fraction <= self.limits.see_through_fraction:
+            return None
+        return (
+            f"does not see the robot where it must: {np.count_nonzero(through)} of "
+            f"{np.count_nonzero(reading)} joints in its view read farther away "
+            "than the joint (the camera moved, or its pose is wrong)"
+        )
