@@ -31,6 +31,7 @@ __all__ = [
     "MAX_YAML_BYTES",
     "OUTPUT_MARKERS",
     "check_file",
+    "check_folder_name",
     "check_output_folder",
     "load_mesh",
     "publish_folder",
@@ -40,6 +41,9 @@ __all__ = [
 
 #: A folder holding one of these is an earlier output that may be replaced.
 OUTPUT_MARKERS = ("metrics.json", "report.md")
+
+#: Longest name that becomes a folder name (a scenario's or a sweep's).
+MAX_NAME_LENGTH = 100
 
 #: Largest scenario, include or robot description file [bytes].
 MAX_YAML_BYTES = 4 << 20
@@ -126,6 +130,31 @@ def load_mesh(path: Path, what: str = "mesh") -> trimesh.Trimesh:
     if not np.all(np.isfinite(mesh.vertices)):
         raise ConfigError(f"{what} {path} has coordinates that are not finite")
     return mesh
+
+
+def check_folder_name(name: str, location: str = "name") -> None:
+    """Check that ``name`` is one folder name, so that ``out/<name>`` stays in ``out``.
+
+    Default output folders are named after scenarios and sweeps: a name must
+    not reach outside (``../x``, ``/tmp/x``), be hidden (``.x``, where the
+    staging folders go) or hold control characters.
+
+    Raises:
+        ConfigError: located at ``location``, saying what is wrong.
+    """
+    problem = ""
+    if not name or len(name) > MAX_NAME_LENGTH:
+        problem = f"must have 1 to {MAX_NAME_LENGTH} characters"
+    elif "/" in name or "\\" in name:
+        problem = "must be one folder name, without '/' or '\\'"
+    elif name.startswith("."):
+        problem = "must not start with '.'"
+    elif not name.isprintable():
+        problem = "must not hold control characters"
+    if problem:
+        raise ConfigError(
+            f"{problem} (it names the output folder), got {name[:40]!r}", location
+        )
 
 
 def check_output_folder(out: Path) -> None:

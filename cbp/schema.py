@@ -83,6 +83,20 @@ class Document:
             raise ScenarioError(str(path), [exc.message]) from None
         return cls(text, str(path))
 
+    def copy(self) -> Document:
+        """A copy whose tree :meth:`override` can change, leaving this one as it is.
+
+        Mappings and lists are copied (aliases stay shared); scalars, which
+        nothing changes in place, are shared.
+        """
+        other = object.__new__(Document)
+        other.path = self.path
+        other.problems = list(self.problems)
+        other.root = _copy_tree(self.root, {})
+        other._loader = Loader("")
+        other._loader.name = self.path
+        return other
+
     def report(self, node: Node | None, where: str, message: str) -> None:
         """Record a problem at ``where`` (a document path), with the node's line."""
         line = ""
@@ -399,6 +413,26 @@ def check_tree(doc: Document, root: Node | None) -> list[str]:
         stack.append((node, depth, True))
         stack.extend((child, depth + 1, False) for child in reversed(_children(node)))
     return problems
+
+
+def _copy_tree(node: Node | None, copies: dict[int, Node]) -> Node | None:
+    """Copy the mappings and lists of a node tree (see :meth:`Document.copy`)."""
+    if node is None or isinstance(node, yaml.ScalarNode):
+        return node
+    if id(node) in copies:
+        return copies[id(node)]
+    copy: Node
+    if isinstance(node, yaml.MappingNode):
+        copy = yaml.MappingNode(node.tag, [], node.start_mark, node.end_mark)
+        copies[id(node)] = copy
+        copy.value = [
+            (_copy_tree(k, copies), _copy_tree(v, copies)) for k, v in node.value
+        ]
+    else:
+        copy = yaml.SequenceNode(node.tag, [], node.start_mark, node.end_mark)
+        copies[id(node)] = copy
+        copy.value = [_copy_tree(v, copies) for v in node.value]
+    return copy
 
 
 def _children(node: Node) -> list[Node]:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from cbp.collision.settings import CollisionSettings
 from cbp.errors import ConfigError, require_choice
 from cbp.executors import EXECUTORS
+from cbp.files import check_folder_name
 from cbp.goals import GoalSpec
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import BaseType
@@ -180,7 +181,8 @@ class ScenarioSpec:
     """Constraint entries (bound by :func:`load_scenario`)."""
 
     def __post_init__(self) -> None:
-        """A positive duration of at most a day."""
+        """A positive duration of at most a day; a name that is a folder name."""
+        check_folder_name(self.name)
         if not 0 < self.duration <= MAX_DURATION:
             raise ConfigError(
                 f"must be in (0, {MAX_DURATION:g}] s, got {self.duration}", "duration"

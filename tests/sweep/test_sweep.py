@@ -258,3 +258,95 @@ def test_set_reaches_list_items_by_index_name_or_type() -> None:
     assert entries["joint_limits"].plugin.params.margin == 0.05
     with pytest.raises(ScenarioError, match="'constraints' has no item 'nope'"):
         load_scenario(boards, overrides={"constraints.nope.gain": "0.5"})
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (
+            "samples: {{count: 2, values: {{duration: {{uniform: [-.inf, .inf]}}}}}}",
+            "line 4: samples.values.duration: uniform: the bounds must be finite",
+        ),
+        (
+            "samples: {{count: 2, values: {{duration: {{integers: [1, 2.5]}}}}}}",
+            "line 4: samples.values.duration: integers: give [low, high], two integers",
+        ),
+        ("grid: {{duration: [2020-01-01]}}", "line 4: '2020-01-01' reads as a date"),
+        (
+            "samples: {{count: 1000000000000, values: {{duration: {{choice: [1]}}}}}}",
+            "line 4: samples.count: must be in [1, 10000] draws",
+        ),
+        ("scenes: {{count: 100000000}}", "line 4: scenes.count: must be in [1, 1000]"),
+        (
+            "grid: {{" + ", ".join(f"k{i}: [1, 2, 3, 4]" for i in range(25)) + "}}",
+            "line 4: grid: the sweep has 1125899906842624 runs",
+        ),
+        ("retries: 1000000", "line 4: retries: must be in [0, 100]"),
+    ],
+)
+def test_sweep_sizes_and_bounds_are_checked_before_expansion(
+    tmp_path: Path, body: str, message: str
+) -> None:
+    """Infinite bounds, dates and sizes past the limits are refused at their line."""
+    path = _sweep(
+        tmp_path,
+        'name: s\nscenarios: ["{reach}"]\nmethods: [kinematic]\n' + body + "\n",
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_sweep(path)
+    assert message in str(info.value)
+
+
+def test_names_cannot_reach_outside_the_output_folder(tmp_path: Path) -> None:
+    """A sweep's or a scenario's name with '../' is refused; nothing is written."""
+    from cbp.cli import main
+
+    work = tmp_path / "work"
+    work.mkdir()
+    path = _sweep(
+        tmp_path,
+        'name: ../../escaped\nscenarios: ["{reach}"]\nmethods: [kinematic]\n',
+    )
+    with pytest.raises(ScenarioError, match=r"line 1: name: must be one folder"):
+        load_sweep(path)
+    cwd = Path.cwd()
+    os.chdir(work)
+    try:
+        assert main(["sweep", str(path)]) == 2
+        assert main(["run", str(REACH), "--set", "name=../../escaped"]) == 2
+        assert main(["run", str(REACH), "--set", "name=.hidden"]) == 2
+    finally:
+        os.chdir(cwd)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["sweep.yaml", "work"]
+
+
+def test_a_large_sweep_expands_once_per_scenario_document(tmp_path: Path) -> None:
+    """2500 runs expand with distinct ids, each override checked against the file."""
+    values = ", ".join(str(1 + i / 100) for i in range(50))
+    path = _sweep(
+        tmp_path,
+        f"""\
+        name: large
+        scenarios: ["{{reach}}"]
+        methods: [kinematic]
+        grid:
+          duration: [{values}]
+          method.kinematic.dt: [{", ".join(str(0.001 * (i + 1)) for i in range(50))}]
+        """,
+    )
+    runs = expand(load_sweep(path), path, [])
+    assert len({r.id for r in runs}) == 2500
+    bad = _sweep(
+        tmp_path,
+        f"""\
+        name: large
+        scenarios: ["{{reach}}"]
+        methods: [kinematic]
+        grid:
+          duration: [{values}]
+          method.kinematic.dt: [0.01, 0.02, 5.0]
+        """,
+        "bad.yaml",
+    )
+    with pytest.raises(ScenarioError, match=r"--set method.kinematic.dt.*must be in"):
+        expand(load_sweep(bad), bad, [])
