@@ -24,9 +24,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         prog="cbp",
         description="Constraint-based robot control: run and check scenarios.",
         epilog=(
-            "exit status: 0 done; 2 bad input, found before anything ran; 3 a run "
-            "was aborted after repeated faults (its outputs are written, the "
-            "reason is in metrics.json); 130 interrupted."
+            "exit status: 0 done; 1 a sweep had runs not ok (failed or raised; "
+            "see its report), or a run's output folder was taken meanwhile; 2 bad "
+            "input, found before anything ran; 3 a run was aborted after repeated "
+            "faults (its outputs are written, the reason is in metrics.json); 130 "
+            "interrupted."
         ),
     )
     noise = parser.add_mutually_exclusive_group()
@@ -172,6 +174,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     sweep = sub.add_parser(
         "sweep",
         help="run a sweep file (scenes x methods x settings) on Ray or a process pool",
+        description="Run a sweep file on Ray or a process pool. A run whose worker "
+        "dies is retried (the file's 'retries'), then recorded as failed; a run "
+        "that raises is recorded with its error. Exit status 1 when any run is "
+        "not ok, 0 when all are; a rerun skips the runs already done.",
     )
     sweep.add_argument("sweep", type=Path, help="the sweep file (YAML)")
     sweep.add_argument("--out", type=Path, default=None, help="default out/<name>")
@@ -429,6 +435,12 @@ def _sweep(
     if outcome.interrupted:
         print("interrupted: run the same command again to resume", file=sys.stderr)
         return 130
+    if outcome.failed:
+        print(
+            f"{outcome.failed} of {len(outcome.runs)} runs not ok (see the report)",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 

@@ -75,6 +75,9 @@ class ExecutorInfo:
         perceives: it runs the depth cameras and their map
             (``perception.source: depth_camera``); the others refuse it
             (:meth:`check`).
+        fresh_process: a run needs a process of its own to be reproducible
+            (OMPL seeds its random numbers once per process); sweeps give each
+            such run a new worker process.
     """
 
     name: str
@@ -84,6 +87,7 @@ class ExecutorInfo:
     comparable: bool = False
     periodic: bool = False
     perceives: bool = False
+    fresh_process: bool = False
 
     def check(self, scenario: Scenario) -> None:
         """Refuse a scenario this executor cannot run as written.
@@ -159,6 +163,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             comparable=True,
             periodic=True,
             perceives=True,
+            fresh_process=True,
         ),
         ExecutorInfo(
             "hybrid",
@@ -169,6 +174,7 @@ EXECUTORS: dict[str, ExecutorInfo] = {
             comparable=True,
             periodic=True,
             perceives=True,
+            fresh_process=True,
         ),
         ExecutorInfo(
             "jt",

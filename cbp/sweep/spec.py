@@ -313,8 +313,9 @@ def expand(spec: SweepSpec, path: Path, scenes: list[Path]) -> list[RunSpec]:
     ):
         values = {**point, **draw}
         overrides = {k: _yaml(v) for k, v in {**spec.set, **values}.items()}
-        if "timing" in _settings_fields(method):
-            overrides.setdefault(f"method.{method}.timing.clock", spec.clock)
+        clock = _clock_key(method)
+        if clock is not None:
+            overrides.setdefault(clock, spec.clock)
         overrides["method.name"] = method
         if scenario not in documents:
             documents[scenario] = _base_document(scenario)
@@ -381,8 +382,18 @@ def _draws(samples: SampleSpec) -> list[dict[str, Any]]:
     return draws
 
 
-def _settings_fields(method: str) -> set[str]:
-    return {f.name for f in dataclasses.fields(EXECUTORS[method].settings)}
+def _clock_key(method: str) -> str | None:
+    """The ``--set`` key of the clock ``method`` runs on, if it has one.
+
+    A trajectory executor's own ``timing``; a periodic executor without one
+    (the hybrid) runs CAT's loop with ``method.cat``'s timing.
+    """
+    fields = {f.name for f in dataclasses.fields(EXECUTORS[method].settings)}
+    if "timing" in fields:
+        return f"method.{method}.timing.clock"
+    if EXECUTORS[method].periodic:
+        return "method.cat.timing.clock"
+    return None
 
 
 def _yaml(value: Any) -> str:
