@@ -386,20 +386,24 @@ def _run(
         return 2
     out = out or Path("out") / scenario.spec.name
     from cbp.executors.faults import EXIT_ABORTED
-    from cbp.files import check_output_folder
+    from cbp.files import claim_output_folder
     from cbp.report import summary_line, write_outputs
 
     try:
-        check_output_folder(out)
+        claim = claim_output_folder(out)  # refused if a live run writes there
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
     from cbp.progress import run_progress
 
-    with run_progress(f"{scenario.spec.name} ({name})"):
-        trace = executor(scenario, gui)
     try:
-        metrics = write_outputs(scenario, {name: trace}, out)[name]
+        with run_progress(f"{scenario.spec.name} ({name})"):
+            trace = executor(scenario, gui)
+    except BaseException:
+        claim.release(remove=True)
+        raise
+    try:
+        metrics = write_outputs(scenario, {name: trace}, out, claim=claim)[name]
     except CbpError as exc:  # the folder changed during the run; outputs kept
         print(exc, file=sys.stderr)
         return 1

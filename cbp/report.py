@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from cbp.files import publish_folder, staging_folder
+from cbp.files import OutputClaim, claim_output_folder, publish_folder
 from cbp.metrics import run_metrics
 from cbp.plots import plot_runs
 from cbp.robot import FloatArray
@@ -78,6 +78,7 @@ def write_outputs(
     traces: Mapping[str, Trace],
     out: Path,
     extra_files: Mapping[str, Path] | None = None,
+    claim: OutputClaim | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Write the outputs of one or several runs of ``scenario`` as the folder ``out``.
 
@@ -90,6 +91,11 @@ def write_outputs(
     (:func:`cbp.files.publish_folder`): an earlier output there is replaced as
     a whole, and concurrent runs never mix their files.
 
+    ``claim`` is the folder claimed for ``out`` when the run began
+    (:func:`cbp.files.claim_output_folder`, which refuses an output in use by
+    a live run); without one, it is claimed now, removing what dead processes
+    left but refusing nothing (the run is over: its outputs must be kept).
+
     Returns:
         The metrics, by method.
 
@@ -97,7 +103,8 @@ def write_outputs(
         ConfigError: ``out`` holds something other than a cbp output (the
             outputs are kept beside it; the message says where).
     """
-    staging = staging_folder(out)
+    claim = claim or claim_output_folder(out, refuse_live=False)
+    staging = claim.staging
     try:
         metrics = _write(scenario, traces, staging)
         end = max((float(t.t[-1]) for t in traces.values() if t.t.size), default=0.0)
@@ -105,9 +112,12 @@ def write_outputs(
         for name, source in (extra_files or {}).items():
             shutil.copyfile(source, staging / name)
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
+        claim.release(remove=True)
         raise
-    publish_folder(staging, out)
+    try:
+        publish_folder(staging, out)
+    finally:
+        claim.release()
     return metrics
 
 

@@ -272,37 +272,47 @@ def test_frame_problems_name_what_is_wrong() -> None:
 # ------------------------------------------------------------------ outputs
 
 
-def test_two_concurrent_runs_into_one_folder_leave_one_complete_run(
+def test_a_folder_in_use_by_a_live_run_is_refused_and_a_dead_ones_is_cleaned(
     tmp_path: Path,
 ) -> None:
+    """A live claim on --out refuses a second run (exit 2); a killed one's is removed."""
     out = tmp_path / "out"
-    runs = [
-        subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "cbp",
-                "run",
-                str(SCENARIOS / "panda_reach.yaml"),
-                "--out",
-                str(out),
-                "--set",
-                f"duration={duration}",
-            ],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-        )
-        for duration in (2.0, 3.0)
-    ]
-    for run in runs:
-        _, stderr = run.communicate(timeout=120)
-        assert run.returncode == 0, stderr
-    samples = json.loads((out / "metrics.json").read_text())["kinematic"]["samples"]
-    rows = len((out / "trace.csv").read_text().splitlines()) - 1
-    assert rows == samples  # the trace and the metrics of the same run
-    assert samples in (201, 301)
-    leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(".out.")]
-    assert leftovers == [".out.lock"]
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time; from pathlib import Path; "
+            "from cbp.files import claim_output_folder; "
+            "print(claim_output_folder(Path(sys.argv[1])).staging, flush=True); "
+            "time.sleep(600)",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout is not None
+        staging = Path(holder.stdout.readline().strip())
+        assert staging.is_dir()
+        refused = run_cbp("run", str(SCENARIOS / "panda_reach.yaml"), "--out", str(out))
+        assert refused.returncode == 2
+        assert f"output folder {out} is in use by a run still going" in refused.stderr
+        assert f"process {holder.pid}" in refused.stderr
+    finally:
+        holder.kill()  # SIGKILL: nothing of its own cleans up
+        holder.communicate()
+    assert staging.is_dir()  # what a killed run leaves
+    done = run_cbp(
+        "run",
+        str(SCENARIOS / "panda_reach.yaml"),
+        "--out",
+        str(out),
+        "--set",
+        "duration=1",
+    )
+    assert done.returncode == 0, done.stderr
+    assert (out / "metrics.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no lock file
 
 
 def test_outputs_never_replace_a_folder_that_is_not_an_output(tmp_path: Path) -> None:
