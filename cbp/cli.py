@@ -27,8 +27,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             "exit status: 0 done; 1 a sweep had runs not ok (failed or raised; "
             "see its report), or a run's output folder was taken meanwhile; 2 bad "
             "input, found before anything ran; 3 a run was aborted after repeated "
-            "faults (its outputs are written, the reason is in metrics.json); 130 "
-            "interrupted."
+            "faults (its outputs are written, the reason is in metrics.json); 4 a "
+            "stage after the run failed (clearance, metrics, plots or the report: "
+            "the rest is written, metrics.json names it); 130 interrupted."
         ),
     )
     noise = parser.add_mutually_exclusive_group()
@@ -385,7 +386,7 @@ def _run(
         print(exc, file=sys.stderr)
         return 2
     out = out or Path("out") / scenario.spec.name
-    from cbp.executors.faults import EXIT_ABORTED
+    from cbp.executors.faults import EXIT_ABORTED, EXIT_INCOMPLETE
     from cbp.files import claim_output_folder
     from cbp.report import summary_line, write_outputs
 
@@ -409,7 +410,16 @@ def _run(
         return 1
     print(summary_line(scenario, name, metrics))
     print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
-    return EXIT_ABORTED if trace.aborted else 0
+    if trace.aborted:
+        return EXIT_ABORTED
+    if metrics.get("incomplete"):
+        print(
+            f"not written: {', '.join(metrics['incomplete'])} (see the events in "
+            f"{out}/metrics.json)",
+            file=sys.stderr,
+        )
+        return EXIT_INCOMPLETE
+    return 0
 
 
 def _sweep(
@@ -463,16 +473,24 @@ def _compare(
         return 2
     for name, m in result.metrics.items():
         print(
-            f"{name:>3}: reached {m['reached']!s:5}  total "
-            f"{_num(m['total_time_s'])} s  peak force {m['peak_contact_force_n']:.1f} N"
+            f"{name:>3}: reached {m.get('reached')!s:5}  total "
+            f"{_num(m.get('total_time_s'))} s  peak force "
+            f"{_num(m.get('peak_contact_force_n'))} N"
         )
     print(f"Report: {result.out / 'report.md'}")
-    from cbp.executors.faults import EXIT_ABORTED
+    from cbp.executors.faults import EXIT_ABORTED, EXIT_INCOMPLETE
 
     aborted = [name for name, m in result.metrics.items() if m.get("aborted")]
     if aborted:
         print(f"aborted: {', '.join(aborted)} (see the report)", file=sys.stderr)
         return EXIT_ABORTED
+    incomplete = [name for name, m in result.metrics.items() if m.get("incomplete")]
+    if incomplete:
+        print(
+            f"outputs incomplete: {', '.join(incomplete)} (see metrics.json)",
+            file=sys.stderr,
+        )
+        return EXIT_INCOMPLETE
     return 0
 
 

@@ -98,6 +98,9 @@ class Trace:
             (:mod:`cbp.executors.faults`), or None.
         counters: numbers an executor counts over the run, by metric name
             (the hybrid's ``plans``); they go into the metrics as they are.
+        incomplete: the stages after the control loop that failed (``clearance``;
+            :func:`cbp.report.write_outputs` adds its own), each also an event;
+            the outputs are written without them.
     """
 
     method: str
@@ -126,6 +129,7 @@ class Trace:
     transient_s: float = 0.0
     aborted: str | None = None
     counters: dict[str, float] = field(default_factory=dict)
+    incomplete: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         """Every column has one row per sample."""

@@ -23,7 +23,7 @@ from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.errors import InvalidTargetError
 from cbp.executors.clock import ClockKind
 from cbp.executors.declared import DeclaredObjects
-from cbp.executors.faults import Faults
+from cbp.executors.faults import Faults, describe
 from cbp.goals import GoalSource
 from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.kernels import UNKNOWN
@@ -431,6 +431,13 @@ class SimulatedRun:
                 goal_p[i] = changes[k][1].translation
                 goal_R[i] = changes[k][1].rotation
         change_time = float(times[1]) if times.size > 1 else None
+        incomplete = []
+        try:
+            clearance: FloatArray | None = self._clearance(rec["t"], rec["q"])
+        except Exception as exc:  # the outputs are written without it
+            clearance, end = None, float(rec["t"][-1]) if n else 0.0
+            self.events.append((end, f"clearance not computed: {describe(exc)}"))
+            incomplete.append("clearance")
         return Trace(
             method=self.method,
             t=rec["t"],
@@ -445,12 +452,13 @@ class SimulatedRun:
             contact_force=rec["contact_force"],
             wrist_force=rec["wrist_force"],
             penetration=rec["penetration"],
-            clearance=self._clearance(rec["t"], rec["q"]),
+            clearance=clearance,
             goal_change_time=change_time,
             periods=self.periods,
             events=self.events,
             aborted=self.faults.aborted,
             counters=dict(self.counters),
+            incomplete=incomplete,
         )
 
     @property

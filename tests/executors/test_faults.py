@@ -358,3 +358,77 @@ def test_the_recorder_spools_blocks_and_reads_them_back() -> None:
     recorder.row()[:] = [1, 2, 3]  # recording goes on after a read
     assert np.array_equal(recorder.array()[-1], [1, 2, 3])
     recorder.close()
+
+
+def test_a_collision_checker_that_fails_for_good_still_gives_every_output(
+    monkeypatch, tmp_path: Path
+) -> None:
+    """From its 200th call on the checker raises: the run aborts, outputs written."""
+    from cbp.cli import main
+    from cbp.collision.world import CollisionWorld
+
+    check = CollisionWorld.check
+    calls = [0]
+
+    def failing(self, *args, **kwargs):
+        calls[0] += 1
+        if calls[0] >= 200:
+            raise InjectedError("checker gone")
+        return check(self, *args, **kwargs)
+
+    monkeypatch.setattr(CollisionWorld, "check", failing)
+    out = tmp_path / "out"
+    status = main(
+        [
+            "run",
+            str(SCENARIOS / "cat_boards.yaml"),
+            "--out",
+            str(out),
+            "--set",
+            "duration=2",
+            "--set",
+            "method.cat.timing.clock=virtual",
+        ]
+    )
+    assert calls[0] > 200
+    assert status == EXIT_ABORTED
+    document = json.loads((out / "metrics.json").read_text())["cat"]
+    messages = [e["message"] for e in document["events"]]
+    assert "clearance not computed: InjectedError: checker gone" in messages
+    assert document["incomplete"] == ["clearance"]
+    assert "InjectedError: checker gone" in document["aborted"]
+    for name in ("report.md", "trace.csv", "scene.json", "tracking.png"):
+        assert (out / name).is_file(), name
+
+
+@pytest.mark.parametrize(
+    ("target", "stage"),
+    [
+        ("cbp.report.plot_runs", "plots"),
+        ("cbp.report.run_metrics", "metrics"),
+        ("cbp.report.scene_description", "scene description"),
+        ("cbp.report._report", "report"),
+    ],
+)
+def test_a_failing_output_stage_is_an_event_and_exit_4(
+    monkeypatch, tmp_path: Path, target: str, stage: str
+) -> None:
+    """Each stage after the loop that raises is named; the rest is written."""
+    from cbp.cli import main
+    from cbp.executors.faults import EXIT_INCOMPLETE
+
+    def broken(*args, **kwargs):
+        raise InjectedError("stage bug")
+
+    monkeypatch.setattr(target, broken)
+    out = tmp_path / "out"
+    reach = str(SCENARIOS / "panda_reach.yaml")
+    assert main(["run", reach, "--out", str(out), "--set", "duration=1"]) == (
+        EXIT_INCOMPLETE
+    )
+    document = json.loads((out / "metrics.json").read_text())["kinematic"]
+    assert document["incomplete"] == [stage]
+    messages = [e["message"] for e in document["events"]]
+    assert f"{stage} not written: InjectedError: stage bug" in messages
+    assert (out / "trace.csv").is_file()
+    assert (out / "report.md").is_file()
