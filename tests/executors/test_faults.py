@@ -21,6 +21,7 @@ from cbp.executors import cat as cat_module
 from cbp.executors.cat import run_cat
 from cbp.executors.faults import EXIT_ABORTED, MAX_FAULTS_IN_A_ROW
 from cbp.executors.kinematic import run_kinematic
+from cbp.executors.simulated import SimulatedRun
 from cbp.executors.velocity import run_velocity
 from cbp.goals import GoalStream
 from cbp.metrics import run_metrics
@@ -432,3 +433,64 @@ def test_a_failing_output_stage_is_an_event_and_exit_4(
     assert f"{stage} not written: InjectedError: stage bug" in messages
     assert (out / "trace.csv").is_file()
     assert (out / "report.md").is_file()
+
+
+# ------------------------------------------------------------------ IK's guard
+
+
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        (lambda q, robot: np.full_like(q, np.nan), "not 7 finite values"),
+        (
+            # the elbow 0.5 rad past its upper limit
+            lambda q, robot: np.where(
+                np.arange(q.size) == 3, robot.upper_limits + 0.5, q
+            ),
+            "panda_joint4 would end",
+        ),
+    ],
+    ids=["nan", "past_limit"],
+)
+def test_ik_holds_through_bad_solutions_and_aborts_when_they_persist(
+    monkeypatch, bad, message
+) -> None:
+    """Bad IK solutions are refused by IK's step guard: held, then aborted."""
+    from cbp.executors.ik import run_ik
+    from cbp.executors.ik_search import IkSearch
+
+    solution_for = IkSearch.solution_for
+    window = [0.8, 0.95]
+
+    def faulty(self, goal, q_near, budget):
+        solution = solution_for(self, goal, q_near, budget)
+        if solution is not None and window[0] <= self_time[0] < window[1]:
+            return bad(solution, self.robot)
+        return solution
+
+    self_time = [0.0]
+    send_goal = SimulatedRun.send_goal
+
+    def timed(self, t):
+        self_time[0] = t
+        return send_goal(self, t)
+
+    monkeypatch.setattr(IkSearch, "solution_for", faulty)
+    monkeypatch.setattr(SimulatedRun, "send_goal", timed)
+    overrides = {"duration": "3", "method.ik.timing.clock": "virtual"}
+    scenario = load_scenario(SCENARIOS / "cat_free_step.yaml", overrides=overrides)
+    trace = run_ik(scenario)
+    m = run_metrics(trace, scenario.robot)
+    assert f"planning failed (UnsafeStepError: IK solution rejected: {message}" in (
+        _events(trace)
+    )
+    assert m["aborted"] is None
+    assert m["max_joint_limit_violation_rad"] == 0.0
+    assert np.all(np.isfinite(trace.q))
+    # Refused for good: the run is aborted, still within the limits.
+    window[1] = 10.0
+    trace = run_ik(load_scenario(SCENARIOS / "cat_free_step.yaml", overrides=overrides))
+    m = run_metrics(trace, scenario.robot)
+    assert "IK solution rejected" in m["aborted"]
+    assert m["max_joint_limit_violation_rad"] == 0.0
+    assert np.all(np.isfinite(trace.q))
