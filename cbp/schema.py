@@ -89,12 +89,9 @@ class Document:
         Mappings and lists are copied (aliases stay shared); scalars, which
         nothing changes in place, are shared.
         """
-        other = object.__new__(Document)
-        other.path = self.path
+        other = Document("", self.path)  # its own loader, an empty tree
         other.problems = list(self.problems)
         other.root = _copy_tree(self.root, {})
-        other._loader = Loader("")
-        other._loader.name = self.path
         return other
 
     def report(self, node: Node | None, where: str, message: str) -> None:
