@@ -73,10 +73,11 @@ test-slow: $(DEV_STAMP) browser
 test-all: lint
 	$(BIN)/python -m pytest -q
 
-# 10,000 fresh random damaged scenarios of each kind (about 20 min); failures
-# are saved in out/fuzz/.
+# 10,000 fresh random damaged scenarios and sweep files of each kind (about
+# 25 min); failures are saved in out/fuzz/.
 fuzz: $(DEV_STAMP)
-	CBP_FUZZ_EXAMPLES=10000 $(BIN)/python -m pytest -q tests/engine/test_loader_fuzz.py -k damaged
+	CBP_FUZZ_EXAMPLES=10000 $(BIN)/python -m pytest -q -k damaged \
+		tests/engine/test_loader_fuzz.py tests/sweep/test_sweep_fuzz.py
 
 bench: $(DEV_STAMP)
 	$(BIN)/cbp bench --results benchmarks/RESULTS.md --out benchmarks/results.json

@@ -24,9 +24,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         prog="cbp",
         description="Constraint-based robot control: run and check scenarios.",
         epilog=(
-            "exit status: 0 done; 2 bad input, found before anything ran; 3 a run "
-            "was aborted after repeated faults (its outputs are written, the "
-            "reason is in metrics.json); 130 interrupted."
+            "exit status: 0 done; 1 a sweep had runs not ok (failed or raised; "
+            "see its report), or a run's output folder was taken meanwhile; 2 bad "
+            "input, found before anything ran; 3 a run was aborted after repeated "
+            "faults (its outputs are written, the reason is in metrics.json); 4 a "
+            "stage after the run failed (clearance, metrics, plots or the report: "
+            "the rest is written, metrics.json names it); 130 interrupted."
         ),
     )
     parser.add_argument("--version", action="version", version=f"cbp {_version()}")
@@ -187,6 +190,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     sweep = sub.add_parser(
         "sweep",
         help="run a sweep file (scenes x methods x settings) on Ray or a process pool",
+        description="Run a sweep file on Ray or a process pool. A run whose worker "
+        "dies is retried (the file's 'retries'), then recorded as failed; a run "
+        "that raises is recorded with its error. Exit status 1 when any run is "
+        "not ok, 0 when all are; a rerun skips the runs already done.",
     )
     sweep.add_argument("sweep", type=Path, help="the sweep file (YAML)")
     sweep.add_argument("--out", type=Path, default=None, help="default out/<name>")
@@ -458,27 +465,40 @@ def _run(
         print(exc, file=sys.stderr)
         return 2
     out = out or Path("out") / scenario.spec.name
-    from cbp.files import check_output_folder
+    from cbp.files import claim_output_folder
     from cbp.report import summary_line, write_outputs
-    from cbp.run.faults import EXIT_ABORTED
+    from cbp.run.faults import EXIT_ABORTED, EXIT_INCOMPLETE
 
     try:
-        check_output_folder(out)
+        claim = claim_output_folder(out)  # refused if a live run writes there
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
     from cbp.progress import run_progress
 
-    with run_progress(f"{scenario.spec.name} ({name})"):
-        trace = executor(scenario, gui)
     try:
-        metrics = write_outputs(scenario, {name: trace}, out)[name]
+        with run_progress(f"{scenario.spec.name} ({name})"):
+            trace = executor(scenario, gui)
+    except BaseException:
+        claim.release(remove=True)
+        raise
+    try:
+        metrics = write_outputs(scenario, {name: trace}, out, claim=claim)[name]
     except CbpError as exc:  # the folder changed during the run; outputs kept
         print(exc, file=sys.stderr)
         return 1
     print(summary_line(scenario, name, metrics))
     print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
-    return EXIT_ABORTED if trace.aborted else 0
+    if trace.aborted:
+        return EXIT_ABORTED
+    if metrics.get("incomplete"):
+        print(
+            f"not written: {', '.join(metrics['incomplete'])} (see the events in "
+            f"{out}/metrics.json)",
+            file=sys.stderr,
+        )
+        return EXIT_INCOMPLETE
+    return 0
 
 
 def _sweep(
@@ -508,6 +528,12 @@ def _sweep(
     if outcome.interrupted:
         print("interrupted: run the same command again to resume", file=sys.stderr)
         return 130
+    if outcome.failed:
+        print(
+            f"{outcome.failed} of {len(outcome.runs)} runs not ok (see the report)",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
@@ -526,16 +552,24 @@ def _compare(
         return 2
     for name, m in result.metrics.items():
         print(
-            f"{name:>3}: reached {m['reached']!s:5}  total "
-            f"{_num(m['total_time_s'])} s  peak force {m['peak_contact_force_n']:.1f} N"
+            f"{name:>3}: reached {m.get('reached')!s:5}  total "
+            f"{_num(m.get('total_time_s'))} s  peak force "
+            f"{_num(m.get('peak_contact_force_n'))} N"
         )
     print(f"Report: {result.out / 'report.md'}")
-    from cbp.run.faults import EXIT_ABORTED
+    from cbp.run.faults import EXIT_ABORTED, EXIT_INCOMPLETE
 
     aborted = [name for name, m in result.metrics.items() if m.get("aborted")]
     if aborted:
         print(f"aborted: {', '.join(aborted)} (see the report)", file=sys.stderr)
         return EXIT_ABORTED
+    incomplete = [name for name, m in result.metrics.items() if m.get("incomplete")]
+    if incomplete:
+        print(
+            f"outputs incomplete: {', '.join(incomplete)} (see metrics.json)",
+            file=sys.stderr,
+        )
+        return EXIT_INCOMPLETE
     return 0
 
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from cbp.executors import load_executor
-from cbp.files import check_output_folder
+from cbp.files import claim_output_folder
 from cbp.goals import write_recorded
 from cbp.methods import COMPARABLE, method_info
 from cbp.progress import Progress
@@ -101,33 +101,39 @@ def compare(
     overrides = dict(overrides or {})
     scenario = load_scenario(path, overrides=overrides)
     out = out or Path("out") / scenario.spec.name
-    check_output_folder(out)
-    with tempfile.TemporaryDirectory(prefix="cbp-compare-") as folder:
-        goal = scenario.spec.goal
-        recorded = Path(folder) / "goal.csv"
-        extra = {}
-        if goal is not None and record_goal(scenario, recorded):
-            task = f", task: {goal.task}" if goal.task else ""
-            overrides["goal"] = (
-                f"{{type: recorded, file: {recorded.resolve()}, "
-                f"rate_hz: {goal.rate_hz}{task}}}"
-            )
-            extra["goal.csv"] = recorded
-        traces: dict[str, Trace] = {}
-        with Progress(len(methods), "compare", lines=progress) as bar:
-            if jobs <= 1:
-                for method in methods:
-                    traces[method] = _run_one(path, overrides, method)
-                    bar.advance(method, traces[method].aborted is not None)
-            else:
-                with ProcessPoolExecutor(max_workers=jobs) as pool:
-                    futures = {
-                        pool.submit(_run_one, path, overrides, m): m for m in methods
-                    }
-                    for future in as_completed(futures):
-                        method = futures[future]
-                        traces[method] = future.result()
+    claim = claim_output_folder(out)  # refused if a live run writes there
+    try:
+        with tempfile.TemporaryDirectory(prefix="cbp-compare-") as folder:
+            goal = scenario.spec.goal
+            recorded = Path(folder) / "goal.csv"
+            extra = {}
+            if goal is not None and record_goal(scenario, recorded):
+                task = f", task: {goal.task}" if goal.task else ""
+                overrides["goal"] = (
+                    f"{{type: recorded, file: {recorded.resolve()}, "
+                    f"rate_hz: {goal.rate_hz}{task}}}"
+                )
+                extra["goal.csv"] = recorded
+            traces: dict[str, Trace] = {}
+            with Progress(len(methods), "compare", lines=progress) as bar:
+                if jobs <= 1:
+                    for method in methods:
+                        traces[method] = _run_one(path, overrides, method)
                         bar.advance(method, traces[method].aborted is not None)
-            traces = {m: traces[m] for m in methods}
-        metrics = write_outputs(scenario, traces, out, extra)
+                else:
+                    with ProcessPoolExecutor(max_workers=jobs) as pool:
+                        futures = {
+                            pool.submit(_run_one, path, overrides, m): m
+                            for m in methods
+                        }
+                        for future in as_completed(futures):
+                            method = futures[future]
+                            traces[method] = future.result()
+                            bar.advance(method, traces[method].aborted is not None)
+                traces = {m: traces[m] for m in methods}
+            # Its own failures release the claim (and keep what it wrote).
+            metrics = write_outputs(scenario, traces, out, extra, claim=claim)
+    except BaseException:
+        claim.release(remove=not claim.released)
+        raise
     return ComparisonResult(out, traces, metrics)

@@ -10,11 +10,13 @@ names the line and column of the first byte that is not.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import secrets
 import shutil
 import stat
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,16 +32,21 @@ __all__ = [
     "MAX_TABLE_BYTES",
     "MAX_YAML_BYTES",
     "OUTPUT_MARKERS",
+    "OutputClaim",
     "check_file",
+    "check_folder_name",
     "check_output_folder",
+    "claim_output_folder",
     "load_mesh",
     "publish_folder",
     "read_text",
-    "staging_folder",
 ]
 
 #: A folder holding one of these is an earlier output that may be replaced.
 OUTPUT_MARKERS = ("metrics.json", "report.md")
+
+#: Longest name that becomes a folder name (a scenario's or a sweep's).
+MAX_NAME_LENGTH = 100
 
 #: Largest scenario, include or robot description file [bytes].
 MAX_YAML_BYTES = 4 << 20
@@ -128,6 +135,31 @@ def load_mesh(path: Path, what: str = "mesh") -> trimesh.Trimesh:
     return mesh
 
 
+def check_folder_name(name: str, location: str = "name") -> None:
+    """Check that ``name`` is one folder name, so that ``out/<name>`` stays in ``out``.
+
+    Default output folders are named after scenarios and sweeps: a name must
+    not reach outside (``../x``, ``/tmp/x``), be hidden (``.x``, where the
+    staging folders go) or hold control characters.
+
+    Raises:
+        ConfigError: located at ``location``, saying what is wrong.
+    """
+    problem = ""
+    if not name or len(name) > MAX_NAME_LENGTH:
+        problem = f"must have 1 to {MAX_NAME_LENGTH} characters"
+    elif "/" in name or "\\" in name:
+        problem = "must be one folder name, without '/' or '\\'"
+    elif name.startswith("."):
+        problem = "must not start with '.'"
+    elif not name.isprintable():
+        problem = "must not hold control characters"
+    if problem:
+        raise ConfigError(
+            f"{problem} (it names the output folder), got {name[:40]!r}", location
+        )
+
+
 def check_output_folder(out: Path) -> None:
     """Check that ``out`` may receive a run's outputs (before the run starts).
 
@@ -148,31 +180,122 @@ def check_output_folder(out: Path) -> None:
         )
 
 
-def staging_folder(out: Path) -> Path:
-    """A new, empty folder beside ``out`` to write outputs into before publishing."""
+class OutputClaim:
+    """A staging folder beside an output folder, locked while this process lives.
+
+    Outputs are written into :attr:`staging` and put in place by
+    :func:`publish_folder`. The folder is locked (``flock``) for as long as
+    :attr:`staging` is open here: the kernel drops the lock when the process
+    ends, however it ends, so a staging folder nobody holds is the remains of a
+    dead process and the next claim on the same output removes it.
+    """
+
+    def __init__(self, out: Path, staging: Path, descriptor: int) -> None:
+        """Hold ``staging`` (locked through ``descriptor``) for ``out``."""
+        self.out = out
+        self.staging = staging
+        self._descriptor: int | None = descriptor
+
+    @property
+    def released(self) -> bool:
+        """Whether the claim has ended (its folder published, kept or removed)."""
+        return self._descriptor is None
+
+    def release(self, remove: bool = False) -> None:
+        """Drop the lock; with ``remove``, delete the staging folder first.
+
+        Once released, a claim does nothing more (a second call is harmless).
+        """
+        if remove and self._descriptor is not None:
+            shutil.rmtree(self.staging, ignore_errors=True)
+        if self._descriptor is not None:
+            os.close(self._descriptor)
+            self._descriptor = None
+
+
+def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
+    """Check ``out`` (:func:`check_output_folder`) and claim it for this process.
+
+    Staging folders beside ``out`` (``.NAME.part-PID-HEX``) that no live
+    process holds are removed, as are folders left renamed aside
+    (``.NAME.old-HEX``).
+
+    Args:
+        out: the output folder.
+        refuse_live: refuse when another live run holds a staging folder for
+            ``out`` (else both write and the last to finish replaces the other).
+
+    Raises:
+        ConfigError: ``out`` is not a cbp output, or is in use by a live run
+            (the message names its process).
+    """
+    check_output_folder(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    staging = out.parent / f".{out.name}.part-{os.getpid()}-{secrets.token_hex(4)}"
-    staging.mkdir()
-    return staging
+    prefix = f".{out.name}."
+    with _locked(out.parent):
+        for other in out.parent.iterdir():
+            if not other.name.startswith(prefix):
+                continue
+            kind = other.name[len(prefix) :].split("-", 1)[0]
+            if kind == "old" or (kind == "part" and not _held(other)):
+                shutil.rmtree(other, ignore_errors=True)  # a dead process's
+            elif kind == "part" and refuse_live:
+                pid = other.name[len(prefix) :].split("-")[1]
+                raise ConfigError(
+                    f"output folder {out} is in use by a run still going (process "
+                    f"{pid}, writing {other.name}); wait for it to end or choose "
+                    "another folder"
+                )
+        if out.name and (out.parent / f".{out.name}.lock").is_file():
+            (out.parent / f".{out.name}.lock").unlink()  # left by earlier versions
+        staging = out.parent / f".{out.name}.part-{os.getpid()}-{secrets.token_hex(4)}"
+        staging.mkdir()
+        descriptor = os.open(staging, os.O_RDONLY)
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return OutputClaim(out, staging, descriptor)
+
+
+def _held(folder: Path) -> bool:
+    """Whether a live process holds the lock on ``folder`` (an OutputClaim)."""
+    try:
+        descriptor = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(descriptor)
+    return False
+
+
+@contextlib.contextmanager
+def _locked(folder: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``folder`` itself (no lock file is made)."""
+    descriptor = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(descriptor)
 
 
 def publish_folder(staging: Path, out: Path) -> None:
     """Put the complete folder ``staging`` in place as ``out``.
 
-    An earlier output at ``out`` is replaced as a whole: under a lock on
-    ``out``, it is renamed aside and ``staging`` renamed into its place (both
-    renames are atomic on one file system), so concurrent runs into one
-    folder leave exactly one complete run there, and a reader never sees a
+    An earlier output at ``out`` is replaced as a whole: under a lock on the
+    folder that holds ``out``, it is renamed aside and ``staging`` renamed into
+    its place (both renames are atomic on one file system), so concurrent
+    writers leave exactly one complete output there, and a reader never sees a
     mixture.
 
     Raises:
         ConfigError: ``out`` is not a cbp output (:func:`check_output_folder`);
             ``staging`` is kept and the message names it.
     """
-    lock_path = out.parent / f".{out.name}.lock"
     old: Path | None = None
-    with open(lock_path, "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    with _locked(out.parent):
         try:
             check_output_folder(out)
         except ConfigError as exc:

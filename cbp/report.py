@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from cbp.files import publish_folder, staging_folder
+from cbp.files import OutputClaim, claim_output_folder, publish_folder
 from cbp.metrics import run_metrics
 from cbp.plots import plot_runs
 from cbp.robot import FloatArray
@@ -38,6 +38,7 @@ def write_outputs(
     traces: Mapping[str, Trace],
     out: Path,
     extra_files: Mapping[str, Path] | None = None,
+    claim: OutputClaim | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Write the outputs of one or several runs of ``scenario`` as the folder ``out``.
 
@@ -50,6 +51,17 @@ def write_outputs(
     (:func:`cbp.files.publish_folder`): an earlier output there is replaced as
     a whole, and concurrent runs never mix their files.
 
+    Every stage after the control loop is guarded: when the metrics, the
+    plots, the scene description or the report of a method cannot be made, the
+    others are still written, an event names the failure and the stage is
+    listed under ``incomplete`` in ``metrics.json`` (with the trace's own, the
+    clearance for example: :attr:`~cbp.trace.Trace.incomplete`).
+
+    ``claim`` is the folder claimed for ``out`` when the run began
+    (:func:`cbp.files.claim_output_folder`, which refuses an output in use by
+    a live run); without one, it is claimed now, removing what dead processes
+    left but refusing nothing (the run is over: its outputs must be kept).
+
     Returns:
         The metrics, by method.
 
@@ -57,28 +69,80 @@ def write_outputs(
         ConfigError: ``out`` holds something other than a cbp output (the
             outputs are kept beside it; the message says where).
     """
-    staging = staging_folder(out)
+    claim = claim or claim_output_folder(out, refuse_live=False)
+    staging = claim.staging
     try:
-        metrics = _write(scenario, traces, staging)
         end = max((float(t.t[-1]) for t in traces.values() if t.t.size), default=0.0)
-        write_scene(staging, scenario, end)
+        try:
+            write_scene(staging, scenario, end)
+        except Exception as exc:  # the replay needs it, the rest does not
+            for trace in traces.values():
+                _failed_stage(trace, "scene description", exc)
+        metrics = _write(scenario, traces, staging)
         for name, source in (extra_files or {}).items():
             shutil.copyfile(source, staging / name)
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
+        claim.release(remove=True)
         raise
-    publish_folder(staging, out)
+    try:
+        publish_folder(staging, out)
+    finally:
+        claim.release()
     return metrics
+
+
+def _failed_stage(trace: Trace, stage: str, exc: BaseException) -> None:
+    """Record that ``stage`` failed for ``trace``: an event and ``incomplete``."""
+    from cbp.run.faults import describe
+
+    end = float(trace.t[-1]) if trace.t.size else 0.0
+    trace.events.append((end, f"{stage} not written: {describe(exc)}"))
+    trace.incomplete.append(stage)
+
+
+def _metrics(trace: Trace, scenario: Scenario) -> dict[str, Any]:
+    """The run's metrics; the ones every run has when they cannot be computed."""
+    try:
+        return run_metrics(trace, scenario.robot)
+    except Exception as exc:
+        _failed_stage(trace, "metrics", exc)
+        return {
+            "samples": int(trace.t.size),
+            "events": len(trace.events),
+            "aborted": trace.aborted,
+        }
 
 
 def _write(
     scenario: Scenario, traces: Mapping[str, Trace], out: Path
 ) -> dict[str, dict[str, Any]]:
-    robot = scenario.robot
-    metrics = {name: run_metrics(trace, robot) for name, trace in traces.items()}
+    metrics = {name: _metrics(trace, scenario) for name, trace in traces.items()}
     for name, trace in traces.items():
         csv_name = "trace.csv" if len(traces) == 1 else f"trace_{name}.csv"
         _write_csv(trace, out / csv_name)
+    try:
+        figures = plot_runs(traces, out, scenario.spec.name)
+    except Exception as exc:
+        figures = []
+        for trace in traces.values():
+            _failed_stage(trace, "plots", exc)
+    scene: Path | None
+    try:
+        scene = plot_scene(
+            scenario.spec.world.objects, traces, out / SCENE_FIGURE, scenario.spec.name
+        )
+    except Exception as exc:
+        scene = None
+        for trace in traces.values():
+            _failed_stage(trace, "scene figure", exc)
+    _settle(metrics, traces)
+    try:
+        report = _report(scenario, traces, metrics, figures, scene)
+    except Exception as exc:
+        for trace in traces.values():
+            _failed_stage(trace, "report", exc)
+        report = f"# {scenario.spec.name}\n\nNo report: see metrics.json.\n"
+        _settle(metrics, traces)
     document = {
         name: {
             **metrics[name],
@@ -87,10 +151,26 @@ def _write(
         for name, trace in traces.items()
     }
     (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n")
-    scene = plot_scene(
-        scenario.spec.world.objects, traces, out / SCENE_FIGURE, scenario.spec.name
-    )
-    figures = plot_runs(traces, out, scenario.spec.name)
+    (out / "report.md").write_text(report)
+    return metrics
+
+
+def _settle(metrics: dict[str, dict[str, Any]], traces: Mapping[str, Trace]) -> None:
+    """Count the events (failed stages add some) and list the failed stages."""
+    for name, trace in traces.items():
+        metrics[name]["events"] = len(trace.events)
+        if trace.incomplete:
+            metrics[name]["incomplete"] = list(trace.incomplete)
+
+
+def _report(
+    scenario: Scenario,
+    traces: Mapping[str, Trace],
+    metrics: Mapping[str, Mapping[str, Any]],
+    figures: list[Path],
+    scene: Path | None,
+) -> str:
+    """report.md: a sentence per method, the scene, the metrics, the figures, events."""
     keys = list(dict.fromkeys(k for m in metrics.values() for k in m))
     story = [run_sentence(name, trace, metrics[name]) for name, trace in traces.items()]
     lines = [
@@ -100,7 +180,11 @@ def _write(
         "",
         *(f"- {sentence}" for sentence in story if sentence),
         "",
-        f"![the scene, the goal's path and each method's hand path]({scene.name})",
+        *(
+            [f"![the scene, the goal's path and each method's hand path]({scene.name})"]
+            if scene is not None
+            else []
+        ),
         "",
         "| metric | " + " | ".join(traces) + " |",
         "|---|" + "---|" * len(traces),
@@ -122,8 +206,7 @@ def _write(
                 more = len(trace.events) - REPORT_EVENTS
                 lines.append(f"- ... {more} more in metrics.json")
             lines.append("")
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    return metrics
+    return "\n".join(lines) + "\n"
 
 
 def summary_line(scenario: Scenario, method: str, metrics: Mapping[str, Any]) -> str:

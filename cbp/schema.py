@@ -13,6 +13,7 @@ problems of one file are reported together (:class:`~cbp.errors.ScenarioError`).
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import math
 import re
 import types
@@ -83,6 +84,17 @@ class Document:
         except ConfigError as exc:
             raise ScenarioError(str(path), [exc.message]) from None
         return cls(text, str(path))
+
+    def copy(self) -> Document:
+        """A copy whose tree :meth:`override` can change, leaving this one as it is.
+
+        Mappings and lists are copied (aliases stay shared); scalars, which
+        nothing changes in place, are shared.
+        """
+        other = Document("", self.path)  # its own loader, an empty tree
+        other.problems = list(self.problems)
+        other.root = _copy_tree(self.root, {})
+        return other
 
     def report(self, node: Node | None, where: str, message: str) -> None:
         """Record a problem at ``where`` (a document path), with the node's line."""
@@ -259,7 +271,8 @@ class Document:
 
 
 #: Largest magnitude of a number in a file: beyond it, squares and products of
-#: positions, sizes and gains overflow.
+#: positions, sizes and gains overflow. Integers have the same bound (counts
+#: that size memory or loops have tighter ones of their own).
 MAX_MAGNITUDE = 1e12
 #: Deepest nesting of lists and mappings accepted in a file.
 MAX_DEPTH = 64
@@ -273,25 +286,32 @@ _PLAIN_TAGS = {
     for name in ("str", "int", "float", "bool", "null", "seq", "map", "timestamp")
 }
 _MERGE_TAG = "tag:yaml.org,2002:merge"
+_COLLECTION_TAGS: dict[type[Node], str] = {
+    yaml.MappingNode: "tag:yaml.org,2002:map",
+    yaml.SequenceNode: "tag:yaml.org,2002:seq",
+}
 
 
 class Loader(yaml.SafeLoader):
-    """PyYAML's safe loader, reading ``1e-3`` as a number as YAML 1.2 does.
+    """PyYAML's safe loader, reading YAML 1.2's numbers as numbers.
 
-    YAML 1.1 (PyYAML's default) wants a dot in a float, so ``1e-3`` would be the
-    string "1e-3".
+    YAML 1.1 (PyYAML's default) wants a dot and a signed exponent in a float, so
+    ``1e-3``, ``1.5e1``, ``1.0e12`` and ``.5e3`` would be strings; YAML 1.2
+    reads them all as numbers, and so does this loader. (YAML 1.1's other forms,
+    ``1_000`` and ``0x1f``, still read as numbers too.)
     """
 
 
 Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)$"),
-    list("-+0123456789"),
+    re.compile(r"^[-+]?(?:\.[0-9]+|[0-9][0-9_]*(?:\.[0-9_]*)?)(?:[eE][-+]?[0-9]+)$"),
+    list("-+.0123456789"),
 )
 
 
 def _compose(text: str, name: str) -> Node | None:
     """Parse ``text`` into a node tree; any YAML error is a located ScenarioError."""
+    loader: Loader | None = None
     try:
         loader = Loader(text)  # refuses control characters here
         loader.name = name  # marks (and so error lines) name the file
@@ -302,12 +322,32 @@ def _compose(text: str, name: str) -> Node | None:
         raise ScenarioError(
             name, [f"{line}malformed YAML: {exc.problem or exc}"]
         ) from None
+    except yaml.reader.ReaderError as exc:  # a character YAML does not accept
+        before = text[: exc.position]
+        column = exc.position - (before.rfind("\n") + 1) + 1
+        raise ScenarioError(
+            name,
+            [
+                f"line {before.count(chr(10)) + 1}, column {column}: malformed "
+                "YAML: unacceptable "
+                f"character #x{exc.character:04x} (control characters are not "
+                "allowed; write them as escapes in a double-quoted string)"
+                if isinstance(exc.character, int)
+                else f"line {before.count(chr(10)) + 1}: malformed YAML: "
+                f"{str(exc).splitlines()[0]}"
+            ],
+        ) from None
     except yaml.YAMLError as exc:
         message = str(exc).split("\n")[0]
         raise ScenarioError(name, [f"malformed YAML: {message}"]) from None
-    except RecursionError:
+    except RecursionError:  # the parser got this far into the nesting
+        deep = loader.line + 1 if loader is not None else 1
         raise ScenarioError(
-            name, [f"malformed YAML: nested too deeply (at most {MAX_DEPTH} levels)"]
+            name,
+            [
+                f"line {deep}: malformed YAML: nested too deeply (at most "
+                f"{MAX_DEPTH} levels)"
+            ],
         ) from None
 
 
@@ -339,6 +379,13 @@ def check_tree(doc: Document, root: Node | None) -> list[str]:
             open_nodes.discard(key)
             children = _children(node)
             sizes[key] = 1 + sum(sizes.get(id(c), 0) for c in children)
+            if sizes[key] > MAX_VALUES:  # the smallest value that is too large
+                problems.append(
+                    f"{where(node)}: this value holds {sizes[key]} values once "
+                    f"aliases are expanded, more than the {MAX_VALUES} accepted in "
+                    "a file"
+                )
+                return problems
             continue
         if key in sizes:
             continue
@@ -368,15 +415,37 @@ def check_tree(doc: Document, root: Node | None) -> list[str]:
             if problem:
                 problems.append(f"{where(node)}: {problem}")
             continue
+        if node.tag != _COLLECTION_TAGS.get(type(node)):
+            kind = node.tag.rsplit(":", 1)[-1]
+            problems.append(
+                f"{where(node)}: the tag '!!{kind}' cannot be given to "
+                f"{'a mapping' if isinstance(node, yaml.MappingNode) else 'a list'}"
+            )
+            continue
         open_nodes.add(key)
         stack.append((node, depth, True))
         stack.extend((child, depth + 1, False) for child in reversed(_children(node)))
-    if not problems and sizes.get(id(root), 0) > MAX_VALUES:
-        problems.append(
-            f"the file holds {sizes[id(root)]} values once aliases are expanded, "
-            f"more than the {MAX_VALUES} accepted"
-        )
     return problems
+
+
+def _copy_tree(node: Node | None, copies: dict[int, Node]) -> Node | None:
+    """Copy the mappings and lists of a node tree (see :meth:`Document.copy`)."""
+    if node is None or isinstance(node, yaml.ScalarNode):
+        return node
+    if id(node) in copies:
+        return copies[id(node)]
+    copy: Node
+    if isinstance(node, yaml.MappingNode):
+        copy = yaml.MappingNode(node.tag, [], node.start_mark, node.end_mark)
+        copies[id(node)] = copy
+        copy.value = [
+            (_copy_tree(k, copies), _copy_tree(v, copies)) for k, v in node.value
+        ]
+    else:
+        copy = yaml.SequenceNode(node.tag, [], node.start_mark, node.end_mark)
+        copies[id(node)] = copy
+        copy.value = [_copy_tree(v, copies) for v in node.value]
+    return copy
 
 
 def _children(node: Node) -> list[Node]:
@@ -389,12 +458,19 @@ def _children(node: Node) -> list[Node]:
 
 def _scalar_problem(doc: Document, node: yaml.ScalarNode) -> str:
     """Why the scalar cannot be read, or an empty string."""
+    kind = node.tag.rsplit(":", 1)[-1]
     try:
         value = doc.scalar(node)
-    except (yaml.YAMLError, ValueError, OverflowError) as exc:
+    except Exception as exc:  # PyYAML's constructors raise many types here
         reason = getattr(exc, "problem", None) or str(exc).split("\n")[0]
-        kind = node.tag.rsplit(":", 1)[-1]
+        if isinstance(exc, KeyError | AttributeError | TypeError):
+            reason = "not a valid value of this tag"  # !!bool maybe, !!timestamp x
         return f"cannot read {node.value[:40]!r} as {kind}: {reason}"
+    if isinstance(value, datetime.date):
+        return (
+            f"{node.value[:40]!r} reads as a date, which no setting takes; quote "
+            "it to make it a string"
+        )
     if isinstance(value, int) and not isinstance(value, bool):
         try:
             float(value)
@@ -537,7 +613,15 @@ def _check_scalar(doc: Document, tp: Any, value: Any, node: Node, where: str) ->
         )
         return INVALID
     if tp is int and isinstance(value, int) and not isinstance(value, bool):
-        return value
+        if abs(value) <= MAX_MAGNITUDE:
+            return value
+        doc.report(
+            node,
+            where,
+            f"expected an integer of magnitude at most {MAX_MAGNITUDE:.0f}, "
+            f"got {node.value if isinstance(node, yaml.ScalarNode) else value}"[:200],
+        )
+        return INVALID
     if tp is str and isinstance(value, str):
         return value
     if tp is bool and isinstance(value, bool):

@@ -95,9 +95,12 @@ class Trace:
         transient_s: metrics of the steady behaviour leave out the samples
             before this time [s].
         aborted: why the run ended before its duration
-            (:mod:`cbp.executors.faults`), or None.
+            (:mod:`cbp.run.faults`), or None.
         counters: numbers an executor counts over the run, by metric name
             (the hybrid's ``plans``); they go into the metrics as they are.
+        incomplete: the stages after the control loop that failed (``clearance``;
+            :func:`cbp.report.write_outputs` adds its own), each also an event;
+            the outputs are written without them.
     """
 
     method: str
@@ -126,6 +129,7 @@ class Trace:
     transient_s: float = 0.0
     aborted: str | None = None
     counters: dict[str, float] = field(default_factory=dict)
+    incomplete: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         """Every column has one row per sample."""

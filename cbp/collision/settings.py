@@ -7,7 +7,10 @@ from dataclasses import dataclass
 
 from cbp.errors import ConfigError
 
-__all__ = ["CollisionSettings"]
+__all__ = ["MAX_CONTACTS_PER_LINK", "CollisionSettings"]
+
+#: Most contacts kept per robot shape (each is a row of every contact query).
+MAX_CONTACTS_PER_LINK = 64
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -41,9 +44,11 @@ class CollisionSettings:
             raise ConfigError(
                 f"must be > 0, got {self.activation_distance}", "activation_distance"
             )
-        if self.contacts_per_link < 1:
+        if not 1 <= self.contacts_per_link <= MAX_CONTACTS_PER_LINK:
             raise ConfigError(
-                f"must be >= 1, got {self.contacts_per_link}", "contacts_per_link"
+                f"must be in [1, {MAX_CONTACTS_PER_LINK}], got "
+                f"{self.contacts_per_link}",
+                "contacts_per_link",
             )
         if self.padding is not None and not self.padding >= 0:
             raise ConfigError(f"must be >= 0, got {self.padding}", "padding")

@@ -15,16 +15,20 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from cbp.errors import UnsafeStepError
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch, SearchEvents
 from cbp.executors.trajectory import Plan, run_periodic
 from cbp.methods.settings import IkSettings
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, RobotModel
 from cbp.run.parts import RunParts
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 
-__all__ = ["IkPlanner", "make_planner", "run_ik"]
+__all__ = ["IkPlanner", "guard_solution", "make_planner", "run_ik"]
+
+#: How far past a joint limit an IK solution may end (solver tolerance) [rad or m].
+LIMIT_TOLERANCE = 1e-6
 
 
 class IkPlanner:
@@ -47,12 +51,39 @@ class IkPlanner:
             self.events.failed(run, goal, exhausted=not budget.spent())
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         self.events.solved(run)
+        guard_solution(self.search.robot, target)
         return interpolate_checked(
             q, target, self.settings.interpolation_step, self.search, budget
         )
 
     def close(self) -> None:
         """Nothing to release."""
+
+
+def guard_solution(robot: RobotModel, target: FloatArray) -> None:
+    """The IK method's step guard: a solution the arm may be sent toward.
+
+    The line from the current configuration to ``target`` is what reaches the
+    robot (time-parameterized within its velocity and acceleration limits);
+    it stays within the joint limits when both ends do. So ``target`` must be
+    finite, of the robot's size and within the joint limits.
+
+    Raises:
+        UnsafeStepError: naming the joint and the amount; the trajectory loop
+            holds the robot and records it (:mod:`cbp.run.faults`).
+    """
+    target = np.asarray(target, dtype=float)
+    if target.shape != (robot.nq,) or not np.all(np.isfinite(target)):
+        raise UnsafeStepError(f"IK solution rejected: not {robot.nq} finite values")
+    lower, upper = robot.lower_limits, robot.upper_limits
+    beyond = np.maximum(lower - target, target - upper)
+    k = int(np.argmax(beyond))
+    if beyond[k] > LIMIT_TOLERANCE:
+        names = robot.coordinate_names("q")
+        raise UnsafeStepError(
+            f"IK solution rejected: {names[k]} would end {beyond[k]:.4g} beyond "
+            f"its limits [{lower[k]:.4g}, {upper[k]:.4g}]"
+        )
 
 
 def interpolate_checked(

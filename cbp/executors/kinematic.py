@@ -6,7 +6,7 @@ per control step of ``method.dt``. The goal stream is sampled at its own rate.
 A goal that is NaN or malformed is ignored (the previous goal stays); a QP that
 cannot be solved holds the robot still for that step. Both are recorded as events
 and the loop goes on. So is anything else that raises in a step (a plugin, the
-collision world); after :data:`~cbp.executors.faults.MAX_FAULTS_IN_A_ROW` such
+collision world); after :data:`~cbp.run.faults.MAX_FAULTS_IN_A_ROW` such
 steps in a row the run is aborted and the trace ends there.
 
 When the scenario has contact constraints, every step is validated (CAT Sec.

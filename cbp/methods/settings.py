@@ -143,7 +143,8 @@ class CatSettings:
     def __post_init__(self) -> None:
         """Positive values."""
         require_between(self, MIN_DT, MAX_DT, "s", "step_dt")
-        require(self, ">= 1", "max_steps", "max_rejections")
+        require_between(self, 1, 100_000, "steps", "max_steps")
+        require_between(self, 1, 1000, "steps", "max_rejections")
         require(self, ">= 0", "converged_step")
 
 
@@ -172,10 +173,10 @@ class IkSearchSettings:
             self,
             "> 0",
             "sweep_step",
-            "max_iterations",
             "position_tolerance",
             "rotation_tolerance",
         )
+        require_between(self, 1, 10_000, "iterations", "max_iterations")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -307,7 +308,9 @@ class HybridSettings:
             "rotation_weight",
             "retry_after",
         )
-        require(self, ">= 1", "ik_seeds", "tries")
+        require_between(self, 1, 10_000, "starts", "ik_seeds")
+        require_between(self, 1, 1000, "searches", "tries")
+        require(self, ">= 0", "seed")
 
 
 @dataclass(frozen=True, kw_only=True)

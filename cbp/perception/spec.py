@@ -263,9 +263,9 @@ class PerceptionSpec:
                 f"{MAX_CELLS:.3g}: shrink the bounds or grow the cells",
                 "bounds",
             )
-        if self.misses_to_clear < 1:
+        if not 1 <= self.misses_to_clear <= 1000:
             raise ConfigError(
-                f"must be >= 1, got {self.misses_to_clear}", "misses_to_clear"
+                f"must be in [1, 1000], got {self.misses_to_clear}", "misses_to_clear"
             )
         if not 0.0 <= self.robot_margin <= 0.2:
             raise ConfigError(

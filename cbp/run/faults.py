@@ -16,7 +16,13 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-__all__ = ["EXIT_ABORTED", "MAX_FAULTS_IN_A_ROW", "Faults"]
+__all__ = [
+    "EXIT_ABORTED",
+    "EXIT_INCOMPLETE",
+    "MAX_FAULTS_IN_A_ROW",
+    "Faults",
+    "describe",
+]
 
 log = logging.getLogger(__name__)
 
@@ -25,6 +31,11 @@ MAX_FAULTS_IN_A_ROW = 10
 #: Exit status of ``cbp run`` and ``cbp compare`` when a run was aborted (its
 #: outputs are written).
 EXIT_ABORTED = 3
+#: Exit status of ``cbp run`` and ``cbp compare`` when a stage after the control
+#: loop failed (the ground-truth clearance, metrics, plots, the report): the
+#: outputs are written without it, and an event and ``incomplete`` in
+#: ``metrics.json`` name it.
+EXIT_INCOMPLETE = 4
 
 
 class Faults:
@@ -57,7 +68,7 @@ class Faults:
         """
         self.total += 1
         self.in_a_row += 1
-        what = f"{type(exc).__name__}: {exc}".strip().rstrip(":")
+        what = describe(exc)
         message = f"{where} failed ({what}); robot held"
         log.debug("%s at t=%.3f s", where, t, exc_info=exc)
         self._event(t, message)
@@ -69,3 +80,8 @@ class Faults:
     def ok(self) -> None:
         """A control cycle went through: the count in a row starts again."""
         self.in_a_row = 0
+
+
+def describe(exc: BaseException) -> str:
+    """An exception as an event names it: ``InjectedError: what happened``."""
+    return f"{type(exc).__name__}: {exc}".strip().rstrip(":")

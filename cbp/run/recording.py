@@ -18,6 +18,7 @@ from cbp.collision.world import CollisionSettings, CollisionWorld
 from cbp.robot import FloatArray, RobotModel
 from cbp.run.declared import DeclaredObjects
 from cbp.run.events import RunLog
+from cbp.run.faults import describe
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
 
@@ -47,9 +48,20 @@ def make_trace(
         log: the run's events, command periods and counters.
         aborted: why the run was aborted, or None.
         ee_frame: the frame that tracks the goal.
+
+    A ground-truth clearance that cannot be computed is an event; the trace
+    lists it as ``incomplete`` and has no clearance.
     """
     robot = scenario.robot
     t, q = recording["t"], recording["q"]
+    incomplete = []
+    try:
+        ground_truth: FloatArray | None = clearance(scenario, t, q)
+    except Exception as exc:  # the outputs are written without it
+        ground_truth = None
+        end = float(t[-1]) if t.size else 0.0
+        log.event(end, f"clearance not computed: {describe(exc)}")
+        incomplete.append("clearance")
     ee_p, ee_R = _frame_poses(robot, ee_frame, q)
     n = t.size
     goal_p = np.full((n, 3), np.nan)
@@ -74,12 +86,13 @@ def make_trace(
         contact_force=recording["contact_force"],
         wrist_force=recording["wrist_force"],
         penetration=recording["penetration"],
-        clearance=clearance(scenario, t, q),
+        clearance=ground_truth,
         goal_change_time=float(times[1]) if times.size > 1 else None,
         periods=log.periods,
         events=log.events,
         aborted=aborted,
         counters=dict(log.counters),
+        incomplete=incomplete,
     )
 
 

@@ -152,5 +152,5 @@ class SimulationSettings:
         """A rate of 100 Hz to 10 kHz, positive gains and recording stride."""
         require_between(self, 100.0, 10_000.0, "Hz", "rate_hz")
         require(self, "> 0", "stiffness", "damping")
-        require(self, ">= 1", "record_every")
+        require_between(self, 1, 10_000, "physics steps", "record_every")
         require(self, ">= 0", "friction")

@@ -14,6 +14,7 @@ from typing import Any, TypeVar
 
 from cbp.collision.settings import CollisionSettings
 from cbp.errors import ConfigError, require_choice
+from cbp.files import check_folder_name
 from cbp.goals import GoalSpec
 from cbp.methods import METHODS, method_info
 from cbp.methods.settings import (
@@ -190,7 +191,8 @@ class ScenarioSpec:
     """Constraint entries (bound by :func:`load_scenario`)."""
 
     def __post_init__(self) -> None:
-        """A positive duration of at most a day."""
+        """A positive duration of at most a day; a name that is a folder name."""
+        check_folder_name(self.name)
         if not 0 < self.duration <= MAX_DURATION:
             raise ConfigError(
                 f"must be in (0, {MAX_DURATION:g}] s, got {self.duration}", "duration"

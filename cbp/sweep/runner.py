@@ -9,11 +9,16 @@ and writes the results table and report (:mod:`cbp.sweep.results`).
   one (``ray start --head`` printed it), the driver joins that cluster and each
   run takes one CPU wherever Ray places it. Every node needs ``cbp`` installed
   and the scenario files at the same path (a shared or identical checkout).
-* A worker that dies (killed, out of memory, its node lost) is retried by Ray up
-  to ``retries`` times; then the run is recorded as failed with the reason, in
-  ``DIR/failed/<run id>.json``, and a later rerun tries it again. A run that
-  raises is recorded with its exception and is not retried (it would raise
-  again).
+* A worker that dies (killed, out of memory, its node lost) is charged to the
+  run it was running, and only to it: that run is retried (by Ray, or on a new
+  pool process) up to ``retries`` times; then it is recorded as failed with the
+  reason, in ``DIR/failed/<run id>.json``, and a later rerun tries it again. A
+  run that raises is recorded with its exception and is not retried (it would
+  raise again). ``cbp sweep`` exits with status 1 when any run is not ok
+  (failed or raised), with either backend.
+* A method that needs a process of its own to be reproducible
+  (:attr:`cbp.executors.ExecutorInfo.fresh_process`: MP and the hybrid, which
+  seed OMPL once per process) runs in a new worker process each time.
 * Ctrl-C cancels the runs in flight; finished runs are kept and a rerun
   resumes.
 """
@@ -174,6 +179,8 @@ def _run_ray(
     """Each run a Ray task; returns Ray's start-up time [s]."""
     import ray
 
+    from cbp.methods import METHODS
+
     start = time.perf_counter()
     options: dict[str, Any] = {
         "logging_level": "ERROR",
@@ -188,13 +195,13 @@ def _run_ray(
     try:
         options = {"num_cpus": 1, "max_retries": retries, "retry_exceptions": False}
         task = ray.remote(**options)(execute_run)
-        # OMPL seeds its samplers once per process: an MP run gets a fresh
-        # process so that it is reproducible (cbp.executors.mp).
+        # OMPL seeds its samplers once per process: an MP or hybrid run gets a
+        # fresh process so that it is reproducible (cbp.executors.mp).
         fresh = ray.remote(max_calls=1, **options)(execute_run)
         refs = {}
         for run in pending:
-            ref = (fresh if run.method == "mp" else task).remote(asdict(run), str(out))
-            refs[ref] = run
+            remote = fresh if METHODS[run.method].fresh_process else task
+            refs[remote.remote(asdict(run), str(out))] = run
         try:
             while refs:
                 ready, _ = ray.wait(list(refs), num_returns=1, timeout=1.0)
@@ -222,42 +229,122 @@ def _run_pool(
     retries: int,
     done: Callable[[RunSpec, dict[str, Any]], None],
 ) -> float:
-    """Without Ray: a process pool; a pool broken by a dead worker is rebuilt.
+    """Without Ray: worker processes, each running one run at a time.
+
+    The driver knows which run each worker holds, so a worker that dies
+    (killed, out of memory) is charged to that run alone: it is tried again up
+    to ``retries`` times on a new worker, then recorded as failed, while the
+    other workers carry on. A run whose method needs a fresh process
+    (:attr:`~cbp.executors.ExecutorInfo.fresh_process`) gets a new worker that
+    ends after it.
 
     Workers are spawned, not forked: a fork copies the parent's threads' locks
     in whatever state they were (Ray's, a map thread's, a web server's), and the
     child can die or hang on one before it runs anything.
     """
     import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
+    from collections import deque
+    from multiprocessing.connection import wait
+
+    from cbp.methods import METHODS
 
     context = multiprocessing.get_context("spawn")
-
-    tries = {run.id: 0 for run in pending}
-    queue = list(pending)
-    while queue:
-        lost: list[RunSpec] = []
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            futures = {pool.submit(execute_run, asdict(r), str(out)): r for r in queue}
-            queue = []
-            try:
-                while futures:
-                    finished, _ = wait(futures, return_when=FIRST_COMPLETED)
-                    for future in finished:
-                        run = futures.pop(future)
-                        try:
-                            done(run, future.result())
-                        except BrokenProcessPool as exc:
-                            tries[run.id] += 1
-                            if tries[run.id] > retries:
-                                reason = f"worker process died: {exc}"
-                                done(run, _failed(run, reason, tries[run.id]))
-                            else:
-                                lost.append(run)
-            except KeyboardInterrupt:
-                for future in futures:
-                    future.cancel()
-                raise
-        queue = lost
+    queue = deque(pending)
+    tries = {run.id: 0 for run in queue}
+    idle: list[_Worker] = []
+    busy: list[_Worker] = []
+    try:
+        while queue or busy:
+            while queue and len(busy) < workers:
+                run = queue.popleft()
+                fresh = METHODS[run.method].fresh_process
+                if fresh or not idle:
+                    if idle and len(idle) + len(busy) >= workers:
+                        idle.pop().stop()  # at most `workers` processes
+                    worker = _Worker(context)
+                else:
+                    worker = idle.pop()
+                worker.start_run(run, out, last=fresh)
+                busy.append(worker)
+            wait([w.connection for w in busy] + [w.process.sentinel for w in busy])
+            for worker in list(busy):
+                held = worker.run
+                assert held is not None
+                run = held
+                record = worker.result()
+                if record is None and worker.process.is_alive():
+                    continue  # still running
+                busy.remove(worker)
+                if record is not None:
+                    done(run, record)
+                    if METHODS[run.method].fresh_process:
+                        worker.stop()
+                    else:
+                        idle.append(worker)
+                    continue
+                worker.stop()
+                tries[run.id] += 1
+                if tries[run.id] > retries:
+                    code = worker.process.exitcode
+                    reason = f"worker process died (exit code {code})"
+                    done(run, _failed(run, reason, tries[run.id]))
+                else:
+                    queue.append(run)
+    finally:
+        for worker in idle + busy:
+            worker.stop(kill=worker in busy)
     return 0.0
+
+
+class _Worker:
+    """A spawned process that runs the sweep runs it is sent, one at a time."""
+
+    def __init__(self, context: Any) -> None:
+        self.connection, child = context.Pipe()
+        self.process = context.Process(target=_serve, args=(child,), daemon=True)
+        self.process.start()
+        child.close()
+        self.run: RunSpec | None = None
+
+    def start_run(self, run: RunSpec, out: Path, last: bool) -> None:
+        """Send ``run``; with ``last`` the process ends after it."""
+        self.run = run
+        self.connection.send((asdict(run), str(out), last))
+
+    def result(self) -> dict[str, Any] | None:
+        """The run's record if it has come, else None (running, or died)."""
+        try:
+            if self.connection.poll():
+                record: dict[str, Any] = self.connection.recv()
+                return record
+        except (EOFError, OSError):  # died while sending
+            pass
+        return None
+
+    def stop(self, kill: bool = False) -> None:
+        """End the process: ask it to (idle), or kill it (running a run)."""
+        if self.process.is_alive() and not kill:
+            try:
+                self.connection.send(None)
+            except OSError:
+                kill = True
+            self.process.join(timeout=10)
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join()
+        self.connection.close()
+
+
+def _serve(connection: Any) -> None:
+    """A pool worker's loop: run each run received, send back its record."""
+    while True:
+        try:
+            job = connection.recv()
+        except (EOFError, KeyboardInterrupt):
+            return
+        if job is None:
+            return
+        run, out, last = job
+        connection.send(execute_run(run, out))
+        if last:
+            return

@@ -25,26 +25,37 @@ Keys are anything ``cbp run --set`` accepts. Each run is one (scenario, method,
 grid point, sample); its id is a hash of the scenario document after includes
 and overrides, the method and the seed (the generated scene's, else 0), so the
 same run has the same id in any sweep and a rerun finds it done.
+
+Sizes are checked before anything is expanded: a sweep has at most
+:data:`MAX_RUNS` runs (scenarios and scenes x methods x grid points x draws)
+and :data:`MAX_SCENES` generated scenes; a distribution's bounds are finite
+numbers of magnitude at most :data:`~cbp.schema.MAX_MAGNITUDE`; the name is one
+folder name (it names the output folder, :func:`cbp.files.check_folder_name`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import itertools
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import yaml
 
-from cbp.errors import ScenarioError, require
+from cbp.data import is_file
+from cbp.errors import require, require_between
+from cbp.files import check_folder_name
 from cbp.methods import METHODS
 from cbp.scenario.spec import ScenarioSpec
-from cbp.schema import Document
+from cbp.schema import MAX_MAGNITUDE, Document, Node
 
 __all__ = [
+    "MAX_RUNS",
+    "MAX_SCENES",
     "RunSpec",
     "SampleSpec",
     "ScenesSpec",
@@ -54,18 +65,27 @@ __all__ = [
 ]
 
 
+#: Most runs in one sweep (scenarios and scenes x methods x grid points x draws).
+MAX_RUNS = 10_000
+#: Most generated scenes in one sweep.
+MAX_SCENES = 1_000
+#: Most retries of a run whose worker dies.
+MAX_RETRIES = 100
+
+
 @dataclass(frozen=True, kw_only=True)
 class ScenesSpec:
     """Generated cluttered scenes (:mod:`cbp.scenes`)."""
 
     count: int
-    """How many scenes."""
+    """How many scenes (at most :data:`MAX_SCENES`)."""
     seed: int = 0
     """The first seed tried; a scene that does not load is skipped."""
 
     def __post_init__(self) -> None:
-        """At least one scene."""
-        require(self, ">= 1", "count")
+        """One to MAX_SCENES scenes; a seed >= 0."""
+        require_between(self, 1, MAX_SCENES, "scenes", "count")
+        require(self, ">= 0", "seed")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,11 +97,16 @@ class SampleSpec:
     """
 
     count: int
-    """Draws; each is combined with every grid point."""
+    """Draws; each is combined with every grid point (at most :data:`MAX_RUNS`)."""
     values: dict[str, dict[str, Any]]
     """Distribution of each key."""
     seed: int = 0
     """Seed of the draws: the same seed gives the same values."""
+
+    def __post_init__(self) -> None:
+        """One to MAX_RUNS draws; a seed >= 0."""
+        require_between(self, 1, MAX_RUNS, "draws", "count")
+        require(self, ">= 0", "seed")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -110,6 +135,11 @@ class SweepSpec:
     """A run whose worker dies is tried this many more times, then recorded as
     failed."""
 
+    def __post_init__(self) -> None:
+        """A name that is a folder name; 0 to MAX_RETRIES retries."""
+        check_folder_name(self.name)
+        require_between(self, 0, MAX_RETRIES, "retries", "retries")
+
 
 @dataclass(frozen=True)
 class RunSpec:
@@ -136,53 +166,123 @@ DISTRIBUTIONS = ("uniform", "log_uniform", "integers", "choice")
 
 
 def load_sweep(path: str | Path) -> SweepSpec:
-    """Read and check a sweep file.
+    """Read and check a sweep file, its sizes before anything is expanded.
 
     Raises:
-        ScenarioError: every problem in the file, located.
+        ScenarioError: every problem in the file, each with its line.
     """
     doc = Document.from_file(path)
     spec: SweepSpec = doc.build(SweepSpec, doc.root, "")
     doc.raise_if_problems()
-    problems = []
+
+    def report(where: str, message: str) -> None:
+        doc.report(_node_at(doc.root, where), where, message)
+
     for i, method in enumerate(spec.methods):
         if method not in METHODS:
-            problems.append(
-                f"methods[{i}]: unknown method '{method}'; expected one of "
-                + ", ".join(METHODS)
+            report(
+                f"methods[{i}]",
+                f"unknown method '{method}'; expected one of " + ", ".join(METHODS),
             )
+    if not spec.methods:
+        report("methods", "give at least one method")
+    for i, scenario in enumerate(spec.scenarios):
+        if not is_file(Path(path).parent / scenario):
+            report(f"scenarios[{i}]", f"no scenario file {scenario!r} beside the sweep")
     if not spec.scenarios and spec.scenes is None:
-        problems.append("name at least one scenario in 'scenarios' or 'scenes'")
+        report("", "name at least one scenario in 'scenarios' or 'scenes'")
     for key, values in spec.grid.items():
         if not values:
-            problems.append(f"grid.{key}: give at least one value")
+            report(f"grid.{key}", "give at least one value")
     if spec.samples is not None:
         for key, dist in spec.samples.values.items():
-            problems += _check_distribution(f"samples.values.{key}", dist)
-    if spec.retries < 0:
-        problems.append(f"retries: must be >= 0, got {spec.retries}")
-    if problems:
-        raise ScenarioError(str(path), problems)
+            where = f"samples.values.{key}"
+            problem = _distribution_problem(dist)
+            if problem:
+                report(where, problem)
+    runs = sweep_size(spec)
+    if runs > MAX_RUNS:
+        report(
+            "grid" if spec.grid else "samples" if spec.samples else "",
+            f"the sweep has {runs} runs ({_size_terms(spec)}), more than the "
+            f"{MAX_RUNS} accepted: split it into several sweeps",
+        )
+    doc.raise_if_problems()
     return spec
 
 
-def _check_distribution(where: str, dist: dict[str, Any]) -> list[str]:
+def sweep_size(spec: SweepSpec) -> int:
+    """The number of runs ``spec`` expands into (before identical runs merge)."""
+    bases = len(spec.scenarios) + (spec.scenes.count if spec.scenes else 0)
+    points = math.prod(len(v) for v in spec.grid.values())
+    draws = spec.samples.count if spec.samples is not None else 1
+    return bases * len(spec.methods) * points * draws
+
+
+def _size_terms(spec: SweepSpec) -> str:
+    bases = len(spec.scenarios) + (spec.scenes.count if spec.scenes else 0)
+    points = math.prod(len(v) for v in spec.grid.values())
+    draws = spec.samples.count if spec.samples is not None else 1
+    return (
+        f"{bases} scenarios and scenes x {len(spec.methods)} methods x {points} "
+        f"grid points x {draws} draws"
+    )
+
+
+def _node_at(root: Node | None, where: str) -> Node | None:
+    """The node at a document path (``a.b[2]``; keys may hold dots), or nearest."""
+    node = root
+    rest = where
+    while rest and node is not None:
+        if isinstance(node, yaml.SequenceNode) and rest.startswith("["):
+            index, _, rest = rest[1:].partition("]")
+            rest = rest.removeprefix(".")
+            if not index.isdigit() or int(index) >= len(node.value):
+                return node
+            node = node.value[int(index)]
+            continue
+        if not isinstance(node, yaml.MappingNode):
+            return node
+        # The longest key that starts the rest (keys such as 'a.b.c' hold dots).
+        best = None
+        for key_node, value_node in node.value:
+            key = str(key_node.value)
+            starts = rest == key or rest.startswith((f"{key}.", f"{key}["))
+            if starts and (best is None or len(key) > len(best[0])):
+                best = (key, value_node)
+        if best is None:
+            return node
+        node = best[1]
+        rest = rest[len(best[0]) :].removeprefix(".")
+    return node
+
+
+def _distribution_problem(dist: dict[str, Any]) -> str:
+    """Why a ``samples.values`` entry is not a distribution, or an empty string."""
     if len(dist) != 1 or next(iter(dist)) not in DISTRIBUTIONS:
-        return [f"{where}: expected one of {{{', '.join(DISTRIBUTIONS)}: ...}}"]
+        return f"expected one of {{{', '.join(DISTRIBUTIONS)}: ...}}"
     kind, args = next(iter(dist.items()))
     if kind == "choice":
         ok = isinstance(args, list) and len(args) > 0
-        return [] if ok else [f"{where}.choice: give a non-empty list"]
+        return "" if ok else "choice: give a non-empty list"
+    number = int if kind == "integers" else int | float
     if not (
         isinstance(args, list)
         and len(args) == 2
-        and all(isinstance(a, int | float) for a in args)
-        and args[0] <= args[1]
+        and all(isinstance(a, number) and not isinstance(a, bool) for a in args)
     ):
-        return [f"{where}.{kind}: give [low, high] with low <= high"]
+        what = "integers" if kind == "integers" else "numbers"
+        return f"{kind}: give [low, high], two {what}, got {args!r}"[:200]
+    if not all(math.isfinite(a) and abs(a) <= MAX_MAGNITUDE for a in args):
+        return (
+            f"{kind}: the bounds must be finite, of magnitude at most "
+            f"{MAX_MAGNITUDE:g}, got {args!r}"
+        )
+    if not args[0] <= args[1]:
+        return f"{kind}: give [low, high] with low <= high, got {args!r}"
     if kind == "log_uniform" and args[0] <= 0:
-        return [f"{where}.log_uniform: low must be > 0"]
-    return []
+        return "log_uniform: low must be > 0"
+    return ""
 
 
 def expand(spec: SweepSpec, path: Path, scenes: list[Path]) -> list[RunSpec]:
@@ -204,16 +304,26 @@ def expand(spec: SweepSpec, path: Path, scenes: list[Path]) -> list[RunSpec]:
         for combination in itertools.product(*spec.grid.values())
     ]
     draws = _draws(spec.samples) if spec.samples is not None else [{}]
+    documents: dict[Path, Document] = {}
+    checked: set[tuple[Path, str, str, str]] = set()
     runs: dict[str, RunSpec] = {}  # identical runs (repeated draws) run once
     for (scenario, seed), method, point, draw in itertools.product(
         bases, spec.methods, points, draws
     ):
         values = {**point, **draw}
         overrides = {k: _yaml(v) for k, v in {**spec.set, **values}.items()}
-        if "timing" in _settings_fields(method):
-            overrides.setdefault(f"method.{method}.timing.clock", spec.clock)
+        clock = _clock_key(method)
+        if clock is not None:
+            overrides.setdefault(clock, spec.clock)
         overrides["method.name"] = method
-        key = run_id(scenario, overrides, method, seed)
+        if scenario not in documents:
+            documents[scenario] = _base_document(scenario)
+        # Each value is checked with the scenario in the first run that has
+        # it (a full check per run would take minutes for large sweeps).
+        signature = {(scenario, method, k, v) for k, v in overrides.items()}
+        check = not signature <= checked
+        checked |= signature
+        key = _run_id(documents[scenario], overrides, method, seed, check)
         runs.setdefault(
             key, RunSpec(key, str(scenario), method, seed, overrides, values)
         )
@@ -226,11 +336,25 @@ def run_id(scenario: Path, overrides: dict[str, str], method: str, seed: int) ->
     Raises:
         ScenarioError: the file or an override has a problem.
     """
+    return _run_id(_base_document(scenario), overrides, method, seed, check=True)
+
+
+def _base_document(scenario: Path) -> Document:
+    """The scenario file with its includes merged in."""
     doc = Document.from_file(scenario)
     doc.resolve_includes()
+    doc.raise_if_problems()
+    return doc
+
+
+def _run_id(
+    base: Document, overrides: dict[str, str], method: str, seed: int, check: bool
+) -> str:
+    doc = base.copy()
     for key, text in overrides.items():
         doc.override(key, text)
-    doc.build(ScenarioSpec, doc.root, "")  # keys and types, as cbp run checks them
+    if check:
+        doc.build(ScenarioSpec, doc.root, "")  # keys and types, as cbp run checks
     doc.raise_if_problems()
     data = doc.plain(doc.root) if doc.root is not None else None
     text = json.dumps([data, method, seed], sort_keys=True, default=str)
@@ -257,8 +381,14 @@ def _draws(samples: SampleSpec) -> list[dict[str, Any]]:
     return draws
 
 
-def _settings_fields(method: str) -> set[str]:
-    return {f.name for f in dataclasses.fields(METHODS[method].settings)}
+def _clock_key(method: str) -> str | None:
+    """The ``--set`` key of the clock ``method`` runs on, if it has one.
+
+    A periodic method's loop timing (the table's ``timing``: the hybrid runs
+    CAT's loop, with ``method.cat``'s timing).
+    """
+    section = METHODS[method].timing
+    return None if section is None else f"method.{section}.timing.clock"
 
 
 def _yaml(value: Any) -> str:

@@ -26,8 +26,10 @@ class ContactParams(PluginParams):
 
     def __post_init__(self) -> None:
         """At least one row; finite distance."""
-        if self.max_contacts < 1:
-            raise ConfigError(f"must be >= 1, got {self.max_contacts}", "max_contacts")
+        if not 1 <= self.max_contacts <= 1000:
+            raise ConfigError(
+                f"must be in [1, 1000], got {self.max_contacts}", "max_contacts"
+            )
         if not -1.0 < self.safety_distance < 1.0:
             raise ConfigError(
                 f"must be within (-1, 1) m, got {self.safety_distance}",

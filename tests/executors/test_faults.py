@@ -27,6 +27,7 @@ from cbp.metrics import run_metrics
 from cbp.perception.frame import DepthFrame
 from cbp.report import write_outputs
 from cbp.run.faults import EXIT_ABORTED, MAX_FAULTS_IN_A_ROW
+from cbp.run.goal_input import GoalInput
 from cbp.scenario import Scenario
 from cbp.sim.camera import DepthCamera
 from cbp.sim.recorder import Recorder
@@ -293,37 +294,47 @@ def test_frame_problems_name_what_is_wrong() -> None:
 # ------------------------------------------------------------------ outputs
 
 
-def test_two_concurrent_runs_into_one_folder_leave_one_complete_run(
+def test_a_folder_in_use_by_a_live_run_is_refused_and_a_dead_ones_is_cleaned(
     tmp_path: Path,
 ) -> None:
+    """A live claim on --out refuses a second run (exit 2); a killed one's is removed."""
     out = tmp_path / "out"
-    runs = [
-        subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "cbp",
-                "run",
-                str(SCENARIOS / "panda_reach.yaml"),
-                "--out",
-                str(out),
-                "--set",
-                f"duration={duration}",
-            ],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-        )
-        for duration in (2.0, 3.0)
-    ]
-    for run in runs:
-        _, stderr = run.communicate(timeout=120)
-        assert run.returncode == 0, stderr
-    samples = json.loads((out / "metrics.json").read_text())["kinematic"]["samples"]
-    rows = len((out / "trace.csv").read_text().splitlines()) - 1
-    assert rows == samples  # the trace and the metrics of the same run
-    assert samples in (201, 301)
-    leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(".out.")]
-    assert leftovers == [".out.lock"]
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time; from pathlib import Path; "
+            "from cbp.files import claim_output_folder; "
+            "print(claim_output_folder(Path(sys.argv[1])).staging, flush=True); "
+            "time.sleep(600)",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout is not None
+        staging = Path(holder.stdout.readline().strip())
+        assert staging.is_dir()
+        refused = run_cbp("run", str(SCENARIOS / "panda_reach.yaml"), "--out", str(out))
+        assert refused.returncode == 2
+        assert f"output folder {out} is in use by a run still going" in refused.stderr
+        assert f"process {holder.pid}" in refused.stderr
+    finally:
+        holder.kill()  # SIGKILL: nothing of its own cleans up
+        holder.communicate()
+    assert staging.is_dir()  # what a killed run leaves
+    done = run_cbp(
+        "run",
+        str(SCENARIOS / "panda_reach.yaml"),
+        "--out",
+        str(out),
+        "--set",
+        "duration=1",
+    )
+    assert done.returncode == 0, done.stderr
+    assert (out / "metrics.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no lock file
 
 
 def test_outputs_never_replace_a_folder_that_is_not_an_output(tmp_path: Path) -> None:
@@ -367,3 +378,138 @@ def test_the_recorder_spools_blocks_and_reads_them_back() -> None:
     recorder.row()[:] = [1, 2, 3]  # recording goes on after a read
     assert np.array_equal(recorder.array()[-1], [1, 2, 3])
     recorder.close()
+
+
+def test_a_collision_checker_that_fails_for_good_still_gives_every_output(
+    monkeypatch, tmp_path: Path
+) -> None:
+    """From its 200th call on the checker raises: the run aborts, outputs written."""
+    from cbp.cli import main
+    from cbp.collision.world import CollisionWorld
+
+    check = CollisionWorld.check
+    calls = [0]
+
+    def failing(self, *args, **kwargs):
+        calls[0] += 1
+        if calls[0] >= 200:
+            raise InjectedError("checker gone")
+        return check(self, *args, **kwargs)
+
+    monkeypatch.setattr(CollisionWorld, "check", failing)
+    out = tmp_path / "out"
+    status = main(
+        [
+            "run",
+            str(SCENARIOS / "cat_boards.yaml"),
+            "--out",
+            str(out),
+            "--set",
+            "duration=2",
+            "--set",
+            "method.cat.timing.clock=virtual",
+        ]
+    )
+    assert calls[0] > 200
+    assert status == EXIT_ABORTED
+    document = json.loads((out / "metrics.json").read_text())["cat"]
+    messages = [e["message"] for e in document["events"]]
+    assert "clearance not computed: InjectedError: checker gone" in messages
+    assert document["incomplete"] == ["clearance"]
+    assert "InjectedError: checker gone" in document["aborted"]
+    for name in ("report.md", "trace.csv", "scene.json", "tracking.png"):
+        assert (out / name).is_file(), name
+
+
+@pytest.mark.parametrize(
+    ("target", "stage"),
+    [
+        ("cbp.report.plot_runs", "plots"),
+        ("cbp.report.run_metrics", "metrics"),
+        ("cbp.report.write_scene", "scene description"),
+        ("cbp.report._report", "report"),
+    ],
+)
+def test_a_failing_output_stage_is_an_event_and_exit_4(
+    monkeypatch, tmp_path: Path, target: str, stage: str
+) -> None:
+    """Each stage after the loop that raises is named; the rest is written."""
+    from cbp.cli import main
+    from cbp.run.faults import EXIT_INCOMPLETE
+
+    def broken(*args, **kwargs):
+        raise InjectedError("stage bug")
+
+    monkeypatch.setattr(target, broken)
+    out = tmp_path / "out"
+    reach = str(SCENARIOS / "panda_reach.yaml")
+    assert main(["run", reach, "--out", str(out), "--set", "duration=1"]) == (
+        EXIT_INCOMPLETE
+    )
+    document = json.loads((out / "metrics.json").read_text())["kinematic"]
+    assert document["incomplete"] == [stage]
+    messages = [e["message"] for e in document["events"]]
+    assert f"{stage} not written: InjectedError: stage bug" in messages
+    assert (out / "trace.csv").is_file()
+    assert (out / "report.md").is_file()
+
+
+# ------------------------------------------------------------------ IK's guard
+
+
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        (lambda q, robot: np.full_like(q, np.nan), "not 7 finite values"),
+        (
+            # the elbow 0.5 rad past its upper limit
+            lambda q, robot: np.where(
+                np.arange(q.size) == 3, robot.upper_limits + 0.5, q
+            ),
+            "panda_joint4 would end",
+        ),
+    ],
+    ids=["nan", "past_limit"],
+)
+def test_ik_holds_through_bad_solutions_and_aborts_when_they_persist(
+    monkeypatch, bad, message
+) -> None:
+    """Bad IK solutions are refused by IK's step guard: held, then aborted."""
+    from cbp.executors.ik import run_ik
+    from cbp.executors.ik_search import IkSearch
+
+    solution_for = IkSearch.solution_for
+    window = [0.8, 0.95]
+
+    def faulty(self, goal, q_near, budget):
+        solution = solution_for(self, goal, q_near, budget)
+        if solution is not None and window[0] <= self_time[0] < window[1]:
+            return bad(solution, self.robot)
+        return solution
+
+    self_time = [0.0]
+    send_goal = GoalInput.send
+
+    def timed(self, t):
+        self_time[0] = t
+        return send_goal(self, t)
+
+    monkeypatch.setattr(IkSearch, "solution_for", faulty)
+    monkeypatch.setattr(GoalInput, "send", timed)
+    overrides = {"duration": "3", "method.ik.timing.clock": "virtual"}
+    scenario = load_virtual(SCENARIOS / "cat_free_step.yaml", overrides=overrides)
+    trace = run_ik(scenario)
+    m = run_metrics(trace, scenario.robot)
+    assert f"planning failed (UnsafeStepError: IK solution rejected: {message}" in (
+        _events(trace)
+    )
+    assert m["aborted"] is None
+    assert m["max_joint_limit_violation_rad"] == 0.0
+    assert np.all(np.isfinite(trace.q))
+    # Refused for good: the run is aborted, still within the limits.
+    window[1] = 10.0
+    trace = run_ik(load_virtual(SCENARIOS / "cat_free_step.yaml", overrides=overrides))
+    m = run_metrics(trace, scenario.robot)
+    assert "IK solution rejected" in m["aborted"]
+    assert m["max_joint_limit_violation_rad"] == 0.0
+    assert np.all(np.isfinite(trace.q))

@@ -187,8 +187,45 @@ def test_the_pool_backend_and_a_run_that_raises(tmp_path: Path) -> None:
     )
 
 
+def _sweep_process(path: Path, out: Path, backend: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "cbp",
+            "sweep",
+            str(path),
+            "--out",
+            str(out),
+            "--workers",
+            "2",
+            "--backend",
+            backend,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _kill_when_running(out: Path, run_id: str, sweep: subprocess.Popen[str]) -> None:
+    """SIGKILL the worker of ``run_id`` as soon as its pid file appears."""
+    pid_file = out / "runs" / ".running" / f"{run_id}.pid"
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and sweep.poll() is None:
+        try:
+            pid = int(pid_file.read_text())
+        except (OSError, ValueError):
+            time.sleep(0.05)
+            continue
+        os.kill(pid, signal.SIGKILL)
+        return
+    raise AssertionError(f"run {run_id} never started")
+
+
 @pytest.mark.slow
 def test_a_killed_worker_is_retried_and_its_run_completes(tmp_path: Path) -> None:
+    """Ray retries a run whose worker was killed; the sweep then exits 0."""
     path = _sweep(
         tmp_path,
         """\
@@ -202,35 +239,9 @@ def test_a_killed_worker_is_retried_and_its_run_completes(tmp_path: Path) -> Non
         """,
     )
     out = tmp_path / "out"
-    sweep = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "cbp",
-            "sweep",
-            str(path),
-            "--out",
-            str(out),
-            "--workers",
-            "2",
-            "--backend",
-            "ray",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    running = out / "runs" / ".running"
-    killed = None
-    deadline = time.monotonic() + 120
-    while killed is None and time.monotonic() < deadline:
-        pids = sorted(running.glob("*.pid")) if running.is_dir() else []
-        if pids:
-            run_id = pids[0].stem
-            os.kill(int(pids[0].read_text()), signal.SIGKILL)
-            killed = run_id
-        time.sleep(0.05)
-    assert killed is not None, "no run started"
+    killed = expand(load_sweep(path), path, [])[0].id
+    sweep = _sweep_process(path, out, "ray")
+    _kill_when_running(out, killed, sweep)
     stdout, stderr = sweep.communicate(timeout=300)
     assert sweep.returncode == 0, stderr
     record = read_result(out / "runs" / killed)
@@ -238,6 +249,56 @@ def test_a_killed_worker_is_retried_and_its_run_completes(tmp_path: Path) -> Non
     assert record["status"] == "ok"
     assert record["attempts"] == 2
     assert "0 not ok" in stdout
+
+
+KILLED = """\
+    name: killed
+    scenarios: ["{reach}"]
+    methods: [kinematic]
+    grid:
+      duration: [{duration}, 0.5]
+      tasks.hand.params.frame: [panda_hand, no_such_frame]
+    retries: 0
+    """
+
+
+@pytest.mark.parametrize(
+    "backend", ["pool", pytest.param("ray", marks=pytest.mark.slow)]
+)
+def test_a_dead_worker_is_charged_to_its_run_only(tmp_path: Path, backend: str) -> None:
+    """Killing one run's worker fails that run alone; the sweep exits 1."""
+    path = tmp_path / "sweep.yaml"
+    path.write_text(textwrap.dedent(KILLED).format(reach=REACH, duration=60.0))
+    runs = expand(load_sweep(path), path, [])
+    (long,) = [
+        r
+        for r in runs
+        if r.values == {"duration": 60.0, "tasks.hand.params.frame": "panda_hand"}
+    ]
+    out = tmp_path / "out"
+    sweep = _sweep_process(path, out, backend)
+    _kill_when_running(out, long.id, sweep)
+    stdout, stderr = sweep.communicate(timeout=300)
+    assert sweep.returncode == 1, stderr
+    assert "3 not ok" in stdout
+    records = {r.id: read_result(out / "runs" / r.id) for r in runs}
+    assert records.pop(long.id) is None  # no folder: its worker died
+    failed = json.loads((out / "failed" / f"{long.id}.json").read_text())
+    assert "died" in failed["error"] or "Worker" in failed["error"]
+    statuses = sorted(
+        (r["values"]["tasks.hand.params.frame"], r["status"])
+        for r in records.values()
+        if r is not None
+    )
+    assert statuses == [
+        ("no_such_frame", "error"),
+        ("no_such_frame", "error"),
+        ("panda_hand", "ok"),
+    ]
+    for record in records.values():
+        assert record is not None
+        if record["status"] == "error":
+            assert "no_such_frame" in record["error"]
 
 
 def test_set_reaches_list_items_by_index_name_or_type() -> None:
@@ -258,3 +319,130 @@ def test_set_reaches_list_items_by_index_name_or_type() -> None:
     assert entries["joint_limits"].plugin.params.margin == 0.05
     with pytest.raises(ScenarioError, match="'constraints' has no item 'nope'"):
         load_scenario(boards, overrides={"constraints.nope.gain": "0.5"})
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (
+            "samples: {{count: 2, values: {{duration: {{uniform: [-.inf, .inf]}}}}}}",
+            "line 4: samples.values.duration: uniform: the bounds must be finite",
+        ),
+        (
+            "samples: {{count: 2, values: {{duration: {{integers: [1, 2.5]}}}}}}",
+            "line 4: samples.values.duration: integers: give [low, high], two integers",
+        ),
+        ("grid: {{duration: [2020-01-01]}}", "line 4: '2020-01-01' reads as a date"),
+        (
+            "samples: {{count: 1000000000000, values: {{duration: {{choice: [1]}}}}}}",
+            "line 4: samples.count: must be in [1, 10000] draws",
+        ),
+        ("scenes: {{count: 100000000}}", "line 4: scenes.count: must be in [1, 1000]"),
+        (
+            "grid: {{" + ", ".join(f"k{i}: [1, 2, 3, 4]" for i in range(25)) + "}}",
+            "line 4: grid: the sweep has 1125899906842624 runs",
+        ),
+        ("retries: 1000000", "line 4: retries: must be in [0, 100]"),
+    ],
+)
+def test_sweep_sizes_and_bounds_are_checked_before_expansion(
+    tmp_path: Path, body: str, message: str
+) -> None:
+    """Infinite bounds, dates and sizes past the limits are refused at their line."""
+    path = _sweep(
+        tmp_path,
+        'name: s\nscenarios: ["{reach}"]\nmethods: [kinematic]\n' + body + "\n",
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_sweep(path)
+    assert message in str(info.value)
+
+
+def test_names_cannot_reach_outside_the_output_folder(tmp_path: Path) -> None:
+    """A sweep's or a scenario's name with '../' is refused; nothing is written."""
+    from cbp.cli import main
+
+    work = tmp_path / "work"
+    work.mkdir()
+    path = _sweep(
+        tmp_path,
+        'name: ../../escaped\nscenarios: ["{reach}"]\nmethods: [kinematic]\n',
+    )
+    with pytest.raises(ScenarioError, match=r"line 1: name: must be one folder"):
+        load_sweep(path)
+    cwd = Path.cwd()
+    os.chdir(work)
+    try:
+        assert main(["sweep", str(path)]) == 2
+        assert main(["run", str(REACH), "--set", "name=../../escaped"]) == 2
+        assert main(["run", str(REACH), "--set", "name=.hidden"]) == 2
+    finally:
+        os.chdir(cwd)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["sweep.yaml", "work"]
+
+
+def test_a_large_sweep_expands_once_per_scenario_document(tmp_path: Path) -> None:
+    """2500 runs expand with distinct ids, each override checked against the file."""
+    values = ", ".join(str(1 + i / 100) for i in range(50))
+    path = _sweep(
+        tmp_path,
+        f"""\
+        name: large
+        scenarios: ["{{reach}}"]
+        methods: [kinematic]
+        grid:
+          duration: [{values}]
+          method.kinematic.dt: [{", ".join(str(0.001 * (i + 1)) for i in range(50))}]
+        """,
+    )
+    runs = expand(load_sweep(path), path, [])
+    assert len({r.id for r in runs}) == 2500
+    bad = _sweep(
+        tmp_path,
+        f"""\
+        name: large
+        scenarios: ["{{reach}}"]
+        methods: [kinematic]
+        grid:
+          duration: [{values}]
+          method.kinematic.dt: [0.01, 0.02, 5.0]
+        """,
+        "bad.yaml",
+    )
+    with pytest.raises(ScenarioError, match=r"--set method.kinematic.dt.*must be in"):
+        expand(load_sweep(bad), bad, [])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", ["pool", "ray"])
+def test_hybrid_runs_in_virtual_time_repeat_exactly(
+    tmp_path: Path, backend: str
+) -> None:
+    """Two hybrid runs of one scene, one after the other on one CPU, are identical.
+
+    OMPL seeds its random numbers once per process: the second run is identical
+    only if it gets a fresh worker process (ExecutorInfo.fresh_process).
+    """
+    path = tmp_path / "sweep.yaml"
+    path.write_text(
+        textwrap.dedent(
+            f"""\
+            name: hybrid_twice
+            scenarios: ["{SCENARIOS / "cat_local_minimum.yaml"}"]
+            methods: [hybrid]
+            set: {{duration: 3.0}}
+            grid:
+              description: [first, second]
+            clock: virtual
+            """
+        )
+    )
+    outcome = run_sweep(
+        path, tmp_path / "out", workers=1, progress=False, backend=backend
+    )
+    assert outcome.failed == 0
+    first, second = (tmp_path / "out" / "runs" / r.id for r in outcome.runs)
+    events = json.loads((first / "metrics.json").read_text())["hybrid"]["events"]
+    assert any("hybrid: planned" in e["message"] for e in events)  # OMPL ran
+    assert (first / "trace.csv").read_bytes() == (second / "trace.csv").read_bytes()
+    assert (first / "metrics.json").read_text() == (second / "metrics.json").read_text()

@@ -1,0 +1,147 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Sweep files are refused or expanded: located errors, never a traceback or a hang.
+
+Like the scenario loader's fuzz tests (``tests/engine/test_loader_fuzz.py``):
+two property-based tests damage sweep files, one in their structure and one in
+their bytes, and require :func:`~cbp.sweep.load_sweep` and, for sweeps of at
+most :data:`EXPANDED` runs, :func:`~cbp.sweep.spec.expand` to succeed or raise
+:class:`~cbp.errors.CbpError` within :data:`HANG` s. The examples are
+derandomized; ``make fuzz`` runs 10,000 of each with fresh randomness. A
+failing file is written to ``out/fuzz/``; add it to
+``tests/sweep/fuzz_cases/`` with the fix and a ``.expected`` message, where
+:func:`test_regression_cases` keeps it refused.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import shutil
+import signal
+from pathlib import Path
+
+import pytest
+import yaml
+from hypothesis import given
+from hypothesis import strategies as st
+
+from cbp.errors import CbpError, ScenarioError
+from cbp.sweep import load_sweep
+from cbp.sweep.spec import expand, sweep_size
+from tests.engine.test_loader_fuzz import (
+    EXTRA_KEYS,
+    FUZZ,
+    TOKENS,
+    HangError,
+    _alarm,
+    _parent,
+    _paths,
+    values,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+CASES = Path(__file__).parent / "fuzz_cases"
+#: A load and expansion taking longer than this is a hang [s].
+HANG = 10
+#: Sweeps of at most this many runs are expanded too (each run's overrides are
+#: applied to its scenario).
+EXPANDED = 40
+SOURCES = [CASES / "base.yaml", *sorted((ROOT / "scenarios" / "sweeps").glob("*.yaml"))]
+SWEEP_KEYS = ["grid", "samples", "set", "scenes", "values", "count", "choice", "name"]
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of ``scenarios/`` with a folder for sweeps beside its scenarios."""
+    target = tmp_path_factory.mktemp("sweep_fuzz") / "scenarios"
+    shutil.copytree(ROOT / "scenarios", target)
+    shutil.copytree(CASES, target / "fuzz_sweeps")
+    return target / "fuzz_sweeps"
+
+
+def refuse_or_expand(path: Path) -> None:
+    """Load (and expand, if small) ``path``; anything but a CbpError within HANG fails."""
+    previous = signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(HANG)
+    try:
+        spec = load_sweep(path)
+        if sweep_size(spec) <= EXPANDED:
+            expand(spec, path, [])
+    except CbpError:
+        pass
+    except BaseException as exc:
+        saved = ROOT / "out" / "fuzz"
+        saved.mkdir(parents=True, exist_ok=True)
+        data = path.read_bytes()
+        case = saved / f"sweep_{hashlib.sha256(data).hexdigest()[:12]}.yaml"
+        case.write_bytes(data)
+        what = "hang" if isinstance(exc, HangError) else type(exc).__name__
+        raise AssertionError(f"{what} loading a fuzzed sweep, saved as {case}") from exc
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+@FUZZ
+@given(data=st.data())
+def test_damaged_sweep_structure_is_refused_or_loaded(
+    folder: Path, data: st.DataObject
+) -> None:
+    """Values replaced by other types and sizes, keys removed or added: no traceback."""
+    source = data.draw(st.sampled_from(SOURCES), label="sweep")
+    doc = copy.deepcopy(yaml.safe_load(source.read_text()))
+    for _ in range(data.draw(st.integers(1, 3), label="edits")):
+        path = data.draw(st.sampled_from(list(_paths(doc))), label="path")
+        parent = _parent(doc, path)
+        action = data.draw(st.sampled_from(["replace", "remove", "add"]), label="edit")
+        if action == "replace":
+            parent[path[-1]] = copy.deepcopy(data.draw(values, label="value"))
+        elif action == "remove" and isinstance(parent, dict):
+            del parent[path[-1]]
+        elif isinstance(parent, dict):
+            keys = st.sampled_from(SWEEP_KEYS + EXTRA_KEYS)
+            parent[data.draw(keys, label="key")] = copy.deepcopy(
+                data.draw(values, label="value")
+            )
+    case = folder / "fuzz_case.yaml"
+    case.write_text(yaml.safe_dump(doc, allow_unicode=True))
+    refuse_or_expand(case)
+
+
+@FUZZ
+@given(data=st.data())
+def test_damaged_sweep_bytes_are_refused_or_loaded(
+    folder: Path, data: st.DataObject
+) -> None:
+    """Special YAML tokens, random bytes and cut lines: no traceback, no hang."""
+    source = data.draw(st.sampled_from(SOURCES), label="sweep")
+    text = bytearray(source.read_bytes())
+    for _ in range(data.draw(st.integers(1, 3), label="edits")):
+        at = data.draw(st.integers(0, len(text) - 1), label="at")
+        length = data.draw(st.integers(0, 12), label="length")
+        tokens = [*TOKENS, b"1e400", b"-.inf", b"1000000000000", b"../../", b"[]"]
+        new = data.draw(st.one_of(st.sampled_from(tokens), st.binary(max_size=6)))
+        text[at : at + length] = new
+    case = folder / "fuzz_case.yaml"
+    case.write_bytes(bytes(text))
+    refuse_or_expand(case)
+
+
+def test_the_base_sweep_loads_and_expands(folder: Path) -> None:
+    """The base document of the fuzz tests is a valid sweep (8 distinct runs)."""
+    path = folder / "base.yaml"
+    assert len(expand(load_sweep(path), path, [])) == 8  # draws set solver.name
+
+
+@pytest.mark.parametrize(
+    "case",
+    sorted(p for p in CASES.glob("*.yaml") if p.name != "base.yaml"),
+    ids=lambda p: p.stem,
+)
+def test_regression_cases(case: Path, folder: Path) -> None:
+    """Each saved sweep file is refused with a located message naming the problem."""
+    expected = case.with_suffix(".expected").read_text().strip()
+    path = folder / case.name
+    with pytest.raises(ScenarioError) as info:
+        expand(load_sweep(path), path, [])
+    assert expected in str(info.value)
