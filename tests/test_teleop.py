@@ -21,6 +21,7 @@ from cbp.errors import ConfigError
 from cbp.goals import recorded_goal_overrides
 from cbp.metrics import run_metrics
 from cbp.plugin import HoldsContacts
+from cbp.scenario import load_scenario
 from cbp.teleop import GOAL_FILE, LiveGoal, TeleopSession
 from tests.conftest import free_port, headless_chromium, run_cbp
 
@@ -403,3 +404,58 @@ def test_the_page_gets_the_obstacle_contacts_of_every_contact_row() -> None:
     assert planner.contacts() is shown  # unchanged: not merged again
     engine.step(q, 0.02)
     assert planner.contacts() is not shown
+
+
+def test_absurd_or_unreachable_operator_goals_are_refused_or_clamped() -> None:
+    """1e300 m and 1e12 m are refused; beyond reach or under the floor, clamped."""
+    from cbp.run import build_run
+    from cbp.run.goal_input import GoalBounds
+
+    scenario = load_scenario(BOARDS)
+    session_goal = LiveGoal(np.array([0.4, 0.0, 0.4]), np.eye(3))
+    parts = build_run(scenario, method="cat", goal=session_goal)
+    try:
+        goal = parts.goal
+        first = goal.send(0.0)
+        assert first is not None
+        np.testing.assert_allclose(first.translation, [0.4, 0.0, 0.4])
+        bounds = GoalBounds.of(scenario)
+        assert 0.85 < bounds.reach < 1.1  # the Panda's chain, added up
+        for k, far in enumerate((1e300, 1e12), start=1):
+            session_goal.set(np.array([far, 0.0, 0.4]), np.eye(3))
+            kept = goal.send(k / 30)
+            assert kept is not None
+            np.testing.assert_allclose(kept.translation, [0.4, 0.0, 0.4])
+        session_goal.set(np.array([3.0, 0.0, 0.4]), np.eye(3))  # out of reach
+        clamped = goal.send(3 / 30)
+        assert clamped is not None
+        assert bounds.centre is not None
+        distance = np.linalg.norm(clamped.translation - bounds.centre)
+        assert distance == pytest.approx(bounds.reach)
+        session_goal.set(np.array([0.4, 0.0, -2.0]), np.eye(3))  # under the table
+        under = goal.send(4 / 30)
+        assert under is not None
+        assert under.translation[2] >= scenario.spec.perception.bounds[0][2] - 1e-12
+        session_goal.set(np.array([0.4, 0.1, 0.4]), np.eye(3))
+        goal.send(5 / 30)
+    finally:
+        parts.close()
+    events = [m for _, m in parts.log.events]
+    assert sum(m.startswith("goal rejected") for m in events) == 2
+    assert any("beyond its reach" in m for m in events)
+    assert any("outside the world's bounds" in m for m in events)
+    assert "goal within the world's bounds and the arm's reach again" in events
+
+
+def test_a_scenario_stream_is_not_clamped() -> None:
+    """A scenario's own goal beyond reach (the paper's) is taken as written."""
+    from cbp.run import build_run
+
+    scenario = load_scenario(ROOT / "scenarios" / "cat_unreachable.yaml")
+    parts = build_run(scenario, method="cat")
+    try:
+        goals = [parts.goal.send(t) for t in np.arange(0.0, 6.0, 0.5)]
+    finally:
+        parts.close()
+    assert not [m for _, m in parts.log.events if "clamped" in m]
+    assert max(np.linalg.norm(g.translation[:2]) for g in goals if g) > 1.0

@@ -8,10 +8,16 @@ stays; a source that raises keeps the previous goal too. Each accepted goal
 that differs from the one before is kept with its time, for the trace and for
 replay. Whether the goal lies in an obstacle (or in space no camera has seen)
 is said as it changes: the arm then stops short of it.
+
+An operator's live goal is also held to :class:`GoalBounds`: a goal farther
+than :data:`ABSURD` from the origin is refused (the previous goal stays), and
+one outside the world's box (``perception.bounds``) or beyond the arm's reach
+is clamped onto them; each change is an event.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -24,9 +30,70 @@ from cbp.goals import GoalSource, LiveGoalSource
 from cbp.plugin import GoalReceiver
 from cbp.robot import FloatArray
 from cbp.run.events import RunLog
+from cbp.scenario.runtime import Scenario
 from cbp.spatial import checked_se3
+from cbp.state import RobotState
 
-__all__ = ["GoalInput"]
+__all__ = ["ABSURD", "GoalBounds", "GoalInput"]
+
+#: An operator's goal farther than this from the world's origin is refused [m].
+ABSURD = 1e3
+
+
+@dataclass(frozen=True)
+class GoalBounds:
+    """Where an operator's goal may be: in the world's box and the arm's reach.
+
+    Attributes:
+        lower: the box's lower corner (3,) [m].
+        upper: its upper corner (3,) [m].
+        centre: the arm's first joint, where its reach is measured from (3,)
+            [m]; None for a robot whose base moves (no fixed reach).
+        reach: how far the goal's frame can be from ``centre`` at most: the
+            lengths of the chain's links added up (an upper bound) [m].
+    """
+
+    lower: FloatArray
+    upper: FloatArray
+    centre: FloatArray | None
+    reach: float
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> GoalBounds:
+        """The bounds of ``scenario``'s robot and world (``perception.bounds``)."""
+        lower, upper = (
+            np.asarray(c, dtype=float) for c in scenario.spec.perception.bounds
+        )
+        robot = scenario.robot
+        if robot.base != "fixed":
+            return cls(lower, upper, None, np.inf)
+        state = RobotState(robot, scenario.q0)
+        frame = robot.frame_id(scenario.ee_frame)
+        chain = list(robot.model.supports[robot.model.frames[frame].parentJoint])[1:]
+        points = [state.data.oMi[j].translation for j in chain]
+        points.append(state.frame_position(frame))
+        reach = float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(points)))
+        return cls(lower, upper, np.array(points[0]), reach)
+
+    def clamp(self, position: FloatArray) -> tuple[FloatArray, str | None]:
+        """``position`` moved into the bounds, and what was done (None: nothing)."""
+        inside = np.clip(position, self.lower, self.upper)
+        said = []
+        if not np.array_equal(inside, position):
+            said.append(
+                f"outside the world's bounds {self.lower.tolist()}..."
+                f"{self.upper.tolist()} m (perception.bounds)"
+            )
+        if self.centre is not None:
+            offset = inside - self.centre
+            distance = float(np.linalg.norm(offset))
+            if distance > self.reach:
+                inside = self.centre + offset * (self.reach / distance)
+                said.append(
+                    f"{distance:.2f} m from the arm's first joint, beyond its reach "
+                    f"({self.reach:.2f} m)"
+                )
+        return inside, "; ".join(said) or None
 
 
 @dataclass
@@ -47,6 +114,8 @@ class GoalInput:
             against (None: not checked).
         perceived: the world's environment is a camera map (the event then
             names unseen space as a possible reason).
+        bounds: where the goal may be (an operator's live goal); None: any
+            finite goal is taken as it is (a scenario's stream).
     """
 
     def __init__(
@@ -56,6 +125,7 @@ class GoalInput:
         log: RunLog,
         world: CollisionWorld | None = None,
         perceived: bool = False,
+        bounds: GoalBounds | None = None,
     ) -> None:
         """Nothing sampled yet."""
         self.source = source
@@ -67,6 +137,8 @@ class GoalInput:
         self._failing = False
         self._space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
         self._blocked = False
+        self._bounds = bounds
+        self._clamped: str | None = None
 
     @property
     def changes(self) -> list[tuple[float, pin.SE3]]:
@@ -99,6 +171,8 @@ class GoalInput:
             self._failing = False
         try:
             pose = checked_se3(position, rotation, "goal")
+            if self._bounds is not None:
+                pose = self._bounded(t, pose)
         except InvalidTargetError as exc:
             self._log.event(t, f"goal rejected, previous goal kept: {exc}")
         else:
@@ -106,6 +180,25 @@ class GoalInput:
                 sampled.changes.append((sample_t, pose))
             sampled.pose = pose
         return sampled.pose
+
+    def _bounded(self, t: float, pose: pin.SE3) -> pin.SE3:
+        """``pose`` within the bounds; an absurd one raises InvalidTargetError."""
+        assert self._bounds is not None
+        far = float(np.max(np.abs(pose.translation)))
+        if far > ABSURD:
+            raise InvalidTargetError(
+                f"goal {far:.3g} m from the world's origin (more than {ABSURD:g} m)"
+            )
+        position, said = self._bounds.clamp(pose.translation)
+        if said != self._clamped:
+            self._log.event(
+                t,
+                f"goal clamped: {said}; the arm goes for the nearest point within"
+                if said is not None
+                else "goal within the world's bounds and the arm's reach again",
+            )
+            self._clamped = said
+        return pin.SE3(pose.rotation, position) if said is not None else pose
 
     def changed(self) -> bool:
         """Whether the source has a goal newer than the last one sampled.

@@ -27,7 +27,7 @@ from cbp.run.cameras import Cameras
 from cbp.run.declared import DeclaredObjects
 from cbp.run.events import RunLog
 from cbp.run.faults import Faults
-from cbp.run.goal_input import GoalInput
+from cbp.run.goal_input import GoalBounds, GoalInput
 from cbp.run.recording import make_trace
 from cbp.scenario.runtime import Scenario
 from cbp.sim.simulation import Simulation
@@ -181,7 +181,8 @@ def build_run(
             ``wall`` in the map's worker (never blocking the loop).
         gui: show PyBullet's window.
         goal: the goal source, instead of the scenario's stream (an
-            operator's live goal).
+            operator's live goal, held to the world's bounds and the arm's
+            reach: :class:`~cbp.run.goal_input.GoalBounds`).
         needs_world: build the collision world even when neither an entry nor
             the method needs one (a session that may switch methods).
 
@@ -241,6 +242,7 @@ def build_run(
             log,
             world,
             perceived=cameras is not None,
+            bounds=None if goal is None else GoalBounds.of(scenario),
         ),
         cameras=cameras,
         declared=declared,
