@@ -9,9 +9,10 @@ collision.
 
 The robot's shapes are copies grown by the padding (coal's swept-sphere radius,
 which also grows their bounding boxes, so the broad phase misses nothing within
-the padding). A configuration is free exactly when
-``CollisionWorld.check(q).penetration`` is 0: no padded shape overlaps an obstacle
-(grown by the environment's resolution) or another padded shape of a checked pair.
+the padding). A configuration is free when no padded shape overlaps an obstacle
+(grown by the environment's resolution) deeper than ``tolerance``, and no two
+padded shapes of a checked pair overlap: with ``tolerance`` 0, exactly when
+``CollisionWorld.check(q).penetration`` is 0.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ class FreeSpaceChecker:
         environment: the obstacles (its :meth:`Environment.collision_objects`).
         padding: distance added around every robot shape [m].
         self_collision: also check the robot's own shape pairs.
+        tolerance: how deep a padded shape may reach into an obstacle and
+            still be free [m] (CAT's step validation accepts that much).
 
     Not thread-safe: each thread needs its own checker (they are cheap to build).
     """
@@ -45,6 +48,7 @@ class FreeSpaceChecker:
         environment: Environment,
         padding: float,
         self_collision: bool = True,
+        tolerance: float = 0.0,
     ) -> None:
         """Build the pinocchio geometry model, its pairs and the broad phase."""
         self.environment = environment
@@ -70,11 +74,12 @@ class FreeSpaceChecker:
         self._geometry_model = geometry_model
         self._geometry_data = pin.GeometryData(geometry_model)
         # Occupancy maps represent surfaces to half a cell: obstacle pairs collide
-        # that much earlier, as in the contact queries.
+        # that much earlier, as in the contact queries, and ``tolerance`` later
+        # (coal takes a negative margin: a collision deeper than it).
         for k, pair in enumerate(geometry_model.collisionPairs):
             request: coal.CollisionRequest = self._geometry_data.collisionRequests[k]
             request.security_margin = (
-                environment.resolution if pair.second >= n else 0.0
+                environment.resolution - tolerance if pair.second >= n else 0.0
             )
         self._manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
             self._model, geometry_model, self._geometry_data

@@ -232,8 +232,13 @@ class CollisionWorld:
     def is_free(self, q: FloatArray) -> bool:
         """Whether ``q`` is collision-free, in one pinocchio call (planners, IK).
 
-        The same answer as ``check(q).penetration == 0``, without the contacts
-        (:class:`~cbp.collision.checker.FreeSpaceChecker`).
+        Against declared objects, the same answer as ``check(q).penetration ==
+        0``, without the contacts (:class:`~cbp.collision.checker.FreeSpaceChecker`).
+        Against an occupancy map, by the rule CAT's step validation uses: a
+        padded shape may reach ``collision.penetration_tolerance`` into the
+        map's cells. Space no camera has seen hugs the padded shapes of a robot
+        that has held it, so the strict rule would find no configuration near
+        the arm free, and the planners could not plan where CAT can move.
         """
         environment = self._environment
         checker = self._free_space
@@ -243,6 +248,11 @@ class CollisionWorld:
                 environment,
                 self.padding,
                 self.settings.self_collision,
+                tolerance=(
+                    self.settings.penetration_tolerance
+                    if environment.resolution > 0.0
+                    else 0.0
+                ),
             )
         return checker.is_free(q)
 
