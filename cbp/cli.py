@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import itertools
 import logging
 import sys
 import typing
@@ -631,6 +630,7 @@ def _check(paths: Sequence[Path], overrides: dict[str, str]) -> int:
 def _plugins() -> int:
     from cbp.plugins.constraints import CONSTRAINTS
     from cbp.plugins.tasks import TASKS
+    from cbp.schema import field_docs
 
     registry: Registry[typing.Any]
     for registry in (TASKS, CONSTRAINTS):
@@ -640,7 +640,7 @@ def _plugins() -> int:
             summary = (cls.__doc__ or "").strip().splitlines()[0]
             print(f"      {summary}")
             hints = typing.get_type_hints(cls.Params)
-            docs = _field_docs(cls.Params)
+            docs = field_docs(cls.Params)
             for f in dataclasses.fields(cls.Params):
                 if f.default is not dataclasses.MISSING:
                     default = f"default {f.default!r}"
@@ -655,34 +655,6 @@ def _plugins() -> int:
         if extra:
             print(f"  from installed distributions: {', '.join(extra)}")
     return 0
-
-
-def _field_docs(cls: type) -> dict[str, str]:
-    """Attribute docstrings of a dataclass (the string after each field)."""
-    import ast
-    import inspect
-    import textwrap
-
-    try:
-        tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
-    except (OSError, TypeError):
-        return {}
-    body = (
-        tree.body[0].body
-        if tree.body and isinstance(tree.body[0], ast.ClassDef)
-        else []
-    )
-    docs: dict[str, str] = {}
-    for prev, node in itertools.pairwise(body):
-        if (
-            isinstance(prev, ast.AnnAssign)
-            and isinstance(prev.target, ast.Name)
-            and isinstance(node, ast.Expr)
-            and isinstance(node.value, ast.Constant)
-            and isinstance(node.value.value, str)
-        ):
-            docs[prev.target.id] = " ".join(node.value.value.split())
-    return docs
 
 
 if __name__ == "__main__":

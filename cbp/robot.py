@@ -30,7 +30,7 @@ from cbp.errors import (
     RobotNotFoundError,
     close_matches,
 )
-from cbp.schema import Document
+from cbp.schema import Document, value_node
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -270,7 +270,7 @@ class RobotModel:
         try:
             model = _build_model(path, base)
         except ConfigError as exc:
-            doc.report(_value_node(doc.root, "urdf"), "urdf", exc.message)
+            doc.report(value_node(doc.root, "urdf"), "urdf", exc.message)
             doc.raise_if_problems()
             raise  # unreachable: the problem was reported
         _check_names(
@@ -603,26 +603,9 @@ def _reduced(
     return pin.buildReducedModel(model, ids, q_ref)
 
 
-def _value_node(root: Node | None, *keys: str) -> Node | None:
-    """The value at ``keys`` in a mapping tree, or None."""
-    node = root
-    for key in keys:
-        if not isinstance(node, yaml.MappingNode):
-            return None
-        node = next(
-            (
-                v
-                for k, v in node.value
-                if isinstance(k, yaml.ScalarNode) and k.value == key
-            ),
-            None,
-        )
-    return node
-
-
 def _key_nodes(root: Node | None, *keys: str) -> dict[str, Node]:
     """Each key of the mapping at ``keys``, by name, for problems at that line."""
-    node = _value_node(root, *keys)
+    node = value_node(root, *keys)
     if not isinstance(node, yaml.MappingNode):
         return {}
     return {k.value: k for k, _ in node.value if isinstance(k, yaml.ScalarNode)}
@@ -662,7 +645,7 @@ def _check_names(
         frame = getattr(description, key)
         if frame is not None and frame not in frames:
             doc.report(
-                _value_node(doc.root, key),
+                value_node(doc.root, key),
                 key,
                 f"no frame '{frame}' in {full.urdf_name}{_matches(frame, frames)}",
             )
@@ -677,7 +660,7 @@ def _check_names(
     ]
     for key, i, link in listed:
         if link not in frames:
-            node = _value_node(doc.root, "collision", key)
+            node = value_node(doc.root, "collision", key)
             item = node.value[i] if isinstance(node, yaml.SequenceNode) else None
             doc.report(
                 item or node,

@@ -12,10 +12,14 @@ problems of one file are reported together (:class:`~cbp.errors.ScenarioError`).
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import datetime
+import inspect
+import itertools
 import math
 import re
+import textwrap
 import types
 import typing
 from collections.abc import Mapping
@@ -768,3 +772,47 @@ def from_plain(cls: type[T], data: Mapping[str, Any], where: str = "") -> T:
     value = doc.build(cls, doc.root, "")
     doc.raise_if_problems()
     return typing.cast(T, value)
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring after each field of a dataclass, its bases' included.
+
+    Read from the source (the string that follows a field); {} when there is
+    none to read.
+    """
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if klass is object or not dataclasses.is_dataclass(klass):
+            continue
+        try:
+            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
+        except (OSError, TypeError):
+            continue
+        body = next((n.body for n in tree.body if isinstance(n, ast.ClassDef)), [])
+        for prev, node in itertools.pairwise(body):
+            if (
+                isinstance(prev, ast.AnnAssign)
+                and isinstance(prev.target, ast.Name)
+                and isinstance(node, ast.Expr)
+                and isinstance(node.value, ast.Constant)
+                and isinstance(node.value.value, str)
+            ):
+                docs[prev.target.id] = " ".join(node.value.value.split())
+    return docs
+
+
+def value_node(root: Node | None, *keys: str) -> Node | None:
+    """The node at ``keys`` in a tree of mappings, or None where there is none."""
+    node = root
+    for key in keys:
+        if not isinstance(node, yaml.MappingNode):
+            return None
+        node = next(
+            (
+                v
+                for k, v in node.value
+                if isinstance(k, yaml.ScalarNode) and k.value == key
+            ),
+            None,
+        )
+    return node

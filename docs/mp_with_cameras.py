@@ -10,20 +10,13 @@ import json
 import sys
 import time
 
+from make_cat_scenes import SCENES
+
 from cbp.executors import load_executor
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
 
-SC = [
-    "free_step",
-    "free_continuous",
-    "boards",
-    "local_minimum",
-    "wrist_limit",
-    "unreachable",
-    "shelf_reach",
-    "shelf_retreat",
-]
+SC = SCENES
 method = sys.argv[1]
 scenes = sys.argv[2].split(",") if len(sys.argv) > 2 else SC
 for scene in scenes:

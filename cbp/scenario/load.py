@@ -34,7 +34,7 @@ from cbp.robot import FloatArray, RobotModel
 from cbp.robot_init import load_robot
 from cbp.scenario.runtime import Scenario, goal_receivers
 from cbp.scenario.spec import RobotSpec, ScenarioSpec
-from cbp.schema import INVALID, Document, join_path, mapping_items
+from cbp.schema import INVALID, Document, join_path, mapping_items, value_node
 from cbp.state import RobotState
 
 __all__ = ["load_scenario"]
@@ -92,7 +92,7 @@ def load_scenario(
                 for p in exc.problems
             ]
         except CbpError as exc:
-            doc.report(_key_node(root, "robot", "name"), "robot.name", str(exc))
+            doc.report(value_node(root, "robot", "name"), "robot.name", str(exc))
     entries: list[Entry] = []
     q0 = np.zeros(0)
     if robot is not None:
@@ -180,7 +180,7 @@ def _check_initial_contact(doc: Document, scenario: Scenario, root: yaml.Node) -
                 deepest[key] = d
     for (link, name), d in sorted(deepest.items(), key=lambda item: item[1]):
         doc.report(
-            _key_node(root, "robot", "initial") or _key_node(root, "robot"),
+            value_node(root, "robot", "initial") or value_node(root, "robot"),
             "robot.initial",
             f"the initial configuration puts {link} {-d * 1e3:.1f} mm deep into "
             f"'{name}'; move the robot or the object, or set "
@@ -193,7 +193,7 @@ def _check_meshes(
     doc: Document, spec: ScenarioSpec, root: yaml.Node, folder: Path
 ) -> None:
     """Every mesh object's file can be read (regular file, a mesh, triangles)."""
-    node = _key_node(root, "world", "objects")
+    node = value_node(root, "world", "objects")
     for i, obj in enumerate(spec.world.objects):
         if obj.shape != "mesh":
             continue
@@ -201,7 +201,7 @@ def _check_meshes(
             load_mesh(folder / obj.file)
         except ConfigError as exc:
             item = node.value[i] if isinstance(node, yaml.SequenceNode) else None
-            at = _key_node(item, "file") if item is not None else None
+            at = value_node(item, "file") if item is not None else None
             doc.report(
                 at or node,
                 join_path(join_path("world.objects", i), "file"),
@@ -213,13 +213,13 @@ def _check_allowed_contact(
     doc: Document, spec: ScenarioSpec, robot: RobotModel, root: yaml.Node
 ) -> None:
     """``allow_contact`` names links of the robot."""
-    node = _key_node(root, "world", "objects")
+    node = value_node(root, "world", "objects")
     links = set(robot.frame_names)
     for i, obj in enumerate(spec.world.objects):
         for link in obj.allow_contact:
             if link not in links:
                 item = node.value[i] if isinstance(node, yaml.SequenceNode) else None
-                at = _key_node(item, "allow_contact") if item is not None else None
+                at = value_node(item, "allow_contact") if item is not None else None
                 doc.report(
                     at or node,
                     join_path(join_path("world.objects", i), "allow_contact"),
@@ -233,7 +233,7 @@ def _check_cameras(
 ) -> None:
     """A mounted camera's ``parent`` must be a frame of the robot."""
     key = "cameras" if spec.perception.cameras else "camera"
-    node = _key_node(root, "perception", key)
+    node = value_node(root, "perception", key)
     for i, camera in enumerate(spec.perception.all_cameras):
         if camera.parent is None or spec.perception.source != "depth_camera":
             continue
@@ -246,33 +246,17 @@ def _check_cameras(
                 if key == "cameras"
                 else "perception.camera"
             )
-            parent = _key_node(item, "parent") if item is not None else None
+            parent = value_node(item, "parent") if item is not None else None
             doc.report(parent or item, f"{where}.parent", exc.message)
 
 
 def _robot_spec_quietly(doc: Document, root: yaml.Node) -> Any:
     """Build the robot section, whose problems were already reported; else INVALID."""
-    node = _key_node(root, "robot")
+    node = value_node(root, "robot")
     saved = len(doc.problems)
     value = doc.build(RobotSpec, node, "robot") if node is not None else INVALID
     del doc.problems[saved:]
     return value
-
-
-def _key_node(root: yaml.Node, *keys: str) -> yaml.Node | None:
-    node: yaml.Node | None = root
-    for key in keys:
-        if not isinstance(node, yaml.MappingNode):
-            return None
-        node = next(
-            (
-                v
-                for k, v in node.value
-                if isinstance(k, yaml.ScalarNode) and k.value == key
-            ),
-            None,
-        )
-    return node
 
 
 def _bind_entries(
@@ -344,7 +328,7 @@ def _bind_entry(
         plugin: Plugin[Any] = cls(params, robot, name or "")
     except ConfigError as exc:
         loc = f"params.{exc.location}" if exc.location else "params"
-        key_node = _key_node(node, "params", *exc.location.split(".")[:1])
+        key_node = value_node(node, "params", *exc.location.split(".")[:1])
         doc.report(key_node or node, join_path(where, loc), f"{label}: {exc.message}")
         return None
     try:
@@ -367,7 +351,7 @@ def _initial_configuration(
             q0[robot.joint_q_slice(joint)] = value
         except ConfigError as exc:
             doc.report(
-                _key_node(root, "robot", "initial", joint),
+                value_node(root, "robot", "initial", joint),
                 f"robot.initial.{joint}",
                 exc.message,
             )
@@ -388,7 +372,7 @@ def _check_goal(
         try:
             GoalStream(goal, folder)
         except ConfigError as exc:
-            doc.report(_key_node(root, "goal", "file"), "goal.file", exc.message)
+            doc.report(value_node(root, "goal", "file"), "goal.file", exc.message)
     if goal.function is not None:
         # Evaluated at every sample the run will take.
         times = run_times(spec.duration, goal.rate_hz)
@@ -398,7 +382,7 @@ def _check_goal(
                 try:
                     check_over(compile_time_function(text, where), times, where)
                 except ConfigError as exc:
-                    node = _key_node(root, "goal", "function", name)
+                    node = value_node(root, "goal", "function", name)
                     doc.report(node, where, exc.message)
     receivers = goal_receivers(entries, goal.task)
     if len(receivers) != 1:
@@ -419,14 +403,14 @@ def _check_goal(
                 f"{suggestion(goal.task, tasks)} Tasks that do: "
                 f"{', '.join(tasks) or '(none)'}."
             )
-        doc.report(_key_node(root, "goal"), "goal.task", message)
+        doc.report(value_node(root, "goal"), "goal.task", message)
 
 
 def _check_inputs(
     doc: Document, spec: ScenarioSpec, entries: list[Entry], root: yaml.Node
 ) -> None:
     takers = {e.name: e.plugin for e in entries if isinstance(e.plugin, TakesInput)}
-    node = _key_node(root, "inputs")
+    node = value_node(root, "inputs")
     for i, item in enumerate(spec.inputs):
         where = f"inputs[{i}]"
         plugin = takers.get(item.entry)

@@ -9,12 +9,10 @@ places that name modules are the constants below.
 from __future__ import annotations
 
 import argparse
-import ast
 import contextlib
 import dataclasses
 import importlib
 import inspect
-import itertools
 import os
 import re
 import textwrap
@@ -25,8 +23,10 @@ from typing import Any
 
 import yaml
 
+from cbp.schema import field_docs
+
 #: The in-tree plugin registries, as ``module:attribute`` (what ``cbp plugins`` lists).
-REGISTRIES = ("plugins.tasks:TASKS", "plugins.constraints:CONSTRAINTS")
+REGISTRIES = ("cbp.plugins.tasks:TASKS", "cbp.plugins.constraints:CONSTRAINTS")
 
 #: Modules of the Python API reference, one page each: the stable public entry
 #: points. Add a module here to document it.
@@ -87,29 +87,6 @@ ENTRY_KEYS = (
         "The plugin's parameters (see the plugin catalogue).",
     ),
 )
-
-
-def field_docs(cls: type) -> dict[str, str]:
-    """The docstring after each field of a dataclass, its bases' included."""
-    docs: dict[str, str] = {}
-    for klass in reversed(cls.__mro__):
-        if klass is object or not dataclasses.is_dataclass(klass):
-            continue
-        try:
-            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
-        except (OSError, TypeError):
-            continue
-        body = next((n.body for n in tree.body if isinstance(n, ast.ClassDef)), [])
-        for prev, node in itertools.pairwise(body):
-            if (
-                isinstance(prev, ast.AnnAssign)
-                and isinstance(prev.target, ast.Name)
-                and isinstance(node, ast.Expr)
-                and isinstance(node.value, ast.Constant)
-                and isinstance(node.value.value, str)
-            ):
-                docs[prev.target.id] = " ".join(node.value.value.split())
-    return docs
 
 
 def _rst_to_md(text: str) -> str:
