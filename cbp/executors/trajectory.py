@@ -18,7 +18,9 @@ to the low-level follower (CAT, and the IK and MP methods):
    A result computed after the deadline is discarded; so is one that cannot stop
    in time from the starting velocity (the current trajectory, which does stop,
    goes on).
-5. The period adapts: longer after a miss, shorter when time was spare.
+5. The period adapts: longer after a miss, shorter when time was spare, but
+   not below what the machine sustains (:mod:`cbp.executors.periods`); misses
+   are counted, not listed one by one.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import pinocchio as pin
 from cbp.compilation import CompileCounter
 from cbp.engine import Engine
 from cbp.executors.clock import Budget, make_budget
+from cbp.executors.periods import DeadlineMisses, PeriodAdapter
 from cbp.methods.settings import ExecutorTiming
 from cbp.robot import FloatArray
 from cbp.run.pacing import WallClockPacer
@@ -163,6 +166,8 @@ def run_trajectory_executor(
     t = 0.0
     sim = run.sim
     faults = run.faults
+    adapter = PeriodAdapter(lo, hi, timing.growth, timing.shrink)
+    misses = DeadlineMisses(run.event)
     compiles = CompileCounter.install()
     try:
         while (
@@ -225,28 +230,21 @@ def run_trajectory_executor(
             missed = (compute > period or plan.timed_out) and not failed and not startup
             spliced = False
             if missed:
-                run.event(
-                    t,
-                    f"deadline missed ({compute * 1e3:.1f} ms for a "
-                    f"{period * 1e3:.1f} ms period): "
-                    + (plan.note if plan.timed_out else "result discarded"),
-                )
-                next_period = min(period * timing.growth, hi)
+                why = plan.note if plan.timed_out else "result discarded"
+                misses.missed(t, compute, period, why)
             else:
+                misses.met(t)
                 if new is not None:
                     sim.follow(current.splice(new))
                     if commanded is not None:
                         commanded(float(new.times[0]))
                     spliced = True
-                next_period = (
-                    max(period * timing.shrink, lo)
-                    if compute < 0.5 * period
-                    else period
-                )
+            next_period = adapter.next(t, period, compute, missed)
             run.log.periods.append(
                 PeriodRecord(t, period, plan.steps, compute, missed, spliced, note)
             )
             t, period = t_f, next_period
+        misses.flush(t)
         if faults.aborted is None and not stop_requested():
             run.advance(run.duration)
         else:
