@@ -459,3 +459,86 @@ def test_a_scenario_stream_is_not_clamped() -> None:
         parts.close()
     assert not [m for _, m in parts.log.events if "clamped" in m]
     assert max(np.linalg.norm(g.translation[:2]) for g in goals if g) > 1.0
+
+
+def test_a_goal_moved_twice_within_one_sample_is_recorded_once() -> None:
+    """The recorded goal times strictly increase, so the recording replays."""
+    from cbp.run import build_run
+
+    live = LiveGoal(np.array([0.4, 0.0, 0.4]), np.eye(3), rate_hz=30.0)
+    parts = build_run(load_scenario(BOARDS), method="cat", goal=live)
+    try:
+        parts.goal.send(0.0)
+        live.set(np.array([0.45, 0.0, 0.4]), np.eye(3))
+        parts.goal.resend(0.01)  # a planner takes the newer goal mid-period
+        live.set(np.array([0.5, 0.0, 0.4]), np.eye(3))
+        parts.goal.resend(0.02)  # and again, within the same 1/30 s sample
+    finally:
+        parts.close()
+    times = [t for t, _ in parts.goal.changes]
+    assert np.all(np.diff(times) > 0), times
+    np.testing.assert_allclose(parts.goal.changes[-1][1].translation, [0.5, 0, 0.4])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signal_name", ["SIGTERM", "SIGHUP"])
+def test_a_signal_ends_a_session_that_saves_and_replays(
+    tmp_path: Path, signal_name: str
+) -> None:
+    """SIGTERM or SIGHUP to `cbp teleop`: the outputs are written and replay."""
+    import signal
+    import subprocess
+    import sys
+
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    out = tmp_path / "session"
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "cbp",
+            "teleop",
+            str(BOARDS),
+            "--port",
+            str(free_port()),
+            "--out",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        assert process.stdout is not None
+        said = ""
+        for _ in range(100):  # viser's banner first, then the page's address
+            said += process.stdout.readline()
+            if "teleoperation of" in said:
+                break
+        assert "teleoperation of" in said, said
+        time.sleep(2.0)  # the session runs
+        process.send_signal(getattr(signal, signal_name))
+        rest, _ = process.communicate(timeout=300)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, rest
+    assert f"{signal_name}: stopping and saving" in rest
+    goal_file = out / GOAL_FILE
+    assert goal_file.is_file()
+    assert json.loads((out / "metrics.json").read_text())
+    replay = run_cbp(
+        "compare",
+        str(BOARDS),
+        "--goal",
+        str(goal_file),
+        "--methods",
+        "cat",
+        "--out",
+        str(tmp_path / "replay"),
+        "--set",
+        "duration=1",
+        "--set",
+        "method.cat.timing.clock=virtual",
+    )
+    assert replay.returncode == 0, replay.stderr

@@ -142,7 +142,10 @@ class GoalInput:
 
     @property
     def changes(self) -> list[tuple[float, pin.SE3]]:
-        """Each accepted goal that differs from the one before, and its time."""
+        """Each accepted goal that differs from the one before, and its time.
+
+        Times strictly increase: of goals taken within one sample, the last.
+        """
         return self._sampled.changes
 
     def goal(self, t: float) -> pin.SE3 | None:
@@ -177,7 +180,14 @@ class GoalInput:
             self._log.event(t, f"goal rejected, previous goal kept: {exc}")
         else:
             if sampled.pose is None or not pose.isApprox(sampled.pose, 1e-9):
-                sampled.changes.append((sample_t, pose))
+                changes = sampled.changes
+                if changes and changes[-1][0] >= sample_t:
+                    # A goal taken again within one sample (a live goal that
+                    # moved twice): the later one is the goal at that time, so
+                    # the recorded times stay strictly increasing (replayable).
+                    changes[-1] = (changes[-1][0], pose)
+                else:
+                    changes.append((sample_t, pose))
             sampled.pose = pose
         return sampled.pose
 

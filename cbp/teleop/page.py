@@ -48,6 +48,9 @@ class Page(abc.ABC, Generic[S]):
 
         self.session = session
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        #: A line at the top of the panel: what the session is doing as a whole
+        #: (stopping, where it saved).
+        self.notice = self.server.gui.add_markdown("")
         #: Set by the page's "stop and save" button.
         self.stopped = threading.Event()
         self._close = threading.Event()
@@ -57,6 +60,10 @@ class Page(abc.ABC, Generic[S]):
     def url(self) -> str:
         """The page's address."""
         return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
+    def say(self, text: str) -> None:
+        """Show ``text`` at the top of the panel (markdown)."""
+        self.notice.content = text
 
     @abc.abstractmethod
     def update(self) -> None:

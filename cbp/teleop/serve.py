@@ -4,7 +4,11 @@
 from __future__ import annotations
 
 import contextlib
+import signal
 import sys
+import threading
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from cbp.errors import CbpError, ConfigError
@@ -15,6 +19,35 @@ from cbp.teleop.inputs_page import InputsPage
 
 __all__ = ["serve_teleop"]
 
+#: How long the page stays up after its last notice [s].
+NOTICE_SHOWN = 1.0
+#: The signals that end a session as the page's stop does (saving it).
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+def _let_the_page_show_it() -> None:
+    """Give the browser a moment to receive the last notice before the server stops."""
+    time.sleep(NOTICE_SHOWN)
+
+
+@contextlib.contextmanager
+def _stopping_on_signals(page: TeleopPage | InputsPage) -> Iterator[None]:
+    """While inside: SIGTERM and SIGHUP press the page's stop (it then saves)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # only the main thread may set handlers; Ctrl-C still works
+        return
+
+    def stop(signum: int, _: object) -> None:
+        print(f"{signal.Signals(signum).name}: stopping and saving", flush=True)
+        page.stopped.set()
+
+    previous = {s: signal.signal(s, stop) for s in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
 
 def serve_teleop(
     scenarios: list[Path],
@@ -24,7 +57,10 @@ def serve_teleop(
     out: Path | None,
     overrides: dict[str, str],
 ) -> int:
-    """``cbp teleop``: serve the session until the page's stop or Ctrl-C.
+    """``cbp teleop``: serve the session until the page's stop, Ctrl-C or a signal.
+
+    SIGTERM and SIGHUP end the session like the page's stop and Ctrl-C: the
+    arm brakes and every output is written.
 
     One scenario of a trajectory executor: a goal session
     (:class:`TeleopPage`). Velocity-executor scenarios (one or several
@@ -57,23 +93,29 @@ def serve_teleop(
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
-    print(f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)")
+    print(
+        f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)",
+        flush=True,
+    )
     try:
-        with contextlib.suppress(KeyboardInterrupt):
+        with contextlib.suppress(KeyboardInterrupt), _stopping_on_signals(page):
             page.run()
+        page.say("**Stopping**: the arm brakes to rest, then the session is saved.")
+        if velocity:
+            inputs.write(inputs.stop(), out)
+            page.say(f"**Saved** to `{out}`.")
+            print(f"wrote {out}")
+            _let_the_page_show_it()
+            return 0
+        session.stop()
+        goal_file = session.write(out)
+        replay = f"cbp compare {scenarios[0]} --goal {goal_file}"
+        page.say(f"**Saved** to `{out}`. Replay to every method: `{replay}`")
+        _let_the_page_show_it()
     finally:
         page.close()
-    if velocity:
-        inputs.write(inputs.stop(), out)
-        print(f"wrote {out}")
-        return 0
-    session.stop()
-    goal_file = session.write(out)
     latency = latency_summary(session.latency_ms())
-    print(
-        f"wrote {out}; the operator's goals: {goal_file} "
-        f"(replay: cbp compare {scenarios[0]} --goal {goal_file})"
-    )
+    print(f"wrote {out}; the operator's goals: {goal_file} (replay: {replay})")
     if latency["n"]:
         print(
             f"goal-to-command latency: median {latency['median_ms']:.1f} ms, "
