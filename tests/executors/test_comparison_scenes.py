@@ -1,7 +1,11 @@
 """The CAT paper's comparison (Sec. VI), reproduced: all four methods per scene (slow).
 
 Each scene is run once with ``cbp.compare`` (one recorded goal stream replayed
-to CAT, IK, MP and JT); the assertions read the metrics. Where our outcome
+to CAT, IK, MP and JT); the assertions read the metrics. Outcomes (reached,
+contact) are asserted on the virtual clock, so that they do not depend on how
+busy the machine is. The free-space ranking (JT fastest, MP slowest) is a
+claim about wall-clock planning time and runs on the wall clock: load makes
+planning slower, which only widens MP's gap. Where our outcome
 differs from the paper's, the test asserts what we measure and
 docs/comparison.md says why.
 """
@@ -16,6 +20,7 @@ import numpy as np
 import pytest
 
 from cbp.compare import ComparisonResult, compare
+from tests.conftest import VIRTUAL_CLOCK
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 METHODS = ("cat", "hybrid", "ik", "mp", "jt")
@@ -30,6 +35,9 @@ SCENES = (
     "shelf_retreat",
 )
 
+#: Scenes whose test is about wall-clock time (the free-space ranking).
+WALL_CLOCK = ("free_step", "free_continuous")
+
 pytestmark = pytest.mark.slow
 
 
@@ -39,7 +47,12 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> Any:
 
     @cache
     def run(scene: str) -> ComparisonResult:
-        return compare(SCENARIOS / f"cat_{scene}.yaml", METHODS, root / scene)
+        return compare(
+            SCENARIOS / f"cat_{scene}.yaml",
+            METHODS,
+            root / scene,
+            overrides={} if scene in WALL_CLOCK else VIRTUAL_CLOCK,
+        )
 
     return run
 
