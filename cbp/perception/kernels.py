@@ -413,6 +413,7 @@ def insert_readings(
     t: float,
     hold: float,
     held: FloatArray,
+    spread: FloatArray,
 ) -> tuple[int, int, int, int]:
     """Mark the cells depth readings fall in occupied; count valid, robot, inserted.
 
@@ -421,7 +422,11 @@ def insert_readings(
     :meth:`~cbp.perception.frame.DepthFrame.points` does), dropped when
     farther than ``max_range`` from ``camera`` or within ``reach[s]`` of a
     robot shape s (the shapes as :class:`~cbp.collision.geometry.WorldShapes`
-    gives them; no shapes: no robot), and its cell made occupied with no
+    gives them; no shapes: no robot) grown by how far the camera's noise
+    spreads the reading along its ray (``spread``: the projection's near and
+    far planes [m] and c0, c2, z0 [m]: c0 + c2 (z - z0)^2 along the axis at
+    depth z, so many sigmas of the noise; all 0: no noise), and its cell made
+    occupied with no
     misses. One pass, one call: the map thread takes the GIL once per frame
     for it, not once per array operation. ``dirty`` and ``brick`` as in
     :func:`mark_seen`.
@@ -448,6 +453,7 @@ def insert_readings(
     seen_to, last, moved_at = moved
     track = seen_to.shape[0] == h
     gap = 2.0 * cell
+    noisy = spread[2] > 0.0 or spread[3] > 0.0
     for r in range(h):
         y = 2.0 * (h - 1 - r) / h - 1.0
         for c in range(w):
@@ -473,7 +479,16 @@ def insert_readings(
                     seen_to[r, c] = max_range
                     last[r, c] = max_range
                 continue
-            if inside_any(px, py, pz, planes, plane_start, centres, radii, reach):
+            extra = 0.0
+            if noisy:  # the spread at this depth, along the ray
+                axial = (
+                    spread[1] * spread[0] / (spread[1] - (spread[1] - spread[0]) * z)
+                )
+                extra = spread[2] + spread[3] * (axial - spread[4]) ** 2
+                extra *= distance / axial
+            if _near_robot(
+                px, py, pz, planes, plane_start, centres, radii, reach, extra
+            ):
                 robot += 1
                 if track:  # seen free up to the robot; it hides nothing new
                     seen_to[r, c] = max(seen_to[r, c], distance)
@@ -516,6 +531,33 @@ def insert_readings(
                 grid[i, j, k] = OCCUPIED
                 dirty[i // brick, j // brick, k // brick] = True
     return valid, robot, inserted, hidden
+
+
+@numba.njit(cache=True, nogil=True)
+def _near_robot(
+    x: float,
+    y: float,
+    z: float,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    reach: FloatArray,
+    extra: float,
+) -> bool:
+    """Whether (x, y, z) is within ``reach[s] + extra`` of some robot shape s.
+
+    As :func:`~cbp.collision.geometry.inside_any`, with every shape grown by
+    ``extra`` more.
+    """
+    for s in range(radii.size):
+        grow = reach[s] + extra
+        dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
+        if dx * dx + dy * dy + dz * dz > (radii[s] + grow) ** 2:
+            continue
+        if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grow):
+            return True
+    return False
 
 
 @numba.njit(cache=True, nogil=True)
