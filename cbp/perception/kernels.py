@@ -366,13 +366,23 @@ def eroded_ranges(
     and is seen through only in front of all of them. ``nearest``,
     ``far_plane`` and ``far_buffer`` are depth buffer values: the minimum
     range, where the far plane starts, and the largest valid value.
+
+    A pixel whose value is NaN (the sensor gave no return: the far side of a
+    depth edge, a dropout; :mod:`cbp.sim.depth_noise`) is left out of the
+    least: its surface lies beyond its nearer neighbours (an edge) or is as
+    unknown as a dropout on a continuous surface, so along its own ray it is
+    seen through as far as its neighbours, and a pixel with only NaN around
+    it says nothing (-inf). Any other value that is no reading (nearer than
+    the minimum range, say) stops its neighbours too: something is there.
     """
     h, w = depth.shape
     metric = np.empty((h, w))
     for r in range(h):
         for c in range(w):
             z = depth[r, c]
-            if not _holds_reading(z, nearest, far_buffer):
+            if np.isnan(z):
+                metric[r, c] = np.nan
+            elif not _holds_reading(z, nearest, far_buffer):
                 metric[r, c] = -np.inf
             elif z >= far_plane:
                 metric[r, c] = far
@@ -382,10 +392,14 @@ def eroded_ranges(
     for r in range(h):
         for c in range(w):
             least = np.inf
+            seen = False
             for rr in range(max(r - 1, 0), min(r + 2, h)):
                 for cc in range(max(c - 1, 0), min(c + 2, w)):
-                    least = min(least, metric[rr, cc])
-            out[r, c] = least
+                    m = metric[rr, cc]
+                    if not np.isnan(m):
+                        seen = True
+                        least = min(least, m)
+            out[r, c] = least if seen else -np.inf
     return out
 
 

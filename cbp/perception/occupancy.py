@@ -369,8 +369,9 @@ class OccupancyGrid:
         """
         # The nearest reading around each pixel: a cell at a depth edge or on a
         # grazing surface spans several pixels, and is free only in front of all
-        # of them. NaN (no reading) says nothing: it becomes -inf; background
-        # sees to the far plane.
+        # of them. A pixel without a reading says nothing: it becomes -inf (NaN,
+        # no return, leaves its neighbours be; eroded_ranges); background sees
+        # to the far plane.
         ranges = eroded_ranges(depth, frame.near, frame.far, *limits)
         box = self._frustum_box(frame)
         if box is None:

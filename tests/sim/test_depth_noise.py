@@ -217,3 +217,31 @@ def test_a_camera_s_noise_section_loads_and_is_checked(tmp_path) -> None:
     assert cameras["left"].noise == DepthNoise()
     with pytest.raises(ScenarioError, match=r"perception\.cameras.*dropout.*\[0, 1\)"):
         load_scenario(base, overrides={"perception.cameras.head.noise.dropout": "1.5"})
+
+
+def test_a_pixel_without_a_return_leaves_its_neighbours_seen() -> None:
+    """The map's see-through ranges skip NaN pixels; a too-near one still stops.
+
+    NaN (no return: an edge's far side, a dropout) takes the least of its
+    neighbours' ranges and changes none of theirs; a pixel nearer than the
+    minimum range stops its 3 x 3 neighbours (something is there); a block of
+    NaN says nothing.
+    """
+    from cbp.perception.kernels import eroded_ranges
+
+    depth = np.full((8, 8), 1.0)
+    depth[:, 4:] = 1.5
+    frame = _frame(depth)
+    buffer = frame.depth.copy()
+    buffer[2, 5] = np.nan  # a dropout on the far surface
+    buffer[:, 4] = np.nan  # the edge's far side
+    buffer[6:, 6:] = np.nan  # a block without returns
+    nearest = replace(frame, min_range=0.5).buffer_limits[0]
+    buffer[0, 0] = 0.5 * nearest  # nearer than the minimum range (0.5 m)
+    ranges = eroded_ranges(buffer, NEAR, FAR, nearest, 1 - 1e-6, 1 + 1e-6)
+    assert ranges[2, 5] == pytest.approx(1.5)
+    assert ranges[3, 6] == pytest.approx(1.5)
+    assert ranges[3, 4] == pytest.approx(1.0)  # as far as its nearer side
+    assert ranges[7, 7] == -np.inf
+    assert ranges[1, 1] == -np.inf  # beside the too-near pixel
+    assert ranges[3, 2] == pytest.approx(1.0)
