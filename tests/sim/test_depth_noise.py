@@ -150,9 +150,9 @@ def test_switched_off_frames_are_exactly_as_rendered(scene) -> None:
 def test_the_robot_filter_grows_with_the_camera_s_noise(scene, robots) -> None:
     """With noise on, the arm's readings are dropped, however they scatter.
 
-    From 1.8 m the noise (sigma 5 mm) scatters readings of the arm up to 2 cm
-    off its surface: with a filter of the bare 5 mm margin they would be mapped
-    as obstacle cells on the arm; with the margin grown by 3 sigma none are.
+    From about 1.4 m the noise (sigma 3 mm) scatters readings of the arm past
+    the bare 5 mm margin: they would be mapped as obstacle cells on the arm;
+    with the margin grown by 3 sigma none are.
     """
     robot = robots["panda"]
     geometry = RobotGeometry(robot)
