@@ -63,25 +63,28 @@ class NoisyDepth:
         z = np.asarray(buffer, dtype=float)
         out = z.copy()
         hit = z < far_plane  # a reading nearer than the far plane (NaN: False)
-        depth = np.full(z.shape, np.inf)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            depth[hit] = far * near / (far - (far - near) * z[hit])
-            lost = np.zeros(z.shape, dtype=bool)
+            d = far * near / (far - (far - near) * z[hit])
+            lost = None
             if noise.edge_jump > 0.0:
+                depth = np.full(z.shape, np.inf)
+                depth[hit] = d
                 # Background beside an object lies inf beyond it: lost too.
                 # A pixel without a reading (NaN) neither loses nor makes lose.
+                lost = np.zeros(z.shape, dtype=bool)
                 step = depth[:, 1:] - depth[:, :-1]
                 lost[:, 1:] |= step > noise.edge_jump
                 lost[:, :-1] |= step < -noise.edge_jump
                 step = depth[1:, :] - depth[:-1, :]
                 lost[1:, :] |= step > noise.edge_jump
                 lost[:-1, :] |= step < -noise.edge_jump
-            d = depth[hit]
             d += noise.sigma(d) * self._rng.standard_normal(d.size, dtype=np.float32)
-            lost[hit] |= (d >= far) | (d <= 0.0)
-            out[hit] = far / (far - near) * (1.0 - near / d)
+            noisy = far / (far - near) * (1.0 - near / d)
+            noisy[(d >= far) | (d <= 0.0)] = np.nan  # out of range
+            out[hit] = noisy
+        if lost is not None:
+            out[lost] = np.nan
         if noise.dropout > 0.0:
             count = self._rng.binomial(z.size, noise.dropout)
-            lost.reshape(-1)[self._rng.choice(z.size, count, replace=False)] = True
-        out[lost] = np.nan
+            out.reshape(-1)[self._rng.choice(z.size, count, replace=False)] = np.nan
         return np.asarray(out)
