@@ -366,13 +366,23 @@ def eroded_ranges(
     and is seen through only in front of all of them. ``nearest``,
     ``far_plane`` and ``far_buffer`` are depth buffer values: the minimum
     range, where the far plane starts, and the largest valid value.
+
+    A pixel whose value is NaN (the sensor gave no return: the far side of a
+    depth edge, a dropout; :mod:`cbp.sim.depth_noise`) is left out of the
+    least: its surface lies beyond its nearer neighbours (an edge) or is as
+    unknown as a dropout on a continuous surface, so along its own ray it is
+    seen through as far as its neighbours, and a pixel with only NaN around
+    it says nothing (-inf). Any other value that is no reading (nearer than
+    the minimum range, say) stops its neighbours too: something is there.
     """
     h, w = depth.shape
     metric = np.empty((h, w))
     for r in range(h):
         for c in range(w):
             z = depth[r, c]
-            if not _holds_reading(z, nearest, far_buffer):
+            if np.isnan(z):
+                metric[r, c] = np.nan
+            elif not _holds_reading(z, nearest, far_buffer):
                 metric[r, c] = -np.inf
             elif z >= far_plane:
                 metric[r, c] = far
@@ -382,10 +392,14 @@ def eroded_ranges(
     for r in range(h):
         for c in range(w):
             least = np.inf
+            seen = False
             for rr in range(max(r - 1, 0), min(r + 2, h)):
                 for cc in range(max(c - 1, 0), min(c + 2, w)):
-                    least = min(least, metric[rr, cc])
-            out[r, c] = least
+                    m = metric[rr, cc]
+                    if not np.isnan(m):
+                        seen = True
+                        least = min(least, m)
+            out[r, c] = least if seen else -np.inf
     return out
 
 
@@ -413,6 +427,7 @@ def insert_readings(
     t: float,
     hold: float,
     held: FloatArray,
+    spread: FloatArray,
 ) -> tuple[int, int, int, int]:
     """Mark the cells depth readings fall in occupied; count valid, robot, inserted.
 
@@ -421,7 +436,11 @@ def insert_readings(
     :meth:`~cbp.perception.frame.DepthFrame.points` does), dropped when
     farther than ``max_range`` from ``camera`` or within ``reach[s]`` of a
     robot shape s (the shapes as :class:`~cbp.collision.geometry.WorldShapes`
-    gives them; no shapes: no robot), and its cell made occupied with no
+    gives them; no shapes: no robot) grown by how far the camera's noise
+    spreads the reading along its ray (``spread``: the projection's near and
+    far planes [m] and c0, c2, z0 [m]: c0 + c2 (z - z0)^2 along the axis at
+    depth z, so many sigmas of the noise; all 0: no noise), and its cell made
+    occupied with no
     misses. One pass, one call: the map thread takes the GIL once per frame
     for it, not once per array operation. ``dirty`` and ``brick`` as in
     :func:`mark_seen`.
@@ -448,6 +467,7 @@ def insert_readings(
     seen_to, last, moved_at = moved
     track = seen_to.shape[0] == h
     gap = 2.0 * cell
+    noisy = spread[2] > 0.0 or spread[3] > 0.0
     for r in range(h):
         y = 2.0 * (h - 1 - r) / h - 1.0
         for c in range(w):
@@ -473,7 +493,16 @@ def insert_readings(
                     seen_to[r, c] = max_range
                     last[r, c] = max_range
                 continue
-            if inside_any(px, py, pz, planes, plane_start, centres, radii, reach):
+            extra = 0.0
+            if noisy:  # the spread at this depth, along the ray
+                axial = (
+                    spread[1] * spread[0] / (spread[1] - (spread[1] - spread[0]) * z)
+                )
+                extra = spread[2] + spread[3] * (axial - spread[4]) ** 2
+                extra *= distance / axial
+            if _near_robot(
+                px, py, pz, planes, plane_start, centres, radii, reach, extra
+            ):
                 robot += 1
                 if track:  # seen free up to the robot; it hides nothing new
                     seen_to[r, c] = max(seen_to[r, c], distance)
@@ -516,6 +545,33 @@ def insert_readings(
                 grid[i, j, k] = OCCUPIED
                 dirty[i // brick, j // brick, k // brick] = True
     return valid, robot, inserted, hidden
+
+
+@numba.njit(cache=True, nogil=True)
+def _near_robot(
+    x: float,
+    y: float,
+    z: float,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    reach: FloatArray,
+    extra: float,
+) -> bool:
+    """Whether (x, y, z) is within ``reach[s] + extra`` of some robot shape s.
+
+    As :func:`~cbp.collision.geometry.inside_any`, with every shape grown by
+    ``extra`` more.
+    """
+    for s in range(radii.size):
+        grow = reach[s] + extra
+        dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
+        if dx * dx + dy * dy + dz * dz > (radii[s] + grow) ** 2:
+            continue
+        if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grow):
+            return True
+    return False
 
 
 @numba.njit(cache=True, nogil=True)

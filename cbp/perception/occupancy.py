@@ -123,6 +123,8 @@ class OccupancyGrid:
             ``FREE`` or ``OCCUPIED``.
         frames: frames integrated so far.
         robot_points_removed: readings filtered out as the robot, over all frames.
+        hidden_cells: free cells made unknown again because something came
+            between them and a camera, over all frames.
         last: the last frame's :class:`FrameSummary`.
     """
 
@@ -139,6 +141,7 @@ class OccupancyGrid:
         self.geometry = geometry
         self.frames = 0
         self.robot_points_removed = 0
+        self.hidden_cells = 0
         self.last: FrameSummary | None = None
         self._started = False  # the robot's first space has been freed
         if geometry is not None:  # the shapes' boxes in their frames (carving)
@@ -166,6 +169,7 @@ class OccupancyGrid:
         self._shell = (np.empty((0, 3)), np.zeros(int(np.prod(dims)) + 1, np.int64))
         self._snapshot: OccupancyEnvironment | None = None
         self._mounted = {c.name for c in spec.all_cameras if c.parent is not None}
+        self._noise = {c.name: c.noise for c in spec.all_cameras}
         # Per camera: the view its pixel history was taken from, and the history.
         self._moved: dict[str, tuple[FloatArray, PixelHistory]] = {}
         # How far beyond each robot shape hidden space stops (its padding).
@@ -250,8 +254,10 @@ class OccupancyGrid:
             0.0 if t is None else t,
             self.spec.shadow_hold,
             self._held,
+            self._spread(frame),
         )
         self.robot_points_removed += removed
+        self.hidden_cells += hidden
         self.frames += 1
         self.last = FrameSummary(
             camera=frame.camera,
@@ -263,6 +269,21 @@ class OccupancyGrid:
             hidden=hidden,
         )
         return self.last
+
+    def _spread(self, frame: DepthFrame) -> FloatArray:
+        """How far the frame's camera noise spreads a reading, for the self-filter.
+
+        ``filter_sigmas`` times the camera's sigma(z) (its
+        :class:`~cbp.perception.spec.DepthNoise`), as :func:`insert_readings`
+        takes it; zeros for a camera without noise or not in the spec.
+        """
+        noise = self._noise.get(frame.camera)
+        if noise is None or not noise.enabled:
+            return np.array([frame.near, frame.far, 0.0, 0.0, 0.0])
+        k = noise.filter_sigmas
+        return np.array(
+            [frame.near, frame.far, k * noise.sigma_0, k * noise.sigma_growth, noise.z0]
+        )
 
     def _pixels(self, frame: DepthFrame, t: float | None) -> PixelHistory:
         """The camera's pixel history, begun anew when the camera moved.
@@ -348,8 +369,9 @@ class OccupancyGrid:
         """
         # The nearest reading around each pixel: a cell at a depth edge or on a
         # grazing surface spans several pixels, and is free only in front of all
-        # of them. NaN (no reading) says nothing: it becomes -inf; background
-        # sees to the far plane.
+        # of them. A pixel without a reading says nothing: it becomes -inf (NaN,
+        # no return, leaves its neighbours be; eroded_ranges); background sees
+        # to the far plane.
         ranges = eroded_ranges(depth, frame.near, frame.far, *limits)
         box = self._frustum_box(frame)
         if box is None:

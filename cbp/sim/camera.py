@@ -9,6 +9,8 @@ described in :mod:`cbp.perception.frame`.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pinocchio as pin
 
@@ -17,6 +19,7 @@ from cbp.perception.frame import RENDER_NEAR_FRACTION, DepthFrame, camera_parent
 from cbp.perception.spec import CameraSpec
 from cbp.robot import RobotModel
 from cbp.sim.bullet import pb
+from cbp.sim.depth_noise import NoisyDepth
 from cbp.state import RobotState
 
 __all__ = ["DepthCamera"]
@@ -48,6 +51,7 @@ class DepthCamera:
         )
         # PyBullet's matrices are column-major.
         self.projection = np.array(self._projection_list).reshape(4, 4).T
+        self._noise = NoisyDepth(spec.noise, spec.name) if spec.noise.enabled else None
         self._frame: int | None = None
         self._offset = spec.offset.to_se3()
         if spec.parent is not None:
@@ -89,6 +93,9 @@ class DepthCamera:
     def capture(self, state: RobotState | None = None) -> DepthFrame:
         """Render one depth image (tiny renderer; no window needed).
 
+        With the camera's noise model on (``noise:``, the default) the image
+        is what the sensor would give (:mod:`cbp.sim.depth_noise`).
+
         Args:
             state: the robot at capture time (mounted cameras; kinematics
                 updated).
@@ -108,7 +115,7 @@ class DepthCamera:
             physicsClientId=self.client,
         )
         buffer = np.asarray(depth, dtype=float).reshape(s.height, s.width)
-        return DepthFrame(
+        frame = DepthFrame(
             buffer,
             self.view.copy(),
             self.projection,
@@ -117,6 +124,11 @@ class DepthCamera:
             self.name,
             min_range=s.near,
         )
+        if self._noise is None:
+            return frame
+        far_plane = frame.buffer_limits[1]
+        noisy = self._noise.apply(buffer, self._clip_near, s.far, far_plane)
+        return dataclasses.replace(frame, depth=noisy)
 
     def _set_view(self, eye: object, target: object, up: object) -> None:
         self._view_list = pb.computeViewMatrix(

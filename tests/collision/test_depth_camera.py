@@ -16,7 +16,7 @@ from cbp.perception.kernels import OCCUPIED
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
-from cbp.perception.spec import CameraSpec, PerceptionSpec
+from cbp.perception.spec import CameraSpec, DepthNoise, PerceptionSpec
 from cbp.scenario import ObjectSpec
 from cbp.sim.camera import DepthCamera
 from cbp.sim.scene import PybulletScene
@@ -35,7 +35,12 @@ BOX = ObjectSpec(
     size=(0.12, 0.12, 0.12),
     pose=Pose(position=(0.55, 0.2, 0.26), rpy_deg=(0.0, 0.0, 30.0)),
 )
-CAMERA = CameraSpec(position=(1.5, 0.0, 1.0), target=(0.5, 0.0, 0.2), far=3.0)
+#: Frames exactly as rendered: these tests check the map's geometry (the noise
+#: model has its own, tests/sim/test_depth_noise.py).
+EXACT = DepthNoise(enabled=False)
+CAMERA = CameraSpec(
+    position=(1.5, 0.0, 1.0), target=(0.5, 0.0, 0.2), far=3.0, noise=EXACT
+)
 SPEC = PerceptionSpec(
     source="depth_camera",
     camera=CAMERA,
@@ -182,6 +187,7 @@ def test_an_obstacle_inside_the_padding_is_mapped_and_the_arm_is_not(robots) -> 
         position=(hand[0] + 0.5, hand[1] - 0.35, hand[2] + 0.25),
         target=(hand[0], high, hand[2]),
         far=3.0,
+        noise=EXACT,
     )
     with PybulletScene(robot, [wall]) as scene:
         scene.set_configuration(robot.home())

@@ -13,7 +13,7 @@ from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.occupancy import OccupancyGrid
-from cbp.perception.spec import CameraSpec, PerceptionSpec
+from cbp.perception.spec import CameraSpec, DepthNoise, PerceptionSpec
 from cbp.scenario import ObjectSpec
 from cbp.sim.camera import DepthCamera
 from cbp.sim.scene import PybulletScene
@@ -26,13 +26,24 @@ BOX = ObjectSpec(
     size=(0.3, 0.1, 0.3),
     pose=Pose(position=(0.6, 0.0, 0.15)),
 )
+#: Frames exactly as rendered: these tests check the map's logic (the noise
+#: model has its own, tests/sim/test_depth_noise.py).
+EXACT = DepthNoise(enabled=False)
 # Looking along +y at the box: behind it (y > 0.05) is its shadow, which the
 # side camera (looking along -x) sees.
 FRONT = CameraSpec(
-    name="front", position=(0.6, -1.2, 0.3), target=(0.6, 0.0, 0.15), far=3.0
+    name="front",
+    position=(0.6, -1.2, 0.3),
+    target=(0.6, 0.0, 0.15),
+    far=3.0,
+    noise=EXACT,
 )
 SIDE = CameraSpec(
-    name="side", position=(1.8, 0.2, 0.3), target=(0.6, 0.2, 0.15), far=3.0
+    name="side",
+    position=(1.8, 0.2, 0.3),
+    target=(0.6, 0.2, 0.15),
+    far=3.0,
+    noise=EXACT,
 )
 SPEC = PerceptionSpec(
     source="depth_camera",
@@ -198,6 +209,7 @@ def test_a_mounted_camera_follows_its_link(scene, robots) -> None:
     spec = CameraSpec(
         name="wrist",
         parent="panda_hand",
+        noise=EXACT,
         offset=Pose(position=(0.06, 0.0, 0.03), rpy_deg=(0.0, 25.0, 0.0)),
         near=0.05,
     )
@@ -243,6 +255,7 @@ def test_a_surface_nearer_than_the_minimum_range_is_not_seen_through(
     robot = robots["panda"]
     close = CameraSpec(
         name="close",
+        noise=EXACT,
         position=(0.6, -0.08, 0.15),  # the box's front face is at y = -0.05
         target=(0.6, 1.0, 0.15),
         near=0.05,
@@ -268,7 +281,11 @@ def test_the_far_plane_reads_as_nothing_seen_with_a_near_clipping_plane(
     With a clipping plane of millimetres it comes back as 1.0000001.
     """
     up = CameraSpec(
-        name="up", position=(0.0, 0.0, 1.2), target=(0.0, 0.0, 3.0), up=(1.0, 0.0, 0.0)
+        name="up",
+        position=(0.0, 0.0, 1.2),
+        target=(0.0, 0.0, 3.0),
+        up=(1.0, 0.0, 0.0),
+        noise=EXACT,
     )
     frame = DepthCamera(scene.client, up).capture()
     assert frame.near < up.near
@@ -364,7 +381,7 @@ def test_a_camera_that_moved_hides_nothing(scene, robots) -> None:
 
 def test_a_camera_on_the_robot_hides_nothing(scene, robots) -> None:
     """Its view moves with the arm: it keeps no pixel history."""
-    on_hand = CameraSpec(name="front", parent="panda_hand")
+    on_hand = CameraSpec(name="front", parent="panda_hand", noise=EXACT)
     spec = replace(SPEC, cameras=[on_hand])
     grid, summary, _ = _plate_comes_between(scene, robots, spec)
     assert summary.hidden == 0

@@ -172,3 +172,22 @@ def test_an_obstacle_no_camera_sees_is_never_entered(robot_space: str) -> None:
         assert "panda_link6" in said[0]
     else:
         assert m["peak_contact_force_n"] > 50.0, m
+
+
+def test_with_noisy_cameras_the_boards_are_passed_without_touching() -> None:
+    """With the cameras' noise model on (its default), the boards: 0 N, reached.
+
+    Virtual clock, so the run does not depend on the machine's load;
+    docs/noise.md has the eight scenes.
+    """
+    scenario = load_scenario(
+        SCENARIOS / "cat_boards.yaml",
+        overrides={
+            "perception.source": "depth_camera",
+            "method.cat.timing.clock": "virtual",
+        },
+    )
+    assert all(c.noise.enabled for c in scenario.spec.perception.all_cameras)
+    m = run_metrics(run_cat(scenario))
+    assert m["reached"], m
+    assert m["peak_contact_force_n"] == 0.0
