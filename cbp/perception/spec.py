@@ -205,8 +205,9 @@ class PerceptionSpec:
     it (:attr:`~cbp.collision.geometry.RobotGeometry.visual_excess`): the margin
     covers the error between the robot's modelled and actual pose; each
     camera's depth noise adds ``noise.filter_sigmas`` times its sigma at the
-    reading's depth (:class:`DepthNoise`; 3 x 3.5 mm at 1.5 m). Every reading farther out is mapped, even inside the padding, so an
-    obstacle that comes at the arm stays in view until it is this close (a
+    reading's depth (:class:`DepthNoise`; 3 x 3.5 mm at 1.5 m). Every reading
+    farther out is mapped, even inside the padding, so an obstacle that comes
+    at the arm stays in view until it is this close (a
     reading the filter drops leaves its cell as it was). Before it was
     measured from the shapes it was 0.02 beyond the padded shapes: an obstacle
     pushed into the arm vanished 3 cm before it touched."""
