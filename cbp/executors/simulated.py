@@ -27,6 +27,7 @@ from cbp.executors.faults import Faults
 from cbp.goals import GoalSource
 from cbp.perception.camera import DepthCamera, DepthFrame
 from cbp.perception.kernels import UNKNOWN
+from cbp.perception.map_process import ProcessMapUpdater
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
@@ -127,7 +128,7 @@ class SimulatedRun:
             if self.world is not None and not use_camera
             else None
         )
-        self.mapper: MapUpdater | None = None
+        self.mapper: MapUpdater | ProcessMapUpdater | None = None
         self.cameras: list[DepthCamera] = []
         self._next_frame: list[float] = []
         self._camera_state = RobotState(self.robot)
@@ -157,7 +158,14 @@ class SimulatedRun:
                 if perception.motion_window > 0 and spec.collision.predict_motion
                 else None
             )
-            self.mapper = MapUpdater(
+            # Issue 39 (map off the control core): the map's own process in
+            # wall-clock runs unless perception.map_process is off.
+            updater = (
+                ProcessMapUpdater
+                if perception.map_process and clock != "virtual"
+                else MapUpdater
+            )
+            self.mapper = updater(
                 grid, self.world, synchronous=clock == "virtual", estimator=estimator
             )
             self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
@@ -366,6 +374,8 @@ class SimulatedRun:
             if stale
             else None
         )
+        if reason is None and self.mapper is not None:  # issue 39: map failed, lags
+            reason = self.mapper.hold_reason(timeout)
         if reason != self._stale:
             self.event(t, reason or "every camera gives valid frames: robot resumes")
             self._stale = reason

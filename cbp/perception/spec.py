@@ -185,6 +185,16 @@ class PerceptionSpec:
     still holds free (a box lowered onto the arm: 8.5 kN). Cameras mounted
     on the robot keep no such history (their view moves with the arm). 0:
     off."""
+    map_process: bool = True
+    """In wall-clock runs (``timing.clock: wall``), integrate the frames in a
+    process of its own (:class:`~cbp.perception.map_process.ProcessMapUpdater`:
+    snapshots through shared memory, each stamped with the capture time of
+    its newest frame [s], approaching obstacles measured ahead over the
+    look-ahead plus the snapshot's age [s]) rather than in a thread beside the
+    control loop, which shares the interpreter lock with it. Virtual-time runs
+    integrate each frame in the loop either way. A map process that ends, or
+    a map more than ``camera_timeout`` [s] behind the newest frame, stops the
+    robot (an event)."""
     refine_normals: bool = True
     """Re-estimate contact normals from a metaball surface (CAT Sec. IV-B)."""
     metaball_radius_cells: float = 3.0

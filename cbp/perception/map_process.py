@@ -1,0 +1,574 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The map in a process of its own: frames in, stamped snapshots out.
+
+A :class:`~cbp.perception.mapper.MapUpdater` thread shares the interpreter lock
+with the control loop: each of its Python steps waits for the loop to let go of
+it, and the loop waits for the map's. :class:`ProcessMapUpdater` has the same
+interface and integrates the frames in a child process (started with
+``forkserver`` where the platform has it, else ``spawn``: never ``fork``, which
+would copy the simulator's state and threads), so the two run on two cores.
+
+* Frames go to the child through a queue (pickled by the queue's own thread:
+  :meth:`ProcessMapUpdater.submit` never waits). The child takes what waits,
+  the newest frame per camera (older ones are skipped, as the thread does).
+* The grid's cells live in shared memory (:mod:`multiprocessing.shared_memory`):
+  the child writes them, the control process reads them
+  (:meth:`~cbp.perception.occupancy.OccupancyGrid.state_at` for unseen space,
+  the teleoperation page's drawing).
+* Each snapshot (the obstacle shell by brick, and the dense obstacle mask) is
+  written to one of :data:`SLOTS` shared-memory slots; a short message over a
+  pipe says which, with the capture time of its newest frame (its stamp), the
+  approach speeds and the timings. A receiver thread in the control process
+  copies the slot out, hands the slot back, and swaps the snapshot into the
+  collision world. The child writes only into slots handed back.
+* The approach estimate (:class:`~cbp.perception.motion.ApproachEstimator`)
+  runs in the child. The control process measures each snapshot's contacts
+  nearer by the approach over the look-ahead *plus the snapshot's age* (the
+  newest capture time submitted less its stamp): planned against where the
+  obstacles will be, not where they were.
+
+The control process creates every shared-memory segment and unlinks them all in
+:meth:`ProcessMapUpdater.close`, whatever became of the child. A child that
+dies is reported once (:attr:`~cbp.perception.mapper.SnapshotPublisher.error`,
+an event) and holds the robot for good
+(:meth:`~cbp.perception.mapper.SnapshotPublisher.hold_reason`).
+"""
+
+from __future__ import annotations
+
+import copy
+import multiprocessing as mp
+import os
+import queue
+import threading
+import time
+import uuid
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+from multiprocessing.process import BaseProcess
+from multiprocessing.shared_memory import SharedMemory
+from typing import Any
+
+import numpy as np
+
+from cbp.collision.map_environment import OccupancyEnvironment
+from cbp.collision.world import CollisionWorld
+from cbp.perception.camera import DepthFrame
+from cbp.perception.mapper import Publication, SnapshotPublisher
+from cbp.perception.motion import ApproachEstimator
+from cbp.perception.occupancy import OccupancyGrid
+from cbp.robot import FloatArray
+from cbp.state import RobotState
+
+__all__ = ["SEGMENT_PREFIX", "SLOTS", "ProcessMapUpdater"]
+
+#: Snapshot slots in shared memory: one being read, one written, one spare.
+SLOTS = 3
+#: Every segment's name starts with this (then the process id and a token).
+SEGMENT_PREFIX = "cbp_map_"
+#: How long the child may take to start and load the grid [s].
+START_TIMEOUT = 120.0
+#: How long :meth:`ProcessMapUpdater.close` waits for the child to end [s].
+STOP_TIMEOUT = 5.0
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where a snapshot's arrays lie in a slot (bytes from its start)."""
+
+    cells: int
+    bricks: int
+
+    @property
+    def blocked(self) -> int:
+        """Offset of the dense obstacle mask (one byte a cell)."""
+        return 0
+
+    @property
+    def start(self) -> int:
+        """Offset of the brick starts (``bricks + 1`` int64)."""
+        return _aligned(self.cells)
+
+    @property
+    def centres(self) -> int:
+        """Offset of the shell's cell centres (at most ``cells`` x 3 float64)."""
+        return self.start + 8 * (self.bricks + 1)
+
+    @property
+    def size(self) -> int:
+        """Bytes in a slot (untouched pages cost no memory)."""
+        return self.centres + 24 * self.cells
+
+
+def _aligned(n: int) -> int:
+    return (n + 63) // 64 * 64
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What the child needs: the grid and where to write."""
+
+    grid: OccupancyGrid
+    settings: Any  # the world's CollisionSettings
+    motion_window: float
+    cells_name: str
+    slot_names: tuple[str, ...]
+    layout: _Layout
+
+
+class ProcessMapUpdater(SnapshotPublisher):
+    """Integrates depth frames in a child process; same interface as MapUpdater.
+
+    Args:
+        grid: the occupancy grid, with what the first frames put in it (the
+            child takes it over; from now on this process only reads its
+            cells, which move to shared memory).
+        world: the collision world whose environment is replaced.
+        synchronous: must be False (a map that takes each frame at once is
+            :class:`~cbp.perception.mapper.MapUpdater`'s).
+        estimator: the approach estimate to run in the child (its window), or
+            None: snapshots as mapped.
+
+    Raises:
+        ValueError: ``synchronous`` is True.
+        RuntimeError: the child did not start (its reason).
+    """
+
+    def __init__(
+        self,
+        grid: OccupancyGrid,
+        world: CollisionWorld,
+        synchronous: bool = False,
+        estimator: ApproachEstimator | None = None,
+    ) -> None:
+        """Create the shared memory, start the child and wait until it is ready."""
+        if synchronous:
+            raise ValueError(
+                "a map process cannot take each frame at once: use MapUpdater"
+            )
+        super().__init__()
+        self.grid = grid
+        self.world = world
+        self.synchronous = False
+        self.estimator = estimator
+        self.stamp = self.submitted_t = 0.0
+        self._segments: list[SharedMemory] = []
+        self._closed = False
+        self._lock = threading.Condition()
+        self._done = 0  # frames the child has taken (integrated or skipped)
+        self._sent = 0
+        self._speeds: FloatArray | None = None
+        self._mapped: OccupancyEnvironment | None = None
+        self._process: BaseProcess | None = None
+        self._receiver: threading.Thread | None = None
+        try:
+            self._start(grid, world, estimator)
+        except BaseException:
+            self.close()
+            raise
+
+    def _start(
+        self,
+        grid: OccupancyGrid,
+        world: CollisionWorld,
+        estimator: ApproachEstimator | None,
+    ) -> None:
+        token = f"{SEGMENT_PREFIX}{os.getpid()}_{uuid.uuid4().hex[:8]}"
+        cells = SharedMemory(f"{token}_cells", create=True, size=grid.cells.nbytes)
+        self._segments.append(cells)
+        shared = np.ndarray(grid.cells.shape, np.uint8, buffer=cells.buf)
+        shared[...] = grid.cells
+        _, dims = grid.bricks
+        layout = _Layout(cells=int(grid.cells.size), bricks=int(np.prod(dims)))
+        for i in range(SLOTS):
+            self._segments.append(
+                SharedMemory(f"{token}_slot{i}", create=True, size=layout.size)
+            )
+        self._layout = layout
+        # The child's copy of the grid: this one's state, without the last
+        # snapshot (it holds compiled queries; the child builds its own).
+        child_grid = copy.copy(grid)
+        child_grid._snapshot = None  # noqa: SLF001 - rebuilt by the child
+        setup = _Setup(
+            grid=child_grid,
+            settings=world.settings,
+            motion_window=estimator.window if estimator is not None else 0.0,
+            cells_name=cells.name,
+            slot_names=tuple(s.name for s in self._segments[1:]),
+            layout=layout,
+        )
+        context = _context()
+        frames: Any = context.Queue()
+        self._frames = frames
+        ours, theirs = context.Pipe(duplex=True)
+        self._conn: Connection = ours
+        process = context.Process(
+            target=_child,
+            args=(setup, frames, theirs),
+            name="cbp-map",
+            daemon=True,
+        )
+        process.start()
+        self._process = process
+        theirs.close()
+        ready = wait([ours, process.sentinel], START_TIMEOUT)
+        if ours not in ready:
+            raise RuntimeError(
+                "the map process did not start"
+                + (
+                    f" (exit code {process.exitcode})"
+                    if not process.is_alive()
+                    else f" within {START_TIMEOUT:g} s"
+                )
+            )
+        message = ours.recv()
+        if message[0] != "ready":
+            raise RuntimeError(f"the map process did not start: {message[1]}")
+        # From now on this process reads the cells the child writes.
+        grid.cells = shared
+        self._receiver = threading.Thread(
+            target=self._receive, name="cbp-map-receiver", daemon=True
+        )
+        self._receiver.start()
+
+    # ------------------------------------------------------------------ frames in
+
+    def submit(self, frame: DepthFrame, q: FloatArray, t: float = 0.0) -> None:
+        """Queue a frame taken at configuration ``q`` and time ``t`` [s].
+
+        Never waits for the map (nor for a map process that has died).
+        """
+        self.submitted_t = max(self.submitted_t, t)
+        if self.failed is not None or self._closed:
+            return
+        with self._lock:
+            self._sent += 1
+        self._frames.put((frame, np.array(q, dtype=float), float(t)))
+
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Block until the child has taken every frame sent (for tests)."""
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            while self._done < self._sent and self.failed is None:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._lock.wait(left)
+        return self.failed is None
+
+    # ------------------------------------------------------------------ snapshots out
+
+    def _receive(self) -> None:
+        """Adopt each snapshot the child announces, until it ends."""
+        conn, process = self._conn, self._process
+        assert process is not None
+        layout = self._layout
+        while True:
+            try:
+                ready = wait([conn, process.sentinel])
+                if conn not in ready:
+                    raise EOFError
+                message = conn.recv()
+            except (EOFError, OSError, ValueError):
+                if not self._closed:
+                    process.join(1.0)
+                    self._fail(f"the map process ended (exit code {process.exitcode})")
+                return
+            kind = message[0]
+            if kind == "snapshot":
+                _, slot, n, stamp, speeds, taken, skipped, timings = message
+                segment = self._segments[1 + slot]
+                buf = segment.buf
+                blocked = np.ndarray(
+                    self.grid.shape, np.bool_, buffer=buf, offset=layout.blocked
+                ).copy()
+                start = np.ndarray(
+                    layout.bricks + 1, np.int64, buffer=buf, offset=layout.start
+                ).copy()
+                centres = np.ndarray(
+                    (n, 3), np.float64, buffer=buf, offset=layout.centres
+                ).copy()
+                del buf
+                try:
+                    conn.send(("free", slot))
+                except (OSError, ValueError):
+                    pass  # the child has gone: found at the next wait
+                try:
+                    self._adopt(centres, start, blocked, stamp, speeds, timings)
+                except Exception as exc:  # reported, the previous map kept
+                    self.error = RuntimeError(f"failed, previous map kept: {exc!r}")
+                with self._lock:
+                    self._done += taken
+                    self.skipped += skipped
+                    self._lock.notify_all()
+            elif kind == "error":
+                self.error = RuntimeError(message[1])
+                with self._lock:
+                    self._done += message[2]
+                    self._lock.notify_all()
+
+    def _adopt(
+        self,
+        centres: FloatArray,
+        start: np.ndarray,
+        blocked: np.ndarray,
+        stamp: float,
+        speeds: FloatArray | None,
+        timings: tuple[float, float, float, int],
+    ) -> None:
+        """Swap the snapshot into the world, measured ahead by speed x time."""
+        mapped = self.grid.snapshot_of(centres, start, blocked)
+        mapped.stamp = stamp
+        self._mapped = mapped
+        self._speeds = speeds
+        self.world.set_environment(self._ahead(mapped))
+        self.stamp = max(self.stamp, stamp)
+        self.updates += 1
+        received, integrate_s, snapshot_s, frames = timings
+        self.last_update_s = integrate_s + snapshot_s
+        self.published.append(
+            Publication(
+                stamp, frames, received, integrate_s, snapshot_s, time.perf_counter()
+            )
+        )
+
+    def _ahead(self, mapped: OccupancyEnvironment) -> OccupancyEnvironment:
+        """``mapped`` with each shape's contacts nearer by its approach.
+
+        Over the look-ahead and the snapshot's age (the newest capture time
+        submitted less the snapshot's stamp): where the obstacles will be
+        when the plan made now has run.
+        """
+        speeds = self._speeds
+        if speeds is None or not np.any(speeds > 0):
+            return mapped
+        age = max(0.0, self.submitted_t - (mapped.stamp or 0.0))
+        out = mapped.ahead(speeds * (self.look_ahead + age))
+        out.stamp = mapped.stamp
+        return out
+
+    def age(self) -> float:
+        """How much older the snapshot in use is than the newest frame sent [s]."""
+        return max(0.0, self.submitted_t - self.stamp)
+
+    # ------------------------------------------------------------------ end
+
+    def _fail(self, reason: str) -> None:
+        """The map has stopped for good: say so once, hold the robot."""
+        if self.failed is None:
+            self.failed = reason
+            self.error = RuntimeError(reason)
+        with self._lock:
+            self._lock.notify_all()
+
+    def close(self) -> None:
+        """Stop the child (kill it if it does not stop), free the shared memory.
+
+        Safe to call more than once, and whatever became of the child.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        process = self._process
+        frames = getattr(self, "_frames", None)
+        if frames is not None:
+            try:
+                frames.put(None)
+            except (OSError, ValueError):
+                pass
+        if process is not None:
+            process.join(STOP_TIMEOUT)
+            if process.is_alive():
+                process.kill()
+                process.join(STOP_TIMEOUT)
+        if frames is not None:
+            frames.cancel_join_thread()  # never wait on a pipe nobody reads
+            frames.close()
+            self._frames = None  # its semaphores go with it
+        conn = getattr(self, "_conn", None)
+        if conn is not None:
+            conn.close()
+            self._conn = None
+        if self._receiver is not None:
+            self._receiver.join(STOP_TIMEOUT)
+        if process is not None and not process.is_alive():
+            process.close()
+        # The grid keeps a copy of the last cells; then the segments go.
+        if self._segments:
+            self.grid.cells = np.array(self.grid.cells)
+        for segment in self._segments:
+            try:
+                segment.close()
+            except BufferError:
+                pass  # an array still views it: the mapping ends with it
+            try:
+                segment.unlink()
+            except FileNotFoundError:
+                pass
+        self._segments = []
+
+    def __del__(self) -> None:
+        """Never leave a process or a segment behind."""
+        if not getattr(self, "_closed", True):
+            self.close()
+
+
+def _context() -> Any:
+    """``forkserver`` (this module preloaded in the server) where there is one."""
+    if "forkserver" not in mp.get_all_start_methods():
+        return mp.get_context("spawn")
+    context = mp.get_context("forkserver")
+    context.set_forkserver_preload([__name__])
+    return context
+
+
+# ---------------------------------------------------------------------- the child
+
+
+def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
+    """The map process: integrate what the queue brings, publish to free slots."""
+    segments: list[SharedMemory] = []
+    grid = setup.grid
+    try:
+        cells = _attach(setup.cells_name)
+        segments.append(cells)
+        slots = [_attach(name) for name in setup.slot_names]
+        segments.extend(slots)
+        grid.cells = np.ndarray(grid.shape, np.uint8, buffer=cells.buf)
+        geometry = grid.geometry
+        assert geometry is not None
+        world = CollisionWorld(geometry, None, setup.settings)
+        estimator = (
+            ApproachEstimator(world, setup.motion_window)
+            if setup.motion_window > 0
+            else None
+        )
+        state = RobotState(geometry.robot)
+        # Compile (or load) the snapshot's and the estimate's kernels now.
+        warm = grid.environment()
+        warm.prepare(geometry.shapes, world.margin(warm))
+    except BaseException as exc:
+        conn.send(("failed", repr(exc)))
+        raise
+    conn.send(("ready", None))
+    free = list(range(len(slots)))
+    mapped: OccupancyEnvironment | None = None
+    parent = mp.parent_process()
+    try:
+        while True:
+            batch = _take(frames, parent)
+            if batch is None:
+                return
+            pending, skipped = batch
+            taken = len(pending) + skipped
+            received = time.perf_counter()
+            try:
+                for frame, q, t in pending:
+                    state.update(q)
+                    grid.integrate(frame, state, t)
+                integrated = time.perf_counter()
+                new = grid.environment()
+                stamp = max(t for _, _, t in pending)
+                speeds = None
+                if estimator is not None:
+                    try:
+                        speeds = estimator.update(stamp, state, mapped, new).copy()
+                    except Exception as exc:  # the map itself is still published
+                        conn.send(
+                            (
+                                "error",
+                                "approach estimate failed, map published "
+                                f"without it: {exc}",
+                                0,
+                            )
+                        )
+                mapped = new
+                done = time.perf_counter()
+            except Exception as exc:  # reported, the previous map kept
+                conn.send(("error", f"failed, previous map kept: {exc!r}", taken))
+                continue
+            while not free:  # wait for a slot handed back
+                if not conn.poll(0.5):
+                    if parent is not None and not parent.is_alive():
+                        return
+                    continue
+                message = conn.recv()
+                free.append(message[1])
+            while conn.poll():
+                free.append(conn.recv()[1])
+            slot = free.pop(0)
+            n = _write(slots[slot], setup.layout, new)
+            conn.send(
+                (
+                    "snapshot",
+                    slot,
+                    n,
+                    stamp,
+                    speeds,
+                    taken,
+                    skipped,
+                    (received, integrated - received, done - integrated, len(pending)),
+                )
+            )
+    except (EOFError, BrokenPipeError, KeyboardInterrupt):
+        return
+    finally:
+        grid.cells = np.zeros(0, np.uint8)
+        for segment in segments:
+            try:
+                segment.close()
+            except BufferError:
+                pass  # a view is still alive; the mapping ends with the process
+
+
+def _take(
+    frames: Any, parent: BaseProcess | None
+) -> tuple[list[tuple[DepthFrame, FloatArray, float]], int] | None:
+    """The newest waiting frame per camera and how many were skipped (None: stop).
+
+    Waits for the first; a parent that has gone ends the child.
+    """
+    while True:
+        try:
+            item = frames.get(timeout=0.5)
+            break
+        except queue.Empty:
+            if parent is not None and not parent.is_alive():
+                return None
+    newest: dict[str, tuple[DepthFrame, FloatArray, float]] = {}
+    skipped = 0
+    while True:
+        if item is None:
+            return None
+        frame = item[0]
+        if frame.camera in newest:
+            skipped += 1
+        newest[frame.camera] = item
+        try:
+            item = frames.get_nowait()
+        except queue.Empty:
+            break
+    return list(newest.values()), skipped
+
+
+def _write(segment: SharedMemory, layout: _Layout, env: OccupancyEnvironment) -> int:
+    """Write a snapshot's arrays into a slot; the number of shell cells."""
+    buf = segment.buf
+    assert env.blocked is not None
+    mask = env.blocked.mask
+    np.ndarray(mask.shape, np.bool_, buffer=buf, offset=layout.blocked)[...] = mask
+    start = env.index.start
+    np.ndarray(start.shape, np.int64, buffer=buf, offset=layout.start)[...] = start
+    centres = env.index.centres
+    n = len(centres)
+    np.ndarray((n, 3), np.float64, buffer=buf, offset=layout.centres)[...] = centres
+    return n
+
+
+def _attach(name: str) -> SharedMemory:
+    """Open a segment the control process created (and owns: it unlinks it).
+
+    The child shares the control process's resource tracker (``spawn`` and
+    ``forkserver`` pass it on), so opening registers nothing new.
+    """
+    return SharedMemory(name)
