@@ -36,6 +36,7 @@ an event) and holds the robot for good
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import multiprocessing as mp
 import os
@@ -188,7 +189,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         # The child's copy of the grid: this one's state, without the last
         # snapshot (it holds compiled queries; the child builds its own).
         child_grid = copy.copy(grid)
-        child_grid._snapshot = None  # noqa: SLF001 - rebuilt by the child
+        child_grid._snapshot = None
         setup = _Setup(
             grid=child_grid,
             settings=world.settings,
@@ -201,7 +202,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         frames: Any = context.Queue()
         self._frames = frames
         ours, theirs = context.Pipe(duplex=True)
-        self._conn: Connection = ours
+        self._conn: Connection | None = ours
         process = context.Process(
             target=_child,
             args=(setup, frames, theirs),
@@ -262,6 +263,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         """Adopt each snapshot the child announces, until it ends."""
         conn, process = self._conn, self._process
         assert process is not None
+        assert conn is not None
         layout = self._layout
         while True:
             try:
@@ -289,10 +291,9 @@ class ProcessMapUpdater(SnapshotPublisher):
                     (n, 3), np.float64, buffer=buf, offset=layout.centres
                 ).copy()
                 del buf
-                try:
+                # A child that has gone is found at the next wait.
+                with contextlib.suppress(OSError, ValueError):
                     conn.send(("free", slot))
-                except (OSError, ValueError):
-                    pass  # the child has gone: found at the next wait
                 try:
                     self._adopt(centres, start, blocked, stamp, speeds, timings)
                 except Exception as exc:  # reported, the previous map kept
@@ -372,10 +373,8 @@ class ProcessMapUpdater(SnapshotPublisher):
         process = self._process
         frames = getattr(self, "_frames", None)
         if frames is not None:
-            try:
+            with contextlib.suppress(OSError, ValueError):
                 frames.put(None)
-            except (OSError, ValueError):
-                pass
         if process is not None:
             process.join(STOP_TIMEOUT)
             if process.is_alive():
@@ -397,14 +396,11 @@ class ProcessMapUpdater(SnapshotPublisher):
         if self._segments:
             self.grid.cells = np.array(self.grid.cells)
         for segment in self._segments:
-            try:
+            # An array that still views it keeps the mapping until it goes.
+            with contextlib.suppress(BufferError):
                 segment.close()
-            except BufferError:
-                pass  # an array still views it: the mapping ends with it
-            try:
+            with contextlib.suppress(FileNotFoundError):
                 segment.unlink()
-            except FileNotFoundError:
-                pass
         self._segments = []
 
     def __del__(self) -> None:
@@ -515,10 +511,9 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
     finally:
         grid.cells = np.zeros(0, np.uint8)
         for segment in segments:
-            try:
+            # A view still alive keeps the mapping until the process ends.
+            with contextlib.suppress(BufferError):
                 segment.close()
-            except BufferError:
-                pass  # a view is still alive; the mapping ends with the process
 
 
 def _take(

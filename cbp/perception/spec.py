@@ -185,7 +185,7 @@ class PerceptionSpec:
     still holds free (a box lowered onto the arm: 8.5 kN). Cameras mounted
     on the robot keep no such history (their view moves with the arm). 0:
     off."""
-    map_process: bool = True
+    map_process: bool = False
     """In wall-clock runs (``timing.clock: wall``), integrate the frames in a
     process of its own (:class:`~cbp.perception.map_process.ProcessMapUpdater`:
     snapshots through shared memory, each stamped with the capture time of
@@ -194,7 +194,14 @@ class PerceptionSpec:
     control loop, which shares the interpreter lock with it. Virtual-time runs
     integrate each frame in the loop either way. A map process that ends, or
     a map more than ``camera_timeout`` [s] behind the newest frame, stops the
-    robot (an event)."""
+    robot (an event). Off by default: on the shared 2-core machine
+    (``benchmarks/map_latency.py``, ``cat_pushed_obstacle`` variants, 2 runs)
+    a frame integrated in 8-15 ms in the process against 12-49 ms in the
+    thread, but capture to use in simulated time was no shorter (median
+    33-87 ms against 37-84 ms; virtual time 0-27 ms): the capture, in the
+    control process, and the control loop's own share of the two cores
+    dominate, and the process took the loop's QP steps per period from
+    43-75 to 33-59."""
     refine_normals: bool = True
     """Re-estimate contact normals from a metaball surface (CAT Sec. IV-B)."""
     metaball_radius_cells: float = 3.0
