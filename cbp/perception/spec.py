@@ -196,12 +196,12 @@ class PerceptionSpec:
     a map more than ``camera_timeout`` [s] behind the newest frame, stops the
     robot (an event). Off by default: on the shared 2-core machine
     (``benchmarks/map_latency.py``, ``cat_pushed_obstacle`` variants, 2 runs)
-    a frame integrated in 8-15 ms in the process against 12-49 ms in the
-    thread, but capture to use in simulated time was no shorter (median
-    33-87 ms against 37-84 ms; virtual time 0-27 ms): the capture, in the
-    control process, and the control loop's own share of the two cores
-    dominate, and the process took the loop's QP steps per period from
-    43-75 to 33-59."""
+    a frame integrated in 8-29 ms in the process against 12-53 ms in the
+    thread, but capture to use in simulated time was not consistently
+    shorter (median 33-101 ms against 37-149 ms; virtual time 0-27 ms) nor
+    were the forces lower: the capture, in the control process, and the
+    control loop's own share of the two cores dominate, and the process took
+    the loop's QP steps per period from 34-75 to 25-59."""
     refine_normals: bool = True
     """Re-estimate contact normals from a metaball surface (CAT Sec. IV-B)."""
     metaball_radius_cells: float = 3.0
