@@ -22,10 +22,11 @@ would copy the simulator's state and threads), so the two run on two cores.
   copies the slot out, hands the slot back, and swaps the snapshot into the
   collision world. The child writes only into slots handed back.
 * The approach estimate (:class:`~cbp.perception.motion.ApproachEstimator`)
-  runs in the child. The control process measures each snapshot's contacts
-  nearer by the approach over the look-ahead *plus the snapshot's age* (the
-  newest capture time submitted less its stamp): planned against where the
-  obstacles will be, not where they were.
+  and the clusters' motion (:class:`~cbp.perception.motion.ClusterMotion`)
+  run in the child. The control process measures each snapshot's contacts
+  nearer by the approach, and sweeps the moving clusters, over the look-ahead
+  *plus the snapshot's age* (the newest capture time submitted less its
+  stamp): planned against where the obstacles will be, not where they were.
 
 The control process creates every shared-memory segment and unlinks them all in
 :meth:`ProcessMapUpdater.close`, whatever became of the child. A child that
@@ -55,8 +56,8 @@ import numpy as np
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.perception.camera import DepthFrame
-from cbp.perception.mapper import Publication, SnapshotPublisher
-from cbp.perception.motion import ApproachEstimator
+from cbp.perception.mapper import Publication, SnapshotPublisher, cluster_motion
+from cbp.perception.motion import ApproachEstimator, MovingCluster, swept_snapshot
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
@@ -159,6 +160,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         self._done = 0  # frames the child has taken (integrated or skipped)
         self._sent = 0
         self._speeds: FloatArray | None = None
+        self._moving: list[MovingCluster] = []
         self._mapped: OccupancyEnvironment | None = None
         self._process: BaseProcess | None = None
         self._receiver: threading.Thread | None = None
@@ -278,7 +280,7 @@ class ProcessMapUpdater(SnapshotPublisher):
                 return
             kind = message[0]
             if kind == "snapshot":
-                _, slot, n, stamp, speeds, taken, skipped, timings = message
+                _, slot, n, stamp, speeds, moving, taken, skipped, timings = message
                 segment = self._segments[1 + slot]
                 buf = segment.buf
                 blocked = np.ndarray(
@@ -295,7 +297,7 @@ class ProcessMapUpdater(SnapshotPublisher):
                 with contextlib.suppress(OSError, ValueError):
                     conn.send(("free", slot))
                 try:
-                    self._adopt(centres, start, blocked, stamp, speeds, timings)
+                    self._adopt(centres, start, blocked, stamp, speeds, moving, timings)
                 except Exception as exc:  # reported, the previous map kept
                     self.error = RuntimeError(f"failed, previous map kept: {exc!r}")
                 with self._lock:
@@ -315,6 +317,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         blocked: np.ndarray,
         stamp: float,
         speeds: FloatArray | None,
+        moving: list[MovingCluster],
         timings: tuple[float, float, float, int],
     ) -> None:
         """Swap the snapshot into the world, measured ahead by speed x time."""
@@ -322,6 +325,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         mapped.stamp = stamp
         self._mapped = mapped
         self._speeds = speeds
+        self._moving = moving
         self.world.set_environment(self._ahead(mapped))
         self.stamp = max(self.stamp, stamp)
         self.updates += 1
@@ -341,10 +345,11 @@ class ProcessMapUpdater(SnapshotPublisher):
         when the plan made now has run.
         """
         speeds = self._speeds
+        horizon = self.look_ahead + max(0.0, self.submitted_t - (mapped.stamp or 0.0))
+        out = swept_snapshot(mapped, self._moving, horizon, self.grid.lower)
         if speeds is None or not np.any(speeds > 0):
-            return mapped
-        age = max(0.0, self.submitted_t - (mapped.stamp or 0.0))
-        out = mapped.ahead(speeds * (self.look_ahead + age))
+            return out
+        out = out.ahead(speeds * horizon)
         out.stamp = mapped.stamp
         return out
 
@@ -439,6 +444,7 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
             if setup.motion_window > 0
             else None
         )
+        clusters = cluster_motion(grid) if setup.motion_window > 0 else None
         state = RobotState(geometry.robot)
         # Compile (or load) the snapshot's and the estimate's kernels now.
         warm = grid.environment()
@@ -478,6 +484,20 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
                                 0,
                             )
                         )
+                moving: list[MovingCluster] = []
+                if clusters is not None:
+                    try:
+                        shapes = geometry.world_shapes(state)
+                        moving = clusters.update(stamp, grid.cells, shapes)
+                    except Exception as exc:  # the map itself is still published
+                        conn.send(
+                            (
+                                "error",
+                                "cluster motion failed, map published "
+                                f"without it: {exc}",
+                                0,
+                            )
+                        )
                 mapped = new
                 done = time.perf_counter()
             except Exception as exc:  # reported, the previous map kept
@@ -501,6 +521,7 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
                     n,
                     stamp,
                     speeds,
+                    moving,
                     taken,
                     skipped,
                     (received, integrated - received, done - integrated, len(pending)),

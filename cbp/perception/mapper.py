@@ -31,12 +31,12 @@ import numpy as np
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.perception.camera import DepthFrame
-from cbp.perception.motion import ApproachEstimator
+from cbp.perception.motion import ApproachEstimator, ClusterMotion, swept_snapshot
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
 
-__all__ = ["MapUpdater", "Publication", "SnapshotPublisher"]
+__all__ = ["MapUpdater", "Publication", "SnapshotPublisher", "cluster_motion"]
 
 #: Publications kept in :attr:`SnapshotPublisher.published`.
 KEPT_PUBLICATIONS = 4096
@@ -63,6 +63,14 @@ class Publication:
     integrate_s: float
     snapshot_s: float
     published: float
+
+
+def cluster_motion(grid: OccupancyGrid) -> ClusterMotion | None:
+    """The grid's cluster-motion estimate, or None (``perception.cluster_motion``)."""
+    spec = grid.spec
+    if not spec.cluster_motion or spec.motion_window <= 0:
+        return None
+    return ClusterMotion(grid.lower, grid.cell, spec.motion_window)
 
 
 class SnapshotPublisher:
@@ -144,6 +152,9 @@ class MapUpdater(SnapshotPublisher):
         self.synchronous = synchronous
         self.estimator = estimator
         self._mapped: OccupancyEnvironment | None = None  # the last, as mapped
+        #: Velocities of the mapped obstacles, cluster by cluster (with an
+        #: estimator, when ``perception.cluster_motion`` is on).
+        self.clusters = cluster_motion(grid) if estimator is not None else None
         self._state = RobotState(world.geometry.robot)
         self._pending: dict[str, tuple[DepthFrame, FloatArray, float]] = {}
         self._cond = threading.Condition()
@@ -211,12 +222,23 @@ class MapUpdater(SnapshotPublisher):
         stamp = max(t for _, _, t in frames)
         mapped.stamp = stamp
         published: OccupancyEnvironment = mapped
+        if self.clusters is not None and self.grid.geometry is not None:
+            try:
+                shapes = self.grid.geometry.world_shapes(self._state)
+                moving = self.clusters.update(stamp, self.grid.cells, shapes)
+                published = swept_snapshot(
+                    mapped, moving, self.look_ahead, self.grid.lower
+                )
+            except Exception as exc:  # the map itself is still published
+                self.error = RuntimeError(
+                    f"cluster motion failed, map published without it: {exc}"
+                )
         if self.estimator is not None:
             t = stamp
             try:
                 speeds = self.estimator.update(t, self._state, self._mapped, mapped)
                 if np.any(speeds > 0):
-                    published = mapped.ahead(speeds * self.look_ahead)
+                    published = published.ahead(speeds * self.look_ahead)
             except Exception as exc:  # the map itself is still published
                 self.error = RuntimeError(
                     f"approach estimate failed, map published without it: {exc}"

@@ -175,6 +175,16 @@ class PerceptionSpec:
     at 10 cm/s 173-245 N (1 s) and 91-171 N (0.5 s). In virtual time (the map
     integrates each frame at once) 0.5 s did better on all of them: virtual
     time does not stand for a run beside a map thread here."""
+    cluster_motion: bool = False
+    """Also measure the mapped obstacles' velocities cluster by cluster
+    (touching occupied cells within 0.3 m of the robot, followed from
+    snapshot to snapshot over ``motion_window``;
+    :class:`~cbp.perception.motion.ClusterMotion`), and add to each snapshot
+    the cells a moving cluster passes over the look-ahead [s] (and, with
+    ``map_process``, the snapshot's age [s]). A moving obstacle is then
+    measured on its own, not hidden by a nearer static one as in the per-shape
+    approach estimate (which stays on). Needs ``motion_window`` > 0 and
+    ``collision.predict_motion``."""
     shadow_hold: float = 1.0
     """Space a fixed camera saw free and now sees hidden behind a nearer
     surface (something came between: an obstacle moved in) is unknown again,
