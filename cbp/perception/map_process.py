@@ -45,7 +45,7 @@ import queue
 import threading
 import time
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection, wait
 from multiprocessing.process import BaseProcess
 from multiprocessing.shared_memory import SharedMemory
@@ -55,7 +55,7 @@ import numpy as np
 
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
-from cbp.perception.camera import DepthFrame
+from cbp.perception.camera import RENDER_NEAR_FRACTION, DepthCamera, DepthFrame
 from cbp.perception.mapper import Publication, SnapshotPublisher, cluster_motion
 from cbp.perception.motion import ApproachEstimator, MovingCluster, swept_snapshot
 from cbp.perception.occupancy import OccupancyGrid
@@ -446,7 +446,8 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
         )
         clusters = cluster_motion(grid) if setup.motion_window > 0 else None
         state = RobotState(geometry.robot)
-        # Compile (or load) the snapshot's and the estimate's kernels now.
+        # Compile (or load) the kernels now, not at the first frames.
+        _warm_up(grid, state)
         warm = grid.environment()
         warm.prepare(geometry.shapes, world.margin(warm))
     except BaseException as exc:
@@ -535,6 +536,30 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
             # A view still alive keeps the mapping until the process ends.
             with contextlib.suppress(BufferError):
                 segment.close()
+
+
+def _warm_up(grid: OccupancyGrid, state: RobotState) -> None:
+    """Integrate a small frame into a throwaway copy of the grid (compiles)."""
+    fixed = [c for c in grid.spec.all_cameras if c.parent is None]
+    if not fixed:
+        return
+    spec = replace(fixed[0], width=8, height=8)
+    camera = DepthCamera(-1, spec)  # no client: nothing is rendered
+    frame = DepthFrame(
+        np.full((8, 8), 0.999),
+        camera.view.copy(),
+        camera.projection,
+        min(spec.near, RENDER_NEAR_FRACTION * spec.far),
+        spec.far,
+        "warm-up",
+        min_range=spec.near,
+    )
+    scratch = copy.copy(grid)
+    scratch.cells = grid.cells.copy()
+    scratch.misses = grid.misses.copy()
+    scratch._dirty = grid._dirty.copy()
+    scratch._moved = {}
+    scratch.integrate(frame, state, 0.0)
 
 
 def _take(

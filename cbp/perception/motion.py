@@ -135,10 +135,11 @@ class ClusterMotion:
     """Velocities of the mapped obstacles near the robot, cluster by cluster.
 
     The occupied cells within :data:`CLUSTER_REACH` of the robot's shapes are
-    grouped into clusters of touching cells (26-neighbourhood); each cluster
-    is matched to the one of the previous snapshot it overlaps most (grown by
-    a cell: a face that moved a cell along its normal no longer overlaps
-    itself), and its velocity is its centroid's displacement over the window.
+    grouped into clusters of touching cells (26-neighbourhood, on a grid of
+    twice the cell size); each cluster is matched to the one of the previous
+    snapshot it overlaps most (grown by a coarse cell: a face that moved
+    along its normal no longer overlaps itself), and its velocity is its
+    centroid's displacement over the window.
     A cluster moves when its centroid moved at least :data:`MIN_APPROACH_CELLS`
     cells over the window (a reading's flicker does not). Unlike
     :class:`ApproachEstimator`, a moving obstacle is measured on its own, not
@@ -160,8 +161,10 @@ class ClusterMotion:
         self.lower = np.asarray(grid_lower, dtype=float)
         self.cell = float(cell)
         self.window = float(window)
-        self._labels: np.ndarray | None = None  # last labels, in the last box
-        self._box = np.zeros((2, 3), dtype=np.intp)
+        # The last snapshot's labels on the coarse grid, and their origin.
+        self._labels: np.ndarray | None = None
+        self._origin = np.zeros(3, dtype=np.intp)
+        self._t = -np.inf  # the time of the last update
         self._tracks: dict[int, _Track] = {}  # by the last snapshot's label
         self.moving: list[MovingCluster] = []
         """The clusters of the last update that move."""
@@ -172,40 +175,62 @@ class ClusterMotion:
         """Take the grid's cell states (``OccupancyGrid.cells``) at ``t`` [s].
 
         ``shapes``: the robot's shapes at ``t``, which bound the region
-        looked at. Returns the clusters that move.
+        looked at. Returns the clusters that move (at a time already taken,
+        from another camera's frame: the clusters found then).
+
+        Cells are grouped on a grid of twice the cell size (cells two apart
+        touch; a tenth of the cost of grouping the cells themselves).
         """
+        if t == self._t:  # another camera's frame of the same time
+            return self.moving
+        self._t = t
         lo, hi = self._region(shapes, cells.shape)
         sub = cells[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]] == OCCUPIED
-        labels, count = ndimage.label(sub, structure=np.ones((3, 3, 3), bool))
-        labels = labels.astype(np.int32)
+        fine = np.argwhere(sub) + lo  # the grid's indices
+        coarse = fine // 2
+        origin = lo // 2
+        size = (hi + 1) // 2 - origin
+        grouped = np.zeros(tuple(int(n) for n in size), dtype=bool)
+        local = coarse - origin
+        grouped[local[:, 0], local[:, 1], local[:, 2]] = True
+        labels, count = ndimage.label(grouped, structure=np.ones((3, 3, 3), bool))
+        label_of = labels[local[:, 0], local[:, 1], local[:, 2]]
+        matched = self._match(labels, origin, count)
+        self._labels, self._origin = labels, origin
         tracks: dict[int, _Track] = {}
         moving: list[MovingCluster] = []
         if count:
-            objects = ndimage.find_objects(labels)
-            for label, where in enumerate(objects, start=1):
-                if where is None:
+            sizes = np.bincount(label_of, minlength=count + 1)
+            sums = np.stack(
+                [
+                    np.bincount(label_of, weights=fine[:, d], minlength=count + 1)
+                    for d in range(3)
+                ],
+                axis=1,
+            )
+            order = np.argsort(label_of, kind="stable")
+            bounds = np.concatenate([[0], np.cumsum(sizes)])
+            for label in range(1, count + 1):
+                if sizes[label] < MIN_CLUSTER_CELLS:
                     continue
-                local = np.argwhere(labels[where] == label) + [s.start for s in where]
-                cells = local + lo
-                if len(cells) < MIN_CLUSTER_CELLS:
-                    continue
-                centroid = self.lower + (cells.mean(axis=0) + 0.5) * self.cell
-                track = self._match(cells)
+                centroid = self.lower + (sums[label] / sizes[label] + 0.5) * self.cell
+                track = self._tracks.get(matched.get(label, 0))
                 history: deque[tuple[float, FloatArray]] = (
                     track.history if track is not None else deque()
                 )
                 history.append((t, centroid))
                 while history and history[0][0] < t - self.window - 1e-9:
                     history.popleft()
-                tracks[label] = _Track(history, len(cells))
+                tracks[label] = _Track(history, int(sizes[label]))
                 t0, c0 = history[0]
                 moved = centroid - c0
                 if (
                     t - t0 > 0
                     and np.linalg.norm(moved) >= MIN_APPROACH_CELLS * self.cell
                 ):
-                    moving.append(MovingCluster(cells, moved / (t - t0)))
-        self._labels, self._box, self._tracks = labels, np.array([lo, hi]), tracks
+                    members = fine[order[bounds[label] : bounds[label + 1]]]
+                    moving.append(MovingCluster(members, moved / (t - t0)))
+        self._tracks = tracks
         self.moving = moving
         return moving
 
@@ -220,26 +245,37 @@ class ClusterMotion:
         hi = np.ceil((upper - self.lower) / self.cell).astype(np.intp)
         return np.clip(lo, 0, shape), np.clip(hi, 0, shape)
 
-    def _match(self, cells: np.ndarray) -> _Track | None:
-        """The last snapshot's track this cluster overlaps most (grown a cell)."""
-        labels = self._labels
-        if labels is None or not self._tracks:
-            return None
-        lo, hi = self._box
-        found: dict[int, int] = {}
+    def _match(
+        self, labels: np.ndarray, origin: np.ndarray, count: int
+    ) -> dict[int, int]:
+        """Each new cluster's label to the last snapshot's it overlaps most.
+
+        On the coarse grid, each cell grown by one (a face that moved along
+        its normal no longer overlaps itself).
+        """
+        old, old_origin = self._labels, self._origin
+        if old is None or not count:
+            return {}
+        where = np.argwhere(labels > 0)
+        new_label = labels[where[:, 0], where[:, 1], where[:, 2]].astype(np.int64)
+        at = where + origin - old_origin
+        keys = []
         for offset in _NEIGHBOURS:
-            at = cells + offset - lo
-            inside = np.all((at >= 0) & (at < hi - lo), axis=1)
-            hit = labels[at[inside, 0], at[inside, 1], at[inside, 2]]
-            seen, counts = np.unique(hit[hit > 0], return_counts=True)
-            for label, n in zip(seen, counts, strict=True):
-                found[int(label)] = found.get(int(label), 0) + int(n)
-        best = max(
-            (label for label in found if label in self._tracks),
-            key=found.__getitem__,
-            default=None,
-        )
-        return None if best is None else self._tracks[best]
+            p = at + offset
+            inside = np.all((p >= 0) & (p < np.array(old.shape)), axis=1)
+            hit = old[p[inside, 0], p[inside, 1], p[inside, 2]].astype(np.int64)
+            keep = hit > 0
+            keys.append(new_label[inside][keep] * (int(old.max()) + 1) + hit[keep])
+        if not keys:
+            return {}
+        pairs, counts = np.unique(np.concatenate(keys), return_counts=True)
+        base = int(old.max()) + 1
+        best: dict[int, tuple[int, int]] = {}
+        for key, n in zip(pairs.tolist(), counts.tolist(), strict=True):
+            new, was = divmod(key, base)
+            if n > best.get(new, (0, 0))[1]:
+                best[new] = (was, n)
+        return {new: was for new, (was, _) in best.items()}
 
 
 def swept_cells(
