@@ -69,6 +69,25 @@ MODES: dict[str, dict[str, str]] = {
 }
 
 
+#: How to read the table (the structure of a wall-clock run, not its figures).
+READING = """How to read it. A wall-clock run is not a real-time one: each command
+period the planner works for its wall-clock budget (0.8 of the period) while
+the simulation waits, then the simulation advances a period, rendering each
+camera frame that falls due in the control process as it goes (the five
+cameras' frames of a time one after the other). A frame taken during the
+advance to t can be used by the planning that starts at t at the earliest, so
+capture to use in simulated time is at least the rest of that period (virtual
+time: 0-33 ms); it grows by a period each time the map has not published the
+frame's snapshot before the planner's queries of the next period. The map
+works beside the rendering and the planning: in a thread it shares the
+interpreter lock with them, in its own process it needs a free core, which a
+2-core machine shared with other work does not have. The planner's QP steps per
+period show how much of the cores the control loop itself got: virtual time
+charges 145 us a step (about 180 a period); fewer steps plan less far per
+period, whatever the map does.
+"""
+
+
 class Probe:
     """Wraps the library's functions for one run and keeps what they saw."""
 
@@ -282,7 +301,7 @@ def main() -> None:
             "runs of the table were measured). "
             "Capture to use: from the frame's submission (right after its "
             "capture) to the control loop's first contact query against a "
-            "snapshot holding it.\n\n" + text
+            "snapshot holding it.\n\n" + text + "\n" + READING
         )
         put_section(args.append, section)
 
