@@ -262,53 +262,68 @@ class ProcessMapUpdater(SnapshotPublisher):
     # ------------------------------------------------------------------ snapshots out
 
     def _receive(self) -> None:
-        """Adopt each snapshot the child announces, until it ends."""
+        """Adopt the newest snapshot the child announces, until it ends.
+
+        Snapshots that wait behind a newer one are handed back unread (the
+        newer holds their frames too): a control process slower than the
+        map adopts the newest map, never a queue of old ones.
+        """
         conn, process = self._conn, self._process
         assert process is not None
         assert conn is not None
-        layout = self._layout
         while True:
             try:
                 ready = wait([conn, process.sentinel])
                 if conn not in ready:
                     raise EOFError
-                message = conn.recv()
+                messages = [conn.recv()]
+                while conn.poll():
+                    messages.append(conn.recv())
             except (EOFError, OSError, ValueError):
                 if not self._closed:
                     process.join(1.0)
                     self._fail(f"the map process ended (exit code {process.exitcode})")
                 return
-            kind = message[0]
-            if kind == "snapshot":
-                _, slot, n, stamp, speeds, moving, taken, skipped, timings = message
-                segment = self._segments[1 + slot]
-                buf = segment.buf
-                blocked = np.ndarray(
-                    self.grid.shape, np.bool_, buffer=buf, offset=layout.blocked
-                ).copy()
-                start = np.ndarray(
-                    layout.bricks + 1, np.int64, buffer=buf, offset=layout.start
-                ).copy()
-                centres = np.ndarray(
-                    (n, 3), np.float64, buffer=buf, offset=layout.centres
-                ).copy()
-                del buf
-                # A child that has gone is found at the next wait.
+            snapshots = [m for m in messages if m[0] == "snapshot"]
+            for message in messages:
+                if message[0] == "error":
+                    self.error = RuntimeError(message[1])
+            for message in snapshots[:-1]:  # older than the newest: unread
                 with contextlib.suppress(OSError, ValueError):
-                    conn.send(("free", slot))
-                try:
-                    self._adopt(centres, start, blocked, stamp, speeds, moving, timings)
-                except Exception as exc:  # reported, the previous map kept
-                    self.error = RuntimeError(f"failed, previous map kept: {exc!r}")
-                with self._lock:
-                    self._done += taken
-                    self.skipped += skipped
-                    self._lock.notify_all()
-            elif kind == "error":
-                self.error = RuntimeError(message[1])
-                with self._lock:
-                    self._done += message[2]
-                    self._lock.notify_all()
+                    conn.send(("free", message[1]))
+            if snapshots:
+                self._take(conn, snapshots[-1])
+            with self._lock:
+                for message in messages:
+                    if message[0] == "snapshot":
+                        self._done += message[6]
+                        self.skipped += message[7]
+                    elif message[0] == "error":
+                        self._done += message[2]
+                self._lock.notify_all()
+
+    def _take(self, conn: Connection, message: tuple[Any, ...]) -> None:
+        """Copy a snapshot out of its slot, hand the slot back, adopt it."""
+        _, slot, n, stamp, speeds, moving, _, _, timings = message
+        layout = self._layout
+        buf = self._segments[1 + slot].buf
+        blocked = np.ndarray(
+            self.grid.shape, np.bool_, buffer=buf, offset=layout.blocked
+        ).copy()
+        start = np.ndarray(
+            layout.bricks + 1, np.int64, buffer=buf, offset=layout.start
+        ).copy()
+        centres = np.ndarray(
+            (n, 3), np.float64, buffer=buf, offset=layout.centres
+        ).copy()
+        del buf
+        # A child that has gone is found at the next wait.
+        with contextlib.suppress(OSError, ValueError):
+            conn.send(("free", slot))
+        try:
+            self._adopt(centres, start, blocked, stamp, speeds, moving, timings)
+        except Exception as exc:  # reported, the previous map kept
+            self.error = RuntimeError(f"failed, previous map kept: {exc!r}")
 
     def _adopt(
         self,

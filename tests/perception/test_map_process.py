@@ -253,3 +253,48 @@ def test_the_setting_chooses_the_updater() -> None:
         finally:
             run.finish()
     assert _segments() == []
+
+
+@pytest.mark.slow
+def test_a_wall_clock_run_with_the_map_process_publishes_and_cleans_up() -> None:
+    """The pushed box, five cameras, wall clock: snapshots all along, no leaks.
+
+    (The contact force of a wall-clock run depends on the machine's load:
+    ``benchmarks/map_latency.py`` measures it; here the plumbing.)
+    """
+    from cbp.data import data_dir
+    from cbp.executors.cat import run_cat
+    from cbp.scenario import load_scenario
+
+    path = data_dir("scenarios") / "cat_pushed_obstacle.yaml"
+    overrides = {
+        "perception.source": "depth_camera",
+        "perception.map_process": "true",
+        "duration": "2.0",
+    }
+    trace = run_cat(load_scenario(path, overrides=overrides))
+    messages = [m for _, m in trace.events]
+    assert not any("map failed" in m or "map update" in m for m in messages)
+    assert trace.aborted is None
+    assert _segments() == []
+
+
+@pytest.mark.slow
+def test_moving_clusters_keep_the_pushed_box_off_in_virtual_time() -> None:
+    """cluster_motion on: the box pushed at 10 cm/s, seen by the cameras, 0 N."""
+    from cbp.data import data_dir
+    from cbp.executors.cat import run_cat
+    from cbp.metrics import run_metrics
+    from cbp.scenario import load_scenario
+
+    path = data_dir("scenarios") / "cat_pushed_obstacle.yaml"
+    overrides = {
+        "perception.source": "depth_camera",
+        "perception.cluster_motion": "true",
+        "method.cat.timing.clock": "virtual",
+        "world.objects.box.motion": "{velocity: [0.0, -0.1, 0.0], start: 0.5,"
+        " stop: 2.5}",
+        "duration": "4.0",
+    }
+    m = run_metrics(run_cat(load_scenario(path, overrides=overrides)))
+    assert m["peak_contact_force_n"] == 0.0, m
