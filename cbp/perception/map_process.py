@@ -8,9 +8,14 @@ interface and integrates the frames in a child process (started with
 ``forkserver`` where the platform has it, else ``spawn``: never ``fork``, which
 would copy the simulator's state and threads), so the two run on two cores.
 
-* Frames go to the child through a queue (pickled by the queue's own thread:
-  :meth:`ProcessMapUpdater.submit` never waits). The child takes what waits,
-  the newest frame per camera (older ones are skipped, as the thread does).
+* Frames go to the child through shared memory, one slot per camera:
+  :meth:`ProcessMapUpdater.submit` copies the depth image, the camera's
+  matrices, the robot's configuration and the capture time into the camera's
+  slot (a sequence number around the copy tells the child a frame that was
+  being overwritten) and wakes the child; it never waits. A frame not yet
+  taken is overwritten by its camera's next one: the map skips frames rather
+  than lag, and no backlog builds up anywhere (a queue's backlog would wait
+  in the control process for the interpreter lock).
 * The grid's cells live in shared memory (:mod:`multiprocessing.shared_memory`):
   the child writes them, the control process reads them
   (:meth:`~cbp.perception.occupancy.OccupancyGrid.state_at` for unseen space,
@@ -41,7 +46,6 @@ import contextlib
 import copy
 import multiprocessing as mp
 import os
-import queue
 import threading
 import time
 import uuid
@@ -106,6 +110,17 @@ def _aligned(n: int) -> int:
     return (n + 63) // 64 * 64
 
 
+#: A camera slot's header (float64 each): sequence number, view (16),
+#: projection (16), near, far, minimum range, capture time; then the
+#: configuration (nq) and the depth image.
+_HEADER = 37
+
+
+def _frame_slot(segment: SharedMemory, nq: int, height: int, width: int) -> np.ndarray:
+    """A camera slot's words (float64)."""
+    return np.ndarray(_HEADER + nq + height * width, np.float64, buffer=segment.buf)
+
+
 @dataclass(frozen=True)
 class _Setup:
     """What the child needs: the grid and where to write."""
@@ -116,6 +131,8 @@ class _Setup:
     cells_name: str
     slot_names: tuple[str, ...]
     layout: _Layout
+    cameras: tuple[tuple[str, str, int, int], ...]  # name, segment, height, width
+    nq: int
 
 
 class ProcessMapUpdater(SnapshotPublisher):
@@ -164,6 +181,8 @@ class ProcessMapUpdater(SnapshotPublisher):
         self._mapped: OccupancyEnvironment | None = None
         self._process: BaseProcess | None = None
         self._receiver: threading.Thread | None = None
+        self._slots: dict[str, np.ndarray] = {}
+        self._wake: Any = None
         try:
             self._start(grid, world, estimator)
         except BaseException:
@@ -188,6 +207,16 @@ class ProcessMapUpdater(SnapshotPublisher):
                 SharedMemory(f"{token}_slot{i}", create=True, size=layout.size)
             )
         self._layout = layout
+        nq = int(world.geometry.robot.model.nq)
+        cameras = []
+        for i, camera in enumerate(grid.spec.all_cameras):
+            words = _HEADER + nq + camera.height * camera.width
+            segment = SharedMemory(f"{token}_frame{i}", create=True, size=8 * words)
+            self._segments.append(segment)
+            slot = _frame_slot(segment, nq, camera.height, camera.width)
+            slot[0] = 0.0
+            self._slots[camera.name] = slot
+            cameras.append((camera.name, segment.name, camera.height, camera.width))
         # The child's copy of the grid: this one's state, without the last
         # snapshot (it holds compiled queries; the child builds its own).
         child_grid = copy.copy(grid)
@@ -197,17 +226,19 @@ class ProcessMapUpdater(SnapshotPublisher):
             settings=world.settings,
             motion_window=estimator.window if estimator is not None else 0.0,
             cells_name=cells.name,
-            slot_names=tuple(s.name for s in self._segments[1:]),
+            slot_names=tuple(s.name for s in self._segments[1 : 1 + SLOTS]),
             layout=layout,
+            cameras=tuple(cameras),
+            nq=nq,
         )
         context = _context()
-        frames: Any = context.Queue()
-        self._frames = frames
+        wake = context.Semaphore(0)
+        self._wake = wake
         ours, theirs = context.Pipe(duplex=True)
         self._conn: Connection | None = ours
         process = context.Process(
             target=_child,
-            args=(setup, frames, theirs),
+            args=(setup, wake, theirs),
             name="cbp-map",
             daemon=True,
         )
@@ -244,9 +275,24 @@ class ProcessMapUpdater(SnapshotPublisher):
         self.submitted_t = max(self.submitted_t, t)
         if self.failed is not None or self._closed:
             return
+        slot = self._slots.get(frame.camera)
+        h, w = frame.depth.shape
+        nq = len(slot) - _HEADER - h * w if slot is not None else -1
+        if slot is None or nq != len(q):
+            raise ValueError(
+                f"frame of camera '{frame.camera}' ({w}x{h}) does not fit the map "
+                "process's slots (cameras of perception.cameras, their sizes)"
+            )
+        slot[0] += 1.0  # odd: being written
+        slot[1:17] = frame.view.ravel()
+        slot[17:33] = frame.projection.ravel()
+        slot[33:37] = (frame.near, frame.far, frame.min_range, t)
+        slot[_HEADER : _HEADER + nq] = q
+        slot[_HEADER + nq :] = frame.depth.ravel()
+        slot[0] += 1.0  # even: complete
         with self._lock:
             self._sent += 1
-        self._frames.put((frame, np.array(q, dtype=float), float(t)))
+        self._wake.release()
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
         """Block until the child has taken every frame sent (for tests)."""
@@ -391,20 +437,19 @@ class ProcessMapUpdater(SnapshotPublisher):
             return
         self._closed = True
         process = self._process
-        frames = getattr(self, "_frames", None)
-        if frames is not None:
+        conn = getattr(self, "_conn", None)
+        if conn is not None:
             with contextlib.suppress(OSError, ValueError):
-                frames.put(None)
+                conn.send(("stop", None))
+        wake = getattr(self, "_wake", None)
+        if wake is not None:
+            wake.release()
         if process is not None:
             process.join(STOP_TIMEOUT)
             if process.is_alive():
                 process.kill()
                 process.join(STOP_TIMEOUT)
-        if frames is not None:
-            frames.cancel_join_thread()  # never wait on a pipe nobody reads
-            frames.close()
-            self._frames = None  # its semaphores go with it
-        conn = getattr(self, "_conn", None)
+        self._wake = None  # its semaphore goes with it
         if conn is not None:
             conn.close()
             self._conn = None
@@ -412,7 +457,9 @@ class ProcessMapUpdater(SnapshotPublisher):
             self._receiver.join(STOP_TIMEOUT)
         if process is not None and not process.is_alive():
             process.close()
+            self._process = None  # its arguments (the semaphore) go with it
         # The grid keeps a copy of the last cells; then the segments go.
+        self._slots = {}
         if self._segments:
             self.grid.cells = np.array(self.grid.cells)
         for segment in self._segments:
@@ -441,15 +488,18 @@ def _context() -> Any:
 # ---------------------------------------------------------------------- the child
 
 
-def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
-    """The map process: integrate what the queue brings, publish to free slots."""
+def _child(setup: _Setup, wake: Any, conn: Connection) -> None:
+    """The map process: integrate the cameras' newest frames, publish to free slots."""
     segments: list[SharedMemory] = []
     grid = setup.grid
+    inbox: _Inbox | None = None
     try:
         cells = _attach(setup.cells_name)
         segments.append(cells)
         slots = [_attach(name) for name in setup.slot_names]
         segments.extend(slots)
+        inbox = _Inbox(setup)
+        segments.extend(inbox.segments)
         grid.cells = np.ndarray(grid.shape, np.uint8, buffer=cells.buf)
         geometry = grid.geometry
         assert geometry is not None
@@ -474,10 +524,18 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
     parent = mp.parent_process()
     try:
         while True:
-            batch = _take(frames, parent)
-            if batch is None:
+            woken = wake.acquire(timeout=0.5)
+            while wake.acquire(False):  # one pass takes every frame waiting
+                pass
+            if not _messages(conn, free):
+                return  # told to stop
+            if parent is not None and not parent.is_alive():
                 return
-            pending, skipped = batch
+            if not woken:
+                continue
+            pending, skipped = inbox.take()
+            if not pending:
+                continue
             taken = len(pending) + skipped
             received = time.perf_counter()
             try:
@@ -524,10 +582,8 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
                     if parent is not None and not parent.is_alive():
                         return
                     continue
-                message = conn.recv()
-                free.append(message[1])
-            while conn.poll():
-                free.append(conn.recv()[1])
+                if not _messages(conn, free):
+                    return
             slot = free.pop(0)
             n = _write(slots[slot], setup.layout, new)
             conn.send(
@@ -547,6 +603,8 @@ def _child(setup: _Setup, frames: Any, conn: Connection) -> None:
         return
     finally:
         grid.cells = np.zeros(0, np.uint8)
+        if inbox is not None:
+            inbox.views = []
         for segment in segments:
             # A view still alive keeps the mapping until the process ends.
             with contextlib.suppress(BufferError):
@@ -577,34 +635,65 @@ def _warm_up(grid: OccupancyGrid, state: RobotState) -> None:
     scratch.integrate(frame, state, 0.0)
 
 
-def _take(
-    frames: Any, parent: BaseProcess | None
-) -> tuple[list[tuple[DepthFrame, FloatArray, float]], int] | None:
-    """The newest waiting frame per camera and how many were skipped (None: stop).
+def _messages(conn: Connection, free: list[int]) -> bool:
+    """Read what the control process sent: slots handed back; False: stop."""
+    while conn.poll():
+        kind, value = conn.recv()
+        if kind == "stop":
+            return False
+        free.append(value)
+    return True
 
-    Waits for the first; a parent that has gone ends the child.
-    """
-    while True:
-        try:
-            item = frames.get(timeout=0.5)
-            break
-        except queue.Empty:
-            if parent is not None and not parent.is_alive():
-                return None
-    newest: dict[str, tuple[DepthFrame, FloatArray, float]] = {}
-    skipped = 0
-    while True:
-        if item is None:
-            return None
-        frame = item[0]
-        if frame.camera in newest:
-            skipped += 1
-        newest[frame.camera] = item
-        try:
-            item = frames.get_nowait()
-        except queue.Empty:
-            break
-    return list(newest.values()), skipped
+
+class _Inbox:
+    """The cameras' frame slots, read on the child's side."""
+
+    def __init__(self, setup: _Setup) -> None:
+        """Open each camera's slot; nothing taken yet."""
+        self.nq = setup.nq
+        self.segments = [_attach(name) for _, name, _, _ in setup.cameras]
+        self.cameras = [(name, h, w) for name, _, h, w in setup.cameras]
+        self.views = [
+            _frame_slot(segment, setup.nq, h, w)
+            for segment, (_, h, w) in zip(self.segments, self.cameras, strict=True)
+        ]
+        self.seen = [0.0] * len(self.views)
+
+    def take(self) -> tuple[list[tuple[DepthFrame, FloatArray, float]], int]:
+        """Each camera's newest complete frame not taken yet, and frames skipped.
+
+        A slot being written (odd sequence number), or rewritten while it was
+        copied, is read again.
+        """
+        taken: list[tuple[DepthFrame, FloatArray, float]] = []
+        skipped = 0
+        nq = self.nq
+        for i, (name, h, w) in enumerate(self.cameras):
+            view = self.views[i]
+            for _ in range(100):
+                seq = float(view[0])
+                if seq == self.seen[i]:
+                    break
+                if seq % 2.0:
+                    time.sleep(1e-4)  # being written: a copy takes well under 1 ms
+                    continue
+                words = view.copy()
+                if float(view[0]) != seq:
+                    continue
+                skipped += int((seq - self.seen[i]) / 2.0) - 1
+                self.seen[i] = seq
+                frame = DepthFrame(
+                    words[_HEADER + nq :].reshape(h, w),
+                    words[1:17].reshape(4, 4),
+                    words[17:33].reshape(4, 4),
+                    float(words[33]),
+                    float(words[34]),
+                    name,
+                    min_range=float(words[35]),
+                )
+                taken.append((frame, words[_HEADER : _HEADER + nq], float(words[36])))
+                break
+        return taken, skipped
 
 
 def _write(segment: SharedMemory, layout: _Layout, env: OccupancyEnvironment) -> int:

@@ -10,7 +10,7 @@ import pytest
 
 from cbp.collision import CollisionWorld, RobotGeometry
 from cbp.perception.camera import DepthCamera
-from cbp.perception.map_process import SEGMENT_PREFIX, ProcessMapUpdater
+from cbp.perception.map_process import SEGMENT_PREFIX, SLOTS, ProcessMapUpdater
 from cbp.perception.mapper import MapUpdater, SnapshotPublisher
 from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
@@ -147,7 +147,7 @@ def test_a_process_that_dies_holds_the_robot_and_leaks_nothing(scene, robots) ->
     grid, _world, process = _updater(robots, ProcessMapUpdater)
     child = process._process
     assert child is not None
-    assert len(_segments()) == 4
+    assert len(_segments()) == 1 + SLOTS + len(SPEC.cameras)
     for frame in _frames(scene):
         process.submit(frame, q, 0.1)
     assert process.wait_idle()
@@ -173,7 +173,7 @@ def test_close_frees_every_segment_and_the_process(robots) -> None:
     child = process._process
     assert child is not None
     assert child.is_alive()
-    assert len(_segments()) == 4
+    assert len(_segments()) == 1 + SLOTS + len(SPEC.cameras)
     process.close()
     assert _segments() == []
     assert process.grid.cells.size > 0  # a copy of the last cells is kept
