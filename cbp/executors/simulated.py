@@ -158,8 +158,8 @@ class SimulatedRun:
                 if perception.motion_window > 0 and spec.collision.predict_motion
                 else None
             )
-            # Issue 39 (map off the control core): the map's own process in
-            # wall-clock runs unless perception.map_process is off.
+            # Issue 39 (map off the control core): the map in its own process
+            # in wall-clock runs when perception.map_process is on.
             updater = (
                 ProcessMapUpdater
                 if perception.map_process and clock != "virtual"
