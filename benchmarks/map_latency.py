@@ -226,6 +226,7 @@ def one_run(case: str, mode: str) -> dict[str, Any]:
         "peak_contact_force_n": float(metrics["peak_contact_force_n"]),
         "events": len(trace.events),
         "aborted": trace.aborted,
+        "load": os.getloadavg()[0],
     }
     return out
 
@@ -278,6 +279,7 @@ def main() -> None:
     parser.add_argument(
         "--from-json", type=Path, help="tabulate a --json file instead of measuring"
     )
+    parser.add_argument("--note", help="the load while measured (with --from-json)")
     args = parser.parse_args()
     results = json.loads(args.from_json.read_text()) if args.from_json else []
     for _ in range(0 if args.from_json else args.runs):
@@ -292,13 +294,17 @@ def main() -> None:
         args.json.write_text(json.dumps(results, indent=1))
     if args.append:
         load = os.getloadavg()
+        loads = [r["load"] for r in results if "load" in r]
         section = (
             "## Map latency beside the control loop (benchmarks/map_latency.py)\n\n"
             f"CAT on `cat_pushed_obstacle` variants with the five cameras; "
             f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-            f"load average {load[0]:.1f} when tabulated (the machine is shared "
-            "with other agents; the load varied from about 2.5 to 6 while the "
-            "runs of the table were measured). "
+            + (
+                f"load average {min(loads):.1f}-{max(loads):.1f} at the end of the runs"
+                if loads
+                else args.note or f"load average {load[0]:.1f} when tabulated"
+            )
+            + " (the machine is shared with other work). "
             "Capture to use: from the frame's submission (right after its "
             "capture) to the control loop's first contact query against a "
             "snapshot holding it.\n\n" + text + "\n" + READING

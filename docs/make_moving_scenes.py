@@ -33,6 +33,8 @@ MODES: dict[str, dict[str, str]] = {
     "process": CAMERAS | {"perception.map_process": "true"},
     "thread": CAMERAS | {"perception.map_process": "false"},
     "virtual": CAMERAS | {"method.cat.timing.clock": "virtual"},
+    "clusters": CAMERAS
+    | {"perception.map_process": "true", "perception.cluster_motion": "true"},
 }
 #: Events worth naming in the table (substrings).
 NAMED = ("map failed", "behind the cameras", "aborted", "held by space")
@@ -71,7 +73,8 @@ def markdown(results: list[dict[str, Any]], modes: list[str], runs: int) -> str:
         "objects, wall clock), `process` (cameras, wall clock, the map in its "
         "own process), `thread` (cameras, wall clock, the map in a thread beside "
         "the control loop), `virtual` (cameras, virtual time: the map takes "
-        "each frame in the loop).",
+        "each frame in the loop), `clusters` (as `process`, with "
+        "`perception.cluster_motion`: moving clusters swept over the look-ahead).",
         "",
         f"Measured on a 2-core machine shared with other work: load average "
         f"{min(loads):.1f}-{max(loads):.1f} during the runs ({runs} run(s) per "
@@ -146,7 +149,28 @@ def main() -> None:
     parser.add_argument("--mode", action="append", choices=list(MODES))
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "moving")
     parser.add_argument("--doc", type=Path, default=ROOT / "docs" / "moving_scenes.md")
+    parser.add_argument(
+        "--from-log",
+        type=Path,
+        action="append",
+        help="tabulate the runs of these runs.jsonl files instead of running",
+    )
     args = parser.parse_args()
+    if args.from_log:
+        logged = [
+            json.loads(line)
+            for path in args.from_log
+            for line in path.read_text().splitlines()
+            if line.strip()
+        ]
+        found = list(dict.fromkeys(r["mode"] for r in logged))
+        runs = max(
+            sum(1 for r in logged if (r["scene"], r["mode"]) == key)
+            for key in {(r["scene"], r["mode"]) for r in logged}
+        )
+        args.doc.write_text(markdown(logged, args.mode or found, runs))
+        print(args.doc.read_text())
+        return
     modes = args.mode or list(MODES)
     paths = write_scenes(args.out / "scenes", args.count, args.seed, moving=True)
     results: list[dict[str, Any]] = []

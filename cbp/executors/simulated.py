@@ -159,7 +159,7 @@ class SimulatedRun:
                 else None
             )
             # Issue 39 (map off the control core): the map in its own process
-            # in wall-clock runs when perception.map_process is on.
+            # in wall-clock runs unless perception.map_process is off.
             updater = (
                 ProcessMapUpdater
                 if perception.map_process and clock != "virtual"
