@@ -183,6 +183,8 @@ class ProcessMapUpdater(SnapshotPublisher):
         self._receiver: threading.Thread | None = None
         self._slots: dict[str, np.ndarray] = {}
         self._wake: Any = None
+        self._conn: Connection | None = None
+        self._send_lock = threading.Lock()
         try:
             self._start(grid, world, estimator)
         except BaseException:
@@ -235,7 +237,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         wake = context.Semaphore(0)
         self._wake = wake
         ours, theirs = context.Pipe(duplex=True)
-        self._conn: Connection | None = ours
+        self._conn = ours
         process = context.Process(
             target=_child,
             args=(setup, wake, theirs),
@@ -335,10 +337,9 @@ class ProcessMapUpdater(SnapshotPublisher):
                 if message[0] == "error":
                     self.error = RuntimeError(message[1])
             for message in snapshots[:-1]:  # older than the newest: unread
-                with contextlib.suppress(OSError, ValueError):
-                    conn.send(("free", message[1]))
+                self._send(("free", message[1]))
             if snapshots:
-                self._take(conn, snapshots[-1])
+                self._take(snapshots[-1])
             with self._lock:
                 for message in messages:
                     if message[0] == "snapshot":
@@ -348,7 +349,18 @@ class ProcessMapUpdater(SnapshotPublisher):
                         self._done += message[2]
                 self._lock.notify_all()
 
-    def _take(self, conn: Connection, message: tuple[Any, ...]) -> None:
+    def _send(self, message: tuple[str, Any]) -> None:
+        """Send to the child (one thread at a time; a child gone is no error).
+
+        A child that has gone is found by the receiver's next wait.
+        """
+        conn = self._conn
+        if conn is None:
+            return
+        with self._send_lock, contextlib.suppress(OSError, ValueError):
+            conn.send(message)
+
+    def _take(self, message: tuple[Any, ...]) -> None:
         """Copy a snapshot out of its slot, hand the slot back, adopt it."""
         _, slot, n, stamp, speeds, moving, _, _, timings = message
         layout = self._layout
@@ -363,9 +375,7 @@ class ProcessMapUpdater(SnapshotPublisher):
             (n, 3), np.float64, buffer=buf, offset=layout.centres
         ).copy()
         del buf
-        # A child that has gone is found at the next wait.
-        with contextlib.suppress(OSError, ValueError):
-            conn.send(("free", slot))
+        self._send(("free", slot))
         try:
             self._adopt(centres, start, blocked, stamp, speeds, moving, timings)
         except Exception as exc:  # reported, the previous map kept
@@ -439,8 +449,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         process = self._process
         conn = getattr(self, "_conn", None)
         if conn is not None:
-            with contextlib.suppress(OSError, ValueError):
-                conn.send(("stop", None))
+            self._send(("stop", None))
         wake = getattr(self, "_wake", None)
         if wake is not None:
             wake.release()
