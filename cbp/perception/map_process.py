@@ -482,7 +482,8 @@ class ProcessMapUpdater(SnapshotPublisher):
     def __del__(self) -> None:
         """Never leave a process or a segment behind."""
         if not getattr(self, "_closed", True):
-            self.close()
+            with contextlib.suppress(Exception):  # at exit, modules may be gone
+                self.close()
 
 
 def _context() -> Any:
