@@ -37,7 +37,7 @@ MODES: dict[str, dict[str, str]] = {
     | {"perception.map_process": "true", "perception.cluster_motion": "true"},
 }
 #: Events worth naming in the table (substrings).
-NAMED = ("map failed", "behind the cameras", "aborted", "held by space")
+NAMED = ("map failed", "behind the cameras", "aborted")
 
 
 def run_one(path: Path, mode: str) -> dict[str, Any]:
@@ -60,7 +60,9 @@ def run_one(path: Path, mode: str) -> dict[str, Any]:
     }
 
 
-def markdown(results: list[dict[str, Any]], modes: list[str], runs: int) -> str:
+def markdown(
+    results: list[dict[str, Any]], modes: list[str], runs: int, note: str = ""
+) -> str:
     """The table and a summary per mode."""
     loads = [r["load"] for r in results]
     lines = [
@@ -137,6 +139,8 @@ def markdown(results: list[dict[str, Any]], modes: list[str], runs: int) -> str:
             if rs and m != "declared":
                 zero = sum(r["peak_contact_force_n"] == 0.0 for r in rs)
                 lines.append(f"| {m} | {len(rs)} | {zero} |")
+    if note:
+        lines += ["", note]
     return "\n".join(lines) + "\n"
 
 
@@ -149,6 +153,7 @@ def main() -> None:
     parser.add_argument("--mode", action="append", choices=list(MODES))
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "moving")
     parser.add_argument("--doc", type=Path, default=ROOT / "docs" / "moving_scenes.md")
+    parser.add_argument("--note", default="", help="a paragraph to end the page with")
     parser.add_argument(
         "--from-log",
         type=Path,
@@ -168,7 +173,7 @@ def main() -> None:
             sum(1 for r in logged if (r["scene"], r["mode"]) == key)
             for key in {(r["scene"], r["mode"]) for r in logged}
         )
-        args.doc.write_text(markdown(logged, args.mode or found, runs))
+        args.doc.write_text(markdown(logged, args.mode or found, runs, args.note))
         print(args.doc.read_text())
         return
     modes = args.mode or list(MODES)
@@ -183,8 +188,8 @@ def main() -> None:
                 with log.open("a") as f:
                     f.write(json.dumps(r) + "\n")
                 print(json.dumps(r), flush=True)
-                args.doc.write_text(markdown(results, modes, args.runs))
-    print(markdown(results, modes, args.runs))
+                args.doc.write_text(markdown(results, modes, args.runs, args.note))
+    print(markdown(results, modes, args.runs, args.note))
 
 
 if __name__ == "__main__":
