@@ -41,6 +41,7 @@ from cbp.collision.world import CollisionWorld
 from cbp.executors.cat import run_cat
 from cbp.executors.simulated import SimulatedRun
 from cbp.metrics import run_metrics
+from cbp.perception.camera import DepthCamera
 from cbp.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,15 +100,15 @@ class Probe:
         self.first: dict[float, float] = {}  # capture t -> wall at first submit
         self.published: dict[int, tuple[float, float, float]] = {}
         self.used: dict[int, tuple[float, float, float]] = {}
-        self._kept: list[object] = []
-        self._main = threading.main_thread()
+        self.kept: list[object] = []
+        self.main = threading.main_thread()
         self._saved: list[tuple[Any, str, Any]] = []
 
     def __enter__(self) -> Probe:
         """Wrap."""
         probe = self
         init = SimulatedRun.__init__
-        capture = SimulatedRun._capture
+        capture = DepthCamera.capture
         set_environment = CollisionWorld.set_environment
         query = OccupancyEnvironment.query
 
@@ -126,17 +127,18 @@ class Probe:
 
                 mapper.submit = wrapped_submit  # type: ignore[method-assign]
 
-        def wrapped_capture(run: SimulatedRun, camera: Any) -> Any:
+        def wrapped_capture(camera: DepthCamera, *args: Any) -> Any:
             start = time.perf_counter()
-            frame = capture(run, camera)
-            probe.captures.append((run.sim.t, time.perf_counter() - start))
+            frame = capture(camera, *args)
+            if probe.run is not None:
+                probe.captures.append((probe.run.sim.t, time.perf_counter() - start))
             return frame
 
         def wrapped_set(world: CollisionWorld, environment: Any) -> None:
             set_environment(world, environment)
             stamp = getattr(environment, "stamp", None)
             if stamp is not None and probe.run is not None:
-                probe._kept.append(environment)
+                probe.kept.append(environment)
                 probe.published[id(environment)] = (
                     stamp,
                     time.perf_counter(),
@@ -145,7 +147,7 @@ class Probe:
 
         def wrapped_query(env: OccupancyEnvironment, *args: Any) -> Any:
             if (
-                threading.current_thread() is probe._main
+                threading.current_thread() is probe.main
                 and id(env) in probe.published
                 and id(env) not in probe.used
                 and probe.run is not None
@@ -159,7 +161,7 @@ class Probe:
 
         for owner, name, new in [
             (SimulatedRun, "__init__", wrapped_init),
-            (SimulatedRun, "_capture", wrapped_capture),
+            (DepthCamera, "capture", wrapped_capture),
             (CollisionWorld, "set_environment", wrapped_set),
             (OccupancyEnvironment, "query", wrapped_query),
         ]:

@@ -43,7 +43,6 @@ an event) and holds the robot for good
 from __future__ import annotations
 
 import contextlib
-import copy
 import multiprocessing as mp
 import os
 import threading
@@ -219,12 +218,8 @@ class ProcessMapUpdater(SnapshotPublisher):
             slot[0] = 0.0
             self._slots[camera.name] = slot
             cameras.append((camera.name, segment.name, camera.height, camera.width))
-        # The child's copy of the grid: this one's state, without the last
-        # snapshot (it holds compiled queries; the child builds its own).
-        child_grid = copy.copy(grid)
-        child_grid._snapshot = None
         setup = _Setup(
-            grid=child_grid,
+            grid=grid,  # pickled for the child without its snapshot
             settings=world.settings,
             motion_window=estimator.window if estimator is not None else 0.0,
             cells_name=cells.name,
@@ -637,12 +632,7 @@ def _warm_up(grid: OccupancyGrid, state: RobotState) -> None:
         "warm-up",
         min_range=spec.near,
     )
-    scratch = copy.copy(grid)
-    scratch.cells = grid.cells.copy()
-    scratch.misses = grid.misses.copy()
-    scratch._dirty = grid._dirty.copy()
-    scratch._moved = {}
-    scratch.integrate(frame, state, 0.0)
+    grid.scratch().integrate(frame, state, 0.0)
 
 
 def _messages(conn: Connection, free: list[int]) -> bool:

@@ -175,6 +175,30 @@ class OccupancyGrid:
             else np.zeros(0)
         )
 
+    # ------------------------------------------------------------------ copies
+
+    def __getstate__(self) -> dict[str, object]:
+        """Copied or pickled without the last snapshot.
+
+        (It holds compiled queries and maybe a coal octree; the copy builds
+        its own at its first :meth:`environment`.) The map process takes its
+        grid this way.
+        """
+        state = dict(self.__dict__)
+        state["_snapshot"] = None
+        return state
+
+    def scratch(self) -> OccupancyGrid:
+        """A copy whose integration changes nothing of this grid (warm-ups)."""
+        state = self.__getstate__()
+        state["cells"] = self.cells.copy()
+        state["misses"] = self.misses.copy()
+        state["_dirty"] = self._dirty.copy()
+        state["_moved"] = {}
+        out = OccupancyGrid.__new__(OccupancyGrid)
+        out.__dict__.update(state)
+        return out
+
     # ------------------------------------------------------------------ reading
 
     def centres(self, state: int = OCCUPIED) -> FloatArray:
