@@ -126,14 +126,10 @@ class MapUpdater(SnapshotPublisher):
         synchronous: integrate in :meth:`submit` itself (for tests and
             deterministic replays) instead of a worker thread.
         estimator: measures how fast the map's obstacles approach the robot
-            (None: snapshots as mapped).
+            (None: snapshots as mapped; with it and
+            ``perception.cluster_motion``, moving clusters are swept too).
 
-    Attributes:
-        updates: snapshots published so far.
-        skipped: frames replaced before the worker took them.
-        last_update_s: wall time of the last integration + snapshot [s].
-        look_ahead: how far ahead approaching obstacles are measured [s] (the
-            executor sets it every command period, as for declared objects).
+    What it reports (updates, skips, stamps, failures): :class:`SnapshotPublisher`.
     """
 
     def __init__(
