@@ -99,7 +99,7 @@ def markdown(
             cells.append(
                 ", ".join(
                     f"{r['peak_contact_force_n']:.0f} ({r['events']}"
-                    + (f"; {'; '.join(r['named'])}" if r["named"] else "")
+                    + "".join(f"; {n}" for n in r["named"] if n in NAMED)
                     + ")"
                     for r in rs
                 )
@@ -150,7 +150,9 @@ def main() -> None:
     parser.add_argument("--count", type=int, default=30)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--runs", type=int, default=3)
-    parser.add_argument("--mode", action="append", choices=list(MODES))
+    parser.add_argument(
+        "--mode", action="append", help=f"one of {', '.join(MODES)} (repeatable)"
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "moving")
     parser.add_argument("--doc", type=Path, default=ROOT / "docs" / "moving_scenes.md")
     parser.add_argument("--note", default="", help="a paragraph to end the page with")
@@ -177,6 +179,9 @@ def main() -> None:
         print(args.doc.read_text())
         return
     modes = args.mode or list(MODES)
+    unknown = [m for m in modes if m not in MODES]
+    if unknown:
+        parser.error(f"unknown mode(s) {unknown}; choose from {list(MODES)}")
     paths = write_scenes(args.out / "scenes", args.count, args.seed, moving=True)
     results: list[dict[str, Any]] = []
     log = args.out / "runs.jsonl"
