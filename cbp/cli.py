@@ -109,6 +109,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     scenes.add_argument("--count", type=_positive_int, default=30)
     scenes.add_argument("--seed", type=int, default=0, help="first seed")
     scenes.add_argument("--out", type=Path, default=Path("out/scenes"))
+    scenes.add_argument(
+        "--moving",
+        action="store_true",
+        help="obstacles that come at a still hand at 2-20 cm/s instead of clutter",
+    )
     robot = sub.add_parser("robot", help="bring your own robot")
     robot_sub = robot.add_subparsers(dest="robot_command", required=True)
     init = robot_sub.add_parser(
@@ -272,7 +277,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "scenes":
         from cbp.scenes import write_scenes
 
-        for path in write_scenes(args.out, args.count, args.seed):
+        for path in write_scenes(args.out, args.count, args.seed, args.moving):
             print(path)
         return 0
     return _plugins()

@@ -8,6 +8,11 @@ arm must go around or stop). The same seed always gives the same file. A scene i
 kept only if it loads: the arm's start must not touch an object (the loader's
 check), and no object may cover a goal keyframe's hand position.
 
+:func:`generate_moving_scene` (``cbp scenes --moving``) holds the hand still
+over the table while boxes, balls and posts come at it at 2-20 cm/s from random
+directions (level or from above), each stopping a few centimetres past where
+the hand was: the arm must yield to them.
+
 ``cbp scenes --count N --seed S --out DIR`` writes N files; each runs with
 ``cbp run FILE`` and, with the cameras of ``configs/cat.yaml``, with
 ``--set perception.source=depth_camera``.
@@ -25,13 +30,20 @@ import yaml
 from cbp.data import data_dir
 from cbp.errors import ScenarioError
 
-__all__ = ["generate_scene", "write_scenes"]
+__all__ = ["generate_moving_scene", "generate_scene", "write_scenes"]
 
 #: The table's top is at z = 0; objects stand on it within this box [m].
 REGION = ((0.3, -0.45), (0.75, 0.45))
 #: Hand orientation of every goal: pointing down, fingers across y.
 HAND_DOWN = [180.0, 0.0, 90.0]
 CAT_CONFIG = data_dir("scenarios") / "configs" / "cat.yaml"
+#: Approach speeds of the moving obstacles [m/s].
+MOVING_SPEEDS = (0.02, 0.20)
+#: When the obstacles start moving (the hand has reached its goal) [s].
+MOVING_START = 2.0
+#: The map's bounds in ``configs/cat.yaml``, less a margin: moving obstacles
+#: start inside them (what the cameras can map) [m].
+MOVING_REGION = ((-0.1, -0.7, 0.05), (1.1, 0.7, 0.9))
 
 
 def _object(rng: np.random.Generator, k: int) -> dict[str, Any]:
@@ -123,12 +135,132 @@ def generate_scene(seed: int, objects: tuple[int, int] = (3, 7)) -> dict[str, An
     }
 
 
-def write_scenes(out: Path, count: int, seed: int = 0) -> list[Path]:
+def _mover(rng: np.random.Generator, k: int, hand: np.ndarray) -> dict[str, Any] | None:
+    """An object that comes at ``hand`` and stops past it (None: starts outside).
+
+    It starts 1.5-3 s of travel plus 12 cm (the hand's reach) plus its own
+    half size away, level or from up to 60 degrees above, and stops 3-8 cm
+    past the point it aims at (near the hand).
+    """
+    kind = str(rng.choice(["box", "ball", "post"]))
+    speed = float(rng.uniform(*MOVING_SPEEDS))
+    azimuth = float(rng.uniform(-math.pi, math.pi))
+    elevation = float(rng.uniform(0.0, math.radians(60.0)))
+    towards = -np.array(
+        [
+            math.cos(elevation) * math.cos(azimuth),
+            math.cos(elevation) * math.sin(azimuth),
+            math.sin(elevation),
+        ]
+    )
+    if kind == "box":
+        size = [round(float(rng.uniform(0.06, 0.16)), 3) for _ in range(3)]
+        shape: dict[str, Any] = {"shape": "box", "size": size}
+        half = 0.5 * max(size)
+    elif kind == "ball":
+        radius = round(float(rng.uniform(0.03, 0.08)), 3)
+        shape = {"shape": "sphere", "size": [radius]}
+        half = radius
+    else:  # a post: an upright cylinder
+        radius = round(float(rng.uniform(0.02, 0.05)), 3)
+        height = round(float(rng.uniform(0.15, 0.35)), 3)
+        shape = {"shape": "cylinder", "size": [radius, height]}
+        half = max(radius, 0.5 * height)
+    aim = hand + rng.uniform(-0.05, 0.05, 3)
+    travel = float(rng.uniform(1.5, 3.0)) * speed
+    start = aim - towards * (travel + 0.12 + half)
+    overshoot = float(rng.uniform(0.03, 0.08))
+    lo, hi = np.array(MOVING_REGION[0]), np.array(MOVING_REGION[1])
+    end = aim + towards * (overshoot - 0.12 - half)  # 3-8 cm into the hand's reach
+    if np.any(start < lo) or np.any(start > hi) or start[2] - half < 0.0:
+        return None
+    if end[2] - half < 0.0:  # never through the table
+        return None
+    moved = float(np.linalg.norm(end - start))
+    begin = MOVING_START + float(rng.uniform(0.0, 1.0))
+    velocity = towards * speed
+    return {
+        "name": f"{kind}_{k}",
+        **shape,
+        "pose": {"position": [round(float(v), 4) for v in start]},
+        "motion": {
+            "velocity": [round(float(v), 4) for v in velocity],
+            "start": round(begin, 2),
+            "stop": round(begin + moved / speed, 2),
+        },
+    }
+
+
+def generate_moving_scene(
+    seed: int, movers: tuple[int, int] = (1, 3)
+) -> dict[str, Any]:
+    """A scene of obstacles coming at a still hand, as a scenario document.
+
+    Args:
+        seed: the random seed; the same seed gives the same scene.
+        movers: the least and most moving objects.
+    """
+    rng = np.random.default_rng(seed)
+    hand = np.array(
+        [rng.uniform(0.4, 0.6), rng.uniform(-0.3, 0.3), rng.uniform(0.2, 0.4)]
+    )
+    placed: list[dict[str, Any]] = []
+    wanted = int(rng.integers(*movers, endpoint=True))
+    for _ in range(50):
+        if len(placed) == wanted:
+            break
+        mover = _mover(rng, len(placed), hand)
+        if mover is not None:
+            placed.append(mover)
+    ends = [o["motion"]["stop"] for o in placed] or [MOVING_START]
+    speeds = [
+        round(100.0 * float(np.linalg.norm(o["motion"]["velocity"])), 1) for o in placed
+    ]
+    return {
+        "name": f"moving_{seed}",
+        "description": (
+            f"Generated by cbp.scenes (seed {seed}): {len(placed)} objects come at "
+            f"the still hand at {', '.join(map(str, speeds))} cm/s and stop past it."
+        ),
+        "include": str(CAT_CONFIG),
+        "robot": {"name": "franka_panda"},
+        "duration": float(math.ceil(max(ends) + 1.0)),
+        "goal": {
+            "type": "keyframes",
+            "keyframes": [
+                {
+                    "t": 0.0,
+                    "pose": {
+                        "position": [round(float(v), 4) for v in hand],
+                        "rpy_deg": HAND_DOWN,
+                    },
+                }
+            ],
+        },
+        "world": {
+            "objects": [
+                {
+                    "name": "table",
+                    "shape": "box",
+                    "size": [0.7, 1.2, 0.04],
+                    "pose": {"position": [0.55, 0.0, -0.02]},
+                },
+                *placed,
+            ]
+        },
+    }
+
+
+def write_scenes(
+    out: Path, count: int, seed: int = 0, moving: bool = False
+) -> list[Path]:
     """Write ``count`` loadable scenes to ``out``; return their paths.
 
     Seeds ``seed``, ``seed + 1``, ... are tried in turn; a scene the loader
     refuses (the arm starts in contact) or whose goal lies inside an object is
-    skipped, so the files are always valid scenarios.
+    skipped, so the files are always valid scenarios. ``moving``: scenes of
+    :func:`generate_moving_scene` (their goal is checked against the objects
+    where they start; they are meant to come at it).
     """
     from cbp.scenario import load_scenario
 
@@ -136,13 +268,16 @@ def write_scenes(out: Path, count: int, seed: int = 0) -> list[Path]:
     written: list[Path] = []
     s = seed
     while len(written) < count:
-        document = generate_scene(s)
-        path = out / f"clutter_{s}.yaml"
+        document = generate_moving_scene(s) if moving else generate_scene(s)
+        path = out / f"{'moving' if moving else 'clutter'}_{s}.yaml"
         path.write_text(yaml.safe_dump(document, sort_keys=False))
         s += 1
         try:
             scenario = load_scenario(path)
         except ScenarioError:
+            path.unlink()
+            continue
+        if moving and len(document["world"]["objects"]) < 2:
             path.unlink()
             continue
         world = scenario.world_for_run()

@@ -155,6 +155,9 @@ class OccupancyEnvironment(Environment):
         #: Per robot shape, how much nearer its contacts are reported [m]
         #: (obstacles that come at it, measured ahead: :meth:`ahead`).
         self.nearer: FloatArray | None = None
+        #: The capture time of the newest frame in this snapshot [s of the
+        #: run's clock] (None: not built from frames); its age is now - stamp.
+        self.stamp: float | None = None
         self.blocked = blocked
         self.surfaces_only = blocked is not None
         self._identity = pin.SE3.Identity()

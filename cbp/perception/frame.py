@@ -22,10 +22,17 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from cbp.robot import FloatArray, RobotModel
 
-__all__ = ["RENDER_NEAR_FRACTION", "DepthFrame", "camera_parent"]
+__all__ = [
+    "RENDER_NEAR_FRACTION",
+    "DepthFrame",
+    "camera_parent",
+    "look_at",
+    "perspective",
+]
 
 RENDER_NEAR_FRACTION = 1e-3
 """The rendering clip plane as a fraction of the far plane: 2.5 mm for a 2.5 m
@@ -189,3 +196,32 @@ def camera_parent(parent: str, robot: RobotModel) -> str:
     any arm.
     """
     return robot.end_effector if parent == "end_effector" else parent
+
+
+def perspective(fov_deg: float, aspect: float, near: float, far: float) -> FloatArray:
+    """The OpenGL projection matrix of a vertical field of view (4, 4)."""
+    f = 1.0 / np.tan(np.deg2rad(fov_deg) / 2.0)
+    return np.array(
+        [
+            [f / aspect, 0.0, 0.0, 0.0],
+            [0.0, f, 0.0, 0.0],
+            [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
+            [0.0, 0.0, -1.0, 0.0],
+        ]
+    )
+
+
+def look_at(
+    eye: npt.ArrayLike, target: npt.ArrayLike, up: npt.ArrayLike
+) -> FloatArray:
+    """The OpenGL view matrix (world to camera) of a camera at ``eye`` (4, 4)."""
+    eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
+    forward = target - eye
+    forward /= np.linalg.norm(forward)
+    side = np.cross(forward, up)
+    side /= np.linalg.norm(side)
+    true_up = np.cross(side, forward)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = side, true_up, -forward
+    view[:3, 3] = -view[:3, :3] @ eye
+    return view

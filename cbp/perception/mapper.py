@@ -10,27 +10,114 @@ skips frames rather than lag). Queries in flight keep the snapshot they started
 with. With an :class:`~cbp.perception.motion.ApproachEstimator`, each snapshot
 published reports its contacts nearer by how far the obstacles approaching each
 robot shape come over :attr:`MapUpdater.look_ahead`.
+
+Each snapshot is stamped with the capture time of its newest frame
+(:attr:`~cbp.collision.map_environment.OccupancyEnvironment.stamp`), and the
+updater keeps a record of each publication (:class:`Publication`). A thread
+shares the interpreter lock with the control loop;
+:class:`~cbp.perception.map_process.ProcessMapUpdater` has the same interface
+and runs the map in a process of its own.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.perception.frame import DepthFrame
-from cbp.perception.motion import ApproachEstimator
+from cbp.perception.motion import ApproachEstimator, ClusterMotion, swept_snapshot
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
 
-__all__ = ["MapUpdater"]
+__all__ = ["MapUpdater", "Publication", "SnapshotPublisher", "cluster_motion"]
+
+#: Publications kept in :attr:`SnapshotPublisher.published`.
+KEPT_PUBLICATIONS = 4096
 
 
-class MapUpdater:
+@dataclass(frozen=True)
+class Publication:
+    """One snapshot made public to the collision world.
+
+    Attributes:
+        stamp: capture time of the newest frame in it [s of the run's clock].
+        frames: frames it took in.
+        received: when the updater took the frames (``time.perf_counter``,
+            the same clock in every process of the machine) [s].
+        integrate_s: wall time integrating them [s].
+        snapshot_s: wall time building the snapshot (and the approach
+            estimate) [s].
+        published: when the collision world had it (``time.perf_counter``) [s].
+    """
+
+    stamp: float
+    frames: int
+    received: float
+    integrate_s: float
+    snapshot_s: float
+    published: float
+
+
+def cluster_motion(grid: OccupancyGrid) -> ClusterMotion | None:
+    """The grid's cluster-motion estimate, or None (``perception.cluster_motion``)."""
+    spec = grid.spec
+    if not spec.cluster_motion or spec.motion_window <= 0:
+        return None
+    return ClusterMotion(grid.lower, grid.cell, spec.motion_window)
+
+
+class SnapshotPublisher:
+    """What every map updater tells its executor, however it runs.
+
+    Attributes:
+        updates: snapshots published so far.
+        skipped: frames replaced before the map took them.
+        last_update_s: wall time of the last integration + snapshot [s].
+        look_ahead: how far ahead approaching obstacles are measured [s] (the
+            executor sets it every command period, as for declared objects).
+        error: a failure to report as an event (the executor clears it).
+        failed: why the map stopped for good (its process died), or None.
+        published: the last :data:`KEPT_PUBLICATIONS` publications.
+    """
+
+    def __init__(self) -> None:
+        """Nothing published yet."""
+        self.look_ahead = 0.0
+        self.updates = 0
+        self.skipped = 0
+        self.last_update_s = 0.0
+        self.error: BaseException | None = None
+        self.failed: str | None = None
+        self.published: deque[Publication] = deque(maxlen=KEPT_PUBLICATIONS)
+        #: Capture time of the newest frame submitted, and of the newest one
+        #: published [s of the run's clock].
+        self.submitted_t = 0.0
+        self.stamp = 0.0
+
+    def hold_reason(self, timeout: float) -> str | None:
+        """Why the robot must hold, or None: the map failed, or lags.
+
+        The map lags when the newest frame submitted is more than ``timeout``
+        [s] newer than the newest one published (the map no longer keeps up
+        with the cameras: as stale as a camera that gives no frames).
+        """
+        if self.failed is not None:
+            return f"map failed ({self.failed}): robot stopped"
+        if self.submitted_t - self.stamp > timeout:
+            return (
+                f"the map is more than {timeout:g} s behind the cameras: robot stopped"
+            )
+        return None
+
+
+class MapUpdater(SnapshotPublisher):
     """Integrates depth frames into a grid and publishes snapshots to a world.
 
     Args:
@@ -39,14 +126,10 @@ class MapUpdater:
         synchronous: integrate in :meth:`submit` itself (for tests and
             deterministic replays) instead of a worker thread.
         estimator: measures how fast the map's obstacles approach the robot
-            (None: snapshots as mapped).
+            (None: snapshots as mapped; with it and
+            ``perception.cluster_motion``, moving clusters are swept too).
 
-    Attributes:
-        updates: snapshots published so far.
-        skipped: frames replaced before the worker took them.
-        last_update_s: wall time of the last integration + snapshot [s].
-        look_ahead: how far ahead approaching obstacles are measured [s] (the
-            executor sets it every command period, as for declared objects).
+    What it reports (updates, skips, stamps, failures): :class:`SnapshotPublisher`.
     """
 
     def __init__(
@@ -57,16 +140,15 @@ class MapUpdater:
         estimator: ApproachEstimator | None = None,
     ) -> None:
         """Start the worker (unless synchronous)."""
+        super().__init__()
         self.grid = grid
         self.world = world
         self.synchronous = synchronous
         self.estimator = estimator
-        self.look_ahead = 0.0
         self._mapped: OccupancyEnvironment | None = None  # the last, as mapped
-        self.updates = 0
-        self.skipped = 0
-        self.last_update_s = 0.0
-        self.error: BaseException | None = None
+        #: Velocities of the mapped obstacles, cluster by cluster (with an
+        #: estimator, when ``perception.cluster_motion`` is on).
+        self.clusters = cluster_motion(grid) if estimator is not None else None
         self._state = RobotState(world.geometry.robot)
         self._pending: dict[str, tuple[DepthFrame, FloatArray, float]] = {}
         self._cond = threading.Condition()
@@ -84,6 +166,7 @@ class MapUpdater:
 
         Never waits for the map.
         """
+        self.submitted_t = max(self.submitted_t, t)
         if self.synchronous:
             self._integrate([(frame, q, t)])
             return
@@ -133,22 +216,44 @@ class MapUpdater:
         for frame, q, t in frames:
             self._state.update(q)
             self.grid.integrate(frame, self._state, t)
+        integrated = time.perf_counter()
         mapped = self.grid.environment()
+        stamp = max(t for _, _, t in frames)
+        mapped.stamp = stamp
         published: OccupancyEnvironment = mapped
+        if self.clusters is not None and self.grid.geometry is not None:
+            try:
+                shapes = self.grid.geometry.world_shapes(self._state)
+                moving = self.clusters.update(stamp, self.grid.cells, shapes)
+                published = swept_snapshot(
+                    mapped, moving, self.look_ahead, self.grid.lower
+                )
+            except Exception as exc:  # the map itself is still published
+                self.error = RuntimeError(
+                    f"cluster motion failed, map published without it: {exc}"
+                )
         if self.estimator is not None:
-            t = max(t for _, _, t in frames)
+            t = stamp
             try:
                 speeds = self.estimator.update(t, self._state, self._mapped, mapped)
                 if np.any(speeds > 0):
-                    published = mapped.ahead(speeds * self.look_ahead)
+                    published = published.ahead(speeds * self.look_ahead)
             except Exception as exc:  # the map itself is still published
                 self.error = RuntimeError(
                     f"approach estimate failed, map published without it: {exc}"
                 )
         self._mapped = mapped
+        published.stamp = stamp
         self.world.set_environment(published)
+        self.stamp = max(self.stamp, stamp)
         self.updates += 1
-        self.last_update_s = time.perf_counter() - start
+        done = time.perf_counter()
+        self.last_update_s = done - start
+        self.published.append(
+            Publication(
+                stamp, len(frames), start, integrated - start, done - integrated, done
+            )
+        )
 
     def close(self) -> None:
         """Stop the worker."""

@@ -179,6 +179,30 @@ class OccupancyGrid:
             else np.zeros(0)
         )
 
+    # ------------------------------------------------------------------ copies
+
+    def __getstate__(self) -> dict[str, object]:
+        """Copied or pickled without the last snapshot.
+
+        (It holds compiled queries and maybe a coal octree; the copy builds
+        its own at its first :meth:`environment`.) The map process takes its
+        grid this way.
+        """
+        state = dict(self.__dict__)
+        state["_snapshot"] = None
+        return state
+
+    def scratch(self) -> OccupancyGrid:
+        """A copy whose integration changes nothing of this grid (warm-ups)."""
+        state = self.__getstate__()
+        state["cells"] = self.cells.copy()
+        state["misses"] = self.misses.copy()
+        state["_dirty"] = self._dirty.copy()
+        state["_moved"] = {}
+        out = OccupancyGrid.__new__(OccupancyGrid)
+        out.__dict__.update(state)
+        return out
+
     # ------------------------------------------------------------------ reading
 
     def centres(self, state: int = OCCUPIED) -> FloatArray:
@@ -430,6 +454,33 @@ class OccupancyGrid:
         """
         if self._snapshot is not None and not self._dirty.any():
             return self._snapshot
+        centres, start = shell_update(
+            self.cells,
+            self._blocked,
+            self._dirty,
+            self.lower,
+            self.cell,
+            self._brick,
+            self.spec.unknown_blocks,
+            *self._shell,
+        )
+        self._shell = (centres, start)
+        self._snapshot = self.snapshot_of(centres, start, self._blocked.copy())
+        return self._snapshot
+
+    def snapshot_of(
+        self, centres: FloatArray, start: np.ndarray, blocked: np.ndarray
+    ) -> OccupancyEnvironment:
+        """The snapshot of a shell this grid's :meth:`environment` computed.
+
+        Args:
+            centres: the shell's cell centres (N, 3), brick by brick [m].
+            start: brick b's cells are ``centres[start[b]:start[b + 1]]``.
+            blocked: the obstacle mask (the grid's shape); the snapshot keeps it.
+
+        (A map updated in another process sends these three arrays; this
+        grid's bounds and bricks index them.)
+        """
         s = self.spec
         refiner = (
             MetaballRefiner(
@@ -439,29 +490,21 @@ class OccupancyGrid:
             if s.refine_normals
             else None
         )
-        centres, start = shell_update(
-            self.cells,
-            self._blocked,
-            self._dirty,
-            self.lower,
-            self.cell,
-            self._brick,
-            s.unknown_blocks,
-            *self._shell,
-        )
-        self._shell = (centres, start)
-        blocked = self._blocked.copy()
         index = CellIndex.from_bricks(
             centres, start, self.lower, self.cell, self._brick, self._dims
         )
-        self._snapshot = OccupancyEnvironment(
+        return OccupancyEnvironment(
             centres,
             self.cell,
             refiner,
             index=index,
             blocked=BlockedGrid(blocked, self.lower.copy(), self.cell),
         )
-        return self._snapshot
+
+    @property
+    def bricks(self) -> tuple[int, tuple[int, ...]]:
+        """Cells per brick side, and bricks along x, y and z (the snapshot's)."""
+        return self._brick, tuple(int(n) for n in self._dims)
 
     def __repr__(self) -> str:
         """Size, resolution and the cells in each state."""

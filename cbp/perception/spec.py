@@ -253,6 +253,16 @@ class PerceptionSpec:
     at 10 cm/s 173-245 N (1 s) and 91-171 N (0.5 s). In virtual time (the map
     integrates each frame at once) 0.5 s did better on all of them: virtual
     time does not stand for a run beside a map thread here."""
+    cluster_motion: bool = False
+    """Also measure the mapped obstacles' velocities cluster by cluster
+    (touching occupied cells within 0.3 m of the robot, followed from
+    snapshot to snapshot over ``motion_window``;
+    :class:`~cbp.perception.motion.ClusterMotion`), and add to each snapshot
+    the cells a moving cluster passes over the look-ahead [s] (and, with
+    ``map_process``, the snapshot's age [s]). A moving obstacle is then
+    measured on its own, not hidden by a nearer static one as in the per-shape
+    approach estimate (which stays on). Needs ``motion_window`` > 0 and
+    ``collision.predict_motion``."""
     shadow_hold: float = 1.0
     """Space a fixed camera saw free and now sees hidden behind a nearer
     surface (something came between: an obstacle moved in) is unknown again,
@@ -263,6 +273,24 @@ class PerceptionSpec:
     still holds free (a box lowered onto the arm: 8.5 kN). Cameras mounted
     on the robot keep no such history (their view moves with the arm). 0:
     off."""
+    map_process: bool = True
+    """In wall-clock runs (``timing.clock: wall``), integrate the frames in a
+    process of its own (:class:`~cbp.perception.map_process.ProcessMapUpdater`:
+    frames and snapshots through shared memory, each snapshot stamped with the
+    capture time of its newest frame [s], approaching obstacles measured ahead
+    over the look-ahead plus the snapshot's age [s]) rather than in a thread
+    beside the control loop, which shares the interpreter lock with it (false).
+    Virtual-time runs integrate each frame in the loop either way. A map
+    process that ends, or a map more than ``camera_timeout`` [s] behind the
+    newest frame, stops the robot (an event). Measured with
+    ``benchmarks/map_latency.py`` (``cat_pushed_obstacle``: a box pushed from
+    the side at 5 and 10 cm/s and lowered at 5 cm/s, two runs each, load
+    average 1.6-3.7 on the shared 2-core machine): capture to use in simulated
+    time, median 25-39 ms (p95 48-114 ms) in the process against 33-114 ms
+    (66-198 ms) in the thread (virtual time 0-27 ms); integration 6.5-14 ms a
+    frame against 13-39 ms; the loop's QP steps per period 39-123 against
+    30-69; peak forces 0-173 N against 0-707 N (0 N in virtual time). Under a
+    load average of 6 (and frames still sent by a queue) neither was better."""
     refine_normals: bool = True
     """Re-estimate contact normals from a metaball surface (CAT Sec. IV-B)."""
     metaball_radius_cells: float = 3.0

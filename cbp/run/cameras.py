@@ -22,6 +22,7 @@ from cbp.collision.world import CollisionWorld
 from cbp.methods.settings import ClockKind
 from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import UNKNOWN
+from cbp.perception.map_process import ProcessMapUpdater
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.motion import ApproachEstimator
 from cbp.perception.occupancy import OccupancyGrid
@@ -38,6 +39,10 @@ __all__ = ["Cameras"]
 
 class Cameras:
     """The depth cameras of a run and the map they feed.
+
+    A camera without a valid frame for ``perception.camera_timeout``, a map
+    that failed (its process ended) or lags that far behind the cameras holds
+    the robot (:meth:`hold_reason`).
 
     Args:
         sim: the simulation the cameras render.
@@ -95,7 +100,13 @@ class Cameras:
             if spec.motion_window > 0 and predict_motion
             else None
         )
-        self.mapper = MapUpdater(
+        # Wall clock: the map in a process of its own unless
+        # perception.map_process is off (the interpreter lock would make the
+        # loop and a map thread wait for each other); virtual: in the loop.
+        updater = (
+            ProcessMapUpdater if spec.map_process and clock != "virtual" else MapUpdater
+        )
+        self.mapper: MapUpdater | ProcessMapUpdater = updater(
             grid, world, synchronous=clock == "virtual", estimator=estimator
         )
         self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
@@ -158,7 +169,7 @@ class Cameras:
             f"no valid frame from camera {', '.join(repr(n) for n in stale)} for "
             f"more than {timeout:g} s: robot stopped"
             if stale
-            else None
+            else self.mapper.hold_reason(timeout)  # the map failed, or lags
         )
         if reason != self._stale:
             self._log.event(

@@ -86,3 +86,80 @@ def test_placed_apart_matches_placed(setup) -> None:
     np.testing.assert_allclose(a.centres, b.centres)
     np.testing.assert_allclose(a.halves, b.halves)
     assert isinstance(a.placements[0], pin.SE3)
+
+
+def _grid_cells(lower: np.ndarray, shape: tuple[int, int, int], boxes) -> np.ndarray:
+    """A grid of cell states: FREE, with OCCUPIED boxes (lo, hi) in metres."""
+    from cbp.perception.kernels import FREE, OCCUPIED
+
+    cells = np.full(shape, FREE, dtype=np.uint8)
+    for lo, hi in boxes:
+        a = np.floor((np.asarray(lo) - lower) / CELL).astype(int)
+        b = np.floor((np.asarray(hi) - lower) / CELL).astype(int)
+        cells[a[0] : b[0], a[1] : b[1], a[2] : b[2]] = OCCUPIED
+    return cells
+
+
+def test_a_moving_box_beside_a_nearer_static_one_is_measured_on_its_own(
+    setup,
+) -> None:
+    """10 cm/s toward the hand; a still slab nearer: the box's velocity, not 0.
+
+    The per-shape approach estimate sees the hand's nearest obstacle, the
+    still slab, and gives 0; the clusters give the box its velocity, and the
+    snapshot swept over the look-ahead holds the cells it will reach.
+    """
+    from cbp.collision.map_environment import BlockedGrid
+    from cbp.perception.kernels import OCCUPIED
+    from cbp.perception.motion import ClusterMotion, swept_snapshot
+
+    world, state, hand = setup
+    h = state.data.oMf[state.robot.frame_id("panda_hand")].translation
+    lower = np.floor(h / CELL) * CELL - 0.5
+    shape = (100, 100, 100)
+    slab = (
+        h + np.array([-0.1, -0.1, -0.09]),
+        h + np.array([0.1, 0.1, -0.07]),
+    )  # under the fingers
+    clusters = ClusterMotion(lower, CELL, window=0.5)
+    estimator = ApproachEstimator(world, window=0.5)
+    shapes = world.geometry.world_shapes(state)
+    old = None
+    for k in range(8):  # a snapshot every 0.1 s, the box a cell nearer each
+        x = 0.25 - 0.01 * k
+        box = (h + np.array([x, -0.05, -0.05]), h + np.array([x + 0.1, 0.05, 0.05]))
+        cells = _grid_cells(lower, shape, [slab, box])
+        mask = cells == OCCUPIED
+        centres = lower + (np.argwhere(mask) + 0.5) * CELL
+        env = OccupancyEnvironment(
+            centres, CELL, blocked=BlockedGrid(mask, lower, CELL)
+        )
+        moving = clusters.update(0.1 * k, cells, shapes)
+        speeds = estimator.update(0.1 * k, state, old, env)
+        old = env
+    assert speeds[hand:].max() == 0.0  # hidden behind the still slab
+    assert len(moving) == 1
+    np.testing.assert_allclose(moving[0].velocity, [-0.1, 0.0, 0.0], atol=0.015)
+    swept = swept_snapshot(env, moving, 0.4, lower)
+    ahead = (h + np.array([x - 0.035, 0.0, 0.0]))[None]  # 3.5 cm in front of the box
+    assert not env.inside(ahead)[0]
+    assert swept.inside(ahead)[0]
+    assert len(swept) > len(env)
+    assert swept_snapshot(env, [], 0.4, lower) is env
+
+
+def test_clusters_that_stand_still_do_not_move(setup) -> None:
+    """The same cells every snapshot, and a cell flickering: nothing moves."""
+    from cbp.perception.motion import ClusterMotion
+
+    world, state, _ = setup
+    h = state.data.oMf[state.robot.frame_id("panda_hand")].translation
+    lower = np.floor(h / CELL) * CELL - 0.5
+    clusters = ClusterMotion(lower, CELL, window=0.5)
+    shapes = world.geometry.world_shapes(state)
+    box = (h + np.array([0.1, -0.05, -0.05]), h + np.array([0.2, 0.05, 0.05]))
+    for k in range(10):
+        flicker = (h + np.array([0.09, 0.0, 0.0]), h + np.array([0.1, 0.01, 0.01]))
+        boxes = [box, flicker] if k % 3 == 0 else [box]
+        moving = clusters.update(0.1 * k, _grid_cells(lower, (100,) * 3, boxes), shapes)
+        assert moving == [], k

@@ -1,13 +1,15 @@
-"""The cluttered-scene generator: seeded, valid files, safe with both sources."""
+"""The scene generators: seeded, valid files, safe with both sources."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+import yaml
 
 from cbp.executors.cat import run_cat
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
-from cbp.scenes import generate_scene, write_scenes
+from cbp.scenes import generate_moving_scene, generate_scene, write_scenes
 
 
 def test_a_seed_gives_one_scene_and_seeds_differ() -> None:
@@ -36,3 +38,29 @@ def test_generated_scenes_run_without_contact(tmp_path, source) -> None:
         scenario = load_scenario(path, overrides={"perception.source": source})
         m = run_metrics(run_cat(scenario))
         assert m["peak_contact_force_n"] == 0.0, (path.name, m)
+
+
+def test_moving_scenes_come_at_the_hand_at_2_to_20_cm_s(tmp_path) -> None:
+    """Seeded; every object moves toward the held hand and stops past its reach."""
+    assert generate_moving_scene(3) == generate_moving_scene(3)
+    assert generate_moving_scene(3) != generate_moving_scene(4)
+    kinds = set()
+    for path in write_scenes(tmp_path, 4, seed=0, moving=True):
+        scenario = load_scenario(path)  # refused if the arm starts in contact
+        document = yaml.safe_load(path.read_text())
+        hand = np.array(document["goal"]["keyframes"][0]["pose"]["position"])
+        movers = document["world"]["objects"][1:]
+        assert 1 <= len(movers) <= 3
+        for o in movers:
+            kinds.add(o["shape"])
+            v = np.array(o["motion"]["velocity"])
+            assert 0.0199 <= np.linalg.norm(v) <= 0.2001
+            start = np.array(o["pose"]["position"])
+            duration = o["motion"]["stop"] - o["motion"]["start"]
+            end = start + v * duration
+            # Toward the hand, and ending nearer to it than it started.
+            assert v.dot(hand - start) > 0.0
+            assert np.linalg.norm(end - hand) < np.linalg.norm(start - hand)
+            assert end[2] > 0.0  # never into the table
+        assert scenario.spec.duration >= max(o["motion"]["stop"] for o in movers)
+    assert kinds <= {"box", "sphere", "cylinder"}
