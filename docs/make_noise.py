@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from make_cat_scenes import SCENES
 
 from cbp.executors import make_planner
 from cbp.executors.trajectory import run_trajectory_executor
@@ -30,16 +31,6 @@ from cbp.run import build_run
 from cbp.scenario import load_scenario
 
 ROOT = Path(__file__).parents[1]
-SCENES = [
-    "free_step",
-    "free_continuous",
-    "boards",
-    "local_minimum",
-    "wrist_limit",
-    "unreachable",
-    "shelf_reach",
-    "shelf_retreat",
-]
 #: The settings compared, each fields set on every camera's noise model.
 SETTINGS: dict[str, dict[str, str]] = {
     "off": {"enabled": "false"},

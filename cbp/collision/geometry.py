@@ -728,18 +728,20 @@ def inside_any(
     centres: FloatArray,
     radii: FloatArray,
     grow: FloatArray,
+    extra: float = 0.0,
 ) -> bool:
-    """Whether (x, y, z) is inside some shape s grown by ``grow[s]``.
+    """Whether (x, y, z) is inside some shape s grown by ``grow[s] + extra``.
 
     The shapes as :class:`WorldShapes` gives them: each bounding sphere first,
     then the planes of the shapes whose grown sphere holds the point.
     """
     for s in range(radii.size):
+        grown = grow[s] + extra
         dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
-        reach = radii[s] + grow[s]
+        reach = radii[s] + grown
         if dx * dx + dy * dy + dz * dz > reach * reach:
             continue
-        if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grow[s]):
+        if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grown):
             return True
     return False
 

@@ -211,9 +211,7 @@ def perspective(fov_deg: float, aspect: float, near: float, far: float) -> Float
     )
 
 
-def look_at(
-    eye: npt.ArrayLike, target: npt.ArrayLike, up: npt.ArrayLike
-) -> FloatArray:
+def look_at(eye: npt.ArrayLike, target: npt.ArrayLike, up: npt.ArrayLike) -> FloatArray:
     """The OpenGL view matrix (world to camera) of a camera at ``eye`` (4, 4)."""
     eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
     forward = target - eye

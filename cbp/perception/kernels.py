@@ -500,7 +500,7 @@ def insert_readings(
                 )
                 extra = spread[2] + spread[3] * (axial - spread[4]) ** 2
                 extra *= distance / axial
-            if _near_robot(
+            if inside_any(
                 px, py, pz, planes, plane_start, centres, radii, reach, extra
             ):
                 robot += 1
@@ -545,33 +545,6 @@ def insert_readings(
                 grid[i, j, k] = OCCUPIED
                 dirty[i // brick, j // brick, k // brick] = True
     return valid, robot, inserted, hidden
-
-
-@numba.njit(cache=True, nogil=True)
-def _near_robot(
-    x: float,
-    y: float,
-    z: float,
-    planes: FloatArray,
-    plane_start: IntArray,
-    centres: FloatArray,
-    radii: FloatArray,
-    reach: FloatArray,
-    extra: float,
-) -> bool:
-    """Whether (x, y, z) is within ``reach[s] + extra`` of some robot shape s.
-
-    As :func:`~cbp.collision.geometry.inside_any`, with every shape grown by
-    ``extra`` more.
-    """
-    for s in range(radii.size):
-        grow = reach[s] + extra
-        dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
-        if dx * dx + dy * dy + dz * dz > (radii[s] + grow) ** 2:
-            continue
-        if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grow):
-            return True
-    return False
 
 
 @numba.njit(cache=True, nogil=True)
