@@ -439,7 +439,7 @@ def insert_readings(
     gives them; no shapes: no robot) grown by how far the camera's noise
     spreads the reading along its ray (``spread``: the projection's near and
     far planes [m] and c0, c2, z0 [m]: c0 + c2 (z - z0)^2 along the axis at
-    depth z, so many sigmas of the noise; all 0: no noise), and its cell made
+    depth z, so many sigmas of the noise; c0 and c2 0: no noise), and its cell made
     occupied with no
     misses. One pass, one call: the map thread takes the GIL once per frame
     for it, not once per array operation. ``dirty`` and ``brick`` as in
@@ -447,11 +447,13 @@ def insert_readings(
 
     Space that comes to be hidden (``moved``, the camera's pixel history; empty
     arrays: not tracked): where a pixel's reading, not the robot, is more than
-    two cells nearer than the range the camera saw free along it, something
-    came between, and the free cells behind the reading are made unknown, up
+    two cells (and sqrt(2) times the spread, what two noisy readings of one
+    surface differ by) nearer than the range the camera saw free along it,
+    something came between, and the free cells behind the reading are made unknown, up
     to the robot's shapes grown by ``held[s]`` or that range
     (:func:`_hide_ray`). It is done again at every frame while the reading
-    moves and for ``hold`` seconds after (``t``: the frame's time); then the
+    moves (by more than half a cell and the spread) and for ``hold`` seconds
+    after (``t``: the frame's time); then the
     nearer range is what the camera sees free along the pixel.
 
     Returns (pixels holding a reading, readings taken for the robot, readings
@@ -508,10 +510,11 @@ def insert_readings(
                     seen_to[r, c] = max(seen_to[r, c], distance)
                 continue
             if track:
-                if abs(distance - last[r, c]) > 0.5 * cell:
+                if abs(distance - last[r, c]) > 0.5 * cell + extra:
                     moved_at[r, c] = t
                 last[r, c] = distance
-                if distance < seen_to[r, c] - gap:
+                # Two readings of a still surface differ by sqrt(2) sigma.
+                if distance < seen_to[r, c] - gap - math.sqrt(2.0) * extra:
                     hidden += _hide_ray(
                         camera,
                         dx / distance,

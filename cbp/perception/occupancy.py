@@ -295,16 +295,16 @@ class OccupancyGrid:
         return self.last
 
     def _spread(self, frame: DepthFrame) -> FloatArray:
-        """How far the frame's camera noise spreads a reading, for the self-filter.
+        """How far the camera noise spreads a reading: self-filter, hidden space.
 
-        ``filter_sigmas`` times the camera's sigma(z) (its
+        ``map_sigmas`` times the camera's sigma(z) (its
         :class:`~cbp.perception.spec.DepthNoise`), as :func:`insert_readings`
         takes it; zeros for a camera without noise or not in the spec.
         """
         noise = self._noise.get(frame.camera)
         if noise is None or not noise.enabled:
             return np.array([frame.near, frame.far, 0.0, 0.0, 0.0])
-        k = noise.filter_sigmas
+        k = noise.map_sigmas
         return np.array(
             [frame.near, frame.far, k * noise.sigma_0, k * noise.sigma_growth, noise.z0]
         )

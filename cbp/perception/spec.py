@@ -23,9 +23,9 @@ class DepthNoise:
     """How a depth camera's readings err: noise, edges without readings, dropout.
 
     Simulated cameras apply it to every frame they render
-    (:mod:`cbp.sim.depth_noise`), and the map allows for it when it filters
-    the robot's own readings out (``perception.robot_margin`` grows by
-    ``filter_sigmas`` times :meth:`sigma` at each reading's range). The
+    (:mod:`cbp.sim.depth_noise`), and the map allows for it: the robot filter
+    (``perception.robot_margin``) grows by ``map_sigmas`` times :meth:`sigma`
+    at each reading's depth, and so does the hidden-space rule's gap. The
     defaults are a structured-light sensor of the Kinect kind: the axial
     standard deviation measured by Nguyen et al. (2012),
     sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 m, about 1.3 mm at 0.5 m, 3.5 mm
@@ -57,13 +57,15 @@ class DepthNoise:
     seed: int = 0
     """The random stream's seed; each camera draws from its own stream (the
     seed and the camera's name), so a run is reproducible."""
-    filter_sigmas: float = 3.0
-    """How many sigmas of the reading's range the map's robot filter grows
-    by (a reading of the robot is spread along its ray by the noise)."""
+    map_sigmas: float = 3.0
+    """How many sigmas of a reading's depth the map allows for: the robot
+    filter grows by this many (a reading of the robot is spread along its ray
+    by the noise), and the gap beyond which a nearer reading hides the space
+    behind it by sqrt(2) times as many (two readings of a still surface)."""
 
     def __post_init__(self) -> None:
         """Non-negative sizes; a fraction in [0, 1)."""
-        for name in ("sigma_0", "sigma_growth", "z0", "edge_jump", "filter_sigmas"):
+        for name in ("sigma_0", "sigma_growth", "z0", "edge_jump", "map_sigmas"):
             value = getattr(self, name)
             if not (np.isfinite(value) and 0.0 <= value <= 10.0):
                 raise ConfigError(f"must be in [0, 10], got {value}", name)
@@ -204,10 +206,10 @@ class PerceptionSpec:
     padded ones), each grown by how far its link's visual geometry reaches past
     it (:attr:`~cbp.collision.geometry.RobotGeometry.visual_excess`): the margin
     covers the error between the robot's modelled and actual pose; each
-    camera's depth noise adds ``noise.filter_sigmas`` times its sigma at the
-    reading's depth (:class:`DepthNoise`; 3 x 3.5 mm at 1.5 m). Every reading
-    farther out is mapped, even inside the padding, so an obstacle that comes
-    at the arm stays in view until it is this close (a
+    camera's depth noise adds ``noise.map_sigmas`` times its sigma at the
+    reading's depth (:class:`DepthNoise`; 3 x 3.5 mm at 1.5 m). Every
+    reading farther out is mapped, even inside the padding, so an
+    obstacle that comes at the arm stays in view until it is this close (a
     reading the filter drops leaves its cell as it was). Before it was
     measured from the shapes it was 0.02 beyond the padded shapes: an obstacle
     pushed into the arm vanished 3 cm before it touched."""

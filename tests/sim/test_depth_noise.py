@@ -164,8 +164,8 @@ def test_the_robot_filter_grows_with_the_camera_s_noise(scene, robots) -> None:
     )
     camera = DepthCamera(scene.client, CAMERA)  # the grid takes its noise by name
 
-    def cells_on_the_arm(filter_sigmas: float) -> int:
-        noise = replace(CAMERA.noise, filter_sigmas=filter_sigmas)
+    def cells_on_the_arm(map_sigmas: float) -> int:
+        noise = replace(CAMERA.noise, map_sigmas=map_sigmas)
         grid = OccupancyGrid(
             replace(spec, camera=replace(CAMERA, noise=noise)), geometry
         )
@@ -184,21 +184,53 @@ def test_the_robot_filter_grows_with_the_camera_s_noise(scene, robots) -> None:
     assert not geometry.contains(state, grid.centres(), margin=0.0).any()
 
 
-def test_a_static_scene_with_noise_hides_nothing(scene, robots) -> None:
-    """Noise alone never reads two cells nearer than seen before: no space hidden."""
+def test_a_static_scene_with_noise_hides_next_to_nothing(robots) -> None:
+    """The hidden-space gap grows with the noise: a still scene hides (almost) nothing.
+
+    A camera 2.5 m from a table and a box (sigma about 1 cm there): two readings
+    of a still surface often differ by two cells, and with the gap not grown
+    (``map_sigmas: 0``) the rule hides space behind them again and again.
+    """
     robot = robots["panda"]
     geometry = RobotGeometry(robot)
     state = RobotState(robot, robot.home())
-    spec = PerceptionSpec(
-        source="depth_camera",
-        camera=CAMERA,
-        bounds=((-0.3, -0.6, 0.0), (1.0, 0.6, 1.2)),
+    table = ObjectSpec(
+        name="table",
+        shape="box",
+        size=(1.2, 1.2, 0.02),
+        pose=Pose(position=(0.4, 0, -0.01)),
     )
-    grid = OccupancyGrid(spec, geometry)
-    camera = DepthCamera(scene.client, spec.all_cameras[0])
-    for k in range(30):
-        grid.integrate(camera.capture(), state, t=k / 15)
-    assert grid.hidden_cells == 0
+    box = ObjectSpec(
+        name="box",
+        shape="box",
+        size=(0.2, 0.2, 0.2),
+        pose=Pose(position=(0.6, 0.3, 0.1)),
+    )
+    axis = np.array([1.0, 0.0, 0.6]) / np.linalg.norm([1.0, 0.0, 0.6])
+    far = CameraSpec(
+        name="c",
+        position=tuple(np.array([0.5, 0.0, 0.1]) + 2.5 * axis),
+        target=(0.5, 0.0, 0.1),
+    )
+
+    def hidden(map_sigmas: float) -> int:
+        camera = replace(far, noise=DepthNoise(map_sigmas=map_sigmas))
+        spec = PerceptionSpec(
+            source="depth_camera",
+            camera=camera,
+            bounds=((-0.3, -0.8, -0.05), (1.2, 0.8, 1.2)),
+            max_range=3.0,
+        )
+        grid = OccupancyGrid(spec, geometry)
+        render = DepthCamera(scene.client, camera)
+        for k in range(60):
+            grid.integrate(render.capture(), state, t=k / 15)
+        return grid.hidden_cells
+
+    with PybulletScene(robot, [table, box]) as scene:
+        scene.set_configuration(robot.home())
+        assert hidden(0.0) > 50
+        assert hidden(3.0) <= 10
 
 
 def test_a_camera_s_noise_section_loads_and_is_checked(tmp_path) -> None:
