@@ -34,6 +34,7 @@ import pinocchio as pin
 
 from cbp.compilation import CompileCounter
 from cbp.engine import Engine
+from cbp.executors.backout import back_out
 from cbp.executors.clock import Budget, make_budget
 from cbp.executors.periods import DeadlineMisses, PeriodAdapter
 from cbp.methods.settings import ExecutorTiming
@@ -123,6 +124,46 @@ def run_periodic(scenario: Scenario, method: str, gui: bool = False) -> Trace:
     return run_trajectory_executor(parts, planner, timing)
 
 
+#: The back-out path's points are at most this far apart in time at full speed [s].
+BACK_OUT_DT = 0.02
+
+
+class _LeavingContact:
+    """Backs the robot out of an obstacle before any method plans.
+
+    Against declared objects only: in an occupancy map, contact with cells is
+    not contact with a surface (the map holds it to half a cell, and unseen
+    space counts as an obstacle), and the methods' own rules handle it.
+    """
+
+    def __init__(self, run: RunParts, step_bound: FloatArray) -> None:
+        self.run = run
+        self.step_bound = step_bound
+        self.since: float | None = None
+
+    def plan(self, t: float, q: FloatArray) -> Plan | None:
+        """A back-out plan from ``q``, or None when the robot touches nothing."""
+        world = self.run.world
+        if world is None or world.environment.resolution > 0.0:
+            return None
+        path, depth = back_out(world, q, self.step_bound)
+        if path is None:
+            if self.since is not None:
+                self.run.event(
+                    t, f"out of contact after {t - self.since:.2f} s of backing out"
+                )
+                self.since = None
+            return None
+        if self.since is None:
+            self.since = t
+            self.run.event(
+                t,
+                f"in contact with an obstacle, {depth * 1e3:.1f} mm deep: backing "
+                "out along the contact normals before planning",
+            )
+        return Plan(path, len(path) - 1, "backing out of contact")
+
+
 def _never() -> bool:
     return False
 
@@ -167,6 +208,7 @@ def run_trajectory_executor(
     sim = run.sim
     faults = run.faults
     adapter = PeriodAdapter(lo, hi, timing.growth, timing.shrink)
+    leaving = _LeavingContact(run, vmax * BACK_OUT_DT)
     misses = DeadlineMisses(run.event)
     compiles = CompileCounter.install()
     try:
@@ -199,7 +241,9 @@ def run_trajectory_executor(
                 if hold is not None:
                     plan = Plan(None, 0, hold)
                 else:
-                    plan = planner.plan(q_s.copy(), goal, budget, run)
+                    plan = leaving.plan(t, q_s) or planner.plan(
+                        q_s.copy(), goal, budget, run
+                    )
                 note = plan.note
                 if plan.path is not None and len(plan.path) > 1:
                     new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)

@@ -1,0 +1,100 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Leaving contact first: a path out of an obstacle along the contact normals.
+
+A robot can find itself inside an obstacle: a start the scenario allows
+(``robot.allow_initial_contact``), or an obstacle that came at it. No method
+should plan from there as if it were free: a planner's yes-or-no checks find no
+free configuration near it, and CAT's rows ask for more motion than the limits
+give. So before any method plans, the trajectory loop backs the robot out
+(:func:`back_out`): small steps that move every penetrating witness point out
+along its contact normal, by damped least squares on the contact rows
+n^T J dq, within the velocity and joint limits, until the padded shapes clear
+the obstacles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cbp.collision.contacts import ContactSet
+from cbp.collision.rows import contact_jacobian_rows
+from cbp.collision.world import CollisionWorld
+from cbp.robot import FloatArray
+from cbp.state import RobotState
+
+__all__ = ["CLEAR", "MAX_POINTS", "back_out", "contact_depth"]
+
+#: The padded shapes are clear of the obstacles by this much at the path's end [m].
+CLEAR = 5e-4
+#: Points of one back-out path at most (it is planned again next period).
+MAX_POINTS = 60
+#: How far one point of the path moves a contact along its normal at most [m].
+STEP = 4e-3
+#: Damping of the least squares (keeps steps small near singularities).
+DAMPING = 1e-6
+
+
+def contact_depth(world: CollisionWorld, contacts: ContactSet) -> float:
+    """How deep the unpadded robot is in an obstacle (0: not in contact) [m]."""
+    obstacles = contacts.environment_part()
+    if not len(obstacles):
+        return 0.0
+    inflated = world.padding + world.environment.resolution
+    return max(0.0, -float(np.min(obstacles.distance)) - inflated)
+
+
+def back_out(
+    world: CollisionWorld, q: FloatArray, step_bound: FloatArray
+) -> tuple[FloatArray | None, float]:
+    """A path from ``q`` out of the obstacles the robot is in contact with.
+
+    Args:
+        world: the collision world (its current environment).
+        q: where the robot is.
+        step_bound: the largest change of each joint between two points of the
+            path (nv) [rad or m].
+
+    Returns:
+        The path (its first point is ``q``; None when the unpadded robot
+        touches no obstacle there), and the depth at ``q`` [m].
+    """
+    robot = world.geometry.robot
+    contacts = world.check(q).contacts
+    depth = contact_depth(world, contacts)
+    if depth <= 0.0:
+        return None, 0.0
+    state = RobotState(robot)
+    joints = np.array([s.joint_id for s in world.geometry.shapes], dtype=np.intp)
+    support = robot.support[joints]
+    lower, upper = robot.lower_limits, robot.upper_limits
+    path = [np.array(q, dtype=float)]
+    for _ in range(MAX_POINTS):
+        obstacles = contacts.environment_part()
+        inside = obstacles.distance < CLEAR
+        if not inside.any():
+            break
+        rows = np.zeros((int(np.count_nonzero(inside)), robot.nv))
+        state.update(path[-1])
+        contact_jacobian_rows(
+            obstacles.point[inside],
+            obstacles.other_point[inside],
+            obstacles.normal[inside],
+            obstacles.shape[inside],
+            obstacles.other_shape[inside],
+            support,
+            state.joint_jacobians(),
+            rows,
+        )
+        wanted = np.minimum(CLEAR - obstacles.distance[inside], STEP)
+        gram = rows @ rows.T + DAMPING * np.eye(len(rows))
+        dq = rows.T @ np.linalg.solve(gram, wanted)
+        largest = float(np.max(np.abs(dq) / step_bound))
+        if not np.isfinite(largest) or largest == 0.0:
+            break
+        if largest > 1.0:
+            dq /= largest
+        following = robot.integrate(path[-1], dq)
+        following = np.clip(following, lower, upper)
+        path.append(following)
+        contacts = world.check(following).contacts
+    return np.array(path), depth
