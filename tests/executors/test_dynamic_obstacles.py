@@ -209,29 +209,7 @@ def run_with(method: str, path: Path):
 @pytest.mark.slow
 def test_a_start_inside_a_box_backs_out_and_never_goes_deeper(tmp_path) -> None:
     """5 mm into a box with allow_initial_contact: out within 0.5 s."""
-    base = load_scenario(SCENARIOS / "cat_pushed_obstacle.yaml")
-    state = RobotState(base.robot, base.q0)
-    # The box's top 5 mm into the arm's lowest point (a bisection on coal's
-    # signed distance).
-    box = ObjectSpec(
-        name="box",
-        shape="box",
-        size=(0.2, 0.2, 0.1),
-        pose=_pose_under_hand(base, state, depth=0.005),
-    )
-    text = (
-        (SCENARIOS / "cat_pushed_obstacle.yaml")
-        .read_text()
-        .replace("include: configs/cat.yaml", f"include: {SCENARIOS}/configs/cat.yaml")
-    )
-    head, _, _ = text.partition("    - name: box")
-    z = box.pose.position[2]
-    x, y = box.pose.position[0], box.pose.position[1]
-    head += (
-        f"    - {{name: box, shape: box, size: [0.2, 0.2, 0.1], "
-        f"pose: {{position: [{x}, {y}, {z}]}}}}\n"
-    )
-    head = head.replace("duration: 6.0", "duration: 2.0")
+    box, head = _box_in_the_arm(0.005)
     refused = tmp_path / "inside.yaml"
     refused.write_text(head)
     with pytest.raises(ScenarioError, match="mm deep into 'box'"):
@@ -248,6 +226,35 @@ def test_a_start_inside_a_box_backs_out_and_never_goes_deeper(tmp_path) -> None:
     times = trace.t[::10]
     assert depth.min() >= start - 1e-3  # never deeper
     assert np.all(depth[times >= 0.5] >= 0.0), depth[times >= 0.5].min()
+
+
+def _box_in_the_arm(depth: float) -> tuple[ObjectSpec, str]:
+    """The pushed-box scene with a still box ``depth`` [m] into the arm's lowest point.
+
+    Returns the box and the scenario's text (2 s; the start is refused unless
+    ``robot.allow_initial_contact`` is added).
+    """
+    base = load_scenario(SCENARIOS / "cat_pushed_obstacle.yaml")
+    state = RobotState(base.robot, base.q0)
+    # The box's top ``depth`` into the arm (a bisection on coal's signed distance).
+    box = ObjectSpec(
+        name="box",
+        shape="box",
+        size=(0.2, 0.2, 0.1),
+        pose=_pose_under_hand(base, state, depth=depth),
+    )
+    text = (
+        (SCENARIOS / "cat_pushed_obstacle.yaml")
+        .read_text()
+        .replace("include: configs/cat.yaml", f"include: {SCENARIOS}/configs/cat.yaml")
+    )
+    head, _, _ = text.partition("    - name: box")
+    x, y, z = box.pose.position
+    head += (
+        f"    - {{name: box, shape: box, size: [0.2, 0.2, 0.1], "
+        f"pose: {{position: [{x}, {y}, {z}]}}}}\n"
+    )
+    return box, head.replace("duration: 6.0", "duration: 2.0")
 
 
 def _pose_under_hand(scenario, state: RobotState, depth: float):
@@ -317,28 +324,8 @@ def test_every_method_backs_out_of_an_allowed_start_in_contact(
     tmp_path, method: str
 ) -> None:
     """2 cm into a box with allow_initial_contact: out within 1.5 s, said in events."""
-    base = load_scenario(SCENARIOS / "cat_pushed_obstacle.yaml")
-    state = RobotState(base.robot, base.q0)
-    box = ObjectSpec(
-        name="box",
-        shape="box",
-        size=(0.2, 0.2, 0.1),
-        pose=_pose_under_hand(base, state, depth=0.02),
-    )
-    text = (
-        (SCENARIOS / "cat_pushed_obstacle.yaml")
-        .read_text()
-        .replace("include: configs/cat.yaml", f"include: {SCENARIOS}/configs/cat.yaml")
-    )
-    head, _, _ = text.partition("    - name: box")
-    x, y, z = box.pose.position
-    head += (
-        f"    - {{name: box, shape: box, size: [0.2, 0.2, 0.1], "
-        f"pose: {{position: [{x}, {y}, {z}]}}}}\n"
-    )
-    head = head.replace("duration: 6.0", "duration: 2.0").replace(
-        "  initial:", "  allow_initial_contact: true\n  initial:", 1
-    )
+    box, head = _box_in_the_arm(0.02)
+    head = head.replace("  initial:", "  allow_initial_contact: true\n  initial:", 1)
     allowed = tmp_path / "allowed.yaml"
     allowed.write_text(head)
     virtual = {f"method.{m}.timing.clock": "virtual" for m in ("cat", "ik", "mp")}
