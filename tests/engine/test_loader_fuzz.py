@@ -140,13 +140,9 @@ def _parent(doc: Any, path: tuple[Any, ...]) -> Any:
     return doc
 
 
-@FUZZ
-@given(data=st.data())
-def test_damaged_structure_is_refused_or_loaded(
-    folder: Path, data: st.DataObject
-) -> None:
-    source = data.draw(st.sampled_from(SOURCES), label="scenario")
-    doc = copy.deepcopy(yaml.safe_load(source.read_text()))
+def damage_structure(data: st.DataObject, doc: Any, keys: list[str]) -> Any:
+    """A copy of ``doc`` with 1-3 values replaced, keys removed, or ``keys`` added."""
+    doc = copy.deepcopy(doc)
     for _ in range(data.draw(st.integers(1, 3), label="edits")):
         path = data.draw(st.sampled_from(list(_paths(doc))), label="path")
         parent = _parent(doc, path)
@@ -158,8 +154,29 @@ def test_damaged_structure_is_refused_or_loaded(
         elif action == "remove" and isinstance(parent, dict):
             del parent[path[-1]]
         elif isinstance(parent, dict):
-            key = data.draw(st.sampled_from(EXTRA_KEYS), label="key")
+            key = data.draw(st.sampled_from(keys), label="key")
             parent[key] = copy.deepcopy(data.draw(values, label="value"))
+    return doc
+
+
+def damage_bytes(data: st.DataObject, text: bytes, tokens: list[bytes]) -> bytes:
+    """``text`` with 1-3 spans replaced by one of ``tokens`` or random bytes."""
+    damaged = bytearray(text)
+    for _ in range(data.draw(st.integers(1, 3), label="edits")):
+        at = data.draw(st.integers(0, len(damaged) - 1), label="at")
+        length = data.draw(st.integers(0, 12), label="length")
+        new = data.draw(st.one_of(st.sampled_from(tokens), st.binary(max_size=6)))
+        damaged[at : at + length] = new
+    return bytes(damaged)
+
+
+@FUZZ
+@given(data=st.data())
+def test_damaged_structure_is_refused_or_loaded(
+    folder: Path, data: st.DataObject
+) -> None:
+    source = data.draw(st.sampled_from(SOURCES), label="scenario")
+    doc = damage_structure(data, yaml.safe_load(source.read_text()), EXTRA_KEYS)
     case = folder / "fuzz_case.yaml"
     case.write_text(yaml.safe_dump(doc, allow_unicode=True))
     load_or_refuse(case)
@@ -196,14 +213,8 @@ TOKENS = [
 @given(data=st.data())
 def test_damaged_bytes_are_refused_or_loaded(folder: Path, data: st.DataObject) -> None:
     source = data.draw(st.sampled_from(SOURCES), label="scenario")
-    text = bytearray(source.read_bytes())
-    for _ in range(data.draw(st.integers(1, 3), label="edits")):
-        at = data.draw(st.integers(0, len(text) - 1), label="at")
-        length = data.draw(st.integers(0, 12), label="length")
-        new = data.draw(st.one_of(st.sampled_from(TOKENS), st.binary(max_size=6)))
-        text[at : at + length] = new
     case = folder / "fuzz_case.yaml"
-    case.write_bytes(bytes(text))
+    case.write_bytes(damage_bytes(data, source.read_bytes(), TOKENS))
     load_or_refuse(case)
 
 

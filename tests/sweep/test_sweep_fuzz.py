@@ -14,7 +14,6 @@ failing file is written to ``out/fuzz/``; add it to
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import shutil
 import signal
@@ -34,9 +33,8 @@ from tests.engine.test_loader_fuzz import (
     TOKENS,
     HangError,
     _alarm,
-    _parent,
-    _paths,
-    values,
+    damage_bytes,
+    damage_structure,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -89,20 +87,8 @@ def test_damaged_sweep_structure_is_refused_or_loaded(
 ) -> None:
     """Values replaced by other types and sizes, keys removed or added: no traceback."""
     source = data.draw(st.sampled_from(SOURCES), label="sweep")
-    doc = copy.deepcopy(yaml.safe_load(source.read_text()))
-    for _ in range(data.draw(st.integers(1, 3), label="edits")):
-        path = data.draw(st.sampled_from(list(_paths(doc))), label="path")
-        parent = _parent(doc, path)
-        action = data.draw(st.sampled_from(["replace", "remove", "add"]), label="edit")
-        if action == "replace":
-            parent[path[-1]] = copy.deepcopy(data.draw(values, label="value"))
-        elif action == "remove" and isinstance(parent, dict):
-            del parent[path[-1]]
-        elif isinstance(parent, dict):
-            keys = st.sampled_from(SWEEP_KEYS + EXTRA_KEYS)
-            parent[data.draw(keys, label="key")] = copy.deepcopy(
-                data.draw(values, label="value")
-            )
+    keys = SWEEP_KEYS + EXTRA_KEYS
+    doc = damage_structure(data, yaml.safe_load(source.read_text()), keys)
     case = folder / "fuzz_case.yaml"
     case.write_text(yaml.safe_dump(doc, allow_unicode=True))
     refuse_or_expand(case)
@@ -115,15 +101,9 @@ def test_damaged_sweep_bytes_are_refused_or_loaded(
 ) -> None:
     """Special YAML tokens, random bytes and cut lines: no traceback, no hang."""
     source = data.draw(st.sampled_from(SOURCES), label="sweep")
-    text = bytearray(source.read_bytes())
-    for _ in range(data.draw(st.integers(1, 3), label="edits")):
-        at = data.draw(st.integers(0, len(text) - 1), label="at")
-        length = data.draw(st.integers(0, 12), label="length")
-        tokens = [*TOKENS, b"1e400", b"-.inf", b"1000000000000", b"../../", b"[]"]
-        new = data.draw(st.one_of(st.sampled_from(tokens), st.binary(max_size=6)))
-        text[at : at + length] = new
+    tokens = [*TOKENS, b"1e400", b"-.inf", b"1000000000000", b"../../", b"[]"]
     case = folder / "fuzz_case.yaml"
-    case.write_bytes(bytes(text))
+    case.write_bytes(damage_bytes(data, source.read_bytes(), tokens))
     refuse_or_expand(case)
 
 
