@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.test_robot_init import POST_SCENARIO
+
 ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.slow
@@ -111,23 +113,9 @@ def test_a_scenario_includes_cat_by_name_and_brings_a_urdf(
         "200",
         cwd=tmp_path,
     )
+    # The post scenario of the robot-init tests, shorter.
     (tmp_path / "s.yaml").write_text(
-        textwrap.dedent(
-            """\
-            name: xarm_post
-            include: cat
-            robot: {name: arm}
-            duration: 3.0
-            goal:
-              type: keyframes
-              keyframes:
-                - {t: 0.3, pose: {position: [0.35, -0.25, 0.25], rpy_deg: [180, 0, 0]}}
-                - {t: 1.0, pose: {position: [0.35, 0.25, 0.25], rpy_deg: [180, 0, 0]}}
-            world:
-              objects:
-                - {name: post, shape: cylinder, size: [0.04, 0.3], pose: {position: [0.45, 0.0, 0.15]}}
-            """
-        )
+        POST_SCENARIO.replace("duration: 6.0", "duration: 3.0")
     )
     sub = tmp_path / "elsewhere"
     sub.mkdir()
