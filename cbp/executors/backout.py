@@ -59,11 +59,14 @@ def back_out(
         touches no obstacle there), and the depth at ``q`` [m].
     """
     robot = world.geometry.robot
-    contacts = world.check(q).contacts
+    state = RobotState(robot, q)
+    # The contacts there as they are: ``query``, not ``check``, so that the
+    # contacts a planner's rejected step carried over are neither counted nor
+    # taken from the planner's next query.
+    contacts = world.query(state)
     depth = contact_depth(world, contacts)
     if depth <= 0.0:
         return None, 0.0
-    state = RobotState(robot)
     joints = np.array([s.joint_id for s in world.geometry.shapes], dtype=np.intp)
     support = robot.support[joints]
     lower, upper = robot.lower_limits, robot.upper_limits
@@ -74,7 +77,6 @@ def back_out(
         if not inside.any():
             break
         rows = np.zeros((int(np.count_nonzero(inside)), robot.nv))
-        state.update(path[-1])
         contact_jacobian_rows(
             obstacles.point[inside],
             obstacles.other_point[inside],
@@ -96,5 +98,6 @@ def back_out(
         following = robot.integrate(path[-1], dq)
         following = np.clip(following, lower, upper)
         path.append(following)
-        contacts = world.check(following).contacts
+        state.update(following)
+        contacts = world.query(state)
     return np.array(path), depth
