@@ -129,6 +129,8 @@ class GoalInput:
     ) -> None:
         """Nothing sampled yet."""
         self.source = source
+        # Asked once: changed() runs at every step of a planner's period.
+        self._live = source if isinstance(source, LiveGoalSource) else None
         self.task = task
         self._log = log
         self._world = world
@@ -216,7 +218,7 @@ class GoalInput:
         Only a live source can (:class:`~cbp.goals.LiveGoalSource`); a
         scenario's stream is sampled at its rate.
         """
-        return isinstance(self.source, LiveGoalSource) and self.source.changed()
+        return self._live is not None and self._live.changed()
 
     def send(self, t: float) -> pin.SE3 | None:
         """Sample the goal at ``t`` and hand it to the goal task."""
