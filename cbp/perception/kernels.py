@@ -428,7 +428,8 @@ def insert_readings(
     hold: float,
     held: FloatArray,
     spread: FloatArray,
-) -> tuple[int, int, int, int]:
+    entered: np.ndarray,
+) -> tuple[int, int, int, int, int]:
     """Mark the cells depth readings fall in occupied; count valid, robot, inserted.
 
     Each pixel that holds a reading nearer than the far plane is unprojected
@@ -456,8 +457,13 @@ def insert_readings(
     after (``t``: the frame's time); then the
     nearer range is what the camera sees free along the pixel.
 
+    The cells those nearer readings fall in are where something entered space
+    the camera saw free: a moving obstacle's leading surface. Their flat grid
+    indices (``(i * ny + j) * nz + k``) are written to ``entered``, as many as
+    it holds.
+
     Returns (pixels holding a reading, readings taken for the robot, readings
-    inserted, cells hidden).
+    inserted, cells hidden, cells entered).
     """
     h, w = depth.shape
     nx, ny, nz = grid.shape
@@ -466,6 +472,7 @@ def insert_readings(
     robot = 0
     inserted = 0
     hidden = 0
+    n_entered = 0
     seen_to, last, moved_at = moved
     track = seen_to.shape[0] == h
     gap = 2.0 * cell
@@ -509,12 +516,14 @@ def insert_readings(
                 if track:  # seen free up to the robot; it hides nothing new
                     seen_to[r, c] = max(seen_to[r, c], distance)
                 continue
+            came = False
             if track:
                 if abs(distance - last[r, c]) > 0.5 * cell + extra:
                     moved_at[r, c] = t
                 last[r, c] = distance
                 # Two readings of a still surface differ by sqrt(2) sigma.
                 if distance < seen_to[r, c] - gap - math.sqrt(2.0) * extra:
+                    came = True
                     hidden += _hide_ray(
                         camera,
                         dx / distance,
@@ -547,7 +556,10 @@ def insert_readings(
             if grid[i, j, k] != OCCUPIED:
                 grid[i, j, k] = OCCUPIED
                 dirty[i // brick, j // brick, k // brick] = True
-    return valid, robot, inserted, hidden
+            if came and n_entered < entered.shape[0]:
+                entered[n_entered] = (i * ny + j) * nz + k
+                n_entered += 1
+    return valid, robot, inserted, hidden, n_entered
 
 
 @numba.njit(cache=True, nogil=True)

@@ -66,6 +66,7 @@ from cbp.perception.frame import (
 )
 from cbp.perception.mapper import Publication, SnapshotPublisher, cluster_motion
 from cbp.perception.motion import ApproachEstimator, MovingCluster, swept_snapshot
+from cbp.perception.moving import with_moving
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
@@ -182,6 +183,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         self._sent = 0
         self._speeds: FloatArray | None = None
         self._moving: list[MovingCluster] = []
+        self._entered: FloatArray = np.zeros((0, 3))
         self._mapped: OccupancyEnvironment | None = None
         self._process: BaseProcess | None = None
         self._receiver: threading.Thread | None = None
@@ -343,8 +345,8 @@ class ProcessMapUpdater(SnapshotPublisher):
             with self._lock:
                 for message in messages:
                     if message[0] == "snapshot":
-                        self._done += message[6]
-                        self.skipped += message[7]
+                        self._done += message[7]
+                        self.skipped += message[8]
                     elif message[0] == "error":
                         self._done += message[2]
                 self._lock.notify_all()
@@ -362,7 +364,7 @@ class ProcessMapUpdater(SnapshotPublisher):
 
     def _take(self, message: tuple[Any, ...]) -> None:
         """Copy a snapshot out of its slot, hand the slot back, adopt it."""
-        _, slot, n, stamp, speeds, moving, _, _, timings = message
+        _, slot, n, stamp, speeds, moving, entered, _, _, timings = message
         layout = self._layout
         buf = self._segments[1 + slot].buf
         blocked = np.ndarray(
@@ -377,7 +379,9 @@ class ProcessMapUpdater(SnapshotPublisher):
         del buf
         self._send(("free", slot))
         try:
-            self._adopt(centres, start, blocked, stamp, speeds, moving, timings)
+            self._adopt(
+                centres, start, blocked, stamp, speeds, moving, entered, timings
+            )
         except Exception as exc:  # reported, the previous map kept
             self.error = RuntimeError(f"failed, previous map kept: {exc!r}")
 
@@ -389,6 +393,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         stamp: float,
         speeds: FloatArray | None,
         moving: list[MovingCluster],
+        entered: FloatArray,
         timings: tuple[float, float, float, int],
     ) -> None:
         """Swap the snapshot into the world, measured ahead by speed x time."""
@@ -397,6 +402,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         self._mapped = mapped
         self._speeds = speeds
         self._moving = moving
+        self._entered = entered
         self.world.set_environment(self._ahead(mapped))
         self.stamp = max(self.stamp, stamp)
         self.updates += 1
@@ -418,9 +424,16 @@ class ProcessMapUpdater(SnapshotPublisher):
         speeds = self._speeds
         horizon = self.look_ahead + max(0.0, self.submitted_t - (mapped.stamp or 0.0))
         out = swept_snapshot(mapped, self._moving, horizon, self.grid.lower)
-        if speeds is None or not np.any(speeds > 0):
-            return out
-        out = out.ahead(speeds * horizon)
+        if speeds is not None and np.any(speeds > 0):
+            out = out.ahead(speeds * horizon)
+        grid = self.grid
+        out = with_moving(
+            out,
+            self._entered,
+            grid.spec.moving_speed * horizon,
+            grid.cells,
+            grid.lower,
+        )
         out.stamp = mapped.stamp
         return out
 
@@ -582,6 +595,7 @@ def _child(setup: _Setup, wake: Any, conn: Connection) -> None:
                                 0,
                             )
                         )
+                entered = grid.moving_centres(stamp)
                 mapped = new
                 done = time.perf_counter()
             except Exception as exc:  # reported, the previous map kept
@@ -604,6 +618,7 @@ def _child(setup: _Setup, wake: Any, conn: Connection) -> None:
                     stamp,
                     speeds,
                     moving,
+                    entered,
                     taken,
                     skipped,
                     (received, integrated - received, done - integrated, len(pending)),

@@ -32,6 +32,7 @@ from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.perception.frame import DepthFrame
 from cbp.perception.motion import ApproachEstimator, ClusterMotion, swept_snapshot
+from cbp.perception.moving import with_moving
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
@@ -243,6 +244,13 @@ class MapUpdater(SnapshotPublisher):
                     f"approach estimate failed, map published without it: {exc}"
                 )
         self._mapped = mapped
+        published = with_moving(
+            published,
+            self.grid.moving_centres(stamp),
+            self.grid.spec.moving_speed * self.look_ahead,
+            self.grid.cells,
+            self.grid.lower,
+        )
         published.stamp = stamp
         self.world.set_environment(published)
         self.stamp = max(self.stamp, stamp)

@@ -71,6 +71,9 @@ __all__ = ["FrameSummary", "OccupancyGrid"]
 #: presence frees unseen space (and one cell more) [m].
 NEARBY_MARGIN = 0.02
 
+#: The most cells one frame reports entered (a frame's moving surfaces).
+MAX_ENTERED = 65536
+
 #: The self-filter's shapes when there is no robot: planes, plane starts,
 #: sphere centres and radii, reach (as ``insert_readings`` takes them).
 _NO_ROBOT = (
@@ -126,6 +129,13 @@ class OccupancyGrid:
         hidden_cells: free cells made unknown again because something came
             between them and a camera, over all frames.
         last: the last frame's :class:`FrameSummary`.
+
+    Moving obstacles: a reading that comes nearer than the space its pixel saw
+    free (the same test that hides the space behind it) falls in a cell that
+    something *entered*. Those cells are kept with the time they were last
+    entered; :meth:`moving_centres` gives the ones still occupied and entered
+    within ``shadow_hold`` seconds: the leading surfaces of what moves, which
+    the map updaters measure ahead (:mod:`cbp.perception.moving`).
     """
 
     def __init__(self, spec: PerceptionSpec, geometry: RobotGeometry | None) -> None:
@@ -178,6 +188,10 @@ class OccupancyGrid:
             if geometry is not None
             else np.zeros(0)
         )
+        # The cells entered by a frame (the kernel's output), and those entered
+        # lately: flat indices and the last time each was entered [s].
+        self._entered = np.empty(MAX_ENTERED, np.int64)
+        self._recent = (np.zeros(0, np.int64), np.zeros(0))
 
     # ------------------------------------------------------------------ copies
 
@@ -199,6 +213,8 @@ class OccupancyGrid:
         state["misses"] = self.misses.copy()
         state["_dirty"] = self._dirty.copy()
         state["_moved"] = {}
+        state["_entered"] = np.empty(MAX_ENTERED, np.int64)
+        state["_recent"] = (np.zeros(0, np.int64), np.zeros(0))
         out = OccupancyGrid.__new__(OccupancyGrid)
         out.__dict__.update(state)
         return out
@@ -209,6 +225,32 @@ class OccupancyGrid:
         """Centres of the cells in ``state`` (N, 3) [m] (default: occupied)."""
         idx = np.argwhere(self.cells == state)
         return np.asarray(self.lower + (idx + 0.5) * self.cell)
+
+    def moving_centres(self, t: float) -> FloatArray:
+        """Centres of the occupied cells something entered lately (N, 3) [m].
+
+        Entered (see the class) at most ``shadow_hold`` seconds before ``t``,
+        and occupied still: what moves into space the cameras saw free.
+        """
+        flat, when = self._recent
+        keep = when >= t - self.spec.shadow_hold
+        flat = flat[keep]
+        ijk = np.stack(np.unravel_index(flat, self.shape), axis=1)
+        if len(flat):
+            ijk = ijk[self.cells.reshape(-1)[flat] == OCCUPIED]
+        return np.asarray(self.lower + (ijk + 0.5) * self.cell).reshape(-1, 3)
+
+    def _remember_entered(self, n: int, t: float) -> None:
+        """Keep the ``n`` cells the last frame entered, at time ``t``."""
+        flat, when = self._recent
+        keep = when >= t - self.spec.shadow_hold
+        flat, when = flat[keep], when[keep]
+        if n:
+            new = np.unique(self._entered[:n])
+            old = ~np.isin(flat, new)
+            flat = np.concatenate([flat[old], new])
+            when = np.concatenate([when[old], np.full(len(new), t)])
+        self._recent = (flat, when)
 
     def count(self, state: int) -> int:
         """Number of cells in ``state``."""
@@ -259,7 +301,7 @@ class OccupancyGrid:
         limits = frame.buffer_limits
         seen = self._see_through(frame, depth, limits)
         nearest, far_plane, far_buffer = limits
-        valid, removed, inserted, hidden = insert_readings(
+        valid, removed, inserted, hidden, entered = insert_readings(
             depth,
             frame.unprojection,
             nearest,
@@ -279,7 +321,10 @@ class OccupancyGrid:
             self.spec.shadow_hold,
             self._held,
             self._spread(frame),
+            self._entered,
         )
+        if t is not None:
+            self._remember_entered(entered, t)
         self.robot_points_removed += removed
         self.hidden_cells += hidden
         self.frames += 1

@@ -265,6 +265,16 @@ class PerceptionSpec:
     measured on its own, not hidden by a nearer static one as in the per-shape
     approach estimate (which stays on). Needs ``motion_window`` > 0 and
     ``collision.predict_motion``."""
+    moving_speed: float = 0.25
+    """How fast an obstacle the cameras see moving is assumed to come [m/s].
+    Cells something entered (space a fixed camera saw free, now behind a
+    nearer reading) within ``shadow_hold`` are measured this speed times the
+    look-ahead (and the snapshot's age) nearer, in every direction
+    (:mod:`cbp.perception.moving`): the arm keeps the separation it needs to
+    get away from an obstacle at that speed, as speed and separation
+    monitoring counts it. Set it to the fastest obstacle the robot must outrun;
+    an obstacle faster than the arm can retreat is reported as it comes
+    (``docs/moving_scenes.md``). 0: moving cells are measured where they are."""
     shadow_hold: float = 1.0
     """Space a fixed camera saw free and now sees hidden behind a nearer
     surface (something came between: an obstacle moved in) is unknown again,
@@ -316,6 +326,10 @@ class PerceptionSpec:
             raise ConfigError(
                 f"camera names must be unique; repeated: {', '.join(repeated)}",
                 "cameras",
+            )
+        if not 0.0 <= self.moving_speed <= 10.0:
+            raise ConfigError(
+                f"must be in [0, 10] m/s, got {self.moving_speed}", "moving_speed"
             )
         if not 0.0 <= self.shadow_hold <= 60.0:
             raise ConfigError(

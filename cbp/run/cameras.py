@@ -30,6 +30,7 @@ from cbp.perception.plausibility import FrameCheck, PlausibilityLimits
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import FloatArray
 from cbp.run.events import RunLog
+from cbp.run.separation import SeparationMonitor
 from cbp.sim.camera import DepthCamera
 from cbp.sim.simulation import Simulation
 from cbp.state import RobotState
@@ -110,6 +111,8 @@ class Cameras:
             grid, world, synchronous=clock == "virtual", estimator=estimator
         )
         self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
+        #: Says when a moving obstacle comes nearer than the arm can afford.
+        self.separation = SeparationMonitor(world, log, spec.moving_speed)
 
     @property
     def grid(self) -> OccupancyGrid:
@@ -150,6 +153,7 @@ class Cameras:
                 error, self.mapper.error = self.mapper.error, None
                 self._log.event(sim.t, f"map update: {error}")
             due[i] += 1.0 / self.cameras[i].spec.rate_hz
+        self.separation.check(sim.t, sim.q)
 
     def hold_reason(self, t: float) -> str | None:
         """Why the robot must hold at ``t``, or None.

@@ -12,6 +12,7 @@ from cbp.collision.checker import FreeSpaceChecker
 from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.mapper import MapUpdater
+from cbp.perception.moving import with_moving
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, DepthNoise, PerceptionSpec
 from cbp.scenario import ObjectSpec
@@ -341,14 +342,16 @@ PLATE = ObjectSpec(
 )
 
 
-def _plate_comes_between(scene, robots, spec: PerceptionSpec, moved: bool = False):
+def _plate_comes_between(
+    scene, robots, spec: PerceptionSpec, moved: bool = False, plate: ObjectSpec = PLATE
+):
     """Two frames of FRONT, the plate added between them; the grid after."""
     robot = robots["panda"]
     grid = OccupancyGrid(spec, RobotGeometry(robot))
     state = RobotState(robot, robot.home())
     grid.integrate(DepthCamera(scene.client, FRONT).capture(), state, 0.0)
     assert grid.state_at(BEFORE)[0] == FREE
-    scene.add_object(PLATE, PLATE.pose.to_se3())
+    scene.add_object(plate, plate.pose.to_se3())
     camera = replace(FRONT, position=(0.61, -1.2, 0.3)) if moved else FRONT
     try:
         frame = DepthCamera(scene.client, camera).capture()
@@ -398,3 +401,76 @@ def test_a_static_scene_hides_nothing(scene, robots) -> None:
         for name in ("front", "side"):
             summary = grid.integrate(camera[name].capture(), state, 0.1 * k)
             assert summary.hidden == 0, (k, name)
+
+
+#: The plate inside the map's bounds (PLATE's face toward the camera is not).
+INNER_PLATE = replace(PLATE, pose=Pose(position=(0.6, -0.45, 0.15)))
+
+
+def test_cells_something_entered_are_moving_for_a_while(scene, robots) -> None:
+    """Readings nearer than the space seen free mark moving cells, for shadow_hold."""
+    grid, _, _ = _plate_comes_between(scene, robots, SPEC, plate=INNER_PLATE)
+    moving = grid.moving_centres(0.1)
+    assert len(moving) > 20
+    # The plate's face toward the camera, and nothing else.
+    y = INNER_PLATE.pose.position[1]
+    assert np.all(np.abs(moving[:, 1] - y) <= 0.01 + SPEC.cell_size)
+    assert len(grid.moving_centres(0.1 + SPEC.shadow_hold + 0.05)) == 0
+    # A camera on the robot, or one that moved, tells nothing of what moves.
+    for moved, spec in (
+        (True, SPEC),
+        (False, replace(SPEC, cameras=[CameraSpec(name="front", parent="panda_hand")])),
+    ):
+        grid, _, _ = _plate_comes_between(
+            scene, robots, spec, moved=moved, plate=INNER_PLATE
+        )
+        assert len(grid.moving_centres(0.1)) == 0
+
+
+def test_a_static_scene_has_no_moving_cells(scene, robots) -> None:
+    robot = robots["panda"]
+    grid = OccupancyGrid(replace(SPEC, cameras=[FRONT, SIDE]), RobotGeometry(robot))
+    camera = {c.name: DepthCamera(scene.client, c) for c in (FRONT, SIDE)}
+    for k, q in enumerate(np.linspace(robot.home(), robot.home() + 0.3, 6)):
+        scene.set_configuration(q)
+        state = RobotState(robot, q)
+        for name in ("front", "side"):
+            grid.integrate(camera[name].capture(), state, 0.1 * k)
+    assert len(grid.moving_centres(0.5)) == 0
+
+
+def test_moving_cells_are_met_ahead_and_unseen_space_gives_way(scene, robots) -> None:
+    """The moving cells' contacts come growth nearer; unknown ones drop out then."""
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(SPEC, geometry)
+    state = RobotState(robot, robot.home())
+    grid.integrate(DepthCamera(scene.client, FRONT).capture(), state, 0.0)
+    hand = state.data.oMf[robot.frame_id("panda_hand")].translation
+    plate = replace(PLATE, pose=Pose(position=(hand[0], -0.25, hand[2])))
+    scene.add_object(plate, plate.pose.to_se3())
+    try:
+        grid.integrate(DepthCamera(scene.client, FRONT).capture(), state, 0.1)
+    finally:
+        scene.remove_object("plate")
+    mapped = grid.environment()
+    centres = grid.moving_centres(0.1)
+    assert len(centres)
+    world = CollisionWorld(geometry, mapped)
+    still = world.query(state)
+    unknown = grid.state_at(still.other_point - 0.25 * grid.cell * still.normal)
+    assert np.any(unknown == UNKNOWN)  # the plate's shadow reaches the hand
+    # Far ahead (0.3 m): the plate's cells reach the hand's margin.
+    ahead = with_moving(mapped, centres, 0.3, grid.cells, grid.lower)
+    met = world.query(state, ahead)
+    inner = met.other_point - 0.25 * grid.cell * met.normal
+    assert not np.any(grid.state_at(inner) == UNKNOWN)
+    near_plate = np.abs(met.other_point[:, 1] - plate.pose.position[1]) < 0.03
+    assert np.any(near_plate)
+    assert np.min(met.distance[near_plate]) < np.min(met.distance) + 1e-9
+    # Not far enough ahead to reach: the map's contacts as they were.
+    short = world.query(
+        state, with_moving(mapped, centres, 0.01, grid.cells, grid.lower)
+    )
+    assert len(short) == len(still)
+    np.testing.assert_allclose(np.sort(short.distance), np.sort(still.distance))

@@ -1,0 +1,123 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Moving cells measured ahead: an obstacle that comes is met where it will be.
+
+The map knows where a moving obstacle's leading surface is, not where it will
+be when the plan made now has run. The cameras do tell *which* cells move: a
+fixed camera's reading that comes nearer than the space its pixel saw free
+falls in a cell something entered (:meth:`OccupancyGrid.moving_centres
+<cbp.perception.occupancy.OccupancyGrid.moving_centres>`). Those cells, and
+only those, are measured nearer by how far an obstacle at the assumed speed
+(``perception.moving_speed``) comes over the look-ahead and the snapshot's
+age, in every direction: the robot keeps clear of the whole region the
+obstacle can reach by then, as speed and separation monitoring (ISO/TS 15066)
+counts the separation the robot needs against an assumed approach speed.
+
+While a moving cell is that near the robot, space no camera has seen gives
+way: the snapshot's contacts with unknown cells are left out, so the arm may
+retreat into its own shadow rather than be pinned between an obstacle it sees
+come and space it has not seen (what gives way first: physical limits hold,
+then seen obstacles, then unseen space).
+
+Unlike the per-shape approach estimate
+(:class:`~cbp.perception.motion.ApproachEstimator`), which follows each robot
+shape's *nearest* obstacle, a moving cell is measured on its own: space no
+camera has seen, or a static obstacle, nearer to the arm does not hide it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cbp.collision.contacts import ContactSet
+from cbp.collision.geometry import PlacedShapes
+from cbp.collision.map_environment import OccupancyEnvironment
+from cbp.perception.kernels import UNKNOWN
+from cbp.robot import FloatArray
+
+__all__ = ["MovingCellsEnvironment", "with_moving"]
+
+
+class MovingCellsEnvironment(OccupancyEnvironment):
+    """A map snapshot whose moving cells are measured ``growth`` nearer.
+
+    The snapshot's contacts, and the moving cells' contacts, found within the
+    margin plus ``growth`` and reported ``growth`` nearer. Everything else
+    (planners' checks, :meth:`inside`, the stamp) is the snapshot's.
+
+    Attributes:
+        moving: the moving cells, as an environment of their own.
+        growth: how much nearer they are measured [m].
+        states: the grid's cell states (live: the map's own array), which tell
+            unknown cells from occupied ones.
+        lower: the grid's lower corner [m].
+    """
+
+    moving: OccupancyEnvironment
+    growth: float
+    states: np.ndarray
+    lower: FloatArray
+
+    def query(self, robot: PlacedShapes, margin: float, per_shape: int) -> ContactSet:
+        """The snapshot's contacts and the moving cells' ones, ``growth`` nearer.
+
+        With a moving cell's contact, the snapshot's contacts with unknown
+        cells are left out (the module's docstring).
+        """
+        mapped = super().query(robot, margin, per_shape)
+        ahead = self.moving.query(robot, margin + self.growth, per_shape)
+        if not len(ahead):
+            return mapped
+        ahead.distance = ahead.distance - self.growth
+        return ContactSet.concatenate([self._seen(mapped), ahead])
+
+    def _seen(self, contacts: ContactSet) -> ContactSet:
+        """``contacts`` less those with unknown cells."""
+        if not len(contacts):
+            return contacts
+        # A contact's obstacle point lies on its cell's surface toward the
+        # shape: a quarter cell back along the normal is inside the cell.
+        inner = contacts.other_point - 0.25 * self.cell * contacts.normal
+        ijk = np.floor((inner - self.lower) / self.cell).astype(np.intp)
+        shape = np.array(self.states.shape)
+        inside = np.all((ijk >= 0) & (ijk < shape), axis=1)
+        state = np.full(len(ijk), UNKNOWN + 1, dtype=np.int64)
+        i = ijk[inside]
+        state[inside] = self.states[i[:, 0], i[:, 1], i[:, 2]]
+        keep = state != UNKNOWN
+        if keep.all():
+            return contacts
+        return ContactSet(
+            contacts.shape[keep],
+            contacts.other_shape[keep],
+            contacts.point[keep],
+            contacts.other_point[keep],
+            contacts.normal[keep],
+            contacts.distance[keep],
+        )
+
+
+def with_moving(
+    mapped: OccupancyEnvironment,
+    centres: FloatArray,
+    growth: float,
+    states: np.ndarray,
+    lower: FloatArray,
+) -> OccupancyEnvironment:
+    """``mapped`` with the cells at ``centres`` (N, 3) measured ``growth`` nearer.
+
+    ``states`` and ``lower``: the grid's cell states and lower corner (see
+    :class:`MovingCellsEnvironment`).
+
+    ``mapped`` itself when no cell moves or ``growth`` is 0; else a new
+    snapshot object (its users tell snapshots apart by identity) sharing the
+    snapshot's cells, index and stamp.
+    """
+    if not len(centres) or not growth > 0.0:
+        return mapped
+    out = MovingCellsEnvironment.__new__(MovingCellsEnvironment)
+    out.__dict__.update(mapped.__dict__)
+    out.moving = OccupancyEnvironment(centres, mapped.cell, mapped.refiner)
+    out.growth = float(growth)
+    out.states = states
+    out.lower = np.asarray(lower, dtype=float)
+    return out
