@@ -52,7 +52,7 @@ from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection, wait
 from multiprocessing.process import BaseProcess
 from multiprocessing.shared_memory import SharedMemory
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -109,6 +109,20 @@ class _Layout:
     def size(self) -> int:
         """Bytes in a slot (untouched pages cost no memory)."""
         return self.centres + 24 * self.cells
+
+
+class _Snapshot(NamedTuple):
+    """The child's word that a snapshot is in a slot, and what goes with it."""
+
+    slot: int
+    cells: int  # shell cells written
+    stamp: float  # capture time of its newest frame [s of the run's clock]
+    speeds: FloatArray | None  # the approach estimate per robot shape [m/s]
+    moving: list[MovingCluster]  # clusters that move (cluster_motion)
+    entered: FloatArray  # centres of the cells something entered lately
+    taken: int  # frames it took in
+    skipped: int  # frames replaced before it took them
+    timings: tuple[float, float, float, int]  # received, integrate, snapshot, n
 
 
 def _aligned(n: int) -> int:
@@ -334,20 +348,20 @@ class ProcessMapUpdater(SnapshotPublisher):
                     process.join(1.0)
                     self._fail(f"the map process ended (exit code {process.exitcode})")
                 return
-            snapshots = [m for m in messages if m[0] == "snapshot"]
+            snapshots: list[_Snapshot] = [m[1] for m in messages if m[0] == "snapshot"]
             for message in messages:
                 if message[0] == "error":
                     self.error = RuntimeError(message[1])
-            for message in snapshots[:-1]:  # older than the newest: unread
-                self._send(("free", message[1]))
+            for snapshot in snapshots[:-1]:  # older than the newest: unread
+                self._send(("free", snapshot.slot))
             if snapshots:
                 self._take(snapshots[-1])
             with self._lock:
+                for snapshot in snapshots:
+                    self._done += snapshot.taken
+                    self.skipped += snapshot.skipped
                 for message in messages:
-                    if message[0] == "snapshot":
-                        self._done += message[7]
-                        self.skipped += message[8]
-                    elif message[0] == "error":
+                    if message[0] == "error":
                         self._done += message[2]
                 self._lock.notify_all()
 
@@ -362,11 +376,10 @@ class ProcessMapUpdater(SnapshotPublisher):
         with self._send_lock, contextlib.suppress(OSError, ValueError):
             conn.send(message)
 
-    def _take(self, message: tuple[Any, ...]) -> None:
+    def _take(self, snapshot: _Snapshot) -> None:
         """Copy a snapshot out of its slot, hand the slot back, adopt it."""
-        _, slot, n, stamp, speeds, moving, entered, _, _, timings = message
         layout = self._layout
-        buf = self._segments[1 + slot].buf
+        buf = self._segments[1 + snapshot.slot].buf
         blocked = np.ndarray(
             self.grid.shape, np.bool_, buffer=buf, offset=layout.blocked
         ).copy()
@@ -374,14 +387,12 @@ class ProcessMapUpdater(SnapshotPublisher):
             layout.bricks + 1, np.int64, buffer=buf, offset=layout.start
         ).copy()
         centres = np.ndarray(
-            (n, 3), np.float64, buffer=buf, offset=layout.centres
+            (snapshot.cells, 3), np.float64, buffer=buf, offset=layout.centres
         ).copy()
         del buf
-        self._send(("free", slot))
+        self._send(("free", snapshot.slot))
         try:
-            self._adopt(
-                centres, start, blocked, stamp, speeds, moving, entered, timings
-            )
+            self._adopt(centres, start, blocked, snapshot)
         except Exception as exc:  # reported, the previous map kept
             self.error = RuntimeError(f"failed, previous map kept: {exc!r}")
 
@@ -390,23 +401,20 @@ class ProcessMapUpdater(SnapshotPublisher):
         centres: FloatArray,
         start: np.ndarray,
         blocked: np.ndarray,
-        stamp: float,
-        speeds: FloatArray | None,
-        moving: list[MovingCluster],
-        entered: FloatArray,
-        timings: tuple[float, float, float, int],
+        snapshot: _Snapshot,
     ) -> None:
         """Swap the snapshot into the world, measured ahead by speed x time."""
+        stamp = snapshot.stamp
         mapped = self.grid.snapshot_of(centres, start, blocked)
         mapped.stamp = stamp
         self._mapped = mapped
-        self._speeds = speeds
-        self._moving = moving
-        self._entered = entered
+        self._speeds = snapshot.speeds
+        self._moving = snapshot.moving
+        self._entered = snapshot.entered
         self.world.set_environment(self._ahead(mapped))
         self.stamp = max(self.stamp, stamp)
         self.updates += 1
-        received, integrate_s, snapshot_s, frames = timings
+        received, integrate_s, snapshot_s, frames = snapshot.timings
         self.last_update_s = integrate_s + snapshot_s
         self.published.append(
             Publication(
@@ -610,18 +618,13 @@ def _child(setup: _Setup, wake: Any, conn: Connection) -> None:
                     return
             slot = free.pop(0)
             n = _write(slots[slot], setup.layout, new)
+            timings = (received, integrated - received, done - integrated, len(pending))
             conn.send(
                 (
                     "snapshot",
-                    slot,
-                    n,
-                    stamp,
-                    speeds,
-                    moving,
-                    entered,
-                    taken,
-                    skipped,
-                    (received, integrated - received, done - integrated, len(pending)),
+                    _Snapshot(
+                        slot, n, stamp, speeds, moving, entered, taken, skipped, timings
+                    ),
                 )
             )
     except (EOFError, BrokenPipeError, KeyboardInterrupt):
