@@ -66,6 +66,7 @@ class StepGuard:
             or np.isfinite(robot.upper_limits).any()
         )
         self._joint_name = joint_name
+        self._euclidean = bool(robot.is_euclidean)
 
     def check(
         self, q: FloatArray, dq: FloatArray, dt: float, v: FloatArray | None = None
@@ -98,6 +99,25 @@ class StepGuard:
         dq = np.ascontiguousarray(dq, dtype=float)
         if dq.shape != (robot.nv,):
             raise UnsafeStepError(f"step rejected: {dq.shape} values, not {robot.nv}")
+        if self._euclidean:
+            # Every check in one compiled call; the messages below only when
+            # one fails (the same checks, in the same order).
+            code, _, slowed = _euclidean_check(
+                q,
+                dq,
+                self.speed_bound,
+                float(dt),
+                self.acceleration_bound,
+                _NO_VELOCITY if v is None else v,
+                v is not None,
+                robot.lower_limits,
+                robot.upper_limits,
+                self.limit_tolerance,
+                self._has_limits,
+            )
+            if code == _SAFE:
+                return (dq if slowed == 1.0 else dq / slowed), slowed
+            slowed = 1.0
         i, worst = _speed_ratio(dq, self.speed_bound, float(dt))
         if i < 0:
             raise UnsafeStepError(
@@ -146,6 +166,54 @@ def _speed_ratio(dq: FloatArray, bound: FloatArray, dt: float) -> tuple[int, flo
         if ratio > worst:
             worst, at = ratio, i
     return at, worst
+
+
+#: What :func:`_euclidean_check` found: safe, or which check failed first.
+_SAFE, _NOT_FINITE, _GARBAGE, _ACCELERATES, _PAST_LIMITS = range(5)
+
+#: The velocity passed when there is none (not read).
+_NO_VELOCITY = np.zeros(0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _euclidean_check(
+    q: FloatArray,
+    dq: FloatArray,
+    speed: FloatArray,
+    dt: float,
+    acceleration: FloatArray,
+    v: FloatArray,
+    has_v: bool,
+    lower: FloatArray,
+    upper: FloatArray,
+    tol: float,
+    has_limits: bool,
+) -> tuple[int, int, float]:
+    """Every check of :meth:`StepGuard.check` for a robot whose q ⊕ dq is q + dq.
+
+    Returns (what it found, the coordinate, how many times too fast the step
+    was: it is to be slowed by that when safe).
+    """
+    at, worst = _speed_ratio(dq, speed, dt)
+    if at < 0:
+        return _NOT_FINITE, at, 1.0
+    if worst > GARBAGE_RATIO:
+        return _GARBAGE, at, worst
+    scale = 1.0 / worst if worst > 1.0 else 1.0
+    slowed = worst if worst > 1.0 else 1.0
+    if has_v:
+        for i in range(dq.size):
+            ratio = abs(dq[i] * scale / dt - v[i]) / (acceleration[i] * dt)
+            if ratio > 1.0:
+                return _ACCELERATES, i, slowed
+    if has_limits:
+        for i in range(q.size):
+            end = q[i] + dq[i] * scale
+            beyond = max(lower[i] - end, end - upper[i])
+            started = max(lower[i] - q[i], q[i] - upper[i])
+            if beyond > max(tol, started + 1e-12):
+                return _PAST_LIMITS, i, slowed
+    return _SAFE, -1, slowed
 
 
 @numba.njit(cache=True, nogil=True)
