@@ -8,7 +8,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from cbp.errors import CbpError, ConfigError
@@ -16,6 +16,7 @@ from cbp.teleop.goal_page import TeleopPage
 from cbp.teleop.goal_session import TeleopSession, latency_summary
 from cbp.teleop.input_session import InputSession
 from cbp.teleop.inputs_page import InputsPage
+from cbp.teleop.profiles import InputProfile
 
 __all__ = ["serve_teleop"]
 
@@ -49,6 +50,37 @@ def _stopping_on_signals(page: TeleopPage | InputsPage) -> Iterator[None]:
             signal.signal(s, handler)
 
 
+def _drive_with(
+    profile: InputProfile,
+    page: TeleopPage | InputsPage,
+    session: TeleopSession | InputSession,
+    host: str,
+) -> Callable[[], None]:
+    """Stream the profile's device from the page to the session; the way to stop."""
+    from cbp.teleop.device_link import DeviceLink, add_device_panel
+    from cbp.teleop.devices import DeviceDriver, GoalTarget, VelocityTarget
+
+    target = (
+        VelocityTarget(session)
+        if isinstance(session, InputSession)
+        else GoalTarget(session)
+    )
+    driver = DeviceDriver(profile, target)
+    link = DeviceLink(driver, host)
+    add_device_panel(page, profile, link)
+    driver.start()
+    print(
+        f"{profile.device}: read by the page, streamed to port {link.port}",
+        flush=True,
+    )
+
+    def stop() -> None:
+        link.close()
+        driver.stop()
+
+    return stop
+
+
 def serve_teleop(
     scenarios: list[Path],
     method: str,
@@ -56,6 +88,7 @@ def serve_teleop(
     port: int,
     out: Path | None,
     overrides: dict[str, str],
+    profile: InputProfile | None = None,
 ) -> int:
     """``cbp teleop``: serve the session until the page's stop, Ctrl-C or a signal.
 
@@ -67,6 +100,10 @@ def serve_teleop(
     configurations of one robot, switched on the page): an input session
     (:class:`InputsPage`). Then the outputs are written. Exit 2 for a scenario
     or method that cannot start (nothing runs).
+
+    With an input ``profile`` (``--device``, ``--profile``), the page also
+    reads that device and streams it to the session
+    (:mod:`cbp.teleop.device_link`), through its deadman.
     """
     from cbp.files import check_output_folder
     from cbp.scenario import load_scenario
@@ -93,6 +130,9 @@ def serve_teleop(
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
+    device = None
+    if profile is not None:
+        device = _drive_with(profile, page, inputs if velocity else session, host)
     print(
         f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)",
         flush=True,
@@ -100,6 +140,8 @@ def serve_teleop(
     try:
         with contextlib.suppress(KeyboardInterrupt), _stopping_on_signals(page):
             page.run()
+        if device is not None:
+            device()
         page.say("**Stopping**: the arm brakes to rest, then the session is saved.")
         if velocity:
             inputs.write(inputs.stop(), out)
