@@ -497,3 +497,101 @@ def test_a_gamepad_in_the_browser_drives_the_goal_while_its_deadman_is_held() ->
         page.close()
         session.stop()
     assert link.rejected == 0
+
+
+# A 6-DOF mouse behind WebHID: requestDevice() hands the page this device, and
+# window.cbpReport(id, values) makes it send an input report of int16 values.
+_INJECT_SPACEMOUSE = """
+const device = new EventTarget();
+device.opened = false;
+device.productName = 'injected SpaceMouse';
+device.open = () => { device.opened = true; return Promise.resolve(); };
+Object.defineProperty(navigator, 'hid', {configurable: true, value: {
+  requestDevice: () => Promise.resolve([device]),
+  getDevices: () => Promise.resolve([]),
+}});
+window.cbpReport = (id, values) => {
+  const data = new DataView(new ArrayBuffer(2 * values.length));
+  values.forEach((v, i) => data.setInt16(2 * i, v, true));
+  const event = new Event('inputreport');
+  event.reportId = id;
+  event.data = data;
+  device.dispatchEvent(event);
+};
+"""
+
+
+def _axes(driver: DeviceDriver) -> tuple[float, ...]:
+    """The axes of the latest state the driver received."""
+    latest = driver.latest
+    return () if latest is None else latest.axes
+
+
+@pytest.mark.slow
+def test_a_6dof_mouse_over_webhid_sets_the_orbit_velocity_while_shift_is_held() -> None:
+    """Chromium, a WebHID SpaceMouse, Shift as the deadman: orbit's user velocity."""
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    from cbp.teleop import InputSession
+    from cbp.teleop.device_link import DeviceLink, add_device_panel
+    from cbp.teleop.inputs_page import InputsPage
+
+    profile = load_profile("spacemouse")
+    session = InputSession([ROOT / "scenarios" / "youbot_orbit_case1.yaml"])
+    page = InputsPage(session, port=free_port())
+    driver = DeviceDriver(profile, VelocityTarget(session))
+    link = DeviceLink(driver)
+    add_device_panel(page, profile, link)
+    session.start()
+    page.start()
+    driver.start()
+    browser = headless_chromium()
+    velocity = session.inputs["youbot_orbit_case1"]
+
+    def status() -> str:
+        found = browser.find_elements(By.ID, "cbp-device-status")
+        return str(found[0].text) if found else ""
+
+    try:
+        browser.get(page.url)
+        assert _wait(lambda: "6-DOF mouse: none yet" in status(), 60), status()
+        browser.execute_script(_INJECT_SPACEMOUSE)
+        browser.find_element(
+            By.XPATH, "//button[normalize-space()='connect 6-DOF mouse']"
+        ).click()
+        assert _wait(lambda: "injected SpaceMouse" in status(), 10), status()
+        # The cap pushed right (x) and lifted (z, negative), both at full travel.
+        browser.execute_script("window.cbpReport(1, [350, 0, -350]);")
+        seen = driver.received
+        assert _wait(lambda: driver.received > seen + 5, 10)
+        assert not driver.engaged  # Shift is not held
+        ActionChains(browser).key_down(Keys.SHIFT).perform()
+        assert _wait(lambda: "deadman HELD" in status(), 10), status()
+        # Orbit commands the camera's y and z: push right -y, lift +z.
+        assert _wait(lambda: np.allclose(velocity["user_velocity"], [-0.1, 0.1]), 10), (
+            velocity["user_velocity"]
+        )
+        # A rotation report (2) sets the rotation, leaving the translation; a
+        # newer model's report 1 carries all six.
+        browser.execute_script("window.cbpReport(2, [0, 0, 175]);")
+        assert _wait(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 0.0, 0.5), 10)
+        np.testing.assert_allclose(velocity["user_velocity"], [-0.1, 0.1])
+        browser.execute_script("window.cbpReport(1, [350, 0, -350, 0, 700, 0]);")
+        assert _wait(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 1.0, 0.0), 10)
+        ActionChains(browser).key_up(Keys.SHIFT).perform()
+        assert _wait(
+            lambda: not driver.engaged and not velocity["user_velocity"].any(), 10
+        ), velocity["user_velocity"]
+        assert _wait(lambda: _last_device_event(session.events) in _BRAKES, 10), (
+            session.events[-3:]
+        )
+    finally:
+        browser.quit()
+        link.close()
+        driver.stop()
+        page.close()
+        session.stop()
+    assert "deadman held: injected SpaceMouse drives" in [m for _, m in session.events]

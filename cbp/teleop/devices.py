@@ -432,6 +432,12 @@ class DeviceDriver:
         return sent
 
     @property
+    def latest(self) -> DeviceState | None:
+        """The latest state received (None before the first)."""
+        with self._lock:
+            return self._state
+
+    @property
     def engaged(self) -> bool:
         """Whether the device moves the session now."""
         return self.deadman.engaged
