@@ -595,3 +595,55 @@ def test_a_6dof_mouse_over_webhid_sets_the_orbit_velocity_while_shift_is_held() 
         page.close()
         session.stop()
     assert "deadman held: injected SpaceMouse drives" in [m for _, m in session.events]
+
+
+@pytest.mark.slow
+def test_cbp_teleop_with_a_gamepad_records_what_the_device_did(tmp_path: Path) -> None:
+    """`cbp teleop --device gamepad`: its stream moves the goal; the log has the deadman."""
+    import csv
+    import signal
+    import subprocess
+    import sys
+
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    from websockets.sync.client import connect
+
+    out = tmp_path / "session"
+    command = ["teleop", str(BOARDS), "--device", "gamepad", "--out", str(out)]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "cbp", *command, "--port", str(free_port())],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        assert process.stdout is not None
+        said = ""
+        for _ in range(100):  # viser's banner, the device's port, the page's address
+            said += process.stdout.readline()
+            if "teleoperation of" in said:
+                break
+        assert "gamepad: read by the page, streamed to port" in said, said
+        port = int(said.split("streamed to port ")[1].split()[0])
+        forward = {"axes": [0, -1, 0, 0], "device": "cli pad", "keys": []}
+        with connect(f"ws://127.0.0.1:{port}/") as socket:
+            for held in [True] * 50 + [False] * 10:
+                buttons = [0] * 17
+                buttons[4] = int(held)
+                socket.send(json.dumps({**forward, "buttons": buttons}))
+                time.sleep(0.02)  # the page's pace; the outcome does not hang on it
+        process.send_signal(signal.SIGTERM)
+        rest, _ = process.communicate(timeout=300)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, rest
+    metrics = json.loads((out / "metrics.json").read_text())
+    messages = [e["message"] for e in metrics["cat"]["events"]]
+    held = messages.index("deadman held: cli pad drives")
+    assert any(m.startswith(_BRAKES) for m in messages[held + 1 :]), messages
+    with open(out / "operator_goal.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) > 1
+    x = [float(r["x"]) for r in rows]
+    assert x[-1] > x[0] + 0.01  # forward, at 0.1 m/s for most of a second
