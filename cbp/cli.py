@@ -199,6 +199,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="an input profile file (mapping, dead band, deadman) or a shipped "
         "profile's name; implies its device",
     )
+    teleop.add_argument(
+        "--hid",
+        action="store_true",
+        help="read the 6-DOF mouse in this process (hidapi, the hid extra) instead "
+        "of in the page (WebHID); its deadman must be one of its buttons",
+    )
     _add_set(
         teleop,
         "override a scenario value (as for run)",
@@ -275,6 +281,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.out,
             overrides,
             profile,
+            args.hid,
         )
     if args.command == "bench":
         return _bench(args.quick, args.out, args.results)

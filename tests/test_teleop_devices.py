@@ -647,3 +647,105 @@ def test_cbp_teleop_with_a_gamepad_records_what_the_device_did(tmp_path: Path) -
     assert len(rows) > 1
     x = [float(r["x"]) for r in rows]
     assert x[-1] > x[0] + 0.01  # forward, at 0.1 m/s for most of a second
+
+
+# ---------------------------------------------------------------- the server's HID
+
+
+def _report(kind: int, *values: int) -> list[int]:
+    """An input report as hidapi reads it: its id, then little-endian int16s."""
+    import struct
+
+    return [kind, *struct.pack(f"<{len(values)}h", *values)]
+
+
+def test_spacemouse_reports_set_the_axes_and_buttons_they_carry() -> None:
+    """Report 1: translation (or all six), 2: rotation, 3: button bits; clipped."""
+    from cbp.teleop.hid_reader import apply_report
+
+    axes, buttons = (0.0,) * 6, ()
+    axes, buttons = apply_report(axes, buttons, _report(1, 175, -350, 700))
+    assert axes == (0.5, -1.0, 1.0, 0.0, 0.0, 0.0)
+    axes, buttons = apply_report(axes, buttons, _report(2, 0, 35, -175))
+    assert axes == (0.5, -1.0, 1.0, 0.0, 0.1, -0.5)
+    axes, buttons = apply_report(axes, buttons, _report(1, 0, 0, 0, 350, 0, 0))
+    assert axes == (0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+    axes, buttons = apply_report(axes, buttons, [3, 0b10, 0])
+    assert buttons[:3] == (0.0, 1.0, 0.0)
+    assert len(buttons) == 32
+    assert apply_report(axes, buttons, [23, 1, 2]) == (axes, buttons)  # other ids
+    assert apply_report(axes, buttons, []) == (axes, buttons)
+
+
+class RecordedSpaceMouse:
+    """Replays input reports as hidapi's device gives them, then is unplugged."""
+
+    def __init__(self, reports: list[list[int]]) -> None:
+        """The reports to give, in order."""
+        self.reports = list(reports)
+        self.closed = False
+
+    def read(self, max_length: int, timeout_ms: int = 0) -> list[int]:
+        """The next report; OSError once they are all read (unplugged)."""
+        if not self.reports:
+            raise OSError("read error")
+        return self.reports.pop(0)[:max_length]
+
+    def close(self) -> None:
+        """Close the device."""
+        self.closed = True
+
+
+def test_a_spacemouse_read_by_the_server_drives_until_it_is_unplugged() -> None:
+    """Its button holds the deadman; unplugged, its stream stops and the goal brakes."""
+    from cbp.teleop.hid_reader import HidReader
+
+    session = TeleopSession(BOARDS, "cat")
+    try:
+        clock = VirtualClock()
+        driver = DeviceDriver(load_profile("spacemouse"), GoalTarget(session), clock)
+        device = RecordedSpaceMouse(
+            [[3, 0b1], _report(1, 0, -350, 0), [], _report(2, 0, 0, 0)]
+        )
+        reader = HidReader(driver, device, "recorded SpaceMouse")
+        deadline = time.monotonic() + 30
+        while reader.error is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert isinstance(reader.error, OSError)
+        assert reader.reads == 4
+        assert driver.received == 4
+        latest = driver.latest
+        assert latest is not None
+        assert latest.axes == (0.0, -1.0, 0.0, 0.0, 0.0, 0.0)  # pushed away: y -
+        start = session.goal.pose()[0]
+        assert not driver.step()  # engages; no time has passed
+        clock.advance(0.05)
+        assert driver.step()
+        np.testing.assert_allclose(
+            session.goal.pose()[0] - start, [0.1 * 0.05, 0, 0], atol=1e-12
+        )
+        clock.advance(0.1)  # nothing since: unplugged
+        assert not driver.step()
+        assert session.parts.log.events[-1][1].startswith("device silent for 150 ms")
+        reader.close()
+        assert device.closed
+    finally:
+        session.parts.close()
+
+
+def test_teleop_hid_needs_a_6dof_mouse_with_a_button_deadman(tmp_path: Path) -> None:
+    """`--hid` with a gamepad, a keys-only deadman or no device found: exit 2."""
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    result = run_cbp("teleop", str(BOARDS), "--device", "gamepad", "--hid")
+    assert result.returncode == 2
+    assert "--hid: reads a 6-DOF mouse only; the profile is a gamepad's" in (
+        result.stderr
+    )
+    keys = _write(tmp_path, "device: spacemouse\ndeadman: {key: Shift}\n")
+    result = run_cbp("teleop", str(BOARDS), "--profile", str(keys), "--hid")
+    assert result.returncode == 2
+    assert "deadman must be a device button" in result.stderr
+    result = run_cbp("teleop", str(BOARDS), "--device", "spacemouse", "--hid")
+    assert result.returncode == 2
+    # This machine has no SpaceMouse; without the hid extra, hidapi is missing.
+    assert "no SpaceMouse found" in result.stderr or "cbp[hid]" in result.stderr

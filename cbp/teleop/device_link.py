@@ -25,7 +25,12 @@ from pathlib import Path
 from typing import Any
 
 from cbp.errors import ConfigError
-from cbp.teleop.devices import DeviceDriver, parse_state
+from cbp.teleop.devices import (
+    SPACEMOUSE_FULL,
+    SPACEMOUSE_VENDORS,
+    DeviceDriver,
+    parse_state,
+)
 from cbp.teleop.profiles import InputProfile
 
 __all__ = ["READER", "SEND_PERIOD", "DeviceLink", "add_device_panel", "device_html"]
@@ -34,15 +39,20 @@ log = logging.getLogger(__name__)
 
 #: How often the page sends the device's state [ms].
 SEND_PERIOD = 20
-#: A 6-DOF mouse's axes read this much at full travel (3Dconnexion's range).
-SPACEMOUSE_FULL = 350
-#: The 6-DOF mice WebHID may open: 3Dconnexion's vendor ids (old, new).
-SPACEMOUSE_VENDORS = (0x046D, 0x256F)
 #: The largest message accepted [bytes].
 MAX_MESSAGE = 1 << 14
 
 #: The reader's script (installed once per page).
 READER = Path(__file__).with_name("device_reader.js")
+
+
+def _deadman_text(profile: InputProfile) -> str:
+    """What the deadman is, in words: ``button 4``, ``key Shift``, or both."""
+    deadman = profile.deadman
+    return " or ".join(
+        ([f"button {deadman.button}"] if deadman.button is not None else [])
+        + ([f"key {deadman.key}"] if deadman.key is not None else [])
+    )
 
 
 def device_html(profile: InputProfile, port: int) -> str:
@@ -54,10 +64,7 @@ def device_html(profile: InputProfile, port: int) -> str:
     """
     spacemouse = profile.device == "spacemouse"
     deadman = profile.deadman
-    held = " or ".join(
-        ([f"button {deadman.button}"] if deadman.button is not None else [])
-        + ([f"key {deadman.key}"] if deadman.key is not None else [])
-    )
+    held = _deadman_text(profile)
     config = {
         "port": port,
         "device": profile.device,
@@ -141,8 +148,17 @@ class DeviceLink:
         self._thread.join(5.0)
 
 
-def add_device_panel(page: Any, profile: InputProfile, link: DeviceLink) -> None:
-    """Add the device's section to a page's panel (the reader with it)."""
+def add_device_panel(page: Any, profile: InputProfile, link: DeviceLink | None) -> None:
+    """Add the device's section to a page's panel (the reader with it).
+
+    Without a link (the server reads the device), what to hold only.
+    """
     gui = page.server.gui
     with gui.add_folder("device"):
-        gui.add_html(device_html(profile, link.port))
+        if link is None:
+            gui.add_markdown(
+                f"{profile.device} (read by the server): hold "
+                f"{_deadman_text(profile)} to move"
+            )
+        else:
+            gui.add_html(device_html(profile, link.port))

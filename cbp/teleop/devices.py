@@ -42,6 +42,8 @@ from cbp.teleop.profiles import (
 )
 
 __all__ = [
+    "SPACEMOUSE_FULL",
+    "SPACEMOUSE_VENDORS",
     "STEP_PERIOD",
     "USER_VELOCITY",
     "Deadman",
@@ -68,6 +70,10 @@ USER_VELOCITY = "camera_velocity"
 MAX_ENTRIES = 64
 #: A button counts as pressed above this value.
 PRESSED = 0.5
+#: A 6-DOF mouse's axes read this much at full travel (3Dconnexion's range).
+SPACEMOUSE_FULL = 350
+#: The 6-DOF mice that may be opened: 3Dconnexion's USB vendor ids (old, new).
+SPACEMOUSE_VENDORS = (0x046D, 0x256F)
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cbp.errors import CbpError, ConfigError
 from cbp.teleop.goal_page import TeleopPage
@@ -17,6 +18,9 @@ from cbp.teleop.goal_session import TeleopSession, latency_summary
 from cbp.teleop.input_session import InputSession
 from cbp.teleop.inputs_page import InputsPage
 from cbp.teleop.profiles import InputProfile
+
+if TYPE_CHECKING:
+    from cbp.teleop.hid_reader import HidDevice
 
 __all__ = ["serve_teleop"]
 
@@ -55,10 +59,16 @@ def _drive_with(
     page: TeleopPage | InputsPage,
     session: TeleopSession | InputSession,
     host: str,
+    opened: tuple[HidDevice, str] | None,
 ) -> Callable[[], None]:
-    """Stream the profile's device from the page to the session; the way to stop."""
+    """Stream the profile's device to the session; the way to stop.
+
+    Read by the page (streamed to a device link), or by this process when the
+    device was ``opened`` here (``--hid``).
+    """
     from cbp.teleop.device_link import DeviceLink, add_device_panel
     from cbp.teleop.devices import DeviceDriver, GoalTarget, VelocityTarget
+    from cbp.teleop.hid_reader import HidReader
 
     target = (
         VelocityTarget(session)
@@ -66,16 +76,19 @@ def _drive_with(
         else GoalTarget(session)
     )
     driver = DeviceDriver(profile, target)
-    link = DeviceLink(driver, host)
+    source: DeviceLink | HidReader
+    if opened is None:
+        source = link = DeviceLink(driver, host)
+        where = f"read by the page, streamed to port {link.port}"
+    else:
+        source, link = HidReader(driver, *opened), None
+        where = f"{opened[1]}, read by this process (hidapi)"
     add_device_panel(page, profile, link)
     driver.start()
-    print(
-        f"{profile.device}: read by the page, streamed to port {link.port}",
-        flush=True,
-    )
+    print(f"{profile.device}: {where}", flush=True)
 
     def stop() -> None:
-        link.close()
+        source.close()
         driver.stop()
 
     return stop
@@ -89,6 +102,7 @@ def serve_teleop(
     out: Path | None,
     overrides: dict[str, str],
     profile: InputProfile | None = None,
+    hid: bool = False,
 ) -> int:
     """``cbp teleop``: serve the session until the page's stop, Ctrl-C or a signal.
 
@@ -103,7 +117,9 @@ def serve_teleop(
 
     With an input ``profile`` (``--device``, ``--profile``), the page also
     reads that device and streams it to the session
-    (:mod:`cbp.teleop.device_link`), through its deadman.
+    (:mod:`cbp.teleop.device_link`), through its deadman; with ``hid``
+    (``--hid``), this process reads the 6-DOF mouse instead
+    (:mod:`cbp.teleop.hid_reader`).
     """
     from cbp.files import check_output_folder
     from cbp.scenario import load_scenario
@@ -119,6 +135,14 @@ def serve_teleop(
             )
         out = out or Path("out") / f"{first.spec.name}_teleop"
         check_output_folder(out)
+        opened = None
+        if hid:
+            from cbp.teleop.hid_reader import check_hid_profile, open_spacemouse
+
+            if profile is None:
+                raise ConfigError("give --device spacemouse with it", "--hid")
+            check_hid_profile(profile)
+            opened = open_spacemouse()
         if velocity:
             inputs = InputSession(scenarios, overrides)
             page = InputsPage(inputs, host=host, port=port)
@@ -132,7 +156,9 @@ def serve_teleop(
         return 2
     device = None
     if profile is not None:
-        device = _drive_with(profile, page, inputs if velocity else session, host)
+        device = _drive_with(
+            profile, page, inputs if velocity else session, host, opened
+        )
     print(
         f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)",
         flush=True,
