@@ -38,7 +38,7 @@ from cbp.teleop.profiles import (
     load_profile,
     shipped_profiles,
 )
-from tests.conftest import free_port, headless_chromium, run_cbp
+from tests.conftest import free_port, headless_chromium
 
 ROOT = Path(__file__).resolve().parents[1]
 BOARDS = ROOT / "scenarios" / "cat_boards.yaml"
@@ -65,6 +65,16 @@ def _pad(axes: tuple[float, ...] = (0.0,) * 4, deadman: bool = True) -> DeviceSt
     buttons = [0.0] * 17
     buttons[4] = 1.0 if deadman else 0.0
     return DeviceState(axes=axes, buttons=tuple(buttons), device="test pad")
+
+
+def _wait(condition, timeout: float) -> bool:  # type: ignore[no-untyped-def]
+    """Poll ``condition`` until it holds or ``timeout`` [s] passes (generous)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return bool(condition())
 
 
 def _write(tmp_path: Path, text: str) -> Path:
@@ -367,31 +377,54 @@ def test_the_device_sets_the_user_velocity_and_zeroes_it_on_release() -> None:
 
 
 def test_teleop_refuses_a_bad_profile_or_a_profile_of_another_device(
-    tmp_path: Path,
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """`cbp teleop --profile` with a bad file, or not the --device's: exit 2."""
     pytest.importorskip("viser", reason="the viewer extra is not installed")
+    from cbp.cli import main
+
     bad = _write(tmp_path, "device: gamepad\ndeadman: {}\n")
-    result = run_cbp("teleop", str(BOARDS), "--profile", str(bad))
-    assert result.returncode == 2
-    assert "deadman" in result.stderr
-    result = run_cbp(
-        "teleop", str(BOARDS), "--device", "gamepad", "--profile", "spacemouse"
+    assert main(["teleop", str(BOARDS), "--profile", str(bad)]) == 2
+    assert "line 2: deadman.button: give a 'button', a 'key'" in (
+        capsys.readouterr().err
     )
-    assert result.returncode == 2
-    assert "a spacemouse profile, not a gamepad one" in result.stderr
+    teleop = ["teleop", str(BOARDS), "--device", "gamepad", "--profile", "spacemouse"]
+    assert main(teleop) == 2
+    assert "a spacemouse profile, not a gamepad one" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- the link
+
+
+def test_the_device_link_takes_states_from_the_page_s_origin_only() -> None:
+    """Another site's page is refused; the page's origin and a script get through."""
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    from cbp.teleop.device_link import DeviceLink
+
+    # The states go no further than the driver: its target is never driven.
+    driver = DeviceDriver(load_profile("gamepad"), GoalTarget(None))
+    link = DeviceLink(driver, page_port=8080)
+    url = f"ws://127.0.0.1:{link.port}/"
+    message = json.dumps({"axes": [0.5], "device": "pad"})
+    try:
+        for origin in ("http://evil.example:8080", "http://127.0.0.1:9999"):
+            with pytest.raises(InvalidStatus, match="403"):
+                connect(url, origin=origin).close()
+        for origin in ("http://127.0.0.1:8080", "http://localhost:8080", None):
+            with connect(url, origin=origin) as socket:
+                socket.send(message)
+                socket.send("not json")
+        assert _wait(lambda: driver.received == 3 and link.rejected == 3, 30)
+    finally:
+        link.close()
+    latest = driver.latest
+    assert latest is not None
+    assert latest.axes == (0.5,)
 
 
 # ---------------------------------------------------------------- the browser
-
-
-def _wait(condition, timeout: float) -> bool:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.02)
-    return bool(condition())
 
 
 # A gamepad in the standard layout, the page's only one: the test sets its
@@ -440,7 +473,7 @@ def test_a_gamepad_in_the_browser_drives_the_goal_while_its_deadman_is_held() ->
     session = TeleopSession(BOARDS, "cat")
     page = TeleopPage(session, port=free_port())
     driver = DeviceDriver(profile, GoalTarget(session))
-    link = DeviceLink(driver)
+    link = DeviceLink(driver, page_port=page.server.get_port())
     add_device_panel(page, profile, link)
     session.start()
     page.start()
@@ -543,7 +576,7 @@ def test_a_6dof_mouse_over_webhid_sets_the_orbit_velocity_while_shift_is_held() 
     session = InputSession([ROOT / "scenarios" / "youbot_orbit_case1.yaml"])
     page = InputsPage(session, port=free_port())
     driver = DeviceDriver(profile, VelocityTarget(session))
-    link = DeviceLink(driver)
+    link = DeviceLink(driver, page_port=page.server.get_port())
     add_device_panel(page, profile, link)
     session.start()
     page.start()
@@ -733,19 +766,24 @@ def test_a_spacemouse_read_by_the_server_drives_until_it_is_unplugged() -> None:
         session.parts.close()
 
 
-def test_teleop_hid_needs_a_6dof_mouse_with_a_button_deadman(tmp_path: Path) -> None:
+def test_teleop_hid_needs_a_6dof_mouse_with_a_button_deadman(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """`--hid` with a gamepad, a keys-only deadman or no device found: exit 2."""
     pytest.importorskip("viser", reason="the viewer extra is not installed")
-    result = run_cbp("teleop", str(BOARDS), "--device", "gamepad", "--hid")
-    assert result.returncode == 2
-    assert "--hid: reads a 6-DOF mouse only; the profile is a gamepad's" in (
-        result.stderr
-    )
+    from cbp.cli import main
+
+    teleop = ["teleop", str(BOARDS), "--out", str(tmp_path / "out")]
+    assert main([*teleop, "--device", "gamepad", "--hid"]) == 2
+    said = capsys.readouterr().err
+    assert "--hid: reads a 6-DOF mouse only; the profile is a gamepad's" in said
     keys = _write(tmp_path, "device: spacemouse\ndeadman: {key: Shift}\n")
-    result = run_cbp("teleop", str(BOARDS), "--profile", str(keys), "--hid")
-    assert result.returncode == 2
-    assert "deadman must be a device button" in result.stderr
-    result = run_cbp("teleop", str(BOARDS), "--device", "spacemouse", "--hid")
-    assert result.returncode == 2
+    assert main([*teleop, "--profile", str(keys), "--hid"]) == 2
+    assert "deadman must be a device button" in capsys.readouterr().err
+    assert main([*teleop, "--hid"]) == 2
+    assert "--hid: give --device spacemouse with it" in capsys.readouterr().err
+    assert main([*teleop, "--device", "spacemouse", "--hid"]) == 2
+    said = capsys.readouterr().err
     # This machine has no SpaceMouse; without the hid extra, hidapi is missing.
-    assert "no SpaceMouse found" in result.stderr or "cbp[hid]" in result.stderr
+    assert "no SpaceMouse found" in said or "cbp[hid]" in said
+    assert not (tmp_path / "out").exists()  # nothing ran

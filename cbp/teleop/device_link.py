@@ -20,6 +20,8 @@ from __future__ import annotations
 import html
 import json
 import logging
+import re
+import socket
 import threading
 from pathlib import Path
 from typing import Any
@@ -33,7 +35,14 @@ from cbp.teleop.devices import (
 )
 from cbp.teleop.profiles import InputProfile
 
-__all__ = ["READER", "SEND_PERIOD", "DeviceLink", "add_device_panel", "device_html"]
+__all__ = [
+    "READER",
+    "SEND_PERIOD",
+    "DeviceLink",
+    "add_device_panel",
+    "device_html",
+    "page_origins",
+]
 
 log = logging.getLogger(__name__)
 
@@ -99,29 +108,58 @@ def device_html(profile: InputProfile, port: int) -> str:
     )
 
 
+def page_origins(host: str, page_port: int) -> list[re.Pattern[str] | None]:
+    """The origins a browser may stream from: the page's, on this machine's names.
+
+    And None: a program that sends no origin.
+    """
+    names = {"localhost", "127.0.0.1", "[::1]", socket.gethostname()}
+    if host not in ("", "0.0.0.0", "::"):
+        names.add(f"[{host}]" if ":" in host else host)
+    hosts = "|".join(sorted(re.escape(n) for n in names))
+    return [re.compile(rf"https?://({hosts}):{page_port}", re.IGNORECASE), None]
+
+
 class DeviceLink:
     """A websocket endpoint beside the page's server; the page streams to it.
 
     Each message is a device state (:func:`~cbp.teleop.devices.parse_state`);
-    a malformed one is counted and dropped.
+    a malformed one is counted and dropped. Given the page's port, browsers
+    connect only from the page (any other site open in the operator's
+    browser could otherwise drive the robot): from an origin at that port on
+    this machine's names (``localhost``, ``127.0.0.1``, ``[::1]``, its host
+    name, ``host``). Programs that send no origin (a script) connect too.
 
     Args:
         driver: the driver that takes the states.
         host: where to serve (the page's host).
         port: the port (0: any free one).
+        page_port: the page's port (None: browsers connect from any page).
 
     Attributes:
         port: the port served on.
         rejected: malformed messages dropped so far.
     """
 
-    def __init__(self, driver: DeviceDriver, host: str = "127.0.0.1", port: int = 0):
+    def __init__(
+        self,
+        driver: DeviceDriver,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        page_port: int | None = None,
+    ):
         """Start serving in a thread of its own."""
         from websockets.sync.server import serve
 
         self.driver = driver
         self.rejected = 0
-        self._server = serve(self._handle, host, port, max_size=MAX_MESSAGE)
+        self._server = serve(
+            self._handle,
+            host,
+            port,
+            max_size=MAX_MESSAGE,
+            origins=None if page_port is None else page_origins(host, page_port),
+        )
         self.port = int(self._server.socket.getsockname()[1])
         self._thread = threading.Thread(
             target=self._server.serve_forever, name="device-link", daemon=True

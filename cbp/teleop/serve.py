@@ -78,7 +78,7 @@ def _drive_with(
     driver = DeviceDriver(profile, target)
     source: DeviceLink | HidReader
     if opened is None:
-        source = link = DeviceLink(driver, host)
+        source = link = DeviceLink(driver, host, page_port=page.server.get_port())
         where = f"read by the page, streamed to port {link.port}"
     else:
         source, link = HidReader(driver, *opened), None
@@ -126,6 +126,14 @@ def serve_teleop(
 
     page: TeleopPage | InputsPage
     try:
+        opened = None
+        if hid:
+            from cbp.teleop.hid_reader import check_hid_profile, open_spacemouse
+
+            if profile is None:
+                raise ConfigError("give --device spacemouse with it", "--hid")
+            check_hid_profile(profile)
+            opened = open_spacemouse()
         first = load_scenario(scenarios[0])
         velocity = first.spec.method.name == "velocity"
         if not velocity and len(scenarios) > 1:
@@ -135,14 +143,6 @@ def serve_teleop(
             )
         out = out or Path("out") / f"{first.spec.name}_teleop"
         check_output_folder(out)
-        opened = None
-        if hid:
-            from cbp.teleop.hid_reader import check_hid_profile, open_spacemouse
-
-            if profile is None:
-                raise ConfigError("give --device spacemouse with it", "--hid")
-            check_hid_profile(profile)
-            opened = open_spacemouse()
         if velocity:
             inputs = InputSession(scenarios, overrides)
             page = InputsPage(inputs, host=host, port=port)
