@@ -19,17 +19,8 @@ import pytest
 
 from cbp.errors import ConfigError, ScenarioError
 from cbp.teleop import TeleopSession
-from cbp.teleop.devices import (
-    Deadman,
-    DeviceDriver,
-    DeviceState,
-    GoalTarget,
-    VelocityTarget,
-    command,
-    move_goal,
-    parse_state,
-    shaped,
-)
+from cbp.teleop.device_driver import Deadman, DeviceDriver, GoalTarget, VelocityTarget
+from cbp.teleop.devices import DeviceState, command, move_goal, parse_state, shaped
 from cbp.teleop.profiles import (
     GOAL_COMPONENTS,
     VELOCITY_COMPONENTS,
@@ -438,6 +429,35 @@ navigator.getGamepads = () => [window.cbpTestPad, null, null, null];
 """
 
 
+def _axes(driver: DeviceDriver) -> tuple[float, ...]:
+    """The axes of the latest state the driver received."""
+    latest = driver.latest
+    return () if latest is None else latest.axes
+
+
+def _button(driver: DeviceDriver, index: int) -> float | None:
+    """A button of the latest state the driver received (None: none yet)."""
+    latest = driver.latest
+    return None if latest is None else latest.buttons[index]
+
+
+def _keys(driver: DeviceDriver) -> frozenset[str]:
+    """The keys held in the latest state the driver received."""
+    latest = driver.latest
+    return frozenset({"?"}) if latest is None else latest.keys
+
+
+def _settle(driver: DeviceDriver) -> None:
+    """Wait until every step that may have read an older state has ended.
+
+    A step counts itself after reading the state: once two more have begun,
+    the one that read before has ended, and the last has read the latest.
+    Three, and that one has ended too.
+    """
+    steps = driver.steps
+    assert _wait(lambda: driver.steps >= steps + 3, 30)
+
+
 #: The events a device's braking logs.
 _BRAKES = ("deadman released", "device silent")
 
@@ -491,36 +511,39 @@ def test_a_gamepad_in_the_browser_drives_the_goal_while_its_deadman_is_held() ->
             found = browser.find_elements(By.ID, "cbp-device-status")
             return str(found[0].text) if found else ""
 
-        assert _wait(lambda: "injected pad" in status(), 10), status()
-        assert _wait(lambda: driver.received > 5, 10), "no state reached the session"
+        assert _wait(lambda: "injected pad" in status(), 30), status()
+        assert _wait(lambda: driver.received > 5, 30), "no state reached the session"
         start = session.goal.pose()[0]
 
         # The stick pushed without the deadman: nothing moves.
         _set_pad(browser, [0.0, -1.0, 0.0, 0.0], deadman=False)
+        assert _wait(lambda: _axes(driver)[1:2] == (-1.0,), 30)
         seen = driver.received
-        assert _wait(lambda: driver.received > seen + 10, 10)
+        assert _wait(lambda: driver.received > seen + 10, 30)
         np.testing.assert_array_equal(session.goal.pose()[0], start)
         assert not driver.engaged
 
         # Held: the goal moves forward (+x), the hand after it.
         hand = session.snapshot().hand.copy()
         _set_pad(browser, [0.0, -1.0, 0.0, 0.0], deadman=True)
-        assert _wait(lambda: "deadman HELD" in status(), 10), status()
-        assert _wait(lambda: session.goal.pose()[0][0] - start[0] > 0.03, 20)
+        assert _wait(lambda: "deadman HELD" in status(), 30), status()
+        assert _wait(lambda: session.goal.pose()[0][0] - start[0] > 0.03, 30)
         moved = session.goal.pose()[0] - start
         np.testing.assert_allclose(moved[1:], 0.0, atol=1e-9)  # along x only
-        assert _wait(lambda: session.snapshot().hand[0] - hand[0] > 0.02, 20)
+        assert _wait(lambda: session.snapshot().hand[0] - hand[0] > 0.02, 30)
 
         # Released: the goal stops where it is, with an event (one saying the
         # stream fell silent, if the browser stalled for 100 ms just then).
+        # Every state the page sends from now on has the deadman released.
         _set_pad(browser, [0.0, -1.0, 0.0, 0.0], deadman=False)
         events = session.parts.log.events
-        assert _wait(
-            lambda: not driver.engaged and _last_device_event(events) in _BRAKES, 10
-        ), _last_device_event(events)
+        assert _wait(lambda: _button(driver, 4) == 0.0, 30)
+        _settle(driver)
+        assert not driver.engaged
+        assert _last_device_event(events) in _BRAKES, _last_device_event(events)
         stopped = session.goal.pose()[0]
         seen, steps = driver.received, driver.steps
-        assert _wait(lambda: driver.received > seen + 10 and driver.steps > steps, 10)
+        assert _wait(lambda: driver.received > seen + 10 and driver.steps > steps, 30)
         np.testing.assert_array_equal(session.goal.pose()[0], stopped)
         assert "deadman held: injected pad drives" in [m for _, m in events]
     finally:
@@ -552,12 +575,6 @@ window.cbpReport = (id, values) => {
   device.dispatchEvent(event);
 };
 """
-
-
-def _axes(driver: DeviceDriver) -> tuple[float, ...]:
-    """The axes of the latest state the driver received."""
-    latest = driver.latest
-    return () if latest is None else latest.axes
 
 
 @pytest.mark.slow
@@ -595,32 +612,34 @@ def test_a_6dof_mouse_over_webhid_sets_the_orbit_velocity_while_shift_is_held() 
         browser.find_element(
             By.XPATH, "//button[normalize-space()='connect 6-DOF mouse']"
         ).click()
-        assert _wait(lambda: "injected SpaceMouse" in status(), 10), status()
+        assert _wait(lambda: "injected SpaceMouse" in status(), 30), status()
         # The cap pushed right (x) and lifted (z, negative), both at full travel.
         browser.execute_script("window.cbpReport(1, [350, 0, -350]);")
         seen = driver.received
-        assert _wait(lambda: driver.received > seen + 5, 10)
+        assert _wait(lambda: driver.received > seen + 5, 30)
         assert not driver.engaged  # Shift is not held
         ActionChains(browser).key_down(Keys.SHIFT).perform()
-        assert _wait(lambda: "deadman HELD" in status(), 10), status()
+        assert _wait(lambda: "deadman HELD" in status(), 30), status()
         # Orbit commands the camera's y and z: push right -y, lift +z.
-        assert _wait(lambda: np.allclose(velocity["user_velocity"], [-0.1, 0.1]), 10), (
+        assert _wait(lambda: np.allclose(velocity["user_velocity"], [-0.1, 0.1]), 30), (
             velocity["user_velocity"]
         )
         # A rotation report (2) sets the rotation, leaving the translation; a
         # newer model's report 1 carries all six.
         browser.execute_script("window.cbpReport(2, [0, 0, 175]);")
-        assert _wait(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 0.0, 0.5), 10)
-        np.testing.assert_allclose(velocity["user_velocity"], [-0.1, 0.1])
-        browser.execute_script("window.cbpReport(1, [350, 0, -350, 0, 700, 0]);")
-        assert _wait(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 1.0, 0.0), 10)
-        ActionChains(browser).key_up(Keys.SHIFT).perform()
-        assert _wait(
-            lambda: not driver.engaged and not velocity["user_velocity"].any(), 10
+        assert _wait(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 0.0, 0.5), 30)
+        assert _wait(  # (after a brake, if the browser stalled for 100 ms)
+            lambda: np.allclose(velocity["user_velocity"], [-0.1, 0.1]), 30
         ), velocity["user_velocity"]
-        assert _wait(lambda: _last_device_event(session.events) in _BRAKES, 10), (
-            session.events[-3:]
-        )
+        browser.execute_script("window.cbpReport(1, [350, 0, -350, 0, 700, 0]);")
+        assert _wait(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 1.0, 0.0), 30)
+        ActionChains(browser).key_up(Keys.SHIFT).perform()
+        # Every state the page sends from now on has Shift up.
+        assert _wait(lambda: "Shift" not in _keys(driver), 30)
+        _settle(driver)
+        assert not driver.engaged
+        assert not velocity["user_velocity"].any(), velocity["user_velocity"]
+        assert _last_device_event(session.events) in _BRAKES, session.events[-3:]
     finally:
         browser.quit()
         link.close()

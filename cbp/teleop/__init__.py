@@ -22,7 +22,7 @@ drives either kind of session through an input profile
 (:mod:`cbp.teleop.profiles`) and a deadman (:class:`DeviceDriver`).
 """
 
-from cbp.teleop.devices import DeviceDriver, GoalTarget, VelocityTarget
+from cbp.teleop.device_driver import DeviceDriver, GoalTarget, VelocityTarget
 from cbp.teleop.goal_session import (
     GOAL_FILE,
     METHODS,

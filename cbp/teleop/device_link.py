@@ -8,7 +8,7 @@ every :data:`SEND_PERIOD` reads the gamepad (``navigator.getGamepads()``) or
 the 6-DOF mouse (WebHID: the "connect 6-DOF mouse" button asks for it once;
 Chromium remembers the choice) and the keys held, and sends the state as JSON
 over a websocket to a :class:`DeviceLink` served beside the page's server.
-The link hands each state to a :class:`~cbp.teleop.devices.DeviceDriver`.
+The link hands each state to a :class:`~cbp.teleop.device_driver.DeviceDriver`.
 
 Browsers give the Gamepad API and WebHID to secure pages only: open the page
 as ``http://localhost`` or ``http://127.0.0.1`` (through an SSH tunnel from
@@ -27,12 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from cbp.errors import ConfigError
-from cbp.teleop.devices import (
-    SPACEMOUSE_FULL,
-    SPACEMOUSE_VENDORS,
-    DeviceDriver,
-    parse_state,
-)
+from cbp.teleop.device_driver import DeviceDriver
+from cbp.teleop.devices import SPACEMOUSE_FULL, SPACEMOUSE_VENDORS, parse_state
 from cbp.teleop.profiles import InputProfile
 
 __all__ = [

@@ -5,7 +5,7 @@
 ``cbp`` process (any browser then, or none), reads its input reports
 (:func:`apply_report`, pure: the same layout the page's WebHID reader
 parses) and hands the device's state to the
-:class:`~cbp.teleop.devices.DeviceDriver` after every read, at least every
+:class:`~cbp.teleop.device_driver.DeviceDriver` after every read, at least every
 :data:`READ_TIMEOUT_MS`. A device that stops answering (unplugged) stops the
 stream, and the driver brakes after the profile's timeout. Without the
 keyboard, the deadman must be one of the device's buttons.
@@ -20,12 +20,8 @@ from collections.abc import Sequence
 from typing import Protocol
 
 from cbp.errors import ConfigError
-from cbp.teleop.devices import (
-    SPACEMOUSE_FULL,
-    SPACEMOUSE_VENDORS,
-    DeviceDriver,
-    DeviceState,
-)
+from cbp.teleop.device_driver import DeviceDriver
+from cbp.teleop.devices import SPACEMOUSE_FULL, SPACEMOUSE_VENDORS, DeviceState
 from cbp.teleop.profiles import InputProfile
 
 __all__ = [

@@ -66,8 +66,8 @@ def _drive_with(
     Read by the page (streamed to a device link), or by this process when the
     device was ``opened`` here (``--hid``).
     """
+    from cbp.teleop.device_driver import DeviceDriver, GoalTarget, VelocityTarget
     from cbp.teleop.device_link import DeviceLink, add_device_panel
-    from cbp.teleop.devices import DeviceDriver, GoalTarget, VelocityTarget
     from cbp.teleop.hid_reader import HidReader
 
     target = (
