@@ -20,7 +20,14 @@ import pytest
 from cbp.errors import ConfigError, ScenarioError
 from cbp.teleop import TeleopSession
 from cbp.teleop.device_driver import Deadman, DeviceDriver, GoalTarget, VelocityTarget
-from cbp.teleop.devices import DeviceState, command, move_goal, parse_state, shaped
+from cbp.teleop.devices import (
+    DeviceState,
+    command,
+    deadman_held,
+    move_goal,
+    parse_state,
+    shaped,
+)
 from cbp.teleop.profiles import (
     GOAL_COMPONENTS,
     VELOCITY_COMPONENTS,
@@ -237,6 +244,10 @@ def test_the_deadman_engages_only_on_a_fresh_held_state() -> None:
     assert deadman.update(_pad(deadman=False), 1.0, 1.0) == (
         "deadman released: braking to a stop"
     )
+    letter = DeviceState(keys=frozenset({"d"}))  # the page's names: lower case
+    assert deadman_held(DeadmanSpec(key="D"), letter)
+    assert deadman_held(DeadmanSpec(key="d"), letter)
+    assert not deadman_held(DeadmanSpec(key="Shift"), letter)
 
 
 def test_a_held_deadman_moves_the_goal_and_releasing_it_stops_it() -> None:
@@ -562,10 +573,15 @@ const device = new EventTarget();
 device.opened = false;
 device.productName = 'injected SpaceMouse';
 device.open = () => { device.opened = true; return Promise.resolve(); };
-Object.defineProperty(navigator, 'hid', {configurable: true, value: {
-  requestDevice: () => Promise.resolve([device]),
-  getDevices: () => Promise.resolve([]),
-}});
+const hid = new EventTarget();
+hid.requestDevice = () => Promise.resolve([device]);
+hid.getDevices = () => Promise.resolve([]);
+Object.defineProperty(navigator, 'hid', {configurable: true, value: hid});
+window.cbpUnplug = () => {
+  const event = new Event('disconnect');
+  event.device = device;
+  hid.dispatchEvent(event);
+};
 window.cbpReport = (id, values) => {
   const data = new DataView(new ArrayBuffer(2 * values.length));
   values.forEach((v, i) => data.setInt16(2 * i, v, true));
@@ -640,6 +656,18 @@ def test_a_6dof_mouse_over_webhid_sets_the_orbit_velocity_while_shift_is_held() 
         assert not driver.engaged
         assert not velocity["user_velocity"].any(), velocity["user_velocity"]
         assert _last_device_event(session.events) in _BRAKES, session.events[-3:]
+
+        # Held again; then the mouse is unplugged with Shift still held: the
+        # page forgets it and sends nothing, and the session brakes.
+        ActionChains(browser).key_down(Keys.SHIFT).perform()
+        assert _wait(lambda: velocity["user_velocity"].any(), 30)
+        browser.execute_script("window.cbpUnplug();")
+        assert _wait(lambda: "6-DOF mouse: none yet" in status(), 30), status()
+        assert _wait(lambda: not driver.engaged, 30)
+        _settle(driver)
+        assert _last_device_event(session.events) == "device silent"
+        assert not velocity["user_velocity"].any()
+        ActionChains(browser).key_up(Keys.SHIFT).perform()
     finally:
         browser.quit()
         link.close()

@@ -7,14 +7,16 @@
 // deadman), full (a 6-DOF mouse's full travel), vendors, missing (the status
 // line without a device). hid: the 6-DOF mouse's latest state (it reports
 // only what changes: report 1 the translation, and on newer models the
-// rotation too; report 2 the rotation; report 3 the buttons' bits). keys: the
-// keys held (none once the page loses focus).
+// rotation too; report 2 the rotation; report 3 the buttons' bits; unplugged,
+// it is forgotten and nothing is sent). keys: the keys held, single letters in
+// lower case (none once the page loses focus).
 (function(){
 if(window.cbpDevice)return;window.cbpDevice=1;
 var C=window.cbpDeviceConfig;
 var keys=new Set(),hid={axes:[0,0,0,0,0,0],buttons:[],device:null},ws=null,up=false;
-document.addEventListener('keydown',function(e){keys.add(e.key);});
-document.addEventListener('keyup',function(e){keys.delete(e.key);});
+function named(e){return e.key.length===1?e.key.toLowerCase():e.key;}
+document.addEventListener('keydown',function(e){keys.add(named(e));});
+document.addEventListener('keyup',function(e){keys.delete(named(e));});
 window.addEventListener('blur',function(){keys.clear();});
 function connect(){
  ws=new WebSocket((location.protocol==='https:'?'wss://':'ws://')+location.hostname+':'+C.port+'/');
@@ -38,9 +40,15 @@ function report(e){
   hid.buttons=[];for(i=0;i<32;i++)hid.buttons.push((b>>>i)&1);
  }
 }
+function gone(e){
+ if(e.device!==hid.device)return;
+ hid.device=null;hid.axes=[0,0,0,0,0,0];hid.buttons=[];
+}
 function use(d){
  return (d.opened?Promise.resolve():d.open()).then(function(){
   hid.device=d;d.addEventListener('inputreport',report);
+  navigator.hid.removeEventListener('disconnect',gone);
+  navigator.hid.addEventListener('disconnect',gone);
  });
 }
 var filters=C.vendors.map(function(v){return {vendorId:v};});

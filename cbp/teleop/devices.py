@@ -188,4 +188,7 @@ def deadman_held(spec: DeadmanSpec, state: DeviceState) -> bool:
         and button < len(state.buttons)
         and state.buttons[button] > PRESSED
     )
-    return pressed or (spec.key is not None and spec.key in state.keys)
+    key = spec.key
+    if key is not None and len(key) == 1:
+        key = key.lower()  # the page names single letters in lower case
+    return pressed or (key is not None and key in state.keys)

@@ -102,7 +102,8 @@ class DeadmanSpec:
     button: int | None = None
     """A device button (pressed: value above one half)."""
     key: str | None = None
-    """A keyboard key, as the browser names it (``Shift``, ``Control``, ``d``)."""
+    """A keyboard key, as the browser names it (``Shift``, ``Control``, ``d``;
+    a letter in either case)."""
 
     def __post_init__(self) -> None:
         """At least one of button and key."""
