@@ -16,6 +16,9 @@ from cbp.methods import COMPARABLE, METHODS
 from cbp.registry import Registry
 from cbp.schema import type_name
 
+if typing.TYPE_CHECKING:
+    from cbp.teleop.profiles import InputProfile
+
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cbp`` and ``python -m cbp``; returns the exit status."""
@@ -183,6 +186,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="output folder (default out/<name>_teleop)",
     )
+    teleop.add_argument(
+        "--device",
+        choices=("gamepad", "spacemouse"),
+        default=None,
+        help="drive with a gamepad or a 6-DOF mouse, read by the page, through its "
+        "shipped input profile (hold the deadman to move)",
+    )
+    teleop.add_argument(
+        "--profile",
+        default=None,
+        help="an input profile file (mapping, dead band, deadman) or a shipped "
+        "profile's name; implies its device",
+    )
+    teleop.add_argument(
+        "--hid",
+        action="store_true",
+        help="read the 6-DOF mouse in this process (hidapi, the hid extra) instead "
+        "of in the page (WebHID); its deadman must be one of its buttons",
+    )
     _add_set(
         teleop,
         "override a scenario value (as for run)",
@@ -248,8 +270,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         from cbp.teleop.serve import serve_teleop
 
+        ok, profile = _input_profile(args.device, args.profile)
+        if not ok:
+            return 2
         return serve_teleop(
-            args.scenario, args.method, args.host, args.port, args.out, overrides
+            args.scenario,
+            args.method,
+            args.host,
+            args.port,
+            args.out,
+            overrides,
+            profile,
+            args.hid,
         )
     if args.command == "bench":
         return _bench(args.quick, args.out, args.results)
@@ -400,6 +432,28 @@ def _examples(out: Path) -> int:
             "without touching them)"
         )
     return 0
+
+
+def _input_profile(
+    device: str | None, name: str | None
+) -> tuple[bool, InputProfile | None]:
+    """``cbp teleop``'s input profile (None without a device); False on an error."""
+    from cbp.teleop.profiles import load_profile
+
+    if device is None and name is None:
+        return True, None
+    try:
+        profile = load_profile(name or str(device))
+    except CbpError as exc:
+        print(exc, file=sys.stderr)
+        return False, None
+    if device is not None and profile.device != device:
+        print(
+            f"--profile {name} is a {profile.device} profile, not a {device} one",
+            file=sys.stderr,
+        )
+        return False, None
+    return True, profile
 
 
 def _positive_int(text: str) -> int:

@@ -12,6 +12,7 @@ import pytest
 
 from cbp.robot import RobotDescription
 from cbp.scenario import ScenarioSpec
+from cbp.teleop.profiles import InputProfile
 
 GEN = Path(__file__).resolve().parents[1] / "docs" / "gen" / "reference.py"
 
@@ -44,7 +45,11 @@ def _rows(page: str) -> dict[str, dict[str, str]]:
 
 @pytest.mark.parametrize(
     ("root", "page"),
-    [(ScenarioSpec, "scenario_page"), (RobotDescription, "robot_page")],
+    [
+        (ScenarioSpec, "scenario_page"),
+        (RobotDescription, "robot_page"),
+        (InputProfile, "input_profile_page"),
+    ],
 )
 def test_every_schema_field_is_described(
     reference: ModuleType, root: type, page: str

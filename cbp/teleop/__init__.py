@@ -16,8 +16,13 @@ approached without contact. When the session stops, the arm brakes on a
 trajectory it can follow, and the outputs of ``cbp run`` are written, with the
 operator's goal stream as ``operator_goal.csv``: ``cbp compare SCENARIO --goal
 operator_goal.csv`` replays the session to every method.
+
+A gamepad or a 6-DOF mouse read by the page (:mod:`cbp.teleop.device_link`)
+drives either kind of session through an input profile
+(:mod:`cbp.teleop.profiles`) and a deadman (:class:`DeviceDriver`).
 """
 
+from cbp.teleop.device_driver import DeviceDriver, GoalTarget, VelocityTarget
 from cbp.teleop.goal_session import (
     GOAL_FILE,
     METHODS,
@@ -27,16 +32,22 @@ from cbp.teleop.goal_session import (
 )
 from cbp.teleop.input_session import InputSession, InputSnapshot
 from cbp.teleop.live_goal import LiveGoal
+from cbp.teleop.profiles import InputProfile, load_profile
 from cbp.teleop.switching import SwitchingPlanner
 
 __all__ = [
     "GOAL_FILE",
     "METHODS",
+    "DeviceDriver",
+    "GoalTarget",
+    "InputProfile",
     "InputSession",
     "InputSnapshot",
     "LiveGoal",
     "Snapshot",
     "SwitchingPlanner",
     "TeleopSession",
+    "VelocityTarget",
     "latency_summary",
+    "load_profile",
 ]

@@ -138,6 +138,17 @@ class InputSession:
         with self._lock:
             self.inputs[config][entry] = np.array(values, dtype=float)
 
+    def input_plugins(self, config: str | None = None) -> dict[str, Any]:
+        """The plugins whose inputs the active (or the named) configuration takes."""
+        config = config or self.active
+        require_choice(config, self._plugins, "configuration", "input_plugins")
+        return dict(self._plugins[config])
+
+    def event(self, message: str) -> None:
+        """Record ``message`` in the session's log (a device's deadman, say)."""
+        with self._lock:
+            self.events.append((self.t, message))
+
     def switch(self, config: str) -> None:
         """Hand control to another configuration at the next tick."""
         require_choice(config, self.loops, "configuration", "switch")

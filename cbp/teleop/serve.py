@@ -8,14 +8,19 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cbp.errors import CbpError, ConfigError
 from cbp.teleop.goal_page import TeleopPage
 from cbp.teleop.goal_session import TeleopSession, latency_summary
 from cbp.teleop.input_session import InputSession
 from cbp.teleop.inputs_page import InputsPage
+from cbp.teleop.profiles import InputProfile
+
+if TYPE_CHECKING:
+    from cbp.teleop.hid_reader import HidDevice
 
 __all__ = ["serve_teleop"]
 
@@ -49,6 +54,46 @@ def _stopping_on_signals(page: TeleopPage | InputsPage) -> Iterator[None]:
             signal.signal(s, handler)
 
 
+def _drive_with(
+    profile: InputProfile,
+    page: TeleopPage | InputsPage,
+    session: TeleopSession | InputSession,
+    host: str,
+    opened: tuple[HidDevice, str] | None,
+) -> Callable[[], None]:
+    """Stream the profile's device to the session; the way to stop.
+
+    Read by the page (streamed to a device link), or by this process when the
+    device was ``opened`` here (``--hid``).
+    """
+    from cbp.teleop.device_driver import DeviceDriver, GoalTarget, VelocityTarget
+    from cbp.teleop.device_link import DeviceLink, add_device_panel
+    from cbp.teleop.hid_reader import HidReader
+
+    target = (
+        VelocityTarget(session)
+        if isinstance(session, InputSession)
+        else GoalTarget(session)
+    )
+    driver = DeviceDriver(profile, target)
+    source: DeviceLink | HidReader
+    if opened is None:
+        source = link = DeviceLink(driver, host, page_port=page.server.get_port())
+        where = f"read by the page, streamed to port {link.port}"
+    else:
+        source, link = HidReader(driver, *opened), None
+        where = f"{opened[1]}, read by this process (hidapi)"
+    add_device_panel(page, profile, link)
+    driver.start()
+    print(f"{profile.device}: {where}", flush=True)
+
+    def stop() -> None:
+        source.close()
+        driver.stop()
+
+    return stop
+
+
 def serve_teleop(
     scenarios: list[Path],
     method: str,
@@ -56,6 +101,8 @@ def serve_teleop(
     port: int,
     out: Path | None,
     overrides: dict[str, str],
+    profile: InputProfile | None = None,
+    hid: bool = False,
 ) -> int:
     """``cbp teleop``: serve the session until the page's stop, Ctrl-C or a signal.
 
@@ -67,12 +114,26 @@ def serve_teleop(
     configurations of one robot, switched on the page): an input session
     (:class:`InputsPage`). Then the outputs are written. Exit 2 for a scenario
     or method that cannot start (nothing runs).
+
+    With an input ``profile`` (``--device``, ``--profile``), the page also
+    reads that device and streams it to the session
+    (:mod:`cbp.teleop.device_link`), through its deadman; with ``hid``
+    (``--hid``), this process reads the 6-DOF mouse instead
+    (:mod:`cbp.teleop.hid_reader`).
     """
     from cbp.files import check_output_folder
     from cbp.scenario import load_scenario
 
     page: TeleopPage | InputsPage
     try:
+        opened = None
+        if hid:
+            from cbp.teleop.hid_reader import check_hid_profile, open_spacemouse
+
+            if profile is None:
+                raise ConfigError("give --device spacemouse with it", "--hid")
+            check_hid_profile(profile)
+            opened = open_spacemouse()
         first = load_scenario(scenarios[0])
         velocity = first.spec.method.name == "velocity"
         if not velocity and len(scenarios) > 1:
@@ -93,6 +154,11 @@ def serve_teleop(
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
+    device = None
+    if profile is not None:
+        device = _drive_with(
+            profile, page, inputs if velocity else session, host, opened
+        )
     print(
         f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)",
         flush=True,
@@ -100,6 +166,8 @@ def serve_teleop(
     try:
         with contextlib.suppress(KeyboardInterrupt), _stopping_on_signals(page):
             page.run()
+        if device is not None:
+            device()
         page.say("**Stopping**: the arm brakes to rest, then the session is saved.")
         if velocity:
             inputs.write(inputs.stop(), out)

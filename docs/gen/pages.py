@@ -20,6 +20,7 @@ PAGES = {
     "reference/cli.md": reference.cli_page,
     "reference/scenario.md": reference.scenario_page,
     "reference/robot-yaml.md": reference.robot_page,
+    "reference/input-profile.md": reference.input_profile_page,
     "reference/plugins.md": reference.plugins_page,
 }
 

@@ -336,6 +336,22 @@ def robot_page() -> str:
     return schema_page(RobotDescription, "robot.yaml", intro, {})
 
 
+def input_profile_page() -> str:
+    """The input profile reference, from :class:`cbp.teleop.profiles.InputProfile`."""
+    from cbp.teleop.profiles import InputProfile
+
+    intro = (
+        "An input profile maps a gamepad's or a 6-DOF mouse's axes and buttons "
+        "to what `cbp teleop` moves, generated here from "
+        "`cbp.teleop.profiles.InputProfile`. `cbp teleop SCENARIO --device gamepad` "
+        "uses the shipped `scenarios/input/gamepad.yaml` (`spacemouse` likewise); "
+        "`--profile FILE` reads your own (`cbp examples` copies the shipped ones "
+        "out to edit). Every problem is reported with its line. "
+        "[Drive with a gamepad or a 6-DOF mouse](../howto/devices.md) is the guide."
+    )
+    return schema_page(InputProfile, "Input profile", intro, {})
+
+
 def _registries() -> Iterator[Any]:
     for spec in REGISTRIES:
         module, _, attr = spec.partition(":")
