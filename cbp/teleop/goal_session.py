@@ -81,6 +81,13 @@ class Snapshot:
             (None for a method without them).
         trajectory: the trajectory the robot follows (a new object at each
             splice; its last point is where the arm is heading).
+        held_by: what held the arm at the last step of the method in control
+            (CAT, hybrid): ``contact`` (an obstacle), ``self-collision``,
+            ``joint limit``, or the name of another hard entry; empty when
+            nothing did or the method does not say (IK, MP).
+        note: the last command period's note (what its planner said: a hold's
+            reason, ``paused``, ``converged`` ...).
+        recent_misses: deadline misses among the periods of the last second.
     """
 
     t: float
@@ -94,6 +101,9 @@ class Snapshot:
     events: tuple[tuple[float, str], ...] = ()
     contacts: ContactSet | None = None
     trajectory: JointTrajectory | None = None
+    held_by: frozenset[str] = frozenset()
+    note: str = ""
+    recent_misses: int = 0
 
 
 class TeleopSession:
@@ -294,6 +304,11 @@ class TeleopSession:
         for period in periods[self._periods_counted :]:
             self._misses += period.missed
         self._periods_counted = len(periods)
+        recent = 0
+        for period in reversed(periods[-200:]):
+            if period.t < run.sim.t - 1.0:
+                break
+            recent += period.missed
         return Snapshot(
             t=run.sim.t,
             q=q,
@@ -306,6 +321,9 @@ class TeleopSession:
             events=tuple(run.log.events[-5:]),
             contacts=self.planner.contacts(),
             trajectory=run.sim.trajectory,
+            held_by=self.planner.held_by,
+            note=periods[-1].note if periods else "",
+            recent_misses=recent,
         )
 
     def latency_ms(self) -> list[float]:
