@@ -67,6 +67,8 @@ CONTACT_ARROW = 0.04
 STALLED_FOR = 0.5
 #: Cells drawn at most (the nearest to the hand first).
 MAX_CELLS = 60_000
+#: The readout and the plot are redrawn at every this many page updates.
+PANEL_EVERY = 4
 #: Length of a blocked direction's arrow as drawn [m].
 BLOCKED_ARROW = 0.06
 #: Opacity of the declared objects while the arm holds short of the goal
@@ -292,6 +294,9 @@ class TeleopPage(Page[TeleopSession]):
         self._xray = False
         self._bounds = GoalBounds.of(session.scenario)
         self._space: tuple[object, tuple[float, ...], GoalSpace] = (None, (), "free")
+        #: The session's snapshot the page last drew (None before the first).
+        self.shown: Snapshot | None = None
+        self._updates = 0
         #: Why the arm holds (None while it follows the goal), and since when.
         self.hold: Hold | None = None
         self._hold_since: float | None = None
@@ -331,35 +336,49 @@ class TeleopPage(Page[TeleopSession]):
         position, rotation = self.session.goal.pose()
         self._shown_goal = number
         if np.isfinite(position).all() and np.isfinite(rotation).all():
-            self.gizmo.position = tuple(position)
-            self.gizmo.wxyz = wxyz(rotation)
+            with self.server.atomic():
+                self.gizmo.position = tuple(position)
+                self.gizmo.wxyz = wxyz(rotation)
+            self.server.flush()  # the moved goal shown now, not at a window's end
 
     # ------------------------------------------------------------------ output
 
     def update(self) -> None:
-        """Bring the page up to date with the session (called at UPDATE_RATE)."""
+        """Bring the page up to date with the session (called at UPDATE_RATE).
+
+        The robot, the goal, the contacts and the path at every update; the
+        readout and the plot at :data:`PANEL_EVERY`-th one, or at once when
+        the hold changes (each redraw of them costs the browser a render of
+        the panel, on the cores the control loop runs on).
+        """
         session = self.session
         snap = session.snapshot()
         if self.robot is not None:
-            self._drawn_q = self._cfg(snap.q)
-            self.robot.update_cfg(self._drawn_q)
+            q = self._cfg(snap.q)
+            if not np.array_equal(q, self._drawn_q) or self.shown is None:
+                self._drawn_q = q
+                self.robot.update_cfg(q)
         if session.goal.count != self._shown_goal:  # sent from elsewhere
             self._after_goal(session.goal.count)
         goal, _ = session.goal.pose()
         error = float(np.linalg.norm(goal - snap.hand))
         self._draw_contacts(snap)
         self._draw_path(snap, goal)
+        hold = self.hold
         self._update_hold(snap, goal)
         self._history.append((snap.t, 1e3 * error, snap.contact_force))
         while self._history and self._history[0][0] < snap.t - PLOT_SECONDS:
             self._history.popleft()
-        self.readout.content = "\n".join(
-            readout_lines(snap, error, self.hold, self._hold_since)
-        )
-        if len(self._history) > 1:
-            data = np.array(self._history).T
-            self.plot.data = (data[0], data[1], data[2])
+        self._updates += 1
+        if self._updates % PANEL_EVERY == 1 or hold != self.hold:
+            self.readout.content = "\n".join(
+                readout_lines(snap, error, self.hold, self._hold_since)
+            )
+            if len(self._history) > 1:
+                data = np.array(self._history).T
+                self.plot.data = (data[0], data[1], data[2])
         self._draw_map(snap.t, snap.hand)
+        self.shown = snap
 
     def state(self) -> GoalPageState:
         """What the page shows now."""

@@ -157,6 +157,7 @@ class TeleopSession:
         self._stopping = threading.Event()
         self._pacer = WallClockPacer()
         self._latencies: list[float] = []
+        self._commands: list[tuple[int, float, float]] = []
         self._state = RobotState(robot)
         self._frame = robot.frame_id(self.scenario.ee_frame)
         self._periods_counted = self._misses = 0
@@ -194,9 +195,10 @@ class TeleopSession:
         taken = self.goal.take_sampled()
         if taken is None or not self._pacer.started:
             return
-        _, arrival = taken
+        number, arrival = taken
         starts = max(time.perf_counter(), self._pacer.wall_time(t_start))
         self._latencies.append(starts - arrival)
+        self._commands.append((number, arrival, starts))
 
     def set_goal(self, position: FloatArray, rotation: FloatArray) -> int:
         """Send a goal (the page's gizmo, a script); return its number."""
@@ -329,6 +331,14 @@ class TeleopSession:
     def latency_ms(self) -> list[float]:
         """Goal-to-command latencies measured so far [ms]."""
         return [1e3 * x for x in self._latencies]
+
+    def commands(self) -> list[tuple[int, float, float]]:
+        """Each goal commanded so far: (its number, its arrival, its command).
+
+        Times are ``time.perf_counter()`` [s]; the command is when the first
+        trajectory planned for the goal started to be commanded.
+        """
+        return list(self._commands)
 
 
 def latency_summary(latencies_ms: list[float]) -> dict[str, Any]:

@@ -69,6 +69,19 @@ class Page(abc.ABC, Generic[S]):
     def update(self) -> None:
         """Bring the page up to date with the session."""
 
+    def refresh(self) -> None:
+        """:meth:`update`, sent to the browsers at once as one message batch.
+
+        viser otherwise wakes its event loop for every message (a scene node's
+        pose is one; an update sends dozens), each a switch between threads
+        competing for the interpreter with the control loop, and holds what it
+        queued for up to a 60 Hz window before sending it. Measured on the
+        boards: an update took 34 ms (median) without the batch.
+        """
+        with self.server.atomic():
+            self.update()
+        self.server.flush()
+
     def run(self) -> None:
         """Update the page until :meth:`close`, the stop button or the session's end."""
         period = 1.0 / UPDATE_RATE
@@ -78,7 +91,7 @@ class Page(abc.ABC, Generic[S]):
         failing: str | None = None
         while not self._close.is_set() and not self.stopped.is_set():
             try:
-                self.update()
+                self.refresh()
             except Exception as exc:  # the page must not stop the session
                 message = f"{type(exc).__name__}: {exc}"
                 if message != failing:
