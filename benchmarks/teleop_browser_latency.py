@@ -72,6 +72,28 @@ new MutationObserver(() => {
 """
 
 
+def _tree_cpu(root: int) -> float:
+    """CPU time [s] used so far by process ``root`` and its descendants (Linux)."""
+    parents: dict[int, int] = {}
+    times: dict[int, float] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parents[int(entry.name)] = int(fields[1])
+        times[int(entry.name)] = (int(fields[11]) + int(fields[12])) / tick
+    total, stack = 0.0, [root]
+    while stack:
+        pid = stack.pop()
+        total += times.get(pid, 0.0)
+        stack += [child for child, parent in parents.items() if parent == pid]
+    return total
+
+
 def _percentiles(values: list[float]) -> tuple[float, float]:
     if not values:
         return (float("nan"), float("nan"))
@@ -93,9 +115,12 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
     update = page.update
 
     sent: list[tuple[float, float]] = []  # (server time, the hand's x) per update
+    page_cpu = [0.0]
 
     def marked() -> None:
+        start = time.thread_time()
         update()
+        page_cpu[0] += time.thread_time() - start
         if page.shown is not None:
             x = float(page.shown.hand[0])
             marker.content = f"hand x {x:.5f}"
@@ -141,11 +166,20 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
         trip_ms, clock_ms = min(checks)
         perf_to_epoch = time.time() - time.perf_counter()
         body = browser.find_element(By.TAG_NAME, "body")
+        driver_pid = browser.service.process.pid
+        cpu0 = (_tree_cpu(driver_pid), time.process_time(), page_cpu[0])
+        wall0 = time.perf_counter()
         for k in range(keys):
             ActionChains(browser).send_keys_to_element(body, "ws"[k % 2]).perform()
             time.sleep(0.3)
             load.append(os.getloadavg()[0])
         time.sleep(0.5)
+        wall = time.perf_counter() - wall0
+        cpu = (
+            (_tree_cpu(driver_pid) - cpu0[0]) / wall,
+            (time.process_time() - cpu0[1]) / wall,
+            (page_cpu[0] - cpu0[2]) / wall,
+        )
         keys_at = [t / 1e3 for t in browser.execute_script("return window.cbpKeysAt")]
         hand = [
             (a / 1e3, b / 1e3, x)
@@ -197,6 +231,7 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
         "n_page": len(on_page),
         "clock_ms": clock_ms,
         "trip_ms": trip_ms,
+        "cpu": cpu,
         "load": (min(load), max(load)),
         "misses": sum(1 for p in session.parts.log.periods if p.missed),
         "periods": len(session.parts.log.periods),
@@ -229,8 +264,8 @@ def main() -> None:
         f"{platform.python_version()}. Command: `.venv/bin/python "
         "benchmarks/teleop_browser_latency.py --append benchmarks/RESULTS.md`.",
         "",
-        "| CPU-bound processes | load average | keys / goals | to server median / p95 [ms] | to command median / p95 [ms] | hand on page median / p95 [ms] | moved hand sent / marker changed, medians [ms] | deadline misses | browser clock - server clock [ms] |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| CPU-bound processes | load average | keys / goals | to server median / p95 [ms] | to command median / p95 [ms] | hand on page median / p95 [ms] | moved hand sent / marker changed, medians [ms] | deadline misses | CPU: Chromium / session (page updates) [cores] | browser clock - server clock [ms] |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---|---:|",
     ]
     for r in rows:
         lines.append(
@@ -240,7 +275,8 @@ def main() -> None:
             f"{r['to_command'][0]:.1f} / {r['to_command'][1]:.1f} | "
             f"{r['on_page'][0]:.1f} / {r['on_page'][1]:.1f} | "
             f"{r['to_sent'][0]:.0f} / {r['on_dom'][0]:.0f} | "
-            f"{r['misses']} of {r['periods']} | {r['clock_ms']:.1f} "
+            f"{r['misses']} of {r['periods']} | {r['cpu'][0]:.2f} / {r['cpu'][1]:.2f} "
+            f"({r['cpu'][2]:.2f}) | {r['clock_ms']:.1f} "
             f"(+-{r['trip_ms'] / 2:.1f}) |"
         )
     text = "\n".join(lines) + "\n"

@@ -248,6 +248,7 @@ class TeleopPage(Page[TeleopSession]):
         self.show_unknown = gui.add_checkbox("show unknown space", initial_value=False)
         self.readout = gui.add_markdown("")
         self.legend = gui.add_html(legend_html())
+        self.add_render_toggle()
         self._history: deque[tuple[float, float, float]] = deque()
         self.plot = gui.add_uplot(
             data=(np.zeros(1), np.zeros(1), np.zeros(1)),
@@ -283,9 +284,7 @@ class TeleopPage(Page[TeleopSession]):
         for mesh in getattr(self.ghost, "_meshes", []):
             mesh.wireframe = True
         self._gripper = add_gripper(self.server, "/goal/gripper", GOAL_GRIPPER)
-        self.server.scene.add_label(
-            "/goal/gripper/label", "goal (out of reach)", position=(0.0, 0.0, 0.06)
-        )
+        self.server.scene.add_label("/goal/gripper/label", "goal (out of reach)")
         self._ghost_label = self.server.scene.add_label(
             "/closest_label", "closest posture", visible=False
         )

@@ -136,6 +136,7 @@ class InputsPage(Page[InputSession]):
                     self.sliders[config][entry] = handles
             folder.visible = config == session.active
         self.readout = gui.add_markdown("")
+        self.add_render_toggle()
 
     def _setter(self, config: str, entry: str) -> Any:
         """A slider handler that sends every value of ``entry`` of ``config``."""
