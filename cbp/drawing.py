@@ -92,10 +92,14 @@ def joint_values(
     return np.array([values.get(j, locked.get(j, 0.0)) for j in joints], dtype=float)
 
 
-def add_gripper(server: Any, name: str) -> Any:
-    """A two-finger gripper of boxes under frame ``name`` (opening along y, z out)."""
+def add_gripper(
+    server: Any, name: str, colour: tuple[int, int, int] = (200, 60, 60)
+) -> Any:
+    """A two-finger gripper of boxes under frame ``name`` (opening along y, z out).
+
+    Hidden until shown; ``colour`` is RGB 0-255.
+    """
     frame = server.scene.add_frame(name, show_axes=False, visible=False)
-    colour = (200, 60, 60)
     server.scene.add_box(
         f"{name}/palm", colour, (0.02, 0.16, 0.03), position=(0.0, 0.0, -0.04)
     )

@@ -60,8 +60,8 @@ with the same rules whether it is then used from Python or from a scenario:
 * :meth:`Plugin.prepare` is the only method that may change the plugin.
 
 Optional capabilities are the protocols below (:class:`GoalReceiver`,
-:class:`TakesInput`, :class:`UsesCollisionWorld`, :class:`HoldsContacts`,
-:class:`ReportsSignals`): a
+:class:`TakesInput`, :class:`DescribesInput`, :class:`UsesCollisionWorld`,
+:class:`HoldsContacts`, :class:`ReportsSignals`): a
 plugin has one by defining its methods, and executors test for it with
 ``isinstance``. Writing rows in place (:meth:`Plugin.linearize_into`,
 :meth:`Plugin.value_into`) is an optional speed-up, not part of the contract;
@@ -106,9 +106,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Constraint",
+    "DescribesInput",
     "FloatArray",
     "GoalReceiver",
     "HoldsContacts",
+    "InputValue",
     "Linearization",
     "ParamsT",
     "Plugin",
@@ -487,6 +489,33 @@ class TakesInput(Protocol):
         Raises:
             ValueError: the values are refused; the previous ones are kept.
         """
+
+
+class InputValue(NamedTuple):
+    """What one value of an operator input means, for a slider or a device.
+
+    Attributes:
+        label: what the value sets, in words ("camera velocity along its y").
+        unit: its unit ("m/s").
+        low: the lowest value an operator would set.
+        high: the highest.
+    """
+
+    label: str
+    unit: str
+    low: float
+    high: float
+
+
+@runtime_checkable
+class DescribesInput(Protocol):
+    """A :class:`TakesInput` plugin that says what each of its input values means.
+
+    Pages name their sliders from it, with units and ranges.
+    """
+
+    def input_values(self) -> tuple[InputValue, ...]:
+        """One description per input value, in the input's order."""
 
 
 @runtime_checkable

@@ -224,13 +224,22 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         snap = session.snapshot()
         assert snap.contacts is not None
         assert len(snap.contacts.distance) > 0  # CAT's contact rows are drawn
-        assert _wait(
-            lambda: (
-                "clearance (CAT's nearest contact): -\n" not in page.readout.content
-                and " mm\n" in page.readout.content.split("clearance", 1)[1]
-            ),
-            2,
-        )
+        # Why it holds, as a state: the goal inside the board; red arrows of
+        # the blocked directions at the contacts holding the arm; the board
+        # translucent; a legend; all in the browser too.
+        state = page.state()
+        assert state.hold is not None
+        assert state.hold.kind == "goal in obstacle"
+        assert state.blocked_arrows > 0
+        assert state.xray
+        assert "closest posture" in " ".join(state.legend)
+
+        def text() -> str:
+            return str(browser.execute_script("return document.body.innerText"))
+
+        assert _wait(lambda: "holds: the goal lies inside an obstacle" in text(), 5)
+        assert "legend" in text()
+        assert "blocked direction at a contact" in text()
 
         # A browser that goes away leaves the arm on its goal: nothing is sent,
         # the session runs on.

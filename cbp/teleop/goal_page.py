@@ -10,6 +10,14 @@ or the hand's axes) and a reset, a readout (time, method, steps per period,
 deadline misses, goal error, contact force, the latest events) and a live plot
 of goal error and contact force over the last seconds.
 
+Why the arm holds is drawn and said: a red arrow at each contact that holds
+the arm, pointing along the direction it may not move (toward the obstacle);
+a goal the arm stops short of drawn as a magenta gripper and the closest
+posture the arm reaches as an orange wireframe, both labelled through
+obstacles, which turn translucent meanwhile (an x-ray); a legend; and the
+reason (:func:`cbp.teleop.hold.hold_reason`) at the top of the readout for as
+long as the arm holds.
+
 Every browser connected sees the same session; the last goal sent wins. A
 browser that disconnects leaves the goal where it was.
 """
@@ -26,11 +34,26 @@ from typing import Any
 import numpy as np
 
 from cbp.drawing import add_gripper, draw_objects, joint_values, wxyz
+from cbp.executors.cat import HOLDING_DISTANCE
 from cbp.perception.kernels import OCCUPIED, UNKNOWN
+from cbp.run.goal_input import GoalBounds
 from cbp.scene_file import scene_description
 from cbp.state import RobotState
 from cbp.teleop.goal_session import METHODS, Snapshot, TeleopSession
+from cbp.teleop.hold import GoalSpace, Hold, HoldFacts, hold_reason
 from cbp.teleop.page import Page
+from cbp.teleop.readout import (
+    ARM,
+    BLOCKED,
+    CELLS,
+    CLOSEST_POSTURE,
+    GOAL_GRIPPER,
+    LEGEND,
+    PATH,
+    UNREACHABLE,
+    legend_html,
+    readout_lines,
+)
 
 __all__ = ["GoalPageState", "TeleopPage"]
 
@@ -40,13 +63,17 @@ MAP_PERIOD = 0.5
 PLOT_SECONDS = 10.0
 #: Length of a contact's normal as drawn [m].
 CONTACT_ARROW = 0.04
-#: The goal counts as out of reach when the commanded trajectory ends this far
-#: from it [m]: the gripper and the reachable posture are drawn.
-UNREACHABLE = 0.02
 #: ... and has stayed there this long [s of simulated time].
 STALLED_FOR = 0.5
 #: Cells drawn at most (the nearest to the hand first).
 MAX_CELLS = 60_000
+#: The readout and the plot are redrawn at every this many page updates.
+PANEL_EVERY = 4
+#: Length of a blocked direction's arrow as drawn [m].
+BLOCKED_ARROW = 0.06
+#: Opacity of the declared objects while the arm holds short of the goal
+#: (an x-ray: the gripper and the closest posture inside them stay visible).
+XRAY_OPACITY = 0.3
 
 #: Keyboard shortcuts: key -> the label of the button it presses.
 KEYS = {
@@ -84,6 +111,12 @@ _KEYS_HTML = (
     + '">'
 )
 
+
+def _unit_rgb(colour: tuple[int, int, int]) -> tuple[float, float, float]:
+    """An RGB colour 0-255 as 0-1 (ViserUrdf's colours)."""
+    return (colour[0] / 255, colour[1] / 255, colour[2] / 255)
+
+
 _JOGS = [
     ("+x", "x", 1.0),
     ("-x", "x", -1.0),
@@ -116,6 +149,13 @@ class GoalPageState:
         ghost_visible: whether the reachable posture is shown.
         map_cells: cells of the map drawn (0 without cameras).
         readout: the readout's text.
+        hold: why the arm holds (:func:`cbp.teleop.hold.hold_reason`), or None
+            while it follows the goal.
+        hold_since: since when it holds for that reason [s of session time].
+        blocked_arrows: blocked-direction arrows drawn (one per contact that
+            holds the arm).
+        xray: whether the declared objects are drawn translucent.
+        legend: the legend's entries, as the page lists them.
     """
 
     robot_q: np.ndarray | None
@@ -125,6 +165,11 @@ class GoalPageState:
     ghost_visible: bool
     map_cells: int
     readout: str
+    hold: Hold | None = None
+    hold_since: float | None = None
+    blocked_arrows: int = 0
+    xray: bool = False
+    legend: tuple[str, ...] = ()
 
 
 class TeleopPage(Page[TeleopSession]):
@@ -155,7 +200,7 @@ class TeleopPage(Page[TeleopSession]):
                 root_node_name="/robot",
                 load_meshes=False,
                 load_collision_meshes=True,
-                collision_mesh_color_override=(0.12, 0.47, 0.71),
+                collision_mesh_color_override=_unit_rgb(ARM),
             )
             if urdf is not None
             else None
@@ -163,7 +208,7 @@ class TeleopPage(Page[TeleopSession]):
         self._joints = self.robot.get_actuated_joint_names() if self.robot else []
         self._drawn_q = np.zeros(len(self._joints))
         self._q_names = session.scenario.robot.coordinate_names("q")
-        draw_objects(self.server, description)
+        self._objects = draw_objects(self.server, description)
         camera = self.server.initial_camera
         camera.position = (1.9, -1.4, 1.3)
         camera.look_at = (0.4, 0.0, 0.3)
@@ -202,6 +247,8 @@ class TeleopPage(Page[TeleopSession]):
             reset.on_click(lambda _: self._after_goal(session.reset()))
         self.show_unknown = gui.add_checkbox("show unknown space", initial_value=False)
         self.readout = gui.add_markdown("")
+        self.legend = gui.add_html(legend_html())
+        self.add_render_toggle()
         self._history: deque[tuple[float, float, float]] = deque()
         self.plot = gui.add_uplot(
             data=(np.zeros(1), np.zeros(1), np.zeros(1)),
@@ -216,8 +263,9 @@ class TeleopPage(Page[TeleopSession]):
         )
         self._cells: Any = None
         # Where the arm is heading when the goal is out of its reach: a
-        # transparent robot at the end of the commanded trajectory, and the
-        # goal drawn as a gripper (the CAT paper's operator view).
+        # wireframe robot at the end of the commanded trajectory, and the
+        # goal drawn as a gripper (the CAT paper's operator view), each with
+        # a label drawn through obstacles.
         self.ghost = (
             ViserUrdf(
                 self.server,
@@ -225,12 +273,32 @@ class TeleopPage(Page[TeleopSession]):
                 root_node_name="/reachable",
                 load_meshes=False,
                 load_collision_meshes=True,
-                collision_mesh_color_override=(0.6, 0.6, 0.6, 0.35),
+                collision_mesh_color_override=_unit_rgb(CLOSEST_POSTURE),
             )
             if urdf is not None
             else None
         )
-        self._gripper = add_gripper(self.server, "/goal/gripper")
+        # viser 1.1.1's ViserUrdf takes no wireframe option: its meshes are
+        # switched to wireframe here (a ghost that would cover the arm
+        # otherwise; the arm's own posture stays readable through it).
+        for mesh in getattr(self.ghost, "_meshes", []):
+            mesh.wireframe = True
+        self._gripper = add_gripper(self.server, "/goal/gripper", GOAL_GRIPPER)
+        self.server.scene.add_label("/goal/gripper/label", "goal (out of reach)")
+        self._ghost_label = self.server.scene.add_label(
+            "/closest_label", "closest posture", visible=False
+        )
+        self._arrows: Any = None
+        self._arrow_count = 0
+        self._xray = False
+        self._bounds = GoalBounds.of(session.scenario)
+        self._space: tuple[object, tuple[float, ...], GoalSpace] = (None, (), "free")
+        #: The session's snapshot the page last drew (None before the first).
+        self.shown: Snapshot | None = None
+        self._updates = 0
+        #: Why the arm holds (None while it follows the goal), and since when.
+        self.hold: Hold | None = None
+        self._hold_since: float | None = None
         self._state = RobotState(session.scenario.robot)
         self._hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
         self._drawn_path: object = None
@@ -267,45 +335,49 @@ class TeleopPage(Page[TeleopSession]):
         position, rotation = self.session.goal.pose()
         self._shown_goal = number
         if np.isfinite(position).all() and np.isfinite(rotation).all():
-            self.gizmo.position = tuple(position)
-            self.gizmo.wxyz = wxyz(rotation)
+            with self.server.atomic():
+                self.gizmo.position = tuple(position)
+                self.gizmo.wxyz = wxyz(rotation)
+            self.server.flush()  # the moved goal shown now, not at a window's end
 
     # ------------------------------------------------------------------ output
 
     def update(self) -> None:
-        """Bring the page up to date with the session (called at UPDATE_RATE)."""
+        """Bring the page up to date with the session (called at UPDATE_RATE).
+
+        The robot, the goal, the contacts and the path at every update; the
+        readout and the plot at :data:`PANEL_EVERY`-th one, or at once when
+        the hold changes (each redraw of them costs the browser a render of
+        the panel, on the cores the control loop runs on).
+        """
         session = self.session
         snap = session.snapshot()
         if self.robot is not None:
-            self._drawn_q = self._cfg(snap.q)
-            self.robot.update_cfg(self._drawn_q)
+            q = self._cfg(snap.q)
+            if not np.array_equal(q, self._drawn_q) or self.shown is None:
+                self._drawn_q = q
+                self.robot.update_cfg(q)
         if session.goal.count != self._shown_goal:  # sent from elsewhere
             self._after_goal(session.goal.count)
         goal, _ = session.goal.pose()
         error = float(np.linalg.norm(goal - snap.hand))
         self._draw_contacts(snap)
         self._draw_path(snap, goal)
+        hold = self.hold
+        self._update_hold(snap, goal)
         self._history.append((snap.t, 1e3 * error, snap.contact_force))
         while self._history and self._history[0][0] < snap.t - PLOT_SECONDS:
             self._history.popleft()
-        lines = [
-            f"**t = {snap.t:.2f} s**, method **{snap.method}**"
-            + (" (paused)" if snap.paused else ""),
-            "",
-            f"- goal error: {error * 1e3:.0f} mm",
-            f"- contact force: {snap.contact_force:.1f} N",
-            f"- clearance (CAT's nearest contact): {_clearance(snap)}",
-            f"- steps in the last period: {snap.steps}",
-            f"- deadline misses: {snap.misses}",
-        ]
-        if snap.events:
-            lines += ["", "latest events:"]
-            lines += [f"- {t:.2f} s: {message}" for t, message in snap.events]
-        self.readout.content = "\n".join(lines)
-        if len(self._history) > 1:
-            data = np.array(self._history).T
-            self.plot.data = (data[0], data[1], data[2])
+        self._updates += 1
+        if self._updates % PANEL_EVERY == 1 or hold != self.hold:
+            self.readout.content = "\n".join(
+                readout_lines(snap, error, self.hold, self._hold_since)
+            )
+            if len(self._history) > 1:
+                data = np.array(self._history).T
+                self.plot.data = (data[0], data[1], data[2])
         self._draw_map(snap.t, snap.hand)
+        self.shown = snap
 
     def state(self) -> GoalPageState:
         """What the page shows now."""
@@ -319,7 +391,59 @@ class TeleopPage(Page[TeleopSession]):
             ghost_visible=self.ghost is not None and bool(self.ghost.show_collision),
             map_cells=0 if self._cells is None else len(self._cells.points),
             readout=str(self.readout.content),
+            hold=self.hold,
+            hold_since=self._hold_since,
+            blocked_arrows=self._arrow_count,
+            xray=self._xray,
+            legend=tuple(text for _, text in LEGEND),
         )
+
+    def _update_hold(self, snap: Snapshot, goal: np.ndarray) -> None:
+        """Why the arm holds; the objects turn translucent while it stops short."""
+        bounded, clamped = self._bounds.clamp(goal)
+        facts = HoldFacts(
+            paused=snap.paused,
+            short=self.unreachable,
+            goal_space=self._goal_space(bounded),
+            clamped=clamped,
+            held_by=snap.held_by,
+            note=snap.note,
+            recent_misses=snap.recent_misses,
+            method=snap.method,
+        )
+        hold = hold_reason(facts)
+        if hold is None:
+            self._hold_since = None
+        elif self.hold is None or hold.kind != self.hold.kind:
+            self._hold_since = snap.t
+        self.hold = hold
+        xray = self.unreachable
+        if xray != self._xray:
+            self._xray = xray
+            for handle in self._objects.values():
+                if hasattr(handle, "opacity"):  # boxes, spheres, cylinders
+                    handle.opacity = XRAY_OPACITY if xray else None
+
+    def _goal_space(self, position: np.ndarray) -> GoalSpace:
+        """Whether ``position`` lies in open space, an obstacle or unseen space."""
+        parts = self.session.parts
+        world = parts.world
+        if world is None:
+            return "free"
+        environment = world.environment
+        key = tuple(float(v) for v in position)
+        checked, checked_key, space = self._space
+        if environment is checked and key == checked_key:
+            return space
+        point = np.asarray(position, dtype=float)[None]
+        if bool(parts.unseen(point)[0]):
+            space = "unseen"
+        elif bool(environment.inside(point)[0]):
+            space = "obstacle"
+        else:
+            space = "free"
+        self._space = (environment, key, space)
+        return space
 
     def _cfg(self, q: np.ndarray) -> np.ndarray:
         """The URDF's actuated joints' values for the robot's configuration."""
@@ -330,7 +454,11 @@ class TeleopPage(Page[TeleopSession]):
         """CAT's contacts: a normal at each robot witness point, by distance.
 
         Red at contact or closer, through yellow, to green at the safety
-        distance's 5 cm and beyond.
+        distance's 5 cm and beyond. At each contact that holds the arm (within
+        CAT's holding distance of its bound) a red arrow of the blocked
+        direction: along the contact normal reversed, toward the obstacle,
+        the way the contact row forbids the arm's point to move; drawn on the
+        arm's side, its tip at the witness point.
         """
         contacts = snap.contacts
         if contacts is self._drawn_contacts:
@@ -339,6 +467,7 @@ class TeleopPage(Page[TeleopSession]):
         if contacts is None or not len(contacts.distance):
             points = np.zeros((0, 2, 3))
             colours = np.zeros((0, 2, 3))
+            holding = np.zeros(0, dtype=bool)
         else:
             start = contacts.point
             points = np.stack([start, start + CONTACT_ARROW * contacts.normal], axis=1)
@@ -347,8 +476,25 @@ class TeleopPage(Page[TeleopSession]):
                 [closeness, 1.0 - 0.5 * closeness, np.zeros_like(closeness)], axis=1
             )
             colours = np.repeat(rgb[:, None, :], 2, axis=1)
+            holding = contacts.distance <= HOLDING_DISTANCE
         self.server.scene.add_line_segments(
             "/contacts", points, colours, thickness=3.0, thickness_units="screen"
+        )
+        self._arrow_count = int(holding.sum())
+        if not holding.any():
+            if self._arrows is not None:
+                self._arrows.visible = False
+            return
+        assert contacts is not None
+        tips = contacts.point[holding]
+        tails = tips + BLOCKED_ARROW * contacts.normal[holding]
+        self._arrows = self.server.scene.add_arrows(
+            "/blocked",
+            np.stack([tails, tips], axis=1),
+            BLOCKED,
+            shaft_radius=0.004,
+            head_radius=0.01,
+            head_length=0.02,
         )
 
     def _draw_path(self, snap: Snapshot, goal: np.ndarray) -> None:
@@ -379,7 +525,7 @@ class TeleopPage(Page[TeleopSession]):
             self.server.scene.add_line_segments(
                 "/commanded",
                 segments,
-                (20, 20, 20),
+                PATH,
                 thickness=2.0,
                 thickness_units="screen",
             )
@@ -404,6 +550,9 @@ class TeleopPage(Page[TeleopSession]):
             if unreachable:
                 self.ghost.update_cfg(self._cfg(end))
             self.ghost.show_collision = unreachable
+        if unreachable:
+            self._ghost_label.position = tuple(heading)
+        self._ghost_label.visible = unreachable
 
     def _draw_map(self, t: float, hand: np.ndarray) -> None:
         """Redraw the map's cells when the map or the toggle changed."""
@@ -424,7 +573,7 @@ class TeleopPage(Page[TeleopSession]):
         # may be writing a frame meanwhile: the page shows a cell a frame late.
         grid = parts.cameras.grid
         centres = grid.centres(OCCUPIED)
-        colours = np.tile(np.array([[200, 90, 40]], dtype=np.uint8), (len(centres), 1))
+        colours = np.tile(np.array([CELLS], dtype=np.uint8), (len(centres), 1))
         if unknown:
             points = grid.centres(UNKNOWN)
             centres = np.vstack([centres, points])
@@ -438,12 +587,3 @@ class TeleopPage(Page[TeleopSession]):
         self._cells = self.server.scene.add_point_cloud(
             "/map", centres.astype(np.float32), colours, point_size=cell
         )
-
-
-def _clearance(snap: Snapshot) -> str:
-    """The distance of the nearest contact CAT holds, as text; "-" without one."""
-    contacts = snap.contacts
-    if contacts is None or not len(contacts.distance):
-        return "-"
-    nearest = round(1e3 * float(np.min(contacts.distance)), 1) + 0.0  # no -0.0
-    return f"{nearest:.1f} mm"

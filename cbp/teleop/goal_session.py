@@ -81,6 +81,13 @@ class Snapshot:
             (None for a method without them).
         trajectory: the trajectory the robot follows (a new object at each
             splice; its last point is where the arm is heading).
+        held_by: what held the arm at the last step of the method in control
+            (CAT, hybrid): ``contact`` (an obstacle), ``self-collision``,
+            ``joint limit``, or the name of another hard entry; empty when
+            nothing did or the method does not say (IK, MP).
+        note: the last command period's note (what its planner said: a hold's
+            reason, ``paused``, ``converged`` ...).
+        recent_misses: deadline misses among the periods of the last second.
     """
 
     t: float
@@ -94,6 +101,9 @@ class Snapshot:
     events: tuple[tuple[float, str], ...] = ()
     contacts: ContactSet | None = None
     trajectory: JointTrajectory | None = None
+    held_by: frozenset[str] = frozenset()
+    note: str = ""
+    recent_misses: int = 0
 
 
 class TeleopSession:
@@ -147,6 +157,7 @@ class TeleopSession:
         self._stopping = threading.Event()
         self._pacer = WallClockPacer()
         self._latencies: list[float] = []
+        self._commands: list[tuple[int, float, float]] = []
         self._state = RobotState(robot)
         self._frame = robot.frame_id(self.scenario.ee_frame)
         self._periods_counted = self._misses = 0
@@ -184,9 +195,10 @@ class TeleopSession:
         taken = self.goal.take_sampled()
         if taken is None or not self._pacer.started:
             return
-        _, arrival = taken
+        number, arrival = taken
         starts = max(time.perf_counter(), self._pacer.wall_time(t_start))
         self._latencies.append(starts - arrival)
+        self._commands.append((number, arrival, starts))
 
     def set_goal(self, position: FloatArray, rotation: FloatArray) -> int:
         """Send a goal (the page's gizmo, a script); return its number."""
@@ -294,6 +306,11 @@ class TeleopSession:
         for period in periods[self._periods_counted :]:
             self._misses += period.missed
         self._periods_counted = len(periods)
+        recent = 0
+        for period in reversed(periods[-200:]):
+            if period.t < run.sim.t - 1.0:
+                break
+            recent += period.missed
         return Snapshot(
             t=run.sim.t,
             q=q,
@@ -306,11 +323,22 @@ class TeleopSession:
             events=tuple(run.log.events[-5:]),
             contacts=self.planner.contacts(),
             trajectory=run.sim.trajectory,
+            held_by=self.planner.held_by,
+            note=periods[-1].note if periods else "",
+            recent_misses=recent,
         )
 
     def latency_ms(self) -> list[float]:
         """Goal-to-command latencies measured so far [ms]."""
         return [1e3 * x for x in self._latencies]
+
+    def commands(self) -> list[tuple[int, float, float]]:
+        """Each goal commanded so far: (its number, its arrival, its command).
+
+        Times are ``time.perf_counter()`` [s]; the command is when the first
+        trajectory planned for the goal started to be commanded.
+        """
+        return list(self._commands)
 
 
 def latency_summary(latencies_ms: list[float]) -> dict[str, Any]:

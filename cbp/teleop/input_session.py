@@ -128,6 +128,12 @@ class InputSession:
         """The robot model."""
         return self.scenarios[0].robot
 
+    def plugin(self, config: str, entry: str) -> Any:
+        """The plugin of ``config``'s input ``entry`` (what its values mean)."""
+        require_choice(config, self._plugins, "configuration", "plugin")
+        require_choice(entry, self._plugins[config], "input", "plugin")
+        return self._plugins[config][entry]
+
     def set_input(
         self, entry: str, values: FloatArray, config: str | None = None
     ) -> None:

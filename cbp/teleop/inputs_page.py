@@ -4,27 +4,82 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cbp.drawing import draw_objects, joint_values
+from cbp.errors import ConfigError
+from cbp.plugin import DescribesInput
+from cbp.robot import FloatArray
 from cbp.scene_file import scene_description
 from cbp.teleop.input_session import InputSession
 from cbp.teleop.page import Page
 
-__all__ = ["InputsPage"]
+__all__ = ["InputsPage", "SliderSpec", "slider_specs"]
+
+
+@dataclass(frozen=True)
+class SliderSpec:
+    """A slider of one input value.
+
+    Attributes:
+        label: what it sets, with its unit ("camera velocity sideways (y) [m/s]").
+        low: its lowest value.
+        high: its highest value.
+    """
+
+    label: str
+    low: float
+    high: float
+
+
+def slider_specs(entry: str, plugin: object, values: FloatArray) -> list[SliderSpec]:
+    """The sliders of input ``entry``, one per value, from its plugin's description.
+
+    A plugin that describes its input (:class:`~cbp.plugin.DescribesInput`)
+    names each value, with its unit and range (widened to hold the starting
+    value); one that does not gets ``entry[i]``, from 0 to twice a positive
+    starting value, else within +-0.2.
+    """
+    start = np.asarray(values, dtype=float).reshape(-1)
+    if isinstance(plugin, DescribesInput):
+        described = plugin.input_values()
+        if len(described) != len(start):
+            raise ConfigError(
+                f"input {entry}: its plugin describes {len(described)} values, "
+                f"it takes {len(start)}"
+            )
+        return [
+            SliderSpec(
+                f"{d.label} [{d.unit}]" if d.unit else d.label,
+                min(d.low, float(v)),
+                max(d.high, float(v)),
+            )
+            for d, v in zip(described, start, strict=True)
+        ]
+    return [
+        SliderSpec(
+            f"{entry}[{i}]",
+            0.0 if v > 0 else -0.2,
+            2.0 * float(v) if v > 0 else 0.2,
+        )
+        for i, v in enumerate(start)
+    ]
 
 
 class InputsPage(Page[InputSession]):
     """The page of an :class:`~cbp.teleop.InputSession` (orbit and pan object).
 
     The robot (its base placed from the planar joint), the declared objects, a
-    dropdown of the configurations, a slider per input value (camera-frame
-    velocities, desired distance: from 0 to twice a positive starting value,
-    else within +-0.2), stop and save, and a readout of the active
-    configuration's signals and the latest events.
+    dropdown of the configurations, a slider per input value named by what it
+    sets, with its unit and range, as its plugin describes it
+    (:class:`~cbp.plugin.DescribesInput`: "camera velocity sideways (y)
+    [m/s]", "distance to the object (r_d) [m]"; :func:`slider_specs`), stop
+    and save, and a readout of the active configuration's signals and the
+    latest events.
     """
 
     def __init__(
@@ -67,14 +122,13 @@ class InputsPage(Page[InputSession]):
             with folder:
                 for entry, values in inputs.items():
                     handles = []
-                    for i, value in enumerate(values):
-                        top = 2.0 * value if value > 0 else 0.2
-                        bottom = 0.0 if value > 0 else -0.2
+                    specs = slider_specs(entry, session.plugin(config, entry), values)
+                    for spec, value in zip(specs, values, strict=True):
                         slider = gui.add_slider(
-                            f"{entry}[{i}]",
-                            min=bottom,
-                            max=top,
-                            step=(top - bottom) / 200,
+                            spec.label,
+                            min=spec.low,
+                            max=spec.high,
+                            step=(spec.high - spec.low) / 200,
                             initial_value=float(value),
                         )
                         slider.on_update(self._setter(config, entry))
@@ -82,6 +136,7 @@ class InputsPage(Page[InputSession]):
                     self.sliders[config][entry] = handles
             folder.visible = config == session.active
         self.readout = gui.add_markdown("")
+        self.add_render_toggle()
 
     def _setter(self, config: str, entry: str) -> Any:
         """A slider handler that sends every value of ``entry`` of ``config``."""

@@ -16,7 +16,7 @@ from cbp.robot import FloatArray
 from cbp.run import RunParts
 from cbp.scenario import Scenario
 
-__all__ = ["SwitchingPlanner"]
+__all__ = ["SwitchingPlanner", "held_by"]
 
 
 class SwitchingPlanner:
@@ -35,6 +35,8 @@ class SwitchingPlanner:
         wanted: the method the operator chose (in control from the next
             period on).
         paused: hold the arm (it brakes on its trajectory).
+        held_by: what held the arm at the last step of the last plan, by kind
+            (:func:`held_by`); kept from one plan to the next, for a page.
     """
 
     def __init__(self, scenario: Scenario, parts: RunParts, method: str) -> None:
@@ -45,6 +47,7 @@ class SwitchingPlanner:
         self.method = method
         self.wanted = method
         self.paused = False
+        self.held_by: frozenset[str] = frozenset()
         #: The contact sets last merged by :meth:`contacts`, and the result.
         self._merged: tuple[list[ContactSet], ContactSet] = ([], ContactSet.empty())
         self.planner(method)
@@ -65,8 +68,12 @@ class SwitchingPlanner:
             run.event(run.sim.t, f"method switched from {self.method} to {self.wanted}")
             self.method = self.wanted
         if self.paused:
+            self.held_by = frozenset()
             return Plan(None, 0, "paused", stop=True)
-        return self.planner(self.method).plan(q, goal, budget, run)
+        planner = self.planner(self.method)
+        plan = planner.plan(q, goal, budget, run)
+        self.held_by = held_by(planner)
+        return plan
 
     def engine(self) -> Engine | None:
         """The QP engine of the method in control, if it steps one (CAT, hybrid)."""
@@ -105,3 +112,41 @@ class SwitchingPlanner:
         """Close every planner made."""
         for planner in self._planners.values():
             planner.close()
+
+
+def held_by(planner: Planner) -> frozenset[str]:
+    """What held the arm at the last step of ``planner``'s last plan, by kind.
+
+    CAT's (and hybrid's CAT's) hard entries active at its last step other than
+    the step limits: ``contact`` (a row of contacts with an obstacle),
+    ``self-collision`` (a row of contacts between the robot's own shapes only),
+    ``joint limit`` (the robot's position limits), or the entry's name. Empty
+    for a planner that does not say (IK, MP).
+    """
+    cat = getattr(planner, "cat", planner)  # hybrid steps a CatPlanner
+    names = getattr(cat, "blocked_by", None)
+    engine = getattr(cat, "engine", None)
+    if not names or engine is None:
+        return frozenset()
+    plugins = {e.name: e.plugin for e in engine.entries}
+    kinds = set()
+    for name in names:
+        plugin = plugins.get(name)
+        if plugin is None:
+            kinds.add(name)
+        elif plugin.robot_limit == "position":
+            kinds.add("joint limit")
+        elif isinstance(plugin, HoldsContacts):
+            kinds.add(_contact_kind(plugin))
+        else:
+            kinds.add(name)
+    return frozenset(kinds)
+
+
+def _contact_kind(plugin: HoldsContacts) -> str:
+    """``self-collision`` for rows of the robot's own pairs only, else ``contact``."""
+    try:
+        others = plugin.contacts.other_shape
+    except CbpError:  # nothing latched
+        return "contact"
+    return "self-collision" if len(others) and bool((others >= 0).all()) else "contact"

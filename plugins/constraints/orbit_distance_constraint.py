@@ -10,7 +10,7 @@ import numpy as np
 
 from cbp.errors import ConfigError
 from cbp.orbit import CameraObjectParams, ObjectTarget, frame_of, unit
-from cbp.plugin import Constraint, FloatArray
+from cbp.plugin import Constraint, FloatArray, InputValue
 from cbp.robot import RobotModel
 from cbp.state import RobotState
 
@@ -64,6 +64,17 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
         if not r > 0:
             raise ValueError(f"r_d must be > 0, got {r}")
         self.distance = r
+
+    def input_values(self) -> tuple[InputValue, ...]:
+        """The desired distance r_d [m]: from 0.1 m to twice the starting one."""
+        return (
+            InputValue(
+                "distance to the object (r_d)",
+                "m",
+                0.1,
+                max(2.0 * self.params.distance, 1.0),
+            ),
+        )
 
     def compute_value(self, state: RobotState) -> FloatArray:
         """||p_o - p_e||."""

@@ -9,7 +9,7 @@ from typing import ClassVar
 import numpy as np
 
 from cbp.orbit import frame_of
-from cbp.plugin import FloatArray, PluginParams, Task
+from cbp.plugin import FloatArray, InputValue, PluginParams, Task
 from cbp.robot import RobotModel
 from cbp.state import RobotState
 
@@ -23,6 +23,12 @@ class CameraVelocityParams(PluginParams):
     axes: tuple[int, ...] = (1, 2)
     """Camera axes commanded (0 x: along the line of sight, 1 y, 2 z): the orbit
     commands y and z (the distance is ``orbit_distance``'s); pan object all three."""
+
+
+#: What each camera axis's velocity moves the camera along.
+AXIS_MEANING = ("forward, along its line of sight (x)", "sideways (y)", "up (z)")
+#: The fastest camera velocity an operator's slider or stick asks for [m/s].
+OPERATOR_SPEED = 0.3
 
 
 class CameraVelocityTask(Task[CameraVelocityParams]):
@@ -66,6 +72,18 @@ class CameraVelocityTask(Task[CameraVelocityParams]):
         if v.shape != (len(self.axes),) or not np.all(np.isfinite(v)):
             raise ValueError(f"expected {len(self.axes)} finite velocities, got {v}")
         self.velocity = v.copy()
+
+    def input_values(self) -> tuple[InputValue, ...]:
+        """The camera's velocity along each commanded axis [m/s]."""
+        return tuple(
+            InputValue(
+                f"camera velocity {AXIS_MEANING[axis]}",
+                "m/s",
+                -OPERATOR_SPEED,
+                OPERATOR_SPEED,
+            )
+            for axis in self.axes
+        )
 
     def prepare(self, state: RobotState, dt: float) -> None:
         """Latch the camera's pose and the step's duration."""
