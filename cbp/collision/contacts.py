@@ -135,7 +135,10 @@ class ContactSet:
 
     @classmethod
     def stack(
-        cls, obstacles: ContactSet, padding: float, own: list[ContactRow]
+        cls,
+        obstacles: ContactSet,
+        padding: float,
+        own: list[ContactRow] | ContactSet,
     ) -> ContactSet:
         """The obstacle contacts, then the self contacts, with both parts.
 
@@ -145,14 +148,38 @@ class ContactSet:
             obstacles: an environment's contacts, distances of the unpadded
                 shapes.
             padding: subtracted from the obstacle distances [m].
-            own: the self contacts as rows (distances already padded).
+            own: the self contacts, as rows or a set (distances already padded).
         """
         n = len(obstacles)
-        if own:
-            i, j, point, other, normal, distance = zip(*own, strict=True)
+        fields: (
+            tuple[IntArray, IntArray, FloatArray, FloatArray, FloatArray, FloatArray]
+            | None
+        ) = None
+        if isinstance(own, ContactSet):
+            if len(own):
+                fields = (
+                    own.shape,
+                    own.other_shape,
+                    own.point,
+                    own.other_point,
+                    own.normal,
+                    own.distance,
+                )
+        elif own:
+            columns = tuple(zip(*own, strict=True))
+            fields = (
+                np.array(columns[0], dtype=np.intp),
+                np.array(columns[1], dtype=np.intp),
+                np.array(columns[2], dtype=float).reshape(-1, 3),
+                np.array(columns[3], dtype=float).reshape(-1, 3),
+                np.array(columns[4], dtype=float).reshape(-1, 3),
+                np.array(columns[5], dtype=float),
+            )
+        if fields is not None:
+            i, j, point, other, normal, distance = fields
             arrays = (
-                np.concatenate((obstacles.shape, np.array(i, dtype=np.intp))),
-                np.concatenate((obstacles.other_shape, np.array(j, dtype=np.intp))),
+                np.concatenate((obstacles.shape, i)),
+                np.concatenate((obstacles.other_shape, j)),
                 np.concatenate((obstacles.point, point)),
                 np.concatenate((obstacles.other_point, other)),
                 np.concatenate((obstacles.normal, normal)),

@@ -14,6 +14,7 @@ the occupied cell for octrees).
 from __future__ import annotations
 
 import abc
+from typing import Literal
 
 import coal
 import numpy as np
@@ -23,7 +24,12 @@ from cbp.collision.contacts import ContactSet
 from cbp.collision.geometry import LinkShape, PlacedShapes
 from cbp.robot import FloatArray
 
-__all__ = ["Environment", "signed_distance"]
+__all__ = ["Environment", "NarrowPhase", "signed_distance"]
+
+#: How declared objects and the robot's own shape pairs are measured: in one
+#: compiled pass (:mod:`cbp.collision.convex_kernels`) or by coal, called from
+#: Python per pair (``collision.narrow_phase``).
+NarrowPhase = Literal["compiled", "coal"]
 
 
 def signed_distance(
@@ -63,7 +69,13 @@ class Environment(abc.ABC):
     resolution: float = 0.0
 
     @abc.abstractmethod
-    def query(self, robot: PlacedShapes, margin: float, per_shape: int) -> ContactSet:
+    def query(
+        self,
+        robot: PlacedShapes,
+        margin: float,
+        per_shape: int,
+        narrow_phase: NarrowPhase = "compiled",
+    ) -> ContactSet:
         """Contacts of each robot shape with obstacles closer than ``margin``.
 
         Args:
@@ -71,6 +83,9 @@ class Environment(abc.ABC):
             margin: report obstacles whose distance to a shape is below this [m].
             per_shape: at most this many contacts per shape (the closest, spread
                 over distinct directions).
+            narrow_phase: how exact distances to declared shapes are measured
+                (``collision.narrow_phase``); an environment that measures
+                otherwise (an occupancy map's cells) ignores it.
 
         Returns:
             Obstacle contacts (``other_shape`` -1), with the distances of the

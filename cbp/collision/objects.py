@@ -1,8 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
 """Declared obstacles: coal shapes at world placements, the ground truth.
 
-Queries measure exact distances with coal, for the (shape, object) pairs that a
-compiled broad phase keeps (:mod:`cbp.collision.broad`).
+Queries measure exact distances for the (shape, object) pairs that a compiled
+broad phase keeps (:mod:`cbp.collision.broad`): in the same compiled pass
+(:mod:`cbp.collision.convex_kernels`, GJK and EPA) by default, or with coal
+called from Python per pair (``collision.narrow_phase: coal``). Non-convex
+meshes are measured by coal either way.
 """
 
 from __future__ import annotations
@@ -17,7 +20,14 @@ from scipy.spatial import cKDTree
 
 from cbp.collision.broad import near_objects
 from cbp.collision.contacts import ContactRow, ContactSet
-from cbp.collision.environment import Environment, signed_distance
+from cbp.collision.convex_kernels import (
+    compile_convex_kernels,
+    fields,
+    obstacle_contacts,
+    pack_shapes,
+    packed_robot,
+)
+from cbp.collision.environment import Environment, NarrowPhase, signed_distance
 from cbp.collision.geometry import LinkShape, PlacedShapes
 from cbp.collision.shape_table import compile_kernels
 from cbp.errors import ConfigError
@@ -161,13 +171,43 @@ class PrimitiveEnvironment(Environment):
         self._all = np.arange(len(objects), dtype=np.intp)
         self._request = coal.DistanceRequest()
         self._result = coal.DistanceResult()
+        self._packed = pack_shapes([o.shape for o in objects])
+        self._fields = fields(self._packed)
+        self._frames = np.array(
+            [o.placement.homogeneous for o in objects], dtype=float
+        ).reshape(-1, 4, 4)
+        #: Per robot shapes (by their list's identity): (the list, which
+        #: (shape, object) pairs are wanted contacts, left out).
+        self._skips: dict[int, tuple[list[LinkShape], np.ndarray]] = {}
 
     def prepare(self, shapes: list[LinkShape], margin: float) -> None:
-        """Compile the contact reduction (once per process)."""
-        del shapes, margin
+        """Compile the kernels (once per process), pack the shapes."""
+        del margin
         compile_kernels()
+        compile_convex_kernels()
+        packed_robot(shapes)
+        self._skip(shapes)
 
-    def query(self, robot: PlacedShapes, margin: float, per_shape: int) -> ContactSet:
+    def _skip(self, shapes: list[LinkShape]) -> np.ndarray:
+        """Which (shape, object) pairs are wanted contacts, (n, m) booleans."""
+        found = self._skips.get(id(shapes))
+        if found is None or found[0] is not shapes:
+            skip = np.array(
+                [[s.link in o.allow_contact for o in self.objects] for s in shapes],
+                dtype=np.bool_,
+            ).reshape(len(shapes), len(self.objects))
+            if len(self._skips) >= 4:
+                self._skips.clear()
+            found = self._skips[id(shapes)] = (shapes, skip)
+        return found[1]
+
+    def query(
+        self,
+        robot: PlacedShapes,
+        margin: float,
+        per_shape: int,
+        narrow_phase: NarrowPhase = "compiled",
+    ) -> ContactSet:
         """Exact distances of the candidate pairs; one contact per pair.
 
         Candidates: the objects whose bounding box is within ``margin`` of a
@@ -175,10 +215,67 @@ class PrimitiveEnvironment(Environment):
         """
         if not self.objects:
             return ContactSet.empty()
-        centres, radii, halves = robot.centres, robot.radii, robot.halves
-        candidates = self._near_robot(centres, radii, margin)
+        candidates = self._near_robot(robot.centres, robot.radii, margin)
         if not candidates.size:
             return ContactSet.empty()
+        if narrow_phase == "compiled":
+            contacts = self._compiled(robot, candidates, margin)
+        else:
+            contacts = self._coal(robot, candidates, margin)
+        if len(contacts) <= per_shape:  # no shape can have too many
+            return contacts
+        return contacts.keep_closest(per_shape, min_angle_deg=0.0, min_spacing=0.0)
+
+    def _compiled(
+        self, robot: PlacedShapes, candidates: IntArray, margin: float
+    ) -> ContactSet:
+        """The candidates' contacts in one compiled pass (coal for meshes)."""
+        capacity = len(robot.centres) * len(candidates)
+        shape = np.empty(capacity, dtype=np.intp)
+        obstacle = np.empty(capacity, dtype=np.intp)
+        floats = np.empty((4, capacity, 3))
+        left_shape = np.empty(capacity, dtype=np.intp)
+        left_object = np.empty(capacity, dtype=np.intp)
+        count, left = obstacle_contacts(
+            robot.centres,
+            robot.halves,
+            robot.radii,
+            robot.placements.homogeneous,
+            *fields(packed_robot(robot.shapes)),
+            self._lower,
+            self._upper,
+            candidates,
+            self._frames,
+            *self._fields,
+            self._skip(robot.shapes),
+            self._ahead,
+            self._moving,
+            float(margin),
+            shape,
+            obstacle,
+            floats,
+            left_shape,
+            left_object,
+        )
+        contacts = ContactSet.obstacles(
+            shape[:count],
+            floats[0, :count],
+            floats[1, :count],
+            floats[2, :count],
+            floats[3, :count, 0],
+        )
+        if not left:
+            return contacts
+        rows = self._measure(
+            robot, left_shape[:left].tolist(), left_object[:left].tolist(), margin
+        )
+        return ContactSet.concatenate([contacts, ContactSet.from_rows(rows)])
+
+    def _coal(
+        self, robot: PlacedShapes, candidates: IntArray, margin: float
+    ) -> ContactSet:
+        """The candidates' contacts, coal called from Python per pair."""
+        centres, radii, halves = robot.centres, robot.radii, robot.halves
         capacity = len(centres) * len(candidates)
         shape_index = np.empty(capacity, dtype=np.intp)
         object_index = np.empty(capacity, dtype=np.intp)
@@ -193,14 +290,28 @@ class PrimitiveEnvironment(Environment):
             shape_index,
             object_index,
         )
+        pairs = [
+            (i, k)
+            for i, k in zip(
+                shape_index[:count].tolist(), object_index[:count].tolist(), strict=True
+            )
+            if not (
+                self.objects[k].allow_contact
+                and robot.shapes[i].link in self.objects[k].allow_contact
+            )  # wanted contact
+        ]
+        return ContactSet.from_rows(
+            self._measure(robot, [i for i, _ in pairs], [k for _, k in pairs], margin)
+        )
+
+    def _measure(
+        self, robot: PlacedShapes, shapes: list[int], objects: list[int], margin: float
+    ) -> list[ContactRow]:
+        """Coal's contacts of the pairs (shapes[p], objects[p]) nearer than margin."""
         rows: list[ContactRow] = []
         request, result = self._request, self._result
-        for i, k in zip(
-            shape_index[:count].tolist(), object_index[:count].tolist(), strict=True
-        ):
+        for i, k in zip(shapes, objects, strict=True):
             obj = self.objects[k]
-            if obj.allow_contact and robot.shapes[i].link in obj.allow_contact:
-                continue  # wanted contact
             d, point, other, normal = signed_distance(
                 obj.shape,
                 obj.placement,
@@ -213,10 +324,7 @@ class PrimitiveEnvironment(Environment):
                 d -= max(float(normal.dot(self._ahead[k])), 0.0)
             if d < margin:
                 rows.append((i, -1, point, other, normal, d))
-        contacts = ContactSet.from_rows(rows)
-        if len(rows) <= per_shape:  # no shape can have too many (counted in Python)
-            return contacts
-        return contacts.keep_closest(per_shape, min_angle_deg=0.0, min_spacing=0.0)
+        return rows
 
     def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
         """Every declared object."""

@@ -23,12 +23,18 @@ import pinocchio as pin
 from cbp.collision.broad import shape_bounds
 from cbp.collision.checker import FreeSpaceChecker
 from cbp.collision.contacts import ContactRow, ContactSet
+from cbp.collision.convex_kernels import (
+    compile_convex_kernels,
+    fields,
+    packed_robot,
+    self_contacts,
+)
 from cbp.collision.environment import Environment, signed_distance
 from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
 from cbp.collision.motion import SweepBound
 from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.settings import CollisionSettings
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, IntArray
 from cbp.state import RobotState
 
 __all__ = [
@@ -106,6 +112,9 @@ class CollisionWorld:
         self._centres = np.array(
             [s.placement.actInv(s.centre) for s in geometry.shapes]
         ).reshape(-1, 3)
+        if self.settings.narrow_phase == "compiled":
+            compile_convex_kernels()
+            packed_robot(geometry.shapes)
         self._environment.prepare(geometry.shapes, self.margin(self._environment))
 
     @property
@@ -309,10 +318,14 @@ class CollisionWorld:
         """
         environment = environment or self._environment
         robot = self.placed(state)
+        settings = self.settings
         obstacles = environment.query(
-            robot, self.margin(environment), self.settings.contacts_per_link
+            robot,
+            self.margin(environment),
+            settings.contacts_per_link,
+            settings.narrow_phase,
         )
-        own = self.self_rows(robot) if self.settings.self_collision else []
+        own = self.self_set(robot) if settings.self_collision else []
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles
         # are inflated by that much (and step validation tolerates as much more).
         return ContactSet.stack(obstacles, self.padding + environment.resolution, own)
@@ -347,10 +360,66 @@ class CollisionWorld:
         Args:
             robot: the shapes at a configuration (:meth:`placed`).
         """
-        return ContactSet.from_rows(self.self_rows(robot))
+        own = self.self_set(robot)
+        return own if isinstance(own, ContactSet) else ContactSet.from_rows(own)
 
-    def self_rows(self, robot: PlacedShapes) -> list[ContactRow]:
-        """:meth:`self_contacts` as rows, for a query to stack in one call."""
+    def self_set(self, robot: PlacedShapes) -> ContactSet | list[ContactRow]:
+        """:meth:`self_contacts` as the narrow phase gives them, for stacking.
+
+        Compiled (``collision.narrow_phase: compiled``): a set measured in one
+        pass; with coal: rows (:meth:`self_rows`).
+        """
+        if self.settings.narrow_phase == "coal":
+            return self.self_rows(robot)
+        geometry = self.geometry
+        first, second = geometry.pair_arrays
+        n = len(first)
+        if not n:
+            return ContactSet.empty()
+        pad2 = 2.0 * self.padding
+        out_first = np.empty(n, dtype=np.intp)
+        out_second = np.empty(n, dtype=np.intp)
+        floats = np.empty((4, n, 3))
+        left = np.empty(n, dtype=np.intp)
+        count, missed = self_contacts(
+            robot.centres,
+            robot.halves,
+            robot.radii,
+            robot.placements.homogeneous,
+            *fields(packed_robot(geometry.shapes)),
+            first,
+            second,
+            self.settings.activation_distance + pad2,
+            pad2,
+            out_first,
+            out_second,
+            floats,
+            left,
+        )
+        found = ContactSet(
+            out_first[:count],
+            out_second[:count],
+            floats[0, :count],
+            floats[1, :count],
+            floats[2, :count],
+            floats[3, :count, 0],
+        )
+        if not missed:
+            return found
+        return ContactSet.concatenate(
+            [found, ContactSet.from_rows(self.self_rows(robot, left[:missed]))]
+        )
+
+    def self_rows(
+        self, robot: PlacedShapes, which: IntArray | None = None
+    ) -> list[ContactRow]:
+        """:meth:`self_contacts` measured by coal, as rows, to stack in one call.
+
+        Args:
+            robot: the shapes at a configuration (:meth:`placed`).
+            which: the indices into :attr:`RobotGeometry.self_pairs` to measure
+                (default: those the broad phase keeps).
+        """
         shapes = self.geometry.shapes
         placements, centres, halves = robot.placements, robot.centres, robot.halves
         pad2 = 2.0 * self.padding
@@ -358,7 +427,12 @@ class CollisionWorld:
         rows = []
         request, result = self._request, self._result
         pairs = self.geometry.self_pairs
-        for k in self.geometry.near_self_pairs(centres, margin, halves):
+        near = (
+            self.geometry.near_self_pairs(centres, margin, halves)
+            if which is None
+            else which.tolist()
+        )
+        for k in near:
             i, j = pairs[k]
             # Shape j first: the normal then points from j toward i.
             d, point, other, normal = signed_distance(
