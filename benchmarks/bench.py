@@ -615,6 +615,102 @@ def _cat_rows(cfg: BenchConfig) -> list[Row]:
     return rows
 
 
+def _narrow_phase_rows(cfg: BenchConfig) -> list[Row]:
+    """The compiled narrow phase against coal's, and the CAT step with each.
+
+    In alternating rounds of one run: the hand-written reaching step, the CAT
+    step on the boards (as in "cat step") with ``collision.narrow_phase``
+    compiled and coal, and the CAT step's parts near the first board: the
+    engine step with contact rows (contacts cached) and the contact query that
+    validates a step, with either narrow phase; then the query alone inside
+    the shelf (more pairs) with either.
+    """
+    from cbp.robot import RobotModel
+    from cbp.scenario import load_scenario
+    from cbp.state import RobotState
+
+    n, w = max(cfg.repetitions // 2, 20), min(cfg.warmup, 50)
+    robot = RobotModel.load("franka_panda")
+    hand = HandWritten(robot)
+    hand_q = {"q": robot.home()}
+
+    def hand_step(i: int) -> object:
+        hand.goal = GOALS[(i // 64) % len(GOALS)]
+        dq = hand.step(hand_q["q"])
+        hand_q["q"] = pin.integrate(robot.model, hand_q["q"], dq)
+        return dq
+
+    base = "hand-written reaching step (as in reaching)"
+    steps: list[tuple[str, Callable[[int], object]]] = [(base, hand_step)]
+    checks: list[tuple[str, Callable[[int], object]]] = []
+    queries: list[tuple[str, Callable[[int], object]]] = []
+    contacts = {}
+    for phase in ("compiled", "coal"):
+        overrides = {"collision.narrow_phase": phase}
+        boards: Any = load_scenario(SCENARIOS / "cat_boards.yaml", overrides=overrides)
+        boards.q0[:] = _near_board(boards)
+        step, world = _cat_step(boards)
+        steps.append((f"CAT step on the boards, {phase} narrow phase", step))
+        near = boards.q0
+        pair = (near, near + 1e-9)
+        contacts[phase] = len(world.check(near).contacts)
+        checks.append(
+            (
+                f"CAT: contact query and validation, {phase} narrow phase "
+                "(CollisionWorld.check)",
+                lambda i, world=world, pair=pair: world.check(pair[i % 2]),
+            )
+        )
+        if phase == "compiled":
+            cat = boards.make_engine()
+            _aim_at_final_goal(boards)
+            world.check(near)
+            checks.insert(
+                0,
+                (
+                    "CAT: engine step with contact rows (contacts cached)",
+                    lambda i, cat=cat, near=near: cat.step(near, 0.02),
+                ),
+            )
+        shelf: Any = load_scenario(
+            SCENARIOS / "cat_shelf_retreat.yaml", overrides=overrides
+        )
+        shelf_world = shelf.world_for_run()
+        state = RobotState(shelf.robot, shelf.q0)
+        queries.append(
+            (
+                f"full arm vs declared objects inside the shelf, {phase} narrow "
+                "phase (CollisionWorld.query)",
+                lambda i, world=shelf_world, state=state: world.query(state),
+            )
+        )
+    parts = steps + checks + queries
+    timed = measure_interleaved([fn for _, fn in parts], n, w)
+    rows = [
+        Row("narrow phase", case, median, p95, n)
+        for (case, _), (median, p95) in zip(parts, timed, strict=True)
+    ]
+    for row in rows:
+        if row.case.startswith("CAT step"):
+            row.note = f"{contacts['compiled']} contacts at the start"
+    compiled_step = "CAT step on the boards, compiled"
+    relate(rows, compiled_step, base)
+    relate(rows, "CAT step on the boards, coal", base)
+    relate(rows, "CAT: engine step", compiled_step)
+    relate(rows, "CAT: contact query and validation, compiled", compiled_step)
+    relate(
+        rows,
+        "CAT: contact query and validation, coal",
+        "CAT: contact query and validation, compiled",
+    )
+    relate(
+        rows,
+        "full arm vs declared objects inside the shelf, coal",
+        "full arm vs declared objects inside the shelf, compiled",
+    )
+    return rows
+
+
 def _shelf_octree_world() -> tuple[Any, np.ndarray]:
     """A collision world of the shelf scene's octree (1 cm), and a pose inside."""
     from cbp.collision import MetaballRefiner, OccupancyEnvironment
@@ -1151,6 +1247,7 @@ def run_bench(
         _reaching_rows,
         _parts_rows,
         _cat_rows,
+        _narrow_phase_rows,
         _query_rows,
         _run_query_rows,
         _scaling_rows,
@@ -1418,6 +1515,23 @@ TARGETS = [
         "hand-written",
         130.0 / 25.8,
         "CAT step with contacts / hand-written step (130 us: 250 per period)",
+    ),
+    (
+        "narrow phase",
+        "CAT step on the boards, compiled",
+        "narrow phase",
+        "hand-written",
+        3.5,
+        "CAT step with contacts, compiled narrow phase / hand-written step, "
+        "interleaved (issue 40; moonshot 2.5)",
+    ),
+    (
+        "narrow phase",
+        "CAT: contact query and validation, compiled",
+        "narrow phase",
+        "CAT: contact query and validation, coal",
+        1.0,
+        "CAT step's contact query, compiled narrow phase / coal's",
     ),
     (
         "planning",

@@ -217,6 +217,34 @@ class ContactSet:
             _split=(part(slice(0, n)), part(slice(n, None))),
         )
 
+    @classmethod
+    def packed(
+        cls, index: IntArray, floats: FloatArray, obstacles: int, count: int
+    ) -> ContactSet:
+        """Contacts a kernel wrote, obstacles first, with both parts as views.
+
+        Args:
+            index: (2, K): the shapes, then the other shapes (-1: obstacle).
+            floats: (4, K, 3): points, other points, normals, then the
+                distances in ``floats[3, :, 0]``.
+            obstacles: how many contacts with obstacles come first.
+            count: how many contacts in all.
+        """
+
+        def part(rows: slice) -> ContactSet:
+            return cls(
+                index[0, rows],
+                index[1, rows],
+                floats[0, rows],
+                floats[1, rows],
+                floats[2, rows],
+                floats[3, rows, 0],
+            )
+
+        whole = part(slice(0, count))
+        whole._split = (part(slice(0, obstacles)), part(slice(obstacles, count)))
+        return whole
+
     def select(self, mask: np.ndarray | slice) -> ContactSet:
         """The contacts where ``mask`` is true, at the given indices, or in a slice.
 

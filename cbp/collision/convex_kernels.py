@@ -38,14 +38,14 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import coal
 import numba
 import numpy as np
 import numpy.typing as npt
 
-from cbp.collision.broad import near_objects, near_pairs
+from cbp.collision.broad import near_objects, near_pairs, shape_bounds
 from cbp.robot import FloatArray, IntArray
 
 if TYPE_CHECKING:
@@ -62,7 +62,9 @@ __all__ = [
     "SPHERE",
     "UNSUPPORTED",
     "ConvexShapes",
+    "RobotTable",
     "compile_convex_kernels",
+    "declared_contacts",
     "fields",
     "obstacle_contacts",
     "pack_shapes",
@@ -118,6 +120,35 @@ class ConvexShapes:
     def supported(self) -> bool:
         """Whether the kernels measure every shape."""
         return bool(np.all(self.kind != UNSUPPORTED))
+
+
+@dataclass(frozen=True)
+class RobotTable:
+    """A robot's shapes as :func:`declared_contacts` reads them.
+
+    Attributes:
+        centres: bounding-sphere centres in the shapes' own frames (n, 3) [m].
+        halves: bounding-box half extents about them, same frames (n, 3) [m].
+        radii: bounding-sphere radii (n,) [m].
+        shapes: the packed shapes.
+        first: the self pairs' first shapes (none: no self-collision), (P,).
+        second: their second shapes (P,).
+        self_guess: where the self pairs' next GJK starts (P, 5), updated by
+            each query (:func:`pair_distance`).
+    """
+
+    centres: FloatArray
+    halves: FloatArray
+    radii: FloatArray
+    shapes: ConvexShapes
+    first: IntArray
+    second: IntArray
+    self_guess: FloatArray
+
+    @property
+    def arrays(self) -> tuple[Any, ...]:
+        """Bounds and packed shapes in :func:`declared_contacts`' order."""
+        return (self.centres, self.halves, self.radii, *fields(self.shapes))
 
 
 def pack_shapes(shapes: list[coal.CollisionGeometry]) -> ConvexShapes:
@@ -376,6 +407,7 @@ def pair_distance(
     nb_start: IntArray,
     nb: IntArray,
     frame_b: FloatArray,
+    guess: FloatArray,
     work: FloatArray,
     out: FloatArray,
 ) -> int:
@@ -401,6 +433,9 @@ def pair_distance(
         nb_start: B's.
         nb: B's.
         frame_b: B's.
+        guess: (5,): where to start, updated for the next call: the last
+            normal (zeros: none yet) and the hulls' last support vertices.
+            Between small motions, GJK then needs a few iterations.
         work: scratch, (16, 3) floats.
         out: (10,): distance, the point on A, the point on B, the unit normal
             from B toward A.
@@ -412,11 +447,14 @@ def pair_distance(
     WA = work[4:8]
     WB = work[8:12]
     lam = work[12:16, 0]
-    hint_a, hint_b = start_a, start_b
-    # Start along the line between the frames' origins.
-    vx = frame_a[0, 3] - frame_b[0, 3]
-    vy = frame_a[1, 3] - frame_b[1, 3]
-    vz = frame_a[2, 3] - frame_b[2, 3]
+    # Start from the last call's normal and vertices, else along the line
+    # between the frames' origins.
+    hint_a, hint_b = int(guess[3]), int(guess[4])
+    vx, vy, vz = guess[0], guess[1], guess[2]
+    if vx * vx + vy * vy + vz * vz < 1e-24:
+        vx = frame_a[0, 3] - frame_b[0, 3]
+        vy = frame_a[1, 3] - frame_b[1, 3]
+        vz = frame_a[2, 3] - frame_b[2, 3]
     if vx * vx + vy * vy + vz * vz < 1e-24:
         vx, vy, vz = 1.0, 0.0, 0.0
     n = 0
@@ -526,6 +564,8 @@ def pair_distance(
         ax, ay, az = out[1], out[2], out[3]
         bx, by, bz = out[4], out[5], out[6]
         ux, uy, uz = out[7], out[8], out[9]
+    guess[0], guess[1], guess[2] = ux, uy, uz
+    guess[3], guess[4] = hint_a, hint_b
     out[0] = core - radius_a - radius_b
     out[1], out[2], out[3] = ax - radius_a * ux, ay - radius_a * uy, az - radius_a * uz
     out[4], out[5], out[6] = bx + radius_b * ux, by + radius_b * uy, bz + radius_b * uz
@@ -860,6 +900,7 @@ def _measure(
     vertices_b: FloatArray,
     neighbor_start_b: IntArray,
     neighbors_b: IntArray,
+    guess: FloatArray,
     work: FloatArray,
     out: FloatArray,
 ) -> int:
@@ -883,6 +924,7 @@ def _measure(
         neighbor_start_b,
         neighbors_b,
         frames_b[b],
+        guess,
         work,
         out,
     )
@@ -923,6 +965,7 @@ def obstacle_contacts(
     object_neighbor_start: IntArray,
     object_neighbors: IntArray,
     skip: npt.NDArray[np.bool_],
+    guess: FloatArray,
     ahead: FloatArray,
     moving: bool,
     margin: float,
@@ -935,7 +978,8 @@ def obstacle_contacts(
     """The robot shapes' contacts with declared objects, broad and narrow phase.
 
     The pairs :func:`~cbp.collision.broad.near_objects` keeps, except those in
-    ``skip`` (shape, object) (wanted contacts), are measured; those nearer
+    ``skip`` (shape, object) (wanted contacts), are measured (starting from
+    ``guess`` (n, m, 5), :func:`pair_distance`'s); those nearer
     than ``margin`` are written: the shape and object indices, and in
     ``floats`` (4, K, 3) the point on the shape, the point on the object, the
     unit normal from the object toward the shape and (``[3, :, 0]``) the
@@ -992,6 +1036,7 @@ def obstacle_contacts(
                 object_vertices,
                 object_neighbor_start,
                 object_neighbors,
+                guess[s, k],
                 work,
                 out,
             )
@@ -1027,6 +1072,7 @@ def self_contacts(
     neighbors: IntArray,
     first: IntArray,
     second: IntArray,
+    self_guess: FloatArray,
     margin: float,
     padding: float,
     first_out: IntArray,
@@ -1037,7 +1083,8 @@ def self_contacts(
     """The contacts between the robot's own shape pairs (``first``, ``second``).
 
     The pairs :func:`~cbp.collision.broad.near_pairs` keeps within ``margin``
-    are measured, shape ``second`` as B (the normal points from it toward
+    are measured (from ``self_guess`` (P, 5)), shape ``second`` as B (the
+    normal points from it toward
     ``first``); those nearer than ``margin`` are written as
     :func:`obstacle_contacts` writes them, their distance less ``padding``.
     Pairs the kernels cannot measure go to ``left`` (indices into the pairs).
@@ -1074,6 +1121,7 @@ def self_contacts(
                 vertices,
                 neighbor_start,
                 neighbors,
+                self_guess[near[p]],
                 work,
                 out,
             )
@@ -1085,6 +1133,171 @@ def self_contacts(
             _write(floats, count, out, out[0] - padding)
             count += 1
     return count, missed
+
+
+@numba.njit(cache=True, nogil=True)
+def declared_contacts(
+    frames: FloatArray,
+    centres_local: FloatArray,
+    halves_local: FloatArray,
+    radii: FloatArray,
+    kind: IntArray,
+    size: FloatArray,
+    radius: FloatArray,
+    vertex_start: IntArray,
+    vertices: FloatArray,
+    neighbor_start: IntArray,
+    neighbors: IntArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    candidates: IntArray,
+    object_frames: FloatArray,
+    object_kind: IntArray,
+    object_size: FloatArray,
+    object_radius: FloatArray,
+    object_start: IntArray,
+    object_vertices: FloatArray,
+    object_neighbor_start: IntArray,
+    object_neighbors: IntArray,
+    skip: npt.NDArray[np.bool_],
+    guess: FloatArray,
+    ahead: FloatArray,
+    moving: bool,
+    margin: float,
+    padding: float,
+    first: IntArray,
+    second: IntArray,
+    self_guess: FloatArray,
+    self_margin: float,
+    self_padding: float,
+    index: IntArray,
+    floats: FloatArray,
+    left: IntArray,
+) -> tuple[int, int, int, int]:
+    """A whole contact query against declared objects, in one call.
+
+    The shapes' bounds from their world placements ``frames`` (n, 4, 4) and
+    their bounding boxes and spheres in their own frames
+    (:func:`~cbp.collision.broad.shape_bounds`), then :func:`obstacle_contacts`
+    with distances less ``padding``, then :func:`self_contacts` of the pairs
+    (``first``, ``second``) (none when empty) within ``self_margin``, less
+    ``self_padding``; each pair starts from its ``guess`` (n, m, 5) or
+    ``self_guess`` (P, 5) (:func:`pair_distance`).
+
+    The contacts are written in order, obstacles first: ``index`` (2, K) holds
+    the shape and the other shape (-1 for objects), ``floats`` (4, K, 3) the
+    points, normals and distances as :func:`obstacle_contacts` writes them.
+    ``left`` (2, L) gets the pairs left for coal: (shape, object) first, then
+    (-1, self pair index).
+
+    Returns:
+        (obstacle contacts, self contacts, obstacle pairs left, self pairs left).
+    """
+    n = len(frames)
+    centres = np.empty((n, 3))
+    halves = np.empty((n, 3))
+    shape_bounds(frames, centres_local, halves_local, centres, halves)
+    capacity = n * len(candidates)
+    near_shape = np.empty(capacity, dtype=np.intp)
+    near_object = np.empty(capacity, dtype=np.intp)
+    pairs = near_objects(
+        centres,
+        halves,
+        radii,
+        lower,
+        upper,
+        candidates,
+        margin,
+        near_shape,
+        near_object,
+    )
+    work = np.empty((16, 3))
+    out = np.empty(10)
+    count = 0
+    missed = 0
+    for p in range(pairs):
+        s, k = near_shape[p], near_object[p]
+        if skip[s, k]:
+            continue
+        status = FAILED
+        if kind[s] != UNSUPPORTED and object_kind[k] != UNSUPPORTED:
+            status = _measure(
+                s,
+                frames,
+                kind,
+                size,
+                radius,
+                vertex_start,
+                vertices,
+                neighbor_start,
+                neighbors,
+                k,
+                object_frames,
+                object_kind,
+                object_size,
+                object_radius,
+                object_start,
+                object_vertices,
+                object_neighbor_start,
+                object_neighbors,
+                guess[s, k],
+                work,
+                out,
+            )
+        if status != 0:
+            left[0, missed], left[1, missed] = s, k
+            missed += 1
+            continue
+        d = out[0]
+        if moving:
+            d -= max(
+                out[7] * ahead[k, 0] + out[8] * ahead[k, 1] + out[9] * ahead[k, 2],
+                0.0,
+            )
+        if d < margin:
+            index[0, count], index[1, count] = s, -1
+            _write(floats, count, out, d - padding)
+            count += 1
+    obstacles = count
+    obstacles_missed = missed
+    if len(first):
+        near = np.empty(len(first), dtype=np.intp)
+        pairs = near_pairs(centres, halves, radii, first, second, self_margin, near)
+        for p in range(pairs):
+            i, j = first[near[p]], second[near[p]]
+            status = FAILED
+            if kind[i] != UNSUPPORTED and kind[j] != UNSUPPORTED:
+                status = _measure(
+                    i,
+                    frames,
+                    kind,
+                    size,
+                    radius,
+                    vertex_start,
+                    vertices,
+                    neighbor_start,
+                    neighbors,
+                    j,
+                    frames,
+                    kind,
+                    size,
+                    radius,
+                    vertex_start,
+                    vertices,
+                    neighbor_start,
+                    neighbors,
+                    self_guess[near[p]],
+                    work,
+                    out,
+                )
+            if status != 0:
+                left[0, missed], left[1, missed] = -1, near[p]
+                missed += 1
+            elif out[0] < self_margin:
+                index[0, count], index[1, count] = i, j
+                _write(floats, count, out, out[0] - self_padding)
+                count += 1
+    return obstacles, count - obstacles, obstacles_missed, missed - obstacles_missed
 
 
 #: Packed robot shapes by the shapes' identities, with the shapes they are for.
@@ -1128,7 +1341,7 @@ def compile_convex_kernels() -> None:
     out = np.empty((4, 16, 3))
     index = np.empty(16, dtype=np.intp)
     for ahead in (False, True):
-        obstacle_contacts(
+        obstacle_contacts(  # type: ignore[call-arg]  # tuples of known length
             centres,
             halves,
             radii,
@@ -1140,6 +1353,7 @@ def compile_convex_kernels() -> None:
             frames,
             *fields(shapes),
             np.zeros((4, 4), dtype=np.bool_),
+            np.zeros((4, 4, 5)),
             np.zeros((4, 3)),
             ahead,
             0.1,
@@ -1150,7 +1364,34 @@ def compile_convex_kernels() -> None:
             index.copy(),
         )
     first = np.array([0, 1], dtype=np.intp)
-    self_contacts(
+    for ahead in (False, True):
+        declared_contacts(  # type: ignore[call-arg]  # tuples of known length
+            frames,
+            centres,
+            halves,
+            radii,
+            *fields(shapes),
+            centres - 0.1,
+            centres + 0.1,
+            np.arange(4, dtype=np.intp),
+            frames,
+            *fields(shapes),
+            np.zeros((4, 4), dtype=np.bool_),
+            np.zeros((4, 4, 5)),
+            np.zeros((4, 3)),
+            ahead,
+            0.1,
+            0.01,
+            first,
+            first + 2,
+            np.zeros((2, 5)),
+            0.1,
+            0.02,
+            np.empty((2, 32), dtype=np.intp),
+            np.empty((4, 32, 3)),
+            np.empty((2, 32), dtype=np.intp),
+        )
+    self_contacts(  # type: ignore[call-arg]  # tuples of known length
         centres,
         halves,
         radii,
@@ -1158,6 +1399,7 @@ def compile_convex_kernels() -> None:
         *fields(shapes),
         first,
         first + 2,
+        np.zeros((2, 5)),
         0.1,
         0.01,
         index,
@@ -1167,9 +1409,7 @@ def compile_convex_kernels() -> None:
     )
 
 
-def fields(
-    shapes: ConvexShapes,
-) -> tuple[IntArray, FloatArray, FloatArray, IntArray, FloatArray, IntArray, IntArray]:
+def fields(shapes: ConvexShapes) -> tuple[Any, ...]:
     """The arrays in the kernels' order."""
     return (
         shapes.kind,

@@ -24,6 +24,7 @@ from cbp.collision.broad import shape_bounds
 from cbp.collision.checker import FreeSpaceChecker
 from cbp.collision.contacts import ContactRow, ContactSet
 from cbp.collision.convex_kernels import (
+    RobotTable,
     compile_convex_kernels,
     fields,
     packed_robot,
@@ -112,9 +113,24 @@ class CollisionWorld:
         self._centres = np.array(
             [s.placement.actInv(s.centre) for s in geometry.shapes]
         ).reshape(-1, 3)
+        first, second = geometry.pair_arrays
+        if not self.settings.self_collision:
+            first, second = first[:0], second[:0]
+        #: The shapes as the one-pass queries read them.
+        self._table = RobotTable(
+            np.ascontiguousarray(self._centres),
+            np.ascontiguousarray(geometry.box_halves, dtype=float),
+            np.ascontiguousarray(geometry.radii, dtype=float),
+            packed_robot(geometry.shapes),
+            first,
+            second,
+            np.zeros((len(first), 5)),
+        )
+        #: Where each self pair's GJK starts next (all pairs, for
+        #: :meth:`self_set`; the table's are those it checks).
+        self._self_guess = np.zeros((len(geometry.self_pairs), 5))
         if self.settings.narrow_phase == "compiled":
             compile_convex_kernels()
-            packed_robot(geometry.shapes)
         self._environment.prepare(geometry.shapes, self.margin(self._environment))
 
     @property
@@ -295,6 +311,22 @@ class CollisionWorld:
         # By index: faster than iterating over pinocchio's vector.
         return ShapePlacements([oMg[i] for i in range(len(self.geometry.shapes))])
 
+    def shape_frames(self, state: RobotState) -> FloatArray:
+        """Every robot shape's world placement at ``state``, (n, 4, 4).
+
+        :meth:`shape_placements` as homogeneous matrices only, for the
+        compiled queries.
+        """
+        pin.updateGeometryPlacements(
+            self.geometry.robot.model,
+            state.data,
+            self._geometry_model,
+            self._geometry_data,
+        )
+        oMg = self._geometry_data.oMg
+        count = len(self.geometry.shapes)
+        return np.array([oMg[i].homogeneous for i in range(count)]).reshape(-1, 4, 4)
+
     def shape_bounds(
         self, placements: ShapePlacements
     ) -> tuple[FloatArray, FloatArray]:
@@ -317,8 +349,22 @@ class CollisionWorld:
         computes when its cache misses.
         """
         environment = environment or self._environment
-        robot = self.placed(state)
         settings = self.settings
+        if settings.narrow_phase == "compiled":
+            pad2 = 2.0 * self.padding
+            found = environment.query_with_self(
+                self.shape_frames(state),
+                self._table,
+                self.geometry.shapes,
+                self.margin(environment),
+                settings.contacts_per_link,
+                self.padding + environment.resolution,
+                settings.activation_distance + pad2,
+                pad2,
+            )
+            if found is not None:
+                return found
+        robot = self.placed(state)
         obstacles = environment.query(
             robot,
             self.margin(environment),
@@ -373,6 +419,7 @@ class CollisionWorld:
             return self.self_rows(robot)
         geometry = self.geometry
         first, second = geometry.pair_arrays
+        guess = self._self_guess
         n = len(first)
         if not n:
             return ContactSet.empty()
@@ -381,7 +428,7 @@ class CollisionWorld:
         out_second = np.empty(n, dtype=np.intp)
         floats = np.empty((4, n, 3))
         left = np.empty(n, dtype=np.intp)
-        count, missed = self_contacts(
+        count, missed = self_contacts(  # type: ignore[call-arg]  # tuples of known length
             robot.centres,
             robot.halves,
             robot.radii,
@@ -389,6 +436,7 @@ class CollisionWorld:
             *fields(packed_robot(geometry.shapes)),
             first,
             second,
+            guess,
             self.settings.activation_distance + pad2,
             pad2,
             out_first,
