@@ -57,6 +57,9 @@ class ContactSet:
     _split: tuple[ContactSet, ContactSet] | None = field(
         default=None, repr=False, compare=False
     )
+    #: How many obstacle contacts come first, all self contacts after them
+    #: (-1: not known; the parts are then found by ``other_shape``).
+    _obstacles: int = field(default=-1, repr=False, compare=False)
 
     @classmethod
     def empty(cls) -> ContactSet:
@@ -221,7 +224,7 @@ class ContactSet:
     def packed(
         cls, index: IntArray, floats: FloatArray, obstacles: int, count: int
     ) -> ContactSet:
-        """Contacts a kernel wrote, obstacles first, with both parts as views.
+        """Contacts a kernel wrote, obstacles first; both parts will be views.
 
         Args:
             index: (2, K): the shapes, then the other shapes (-1: obstacle).
@@ -230,20 +233,15 @@ class ContactSet:
             obstacles: how many contacts with obstacles come first.
             count: how many contacts in all.
         """
-
-        def part(rows: slice) -> ContactSet:
-            return cls(
-                index[0, rows],
-                index[1, rows],
-                floats[0, rows],
-                floats[1, rows],
-                floats[2, rows],
-                floats[3, rows, 0],
-            )
-
-        whole = part(slice(0, count))
-        whole._split = (part(slice(0, obstacles)), part(slice(obstacles, count)))
-        return whole
+        return cls(
+            index[0, :count],
+            index[1, :count],
+            floats[0, :count],
+            floats[1, :count],
+            floats[2, :count],
+            floats[3, :count, 0],
+            _obstacles=obstacles,
+        )
 
     def select(self, mask: np.ndarray | slice) -> ContactSet:
         """The contacts where ``mask`` is true, at the given indices, or in a slice.
@@ -275,8 +273,12 @@ class ContactSet:
     def _parts(self) -> tuple[ContactSet, ContactSet]:
         parts = self._split
         if parts is None:
-            is_self = self.is_self
-            parts = (self.select(~is_self), self.select(is_self))
+            n = self._obstacles
+            if n >= 0:
+                parts = (self.select(slice(0, n)), self.select(slice(n, None)))
+            else:
+                is_self = self.is_self
+                parts = (self.select(~is_self), self.select(is_self))
             self._split = parts
         return parts
 

@@ -34,6 +34,7 @@ from cbp.collision.environment import Environment, signed_distance
 from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
 from cbp.collision.motion import SweepBound
 from cbp.collision.objects import PrimitiveEnvironment
+from cbp.collision.placements import ShapeKinematics
 from cbp.collision.settings import CollisionSettings
 from cbp.robot import FloatArray, IntArray
 from cbp.state import RobotState
@@ -126,6 +127,14 @@ class CollisionWorld:
             second,
             np.zeros((len(first), 5)),
         )
+        frames = geometry.robot.model.frames
+        self._kinematics = ShapeKinematics.build(
+            geometry.robot.model,
+            [s.joint_id for s in geometry.shapes],
+            [frames[s.frame_id].placement * s.placement for s in geometry.shapes],
+        )
+        if self._kinematics is not None:  # compiled (or loaded) here, not in a loop
+            self._kinematics(pin.neutral(geometry.robot.model))
         #: Where each self pair's GJK starts next (all pairs, for
         #: :meth:`self_set`; the table's are those it checks).
         self._self_guess = np.zeros((len(geometry.self_pairs), 5))
@@ -315,8 +324,12 @@ class CollisionWorld:
         """Every robot shape's world placement at ``state``, (n, 4, 4).
 
         :meth:`shape_placements` as homogeneous matrices only, for the
-        compiled queries.
+        compiled queries: from ``state.q`` in one compiled call
+        (:mod:`cbp.collision.placements`), or read from pinocchio for a model
+        with joints that call does not know.
         """
+        if self._kinematics is not None:
+            return self._kinematics(state.q)
         pin.updateGeometryPlacements(
             self.geometry.robot.model,
             state.data,
