@@ -29,6 +29,15 @@ distance is negative when they overlap, and ``point_a - point_b = distance *
 normal``. Where the shapes touch along a face, the witness points are one pair
 of the many; the distance and normal are unique for separated shapes.
 
+A hull's support point is found by climbing its edges from the last one (a
+few dot products instead of one per vertex), and each pair's GJK starts from
+its last normal and support vertices (``guess``): between two control steps
+the shapes move little, and a pair takes a few iterations. A guess is only a
+starting point: the distance and normal do not depend on it (to GJK's
+tolerance), so two threads that query the same environment at once (each
+writing its guesses) change how many iterations a pair takes, not the
+contacts.
+
 Shapes are packed in flat arrays (:class:`ConvexShapes`): numba dispatches flat
 arrays faster than named tuples.
 """

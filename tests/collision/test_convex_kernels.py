@@ -401,3 +401,29 @@ def test_narrow_phase_setting_is_checked() -> None:
         load_scenario(
             SCENARIOS / "cat_boards.yaml", overrides={"collision.narrow_phase": "fast"}
         )
+
+
+def test_cores_that_coincide_go_to_coal() -> None:
+    """A sphere centred on a capsule's axis: EPA cannot start; coal measures it."""
+    from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
+
+    capsule = LinkShape.probe("capsule", coal.Capsule(0.05, 0.2))
+    packed_a = pack_shapes([capsule.shape])
+    packed_b = pack_shapes([coal.Sphere(0.03)])
+    on_axis = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.04]))
+    status, _ = _measure(packed_a, 0, pin.SE3.Identity(), packed_b, 0, on_axis)
+    assert status == FAILED
+    ball = EnvironmentObject.primitive("ball", "sphere", (0.03,), on_axis)
+    env = PrimitiveEnvironment([ball])
+    placed = PlacedShapes(
+        [capsule],
+        ShapePlacements([pin.SE3.Identity()]),
+        np.array([capsule.centre]),
+        np.array([capsule.radius]),
+        np.array([0.5 * (capsule.upper - capsule.lower)]),
+    )
+    compiled = env.query(placed, 0.05, 3, "compiled")
+    reference = env.query(placed, 0.05, 3, "coal")
+    assert len(compiled) == len(reference) == 1
+    assert compiled.distance[0] == pytest.approx(-0.08, abs=1e-6)
+    assert compiled.distance[0] == pytest.approx(reference.distance[0], abs=1e-9)
