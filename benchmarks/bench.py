@@ -10,7 +10,8 @@ is the median and 95th percentile of many repetitions after a warm-up. Rows:
 2. the same task on peers: pink (``solve_ik``, daqp), placo
    (``KinematicsSolver``) and a hand-written pinocchio + numpy + daqp step;
 3. one CAT step with collisions (kinematics, contact query, contact rows, QP,
-   step validation) on the boards scene and against an octree of the shelf;
+   step validation) on the boards scene and against an octree of the shelf,
+   and on the boards with each narrow phase (compiled, coal);
 4. scaling with contact rows and with the size of the scene and of the map;
 5. MP planning in the shelf, one orbit tick, one map update.
 
@@ -502,7 +503,7 @@ def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
             lambda i: table.candidates(env.index, placements, margin),
         ),
         (
-            "self pairs (coal distance calls from Python)",
+            "self pairs (compiled narrow phase, CollisionWorld.self_contacts)",
             lambda i: world.self_contacts(robot),
         ),
     ]
@@ -1386,8 +1387,12 @@ def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
         f"- CAT step on the boards: the engine step with contact rows "
         f"{us('CAT: engine'):.0f} us, the contact query that validates the step "
         f"(and gives the next one its contacts) {us('CAT: contact'):.0f} us. The "
-        "query is coal distance calls made from Python after a compiled broad "
-        "phase (bounding spheres and boxes); the engine's cost over the reaching "
+        "query is one compiled call: the shapes' placements from the joints, "
+        "the broad phase (bounding spheres and boxes), and GJK (EPA where they "
+        "overlap) on the obstacle and self pairs it keeps, each pair starting "
+        "from its last normal (`cbp.collision.convex_kernels`; "
+        "`collision.narrow_phase: coal` calls coal from Python per pair, as "
+        "before: the narrow phase rows); the engine's cost over the reaching "
         "step is the two contact constraints (latching their contacts, their "
         "rows in one compiled pass from the joints' world Jacobians) and a QP "
         "with their rows.",
