@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["BenchConfig", "Row", "run_bench", "write_results"]
+__all__ = ["BenchConfig", "Row", "narrow_phase_rows", "run_bench", "write_results"]
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
@@ -616,7 +616,7 @@ def _cat_rows(cfg: BenchConfig) -> list[Row]:
     return rows
 
 
-def _narrow_phase_rows(cfg: BenchConfig) -> list[Row]:
+def narrow_phase_rows(cfg: BenchConfig) -> list[Row]:
     """The compiled narrow phase against coal's, and the CAT step with each.
 
     In alternating rounds of one run: the hand-written reaching step, the CAT
@@ -624,7 +624,8 @@ def _narrow_phase_rows(cfg: BenchConfig) -> list[Row]:
     compiled and coal, and the CAT step's parts near the first board: the
     engine step with contact rows (contacts cached) and the contact query that
     validates a step, with either narrow phase; then the query alone inside
-    the shelf (more pairs) with either.
+    the shelf (more pairs) with either. Public: ``benchmarks/narrow_phase.py``
+    runs these rows alone.
     """
     from cbp.robot import RobotModel
     from cbp.scenario import load_scenario
@@ -1248,7 +1249,7 @@ def run_bench(
         _reaching_rows,
         _parts_rows,
         _cat_rows,
-        _narrow_phase_rows,
+        narrow_phase_rows,
         _query_rows,
         _run_query_rows,
         _scaling_rows,
