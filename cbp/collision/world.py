@@ -378,11 +378,13 @@ class CollisionWorld:
             if found is not None:
                 return found
         robot = self.placed(state)
-        obstacles = environment.query(
-            robot,
-            self.margin(environment),
-            settings.contacts_per_link,
-            settings.narrow_phase,
+        margin, per_shape = self.margin(environment), settings.contacts_per_link
+        # The default is not passed: an environment written before the setting
+        # (its query without the argument) keeps working.
+        obstacles = (
+            environment.query(robot, margin, per_shape)
+            if settings.narrow_phase == "compiled"
+            else environment.query(robot, margin, per_shape, settings.narrow_phase)
         )
         own = self.self_set(robot) if settings.self_collision else []
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles
