@@ -10,7 +10,8 @@ is the median and 95th percentile of many repetitions after a warm-up. Rows:
 2. the same task on peers: pink (``solve_ik``, daqp), placo
    (``KinematicsSolver``) and a hand-written pinocchio + numpy + daqp step;
 3. one CAT step with collisions (kinematics, contact query, contact rows, QP,
-   step validation) on the boards scene and against an octree of the shelf;
+   step validation) on the boards scene and against an octree of the shelf,
+   and on the boards with each narrow phase (compiled, coal);
 4. scaling with contact rows and with the size of the scene and of the map;
 5. MP planning in the shelf, one orbit tick, one map update.
 
@@ -37,7 +38,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["BenchConfig", "Row", "run_bench", "write_results"]
+__all__ = ["BenchConfig", "Row", "narrow_phase_rows", "run_bench", "write_results"]
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
@@ -502,7 +503,7 @@ def _octree_parts() -> list[tuple[str, Callable[[int], object]]]:
             lambda i: table.candidates(env.index, placements, margin),
         ),
         (
-            "self pairs (coal distance calls from Python)",
+            "self pairs (compiled narrow phase, CollisionWorld.self_contacts)",
             lambda i: world.self_contacts(robot),
         ),
     ]
@@ -612,6 +613,108 @@ def _cat_rows(cfg: BenchConfig) -> list[Row]:
     )
     for row in rows:
         row.extra["steps_per_period"] = row.per_period
+    return rows
+
+
+def narrow_phase_rows(cfg: BenchConfig) -> list[Row]:
+    """The compiled narrow phase against coal's, and the CAT step with each.
+
+    In alternating rounds of one run: the hand-written reaching step, the CAT
+    step on the boards (as in "cat step") with ``collision.narrow_phase``
+    compiled and coal, and the CAT step's parts near the first board: the
+    engine step with contact rows (contacts cached) and the contact query that
+    validates a step, with either narrow phase; then the query alone inside
+    the shelf (more pairs) with either. Public: ``benchmarks/narrow_phase.py``
+    runs these rows alone.
+    """
+    from cbp.robot import RobotModel
+    from cbp.scenario import load_scenario
+    from cbp.state import RobotState
+
+    n, w = max(cfg.repetitions // 2, 20), min(cfg.warmup, 50)
+    robot = RobotModel.load("franka_panda")
+    hand = HandWritten(robot)
+    hand_q = {"q": robot.home()}
+
+    def hand_step(i: int) -> object:
+        hand.goal = GOALS[(i // 64) % len(GOALS)]
+        dq = hand.step(hand_q["q"])
+        hand_q["q"] = pin.integrate(robot.model, hand_q["q"], dq)
+        return dq
+
+    base = "hand-written reaching step (as in reaching)"
+    steps: list[tuple[str, Callable[[int], object]]] = [(base, hand_step)]
+    checks: list[tuple[str, Callable[[int], object]]] = []
+    queries: list[tuple[str, Callable[[int], object]]] = []
+    contacts = {}
+    for phase in ("compiled", "coal"):
+        overrides = {"collision.narrow_phase": phase}
+        boards: Any = load_scenario(SCENARIOS / "cat_boards.yaml", overrides=overrides)
+        boards.q0[:] = _near_board(boards)
+        step, _ = _cat_step(boards)
+        steps.append((f"CAT step on the boards, {phase} narrow phase", step))
+        # The parts on a scenario of their own: the CAT step keeps its world's
+        # cache, carried contacts and GJK starts to itself.
+        fixed: Any = load_scenario(SCENARIOS / "cat_boards.yaml", overrides=overrides)
+        fixed.q0[:] = boards.q0
+        world = fixed.world_for_run()
+        near = fixed.q0
+        pair = (near, near + 1e-9)
+        contacts[phase] = len(world.check(near).contacts)
+        checks.append(
+            (
+                f"CAT: contact query and validation, {phase} narrow phase "
+                "(CollisionWorld.check)",
+                lambda i, world=world, pair=pair: world.check(pair[i % 2]),
+            )
+        )
+        if phase == "compiled":
+            cat = fixed.make_engine()
+            _aim_at_final_goal(fixed)
+            world.check(near)
+            checks.insert(
+                0,
+                (
+                    "CAT: engine step with contact rows (contacts cached)",
+                    lambda i, cat=cat, near=near: cat.step(near, 0.02),
+                ),
+            )
+        shelf: Any = load_scenario(
+            SCENARIOS / "cat_shelf_retreat.yaml", overrides=overrides
+        )
+        shelf_world = shelf.world_for_run()
+        state = RobotState(shelf.robot, shelf.q0)
+        queries.append(
+            (
+                f"full arm vs declared objects inside the shelf, {phase} narrow "
+                "phase (CollisionWorld.query)",
+                lambda i, world=shelf_world, state=state: world.query(state),
+            )
+        )
+    parts = steps + checks + queries
+    timed = measure_interleaved([fn for _, fn in parts], n, w)
+    rows = [
+        Row("narrow phase", case, median, p95, n)
+        for (case, _), (median, p95) in zip(parts, timed, strict=True)
+    ]
+    for row in rows:
+        if row.case.startswith("CAT step"):
+            row.note = f"{contacts['compiled']} contacts at the start"
+    compiled_step = "CAT step on the boards, compiled"
+    relate(rows, compiled_step, base)
+    relate(rows, "CAT step on the boards, coal", base)
+    relate(rows, "CAT: engine step", compiled_step)
+    relate(rows, "CAT: contact query and validation, compiled", compiled_step)
+    relate(
+        rows,
+        "CAT: contact query and validation, coal",
+        "CAT: contact query and validation, compiled",
+    )
+    relate(
+        rows,
+        "full arm vs declared objects inside the shelf, coal",
+        "full arm vs declared objects inside the shelf, compiled",
+    )
     return rows
 
 
@@ -1151,6 +1254,7 @@ def run_bench(
         _reaching_rows,
         _parts_rows,
         _cat_rows,
+        narrow_phase_rows,
         _query_rows,
         _run_query_rows,
         _scaling_rows,
@@ -1289,8 +1393,12 @@ def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
         f"- CAT step on the boards: the engine step with contact rows "
         f"{us('CAT: engine'):.0f} us, the contact query that validates the step "
         f"(and gives the next one its contacts) {us('CAT: contact'):.0f} us. The "
-        "query is coal distance calls made from Python after a compiled broad "
-        "phase (bounding spheres and boxes); the engine's cost over the reaching "
+        "query is one compiled call: the shapes' placements from the joints, "
+        "the broad phase (bounding spheres and boxes), and GJK (EPA where they "
+        "overlap) on the obstacle and self pairs it keeps, each pair starting "
+        "from its last normal (`cbp.collision.convex_kernels`; "
+        "`collision.narrow_phase: coal` calls coal from Python per pair, as "
+        "before: the narrow phase rows); the engine's cost over the reaching "
         "step is the two contact constraints (latching their contacts, their "
         "rows in one compiled pass from the joints' world Jacobians) and a QP "
         "with their rows.",
@@ -1418,6 +1526,23 @@ TARGETS = [
         "hand-written",
         130.0 / 25.8,
         "CAT step with contacts / hand-written step (130 us: 250 per period)",
+    ),
+    (
+        "narrow phase",
+        "CAT step on the boards, compiled",
+        "narrow phase",
+        "hand-written",
+        3.5,
+        "CAT step with contacts, compiled narrow phase / hand-written step, "
+        "interleaved (issue 40; moonshot 2.5)",
+    ),
+    (
+        "narrow phase",
+        "CAT: contact query and validation, compiled",
+        "narrow phase",
+        "CAT: contact query and validation, coal",
+        1.0,
+        "CAT step's contact query, compiled narrow phase / coal's",
     ),
     (
         "planning",

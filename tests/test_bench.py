@@ -14,6 +14,7 @@ def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:
         "reaching",
         "parts",
         "cat step",
+        "narrow phase",
         "query",
         "scaling",
         "planning",

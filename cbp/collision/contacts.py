@@ -57,6 +57,9 @@ class ContactSet:
     _split: tuple[ContactSet, ContactSet] | None = field(
         default=None, repr=False, compare=False
     )
+    #: How many obstacle contacts come first, all self contacts after them
+    #: (-1: not known; the parts are then found by ``other_shape``).
+    _obstacles: int = field(default=-1, repr=False, compare=False)
 
     @classmethod
     def empty(cls) -> ContactSet:
@@ -135,7 +138,10 @@ class ContactSet:
 
     @classmethod
     def stack(
-        cls, obstacles: ContactSet, padding: float, own: list[ContactRow]
+        cls,
+        obstacles: ContactSet,
+        padding: float,
+        own: list[ContactRow] | ContactSet,
     ) -> ContactSet:
         """The obstacle contacts, then the self contacts, with both parts.
 
@@ -145,14 +151,38 @@ class ContactSet:
             obstacles: an environment's contacts, distances of the unpadded
                 shapes.
             padding: subtracted from the obstacle distances [m].
-            own: the self contacts as rows (distances already padded).
+            own: the self contacts, as rows or a set (distances already padded).
         """
         n = len(obstacles)
-        if own:
-            i, j, point, other, normal, distance = zip(*own, strict=True)
+        fields: (
+            tuple[IntArray, IntArray, FloatArray, FloatArray, FloatArray, FloatArray]
+            | None
+        ) = None
+        if isinstance(own, ContactSet):
+            if len(own):
+                fields = (
+                    own.shape,
+                    own.other_shape,
+                    own.point,
+                    own.other_point,
+                    own.normal,
+                    own.distance,
+                )
+        elif own:
+            columns = tuple(zip(*own, strict=True))
+            fields = (
+                np.array(columns[0], dtype=np.intp),
+                np.array(columns[1], dtype=np.intp),
+                np.array(columns[2], dtype=float).reshape(-1, 3),
+                np.array(columns[3], dtype=float).reshape(-1, 3),
+                np.array(columns[4], dtype=float).reshape(-1, 3),
+                np.array(columns[5], dtype=float),
+            )
+        if fields is not None:
+            i, j, point, other, normal, distance = fields
             arrays = (
-                np.concatenate((obstacles.shape, np.array(i, dtype=np.intp))),
-                np.concatenate((obstacles.other_shape, np.array(j, dtype=np.intp))),
+                np.concatenate((obstacles.shape, i)),
+                np.concatenate((obstacles.other_shape, j)),
                 np.concatenate((obstacles.point, point)),
                 np.concatenate((obstacles.other_point, other)),
                 np.concatenate((obstacles.normal, normal)),
@@ -190,6 +220,29 @@ class ContactSet:
             _split=(part(slice(0, n)), part(slice(n, None))),
         )
 
+    @classmethod
+    def packed(
+        cls, index: IntArray, floats: FloatArray, obstacles: int, count: int
+    ) -> ContactSet:
+        """Contacts a kernel wrote, obstacles first; both parts will be views.
+
+        Args:
+            index: (2, K): the shapes, then the other shapes (-1: obstacle).
+            floats: (4, K, 3): points, other points, normals, then the
+                distances in ``floats[3, :, 0]``.
+            obstacles: how many contacts with obstacles come first.
+            count: how many contacts in all.
+        """
+        return cls(
+            index[0, :count],
+            index[1, :count],
+            floats[0, :count],
+            floats[1, :count],
+            floats[2, :count],
+            floats[3, :count, 0],
+            _obstacles=obstacles,
+        )
+
     def select(self, mask: np.ndarray | slice) -> ContactSet:
         """The contacts where ``mask`` is true, at the given indices, or in a slice.
 
@@ -220,8 +273,12 @@ class ContactSet:
     def _parts(self) -> tuple[ContactSet, ContactSet]:
         parts = self._split
         if parts is None:
-            is_self = self.is_self
-            parts = (self.select(~is_self), self.select(is_self))
+            n = self._obstacles
+            if n >= 0:
+                parts = (self.select(slice(0, n)), self.select(slice(n, None)))
+            else:
+                is_self = self.is_self
+                parts = (self.select(~is_self), self.select(is_self))
             self._split = parts
         return parts
 

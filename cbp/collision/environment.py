@@ -14,16 +14,23 @@ the occupied cell for octrees).
 from __future__ import annotations
 
 import abc
+from typing import Literal
 
 import coal
 import numpy as np
 import pinocchio as pin
 
 from cbp.collision.contacts import ContactSet
+from cbp.collision.convex_kernels import RobotTable
 from cbp.collision.geometry import LinkShape, PlacedShapes
 from cbp.robot import FloatArray
 
-__all__ = ["Environment", "signed_distance"]
+__all__ = ["Environment", "NarrowPhase", "signed_distance"]
+
+#: How declared objects and the robot's own shape pairs are measured: in one
+#: compiled pass (:mod:`cbp.collision.convex_kernels`) or by coal, called from
+#: Python per pair (``collision.narrow_phase``).
+NarrowPhase = Literal["compiled", "coal"]
 
 
 def signed_distance(
@@ -63,7 +70,13 @@ class Environment(abc.ABC):
     resolution: float = 0.0
 
     @abc.abstractmethod
-    def query(self, robot: PlacedShapes, margin: float, per_shape: int) -> ContactSet:
+    def query(
+        self,
+        robot: PlacedShapes,
+        margin: float,
+        per_shape: int,
+        narrow_phase: NarrowPhase = "compiled",
+    ) -> ContactSet:
         """Contacts of each robot shape with obstacles closer than ``margin``.
 
         Args:
@@ -71,11 +84,47 @@ class Environment(abc.ABC):
             margin: report obstacles whose distance to a shape is below this [m].
             per_shape: at most this many contacts per shape (the closest, spread
                 over distinct directions).
+            narrow_phase: how exact distances to declared shapes are measured
+                (``collision.narrow_phase``); an environment that measures
+                otherwise (an occupancy map's cells) ignores it.
 
         Returns:
             Obstacle contacts (``other_shape`` -1), with the distances of the
             unpadded shapes.
         """
+
+    def query_with_self(
+        self,
+        frames: FloatArray,
+        table: RobotTable,
+        shapes: list[LinkShape],
+        margin: float,
+        per_shape: int,
+        padding: float,
+        self_margin: float,
+        self_padding: float,
+    ) -> ContactSet | None:
+        """The whole contact query in one compiled pass, if this environment can.
+
+        Obstacle contacts (as :meth:`query` with the compiled narrow phase,
+        distances less ``padding``) and the self contacts of the table's pairs
+        within ``self_margin`` (distances less ``self_padding``), stacked as
+        :meth:`ContactSet.stack` does. None (the default): the world queries
+        the environment and the self pairs apart.
+
+        Args:
+            frames: the shapes' world placements (n, 4, 4).
+            table: the robot's shapes, bounds and self pairs.
+            shapes: the shapes themselves.
+            margin: as :meth:`query`'s.
+            per_shape: as :meth:`query`'s.
+            padding: subtracted from the obstacle distances [m].
+            self_margin: self pairs nearer than this are reported [m].
+            self_padding: subtracted from their distances [m].
+        """
+        del frames, table, shapes, margin, per_shape, padding
+        del self_margin, self_padding
+        return None
 
     def prepare(self, shapes: list[LinkShape], margin: float) -> None:
         """Get ready for queries of ``shapes`` up to ``margin``: build, compile.

@@ -548,6 +548,11 @@ class RobotGeometry:
             )
         return model
 
+    @property
+    def pair_arrays(self) -> tuple[IntArray, IntArray]:
+        """:attr:`self_pairs` as two contiguous arrays (first, second)."""
+        return self._pair_a, self._pair_b
+
     def near_self_pairs(
         self, centres: FloatArray, margin: float, halves: FloatArray | None = None
     ) -> list[int]:

@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 
 from cbp.collision.cell_index import CellIndex
 from cbp.collision.contacts import ContactSet
-from cbp.collision.environment import Environment
+from cbp.collision.environment import Environment, NarrowPhase
 from cbp.collision.geometry import LinkShape, PlacedShapes
 from cbp.collision.shape_table import CellContactQuery, ShapeTable, compile_kernels
 from cbp.robot import FloatArray
@@ -217,11 +217,20 @@ class OccupancyEnvironment(Environment):
         d, _ = self.tree.query(points, p=np.inf)
         return np.asarray(d <= 0.5 * self.cell)
 
-    def query(self, robot: PlacedShapes, margin: float, per_shape: int) -> ContactSet:
+    def query(
+        self,
+        robot: PlacedShapes,
+        margin: float,
+        per_shape: int,
+        narrow_phase: NarrowPhase = "compiled",
+    ) -> ContactSet:
         """Cell contacts per shape, reduced to ``per_shape``, normals refined.
 
-        The shapes' own boxes bound the cells measured (not their spheres).
+        The shapes' own boxes bound the cells measured (not their spheres);
+        the cells are always measured by the compiled pass (``narrow_phase``
+        is for declared shapes).
         """
+        del narrow_phase
         if not len(self.centres):
             return ContactSet.empty()
         shapes = robot.shapes

@@ -1,12 +1,16 @@
 # SPDX-License-Identifier: Apache-2.0
 """Declared obstacles: coal shapes at world placements, the ground truth.
 
-Queries measure exact distances with coal, for the (shape, object) pairs that a
-compiled broad phase keeps (:mod:`cbp.collision.broad`).
+Queries measure exact distances for the (shape, object) pairs that a compiled
+broad phase keeps (:mod:`cbp.collision.broad`): in the same compiled pass
+(:mod:`cbp.collision.convex_kernels`, GJK and EPA) by default, or with coal
+called from Python per pair (``collision.narrow_phase: coal``). Non-convex
+meshes are measured by coal either way.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,8 +21,17 @@ from scipy.spatial import cKDTree
 
 from cbp.collision.broad import near_objects
 from cbp.collision.contacts import ContactRow, ContactSet
-from cbp.collision.environment import Environment, signed_distance
-from cbp.collision.geometry import LinkShape, PlacedShapes
+from cbp.collision.convex_kernels import (
+    RobotTable,
+    compile_convex_kernels,
+    declared_contacts,
+    fields,
+    obstacle_contacts,
+    pack_shapes,
+    packed_robot,
+)
+from cbp.collision.environment import Environment, NarrowPhase, signed_distance
+from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
 from cbp.collision.shape_table import compile_kernels
 from cbp.errors import ConfigError
 from cbp.files import load_mesh
@@ -93,12 +106,16 @@ class EnvironmentObject:
         """A triangle mesh file (any format trimesh reads), kept non-convex."""
         mesh = load_mesh(path)
         mesh.apply_scale(scale)
+        # coal 3's addSubModel takes its own vector types, not arrays.
+        points = coal.StdVec_Vec3s()
+        for v in np.asarray(mesh.vertices, dtype=float):
+            points.append(v)
+        triangles = coal.StdVec_Triangle()
+        for a, b, c in np.asarray(mesh.faces).tolist():
+            triangles.append(coal.Triangle(a, b, c))
         model = coal.BVHModelOBBRSS()
         model.beginModel(len(mesh.faces), len(mesh.vertices))
-        model.addSubModel(
-            np.asarray(mesh.vertices, dtype=float),
-            np.asarray(mesh.faces, dtype=np.int64),
-        )
+        model.addSubModel(points, triangles)
         model.endModel()
         return cls.make(name, model, placement)
 
@@ -161,13 +178,49 @@ class PrimitiveEnvironment(Environment):
         self._all = np.arange(len(objects), dtype=np.intp)
         self._request = coal.DistanceRequest()
         self._result = coal.DistanceResult()
+        self._packed = pack_shapes([o.shape for o in objects])
+        self._fields = fields(self._packed)
+        self._frames = np.array(
+            [o.placement.homogeneous for o in objects], dtype=float
+        ).reshape(-1, 4, 4)
+        #: Per robot shapes (by their list's identity): (the list, which
+        #: (shape, object) pairs are wanted contacts, left out, and where each
+        #: pair's GJK starts next (n, m, 5)).
+        self._skips: dict[int, tuple[list[LinkShape], np.ndarray, FloatArray]] = {}
 
     def prepare(self, shapes: list[LinkShape], margin: float) -> None:
-        """Compile the contact reduction (once per process)."""
-        del shapes, margin
+        """Compile the kernels (once per process), pack the shapes."""
+        del margin
         compile_kernels()
+        compile_convex_kernels()
+        packed_robot(shapes)
+        self._skip(shapes)
 
-    def query(self, robot: PlacedShapes, margin: float, per_shape: int) -> ContactSet:
+    def _skip(self, shapes: list[LinkShape]) -> tuple[np.ndarray, FloatArray]:
+        """Which (shape, object) pairs are wanted contacts, and where they start.
+
+        (n, m) booleans, and each pair's GJK start (n, m, 5), the ``guess`` of
+        :func:`~cbp.collision.convex_kernels.pair_distance`.
+        """
+        found = self._skips.get(id(shapes))
+        if found is None or found[0] is not shapes:
+            skip = np.array(
+                [[s.link in o.allow_contact for o in self.objects] for s in shapes],
+                dtype=np.bool_,
+            ).reshape(len(shapes), len(self.objects))
+            guess = np.zeros((len(shapes), len(self.objects), 5))
+            if len(self._skips) >= 4:
+                self._skips.clear()
+            found = self._skips[id(shapes)] = (shapes, skip, guess)
+        return found[1], found[2]
+
+    def query(
+        self,
+        robot: PlacedShapes,
+        margin: float,
+        per_shape: int,
+        narrow_phase: NarrowPhase = "compiled",
+    ) -> ContactSet:
         """Exact distances of the candidate pairs; one contact per pair.
 
         Candidates: the objects whose bounding box is within ``margin`` of a
@@ -175,10 +228,150 @@ class PrimitiveEnvironment(Environment):
         """
         if not self.objects:
             return ContactSet.empty()
-        centres, radii, halves = robot.centres, robot.radii, robot.halves
-        candidates = self._near_robot(centres, radii, margin)
+        candidates = self._near_robot(robot.centres, robot.radii, margin)
         if not candidates.size:
             return ContactSet.empty()
+        if narrow_phase == "compiled":
+            contacts = self._compiled(robot, candidates, margin)
+        else:
+            contacts = self._coal(robot, candidates, margin)
+        if len(contacts) <= per_shape:  # no shape can have too many
+            return contacts
+        return contacts.keep_closest(per_shape, min_angle_deg=0.0, min_spacing=0.0)
+
+    def query_with_self(
+        self,
+        frames: FloatArray,
+        table: RobotTable,
+        shapes: list[LinkShape],
+        margin: float,
+        per_shape: int,
+        padding: float,
+        self_margin: float,
+        self_padding: float,
+    ) -> ContactSet | None:
+        """The whole query in one compiled pass (:func:`declared_contacts`).
+
+        None for scenes so large that a k-d tree picks the objects first.
+        """
+        if len(self.objects) > TREE_MIN_OBJECTS:
+            return None
+        candidates = self._all
+        capacity = len(frames) * len(candidates) + len(table.first)
+        index = np.empty((2, capacity), dtype=np.intp)
+        floats = np.empty((4, capacity, 3))
+        left = np.empty((2, capacity), dtype=np.intp)
+        obstacles, own, missed, missed_own = declared_contacts(  # type: ignore[call-arg]  # tuples of known length
+            frames,
+            *table.arrays,
+            self._lower,
+            self._upper,
+            candidates,
+            self._frames,
+            *self._fields,
+            *self._skip(shapes),
+            self._ahead,
+            self._moving,
+            float(margin),
+            float(padding),
+            table.first,
+            table.second,
+            table.self_guess,
+            float(self_margin),
+            float(self_padding),
+            index,
+            floats,
+            left,
+        )
+        contacts = ContactSet.packed(index, floats, obstacles, obstacles + own)
+        if not (missed or missed_own or obstacles > per_shape):
+            return contacts
+        # Rare: pairs for coal, or more contacts than a shape may keep.
+        found = contacts.environment_part()
+        own_set = contacts.self_part()
+        if missed or missed_own:
+            placements = ShapePlacements([pin.SE3(M) for M in frames])
+        if missed:
+            placed = PlacedShapes(
+                shapes, placements, table.centres, table.radii, table.halves
+            )
+            rows = self._measure(
+                placed, left[0, :missed].tolist(), left[1, :missed].tolist(), margin
+            )
+            found = ContactSet.concatenate(
+                [found, _padded(ContactSet.from_rows(rows), padding)]
+            )
+        if missed_own:
+            rows = []
+            for k in left[1, missed : missed + missed_own].tolist():
+                i, j = int(table.first[k]), int(table.second[k])
+                d, point, other, normal = signed_distance(
+                    shapes[j].shape,
+                    placements[j],
+                    shapes[i].shape,
+                    placements[i],
+                    self._request,
+                    self._result,
+                )
+                if d < self_margin:
+                    rows.append((i, j, point, other, normal, d))
+            own_set = ContactSet.concatenate(
+                [own_set, _padded(ContactSet.from_rows(rows), self_padding)]
+            )
+        if len(found) > per_shape:
+            found = found.keep_closest(per_shape, min_angle_deg=0.0, min_spacing=0.0)
+        return ContactSet.stack(found, 0.0, own_set)
+
+    def _compiled(
+        self, robot: PlacedShapes, candidates: IntArray, margin: float
+    ) -> ContactSet:
+        """The candidates' contacts in one compiled pass (coal for meshes)."""
+        capacity = len(robot.centres) * len(candidates)
+        shape = np.empty(capacity, dtype=np.intp)
+        obstacle = np.empty(capacity, dtype=np.intp)
+        floats = np.empty((4, capacity, 3))
+        left_shape = np.empty(capacity, dtype=np.intp)
+        left_object = np.empty(capacity, dtype=np.intp)
+        count, left = obstacle_contacts(  # type: ignore[call-arg]  # tuples of known length
+            robot.centres,
+            robot.halves,
+            robot.radii,
+            robot.placements.homogeneous,
+            *fields(packed_robot(robot.shapes)),
+            self._lower,
+            self._upper,
+            candidates,
+            self._frames,
+            *self._fields,
+            *self._skip(robot.shapes),
+            self._ahead,
+            self._moving,
+            float(margin),
+            shape,
+            obstacle,
+            floats,
+            left_shape,
+            left_object,
+        )
+        contacts = ContactSet.obstacles(
+            shape[:count],
+            floats[0, :count],
+            floats[1, :count],
+            floats[2, :count],
+            floats[3, :count, 0],
+        )
+        if not left:
+            return contacts
+        rows = self._measure(
+            robot, left_shape[:left].tolist(), left_object[:left].tolist(), margin
+        )
+        return ContactSet.concatenate([contacts, ContactSet.from_rows(rows)])
+
+    def _coal(
+        self, robot: PlacedShapes, candidates: IntArray, margin: float
+    ) -> ContactSet:
+        """The candidates' contacts, coal called from Python per pair."""
+        centres, radii, halves = robot.centres, robot.radii, robot.halves
         capacity = len(centres) * len(candidates)
         shape_index = np.empty(capacity, dtype=np.intp)
         object_index = np.empty(capacity, dtype=np.intp)
@@ -193,14 +386,28 @@ class PrimitiveEnvironment(Environment):
             shape_index,
             object_index,
         )
+        pairs = [
+            (i, k)
+            for i, k in zip(
+                shape_index[:count].tolist(), object_index[:count].tolist(), strict=True
+            )
+            if not (
+                self.objects[k].allow_contact
+                and robot.shapes[i].link in self.objects[k].allow_contact
+            )  # wanted contact
+        ]
+        return ContactSet.from_rows(
+            self._measure(robot, [i for i, _ in pairs], [k for _, k in pairs], margin)
+        )
+
+    def _measure(
+        self, robot: PlacedShapes, shapes: list[int], objects: list[int], margin: float
+    ) -> list[ContactRow]:
+        """Coal's contacts of the pairs (shapes[p], objects[p]) nearer than margin."""
         rows: list[ContactRow] = []
         request, result = self._request, self._result
-        for i, k in zip(
-            shape_index[:count].tolist(), object_index[:count].tolist(), strict=True
-        ):
+        for i, k in zip(shapes, objects, strict=True):
             obj = self.objects[k]
-            if obj.allow_contact and robot.shapes[i].link in obj.allow_contact:
-                continue  # wanted contact
             d, point, other, normal = signed_distance(
                 obj.shape,
                 obj.placement,
@@ -213,10 +420,7 @@ class PrimitiveEnvironment(Environment):
                 d -= max(float(normal.dot(self._ahead[k])), 0.0)
             if d < margin:
                 rows.append((i, -1, point, other, normal, d))
-        contacts = ContactSet.from_rows(rows)
-        if len(rows) <= per_shape:  # no shape can have too many (counted in Python)
-            return contacts
-        return contacts.keep_closest(per_shape, min_angle_deg=0.0, min_spacing=0.0)
+        return rows
 
     def collision_objects(self) -> list[tuple[str, coal.CollisionGeometry, pin.SE3]]:
         """Every declared object."""
@@ -257,3 +461,8 @@ class PrimitiveEnvironment(Environment):
                 )
                 out[k] = min(out[k], d)
         return out
+
+
+def _padded(contacts: ContactSet, padding: float) -> ContactSet:
+    """``contacts`` with ``padding`` subtracted from their distances."""
+    return dataclasses.replace(contacts, distance=contacts.distance - padding)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 from cbp.errors import ConfigError
 
@@ -33,6 +34,12 @@ class CollisionSettings:
     (:class:`~cbp.collision.objects.PrimitiveEnvironment`'s ``look_ahead``).
     False: where they are now, as an occupancy map sees them (it has no
     velocities)."""
+    narrow_phase: Literal["compiled", "coal"] = "compiled"
+    """How distances to declared objects and between the robot's own shapes
+    are measured: ``compiled``, GJK and EPA in one compiled pass over the pairs
+    the broad phase keeps; ``coal``, coal's distance called from Python per
+    pair (the reference, slower). Non-convex meshes are measured by coal
+    either way."""
     penetration_tolerance: float = 0.005
     """Step validation rejects a step that penetrates deeper than this [m]
     (plus half a cell against an occupancy map, whose surfaces are only known

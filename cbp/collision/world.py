@@ -23,12 +23,20 @@ import pinocchio as pin
 from cbp.collision.broad import shape_bounds
 from cbp.collision.checker import FreeSpaceChecker
 from cbp.collision.contacts import ContactRow, ContactSet
+from cbp.collision.convex_kernels import (
+    RobotTable,
+    compile_convex_kernels,
+    fields,
+    packed_robot,
+    self_contacts,
+)
 from cbp.collision.environment import Environment, signed_distance
 from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
 from cbp.collision.motion import SweepBound
 from cbp.collision.objects import PrimitiveEnvironment
+from cbp.collision.placements import ShapeKinematics
 from cbp.collision.settings import CollisionSettings
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, IntArray
 from cbp.state import RobotState
 
 __all__ = [
@@ -106,6 +114,32 @@ class CollisionWorld:
         self._centres = np.array(
             [s.placement.actInv(s.centre) for s in geometry.shapes]
         ).reshape(-1, 3)
+        first, second = geometry.pair_arrays
+        if not self.settings.self_collision:
+            first, second = first[:0], second[:0]
+        #: The shapes as the one-pass queries read them.
+        self._table = RobotTable(
+            np.ascontiguousarray(self._centres),
+            np.ascontiguousarray(geometry.box_halves, dtype=float),
+            np.ascontiguousarray(geometry.radii, dtype=float),
+            packed_robot(geometry.shapes),
+            first,
+            second,
+            np.zeros((len(first), 5)),
+        )
+        frames = geometry.robot.model.frames
+        self._kinematics = ShapeKinematics.build(
+            geometry.robot.model,
+            [s.joint_id for s in geometry.shapes],
+            [frames[s.frame_id].placement * s.placement for s in geometry.shapes],
+        )
+        if self._kinematics is not None:  # compiled (or loaded) here, not in a loop
+            self._kinematics(pin.neutral(geometry.robot.model))
+        #: Where each self pair's GJK starts next (all pairs, for
+        #: :meth:`self_set`; the table's are those it checks).
+        self._self_guess = np.zeros((len(geometry.self_pairs), 5))
+        if self.settings.narrow_phase == "compiled":
+            compile_convex_kernels()
         self._environment.prepare(geometry.shapes, self.margin(self._environment))
 
     @property
@@ -286,6 +320,26 @@ class CollisionWorld:
         # By index: faster than iterating over pinocchio's vector.
         return ShapePlacements([oMg[i] for i in range(len(self.geometry.shapes))])
 
+    def shape_frames(self, state: RobotState) -> FloatArray:
+        """Every robot shape's world placement at ``state``, (n, 4, 4).
+
+        :meth:`shape_placements` as homogeneous matrices only, for the
+        compiled queries: from ``state.q`` in one compiled call
+        (:mod:`cbp.collision.placements`), or read from pinocchio for a model
+        with joints that call does not know.
+        """
+        if self._kinematics is not None:
+            return self._kinematics(state.q)
+        pin.updateGeometryPlacements(
+            self.geometry.robot.model,
+            state.data,
+            self._geometry_model,
+            self._geometry_data,
+        )
+        oMg = self._geometry_data.oMg
+        count = len(self.geometry.shapes)
+        return np.array([oMg[i].homogeneous for i in range(count)]).reshape(-1, 4, 4)
+
     def shape_bounds(
         self, placements: ShapePlacements
     ) -> tuple[FloatArray, FloatArray]:
@@ -308,11 +362,31 @@ class CollisionWorld:
         computes when its cache misses.
         """
         environment = environment or self._environment
+        settings = self.settings
+        if settings.narrow_phase == "compiled":
+            pad2 = 2.0 * self.padding
+            found = environment.query_with_self(
+                self.shape_frames(state),
+                self._table,
+                self.geometry.shapes,
+                self.margin(environment),
+                settings.contacts_per_link,
+                self.padding + environment.resolution,
+                settings.activation_distance + pad2,
+                pad2,
+            )
+            if found is not None:
+                return found
         robot = self.placed(state)
-        obstacles = environment.query(
-            robot, self.margin(environment), self.settings.contacts_per_link
+        margin, per_shape = self.margin(environment), settings.contacts_per_link
+        # The default is not passed: an environment written before the setting
+        # (its query without the argument) keeps working.
+        obstacles = (
+            environment.query(robot, margin, per_shape)
+            if settings.narrow_phase == "compiled"
+            else environment.query(robot, margin, per_shape, settings.narrow_phase)
         )
-        own = self.self_rows(robot) if self.settings.self_collision else []
+        own = self.self_set(robot) if settings.self_collision else []
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles
         # are inflated by that much (and step validation tolerates as much more).
         return ContactSet.stack(obstacles, self.padding + environment.resolution, own)
@@ -347,10 +421,68 @@ class CollisionWorld:
         Args:
             robot: the shapes at a configuration (:meth:`placed`).
         """
-        return ContactSet.from_rows(self.self_rows(robot))
+        own = self.self_set(robot)
+        return own if isinstance(own, ContactSet) else ContactSet.from_rows(own)
 
-    def self_rows(self, robot: PlacedShapes) -> list[ContactRow]:
-        """:meth:`self_contacts` as rows, for a query to stack in one call."""
+    def self_set(self, robot: PlacedShapes) -> ContactSet | list[ContactRow]:
+        """:meth:`self_contacts` as the narrow phase gives them, for stacking.
+
+        Compiled (``collision.narrow_phase: compiled``): a set measured in one
+        pass; with coal: rows (:meth:`self_rows`).
+        """
+        if self.settings.narrow_phase == "coal":
+            return self.self_rows(robot)
+        geometry = self.geometry
+        first, second = geometry.pair_arrays
+        guess = self._self_guess
+        n = len(first)
+        if not n:
+            return ContactSet.empty()
+        pad2 = 2.0 * self.padding
+        out_first = np.empty(n, dtype=np.intp)
+        out_second = np.empty(n, dtype=np.intp)
+        floats = np.empty((4, n, 3))
+        left = np.empty(n, dtype=np.intp)
+        count, missed = self_contacts(  # type: ignore[call-arg]  # tuples of known length
+            robot.centres,
+            robot.halves,
+            robot.radii,
+            robot.placements.homogeneous,
+            *fields(packed_robot(geometry.shapes)),
+            first,
+            second,
+            guess,
+            self.settings.activation_distance + pad2,
+            pad2,
+            out_first,
+            out_second,
+            floats,
+            left,
+        )
+        found = ContactSet(
+            out_first[:count],
+            out_second[:count],
+            floats[0, :count],
+            floats[1, :count],
+            floats[2, :count],
+            floats[3, :count, 0],
+        )
+        if not missed:
+            return found
+        return ContactSet.concatenate(
+            [found, ContactSet.from_rows(self.self_rows(robot, left[:missed]))]
+        )
+
+    def self_rows(
+        self, robot: PlacedShapes, which: IntArray | None = None
+    ) -> list[ContactRow]:
+        """:meth:`self_contacts` measured by coal, as rows, to stack in one call.
+
+        Args:
+            robot: the shapes at a configuration (:meth:`placed`).
+            which: the indices into :attr:`RobotGeometry.self_pairs` to measure
+                (default: those the broad phase keeps).
+        """
         shapes = self.geometry.shapes
         placements, centres, halves = robot.placements, robot.centres, robot.halves
         pad2 = 2.0 * self.padding
@@ -358,7 +490,12 @@ class CollisionWorld:
         rows = []
         request, result = self._request, self._result
         pairs = self.geometry.self_pairs
-        for k in self.geometry.near_self_pairs(centres, margin, halves):
+        near = (
+            self.geometry.near_self_pairs(centres, margin, halves)
+            if which is None
+            else which.tolist()
+        )
+        for k in near:
             i, j = pairs[k]
             # Shape j first: the normal then points from j toward i.
             d, point, other, normal = signed_distance(

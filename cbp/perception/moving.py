@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from cbp.collision.contacts import ContactSet
+from cbp.collision.environment import NarrowPhase
 from cbp.collision.geometry import PlacedShapes
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.perception.kernels import UNKNOWN
@@ -57,14 +58,20 @@ class MovingCellsEnvironment(OccupancyEnvironment):
     states: np.ndarray
     lower: FloatArray
 
-    def query(self, robot: PlacedShapes, margin: float, per_shape: int) -> ContactSet:
+    def query(
+        self,
+        robot: PlacedShapes,
+        margin: float,
+        per_shape: int,
+        narrow_phase: NarrowPhase = "compiled",
+    ) -> ContactSet:
         """The snapshot's contacts and the moving cells' ones, ``growth`` nearer.
 
         With a moving cell's contact, the snapshot's contacts with unknown
         cells are left out (the module's docstring).
         """
-        mapped = super().query(robot, margin, per_shape)
-        ahead = self.moving.query(robot, margin + self.growth, per_shape)
+        mapped = super().query(robot, margin, per_shape, narrow_phase)
+        ahead = self.moving.query(robot, margin + self.growth, per_shape, narrow_phase)
         if not len(ahead):
             return mapped
         ahead.distance = ahead.distance - self.growth
