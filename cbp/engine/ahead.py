@@ -29,6 +29,15 @@ from cbp.state import RobotState
 
 __all__ = ["CoastingDrift"]
 
+#: A row within this of one of its bounds holds the step [its unit].
+ACTIVE = 1e-9
+
+#: Inequality rows that drift are tightened by this [their unit per step]: ten
+#: times the solver's tolerance, so that a robot held on a bound step after
+#: step (sliding along it) stays on its side (the feedback form adds up the
+#: solver's errors to error / k there).
+SOLVER_MARGIN = 1e-8
+
 
 class CoastingDrift:
     r"""Moves hard constraint rows by the drift of coasting one step.
@@ -63,6 +72,8 @@ class CoastingDrift:
             if isinstance(e.plugin, MovingBounds) and e.priority == "hard"
         ]
         self._moving_rows: list[IntArray] = []
+        #: The coasting drift applied to each plugin's rows at this step.
+        self._applied: list[tuple[int, FloatArray]] = []
 
     def apply(
         self, problem: QPProblem, state: RobotState, v: FloatArray, dt: float
@@ -74,27 +85,77 @@ class CoastingDrift:
         """
         if self.moving:
             self._follow(problem)
-        ahead = self._ahead
-        if ahead is None or not v.any():
+        self._applied = []
+        if self._ahead is None or not v.any():
             return
         if not self._rows:
             self._rows = [
                 np.flatnonzero(problem.row_entry == i) for i, _ in self.plugins
             ]
-        step = v * dt
+        self._applied = self._drift(problem, state, v * dt, range(len(self.plugins)))
+        margin = np.where(problem.equality, 0.0, SOLVER_MARGIN)
+        for k, drift in self._applied:
+            rows = self._rows[k]
+            problem.lower[rows] -= drift - margin[rows]  # infinite stays infinite
+            problem.upper[rows] -= drift + margin[rows]
+
+    def refine(self, problem: QPProblem, state: RobotState, dq: FloatArray) -> bool:
+        """Move the rows that hold the step by the drift of ``dq``, not coasting's.
+
+        The step found (``dq``) differs from coasting by the change of
+        velocity; for the inequality rows at one of their bounds that is the
+        drift's last error. Returns whether a row moved (then solve again).
+        """
+        if not self._applied:
+            return False
+        nv = problem.nv
+        at = problem.A[:, :nv].dot(dq)
+        with np.errstate(invalid="ignore"):
+            active = ~problem.equality & (
+                (np.abs(at - problem.lower) <= ACTIVE)
+                | (np.abs(problem.upper - at) <= ACTIVE)
+            )
+        holding = [(k, d) for k, d in self._applied if active[self._rows[k]].any()]
+        if not holding:
+            return False
+        moved = False
+        found = dict(self._drift(problem, state, dq, [k for k, _ in holding]))
+        for k, coasting in holding:
+            if k not in found:
+                continue
+            rows = self._rows[k]
+            shift = np.where(active[rows], found[k] - coasting, 0.0)
+            problem.lower[rows] -= shift
+            problem.upper[rows] -= shift
+            moved = moved or bool(np.any(shift != 0.0))
+        return moved
+
+    def _drift(
+        self,
+        problem: QPProblem,
+        state: RobotState,
+        step: FloatArray,
+        which: Sequence[int] | range,
+    ) -> list[tuple[int, FloatArray]]:
+        """(index, f(q ⊕ step) - f(q) - J step) of the plugins ``which``.
+
+        Those whose values can be computed there and are finite.
+        """
+        ahead = self._ahead
+        assert ahead is not None  # only called with plugins that drift
         ahead.update(self.robot.integrate(state.q, step))
         linear = problem.A[:, : problem.nv].dot(step)
-        lower, upper = problem.lower, problem.upper
-        for rows, (_, plugin) in zip(self._rows, self.plugins, strict=True):
+        out = []
+        for k in which:
+            plugin = self.plugins[k][1]
             try:
                 change = plugin.compute_value(ahead) - plugin.compute_value(state)
             except (ArithmeticError, ValueError):
                 continue
-            drift = change - linear[rows]
-            if not np.all(np.isfinite(drift)):
-                continue
-            lower[rows] -= drift  # an infinite bound stays infinite
-            upper[rows] -= drift
+            drift = change - linear[self._rows[k]]
+            if np.all(np.isfinite(drift)):
+                out.append((k, drift))
+        return out
 
     def _follow(self, problem: QPProblem) -> None:
         """Move the moving bounds' rows by how far the bounds move over the step."""

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -160,6 +161,11 @@ class Engine:
                 state.v,
                 self._levels,
             )
+        if v is not None and self._drift.refine(problem, state, x[: self.robot.nv]):
+            # The rows that hold the step, with the drift of the step found;
+            # if that cannot be solved, the first answer (third order off).
+            with contextlib.suppress(SolveError):
+                x = self.solver.solve(problem)
         dq, slowed = self.guard.check(q, x[: self.robot.nv], dt, v)
         return StepResult(dq, problem, eased, slowed)
 
