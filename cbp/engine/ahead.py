@@ -74,13 +74,22 @@ class CoastingDrift:
         self._moving_rows: list[IntArray] = []
         #: The coasting drift applied to each plugin's rows at this step.
         self._applied: list[tuple[int, FloatArray]] = []
+        #: Each plugin's value at the step's start; all their rows.
+        self._start: dict[int, FloatArray] = {}
+        self._all: IntArray = np.zeros(0, dtype=np.intp)
 
     def apply(
-        self, problem: QPProblem, state: RobotState, v: FloatArray, dt: float
+        self,
+        problem: QPProblem,
+        values: FloatArray,
+        state: RobotState,
+        v: FloatArray,
+        dt: float,
     ) -> None:
         """Move the rows' bounds in ``problem`` by the drift of coasting at ``v``.
 
-        ``state`` is the step's start; a plugin whose value cannot be computed
+        ``values`` are the rows' values as assembled (:attr:`cbp.qp.QPAssembler.values`)
+        and ``state`` the step's start; a plugin whose value cannot be computed
         ahead (a singular configuration) keeps its rows as assembled.
         """
         if self.moving:
@@ -92,12 +101,14 @@ class CoastingDrift:
             self._rows = [
                 np.flatnonzero(problem.row_entry == i) for i, _ in self.plugins
             ]
-        self._applied = self._drift(problem, state, v * dt, range(len(self.plugins)))
-        margin = np.where(problem.equality, 0.0, SOLVER_MARGIN)
+            self._all = np.concatenate(self._rows)
+        self._start = {k: values[rows] for k, rows in enumerate(self._rows)}
+        self._applied = self._drift(problem, state, v * dt, list(self._start))
         for k, drift in self._applied:
             rows = self._rows[k]
-            problem.lower[rows] -= drift - margin[rows]  # infinite stays infinite
-            problem.upper[rows] -= drift + margin[rows]
+            margin = np.where(problem.equality[rows], 0.0, SOLVER_MARGIN)
+            problem.lower[rows] -= drift - margin  # an infinite bound stays so
+            problem.upper[rows] -= drift + margin
 
     def refine(self, problem: QPProblem, state: RobotState, dq: FloatArray) -> bool:
         """Move the rows that hold the step by the drift of ``dq``, not coasting's.
@@ -108,34 +119,30 @@ class CoastingDrift:
         """
         if not self._applied:
             return False
-        nv = problem.nv
-        at = problem.A[:, :nv].dot(dq)
-        with np.errstate(invalid="ignore"):
-            active = ~problem.equality & (
-                (np.abs(at - problem.lower) <= ACTIVE)
-                | (np.abs(problem.upper - at) <= ACTIVE)
-            )
-        holding = [(k, d) for k, d in self._applied if active[self._rows[k]].any()]
-        if not holding:
+        rows = self._all
+        at = problem.A[rows, : problem.nv].dot(dq)
+        active = np.zeros(problem.A.shape[0], dtype=bool)
+        active[rows] = ~problem.equality[rows] & (
+            (np.abs(at - problem.lower[rows]) <= ACTIVE)
+            | (np.abs(problem.upper[rows] - at) <= ACTIVE)
+        )
+        if not active[rows].any():
             return False
+        holding = [(k, d) for k, d in self._applied if active[self._rows[k]].any()]
         moved = False
         found = dict(self._drift(problem, state, dq, [k for k, _ in holding]))
         for k, coasting in holding:
             if k not in found:
                 continue
-            rows = self._rows[k]
-            shift = np.where(active[rows], found[k] - coasting, 0.0)
-            problem.lower[rows] -= shift
-            problem.upper[rows] -= shift
+            mine = self._rows[k]
+            shift = np.where(active[mine], found[k] - coasting, 0.0)
+            problem.lower[mine] -= shift
+            problem.upper[mine] -= shift
             moved = moved or bool(np.any(shift != 0.0))
         return moved
 
     def _drift(
-        self,
-        problem: QPProblem,
-        state: RobotState,
-        step: FloatArray,
-        which: Sequence[int] | range,
+        self, problem: QPProblem, state: RobotState, step: FloatArray, which: list[int]
     ) -> list[tuple[int, FloatArray]]:
         """(index, f(q ⊕ step) - f(q) - J step) of the plugins ``which``.
 
@@ -144,15 +151,15 @@ class CoastingDrift:
         ahead = self._ahead
         assert ahead is not None  # only called with plugins that drift
         ahead.update(self.robot.integrate(state.q, step))
-        linear = problem.A[:, : problem.nv].dot(step)
+        A = problem.A
         out = []
         for k in which:
-            plugin = self.plugins[k][1]
+            plugin, rows = self.plugins[k][1], self._rows[k]
             try:
-                change = plugin.compute_value(ahead) - plugin.compute_value(state)
+                change = plugin.compute_value(ahead) - self._start[k]
             except (ArithmeticError, ValueError):
                 continue
-            drift = change - linear[self._rows[k]]
+            drift = change - A[rows, : problem.nv].dot(step)
             if np.all(np.isfinite(drift)):
                 out.append((k, drift))
         return out

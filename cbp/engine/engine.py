@@ -147,7 +147,7 @@ class Engine:
             plugin.prepare(state, dt)
         problem = self.assembler.assemble(state)
         if v is not None:
-            self._drift.apply(problem, state, v, float(dt))
+            self._drift.apply(problem, self.assembler.values, state, v, float(dt))
         eased: Easing | None = None
         try:
             x = self.solver.solve(problem)

@@ -134,7 +134,7 @@ def ease(
     velocity need be within them (a joint braking before its position limit
     can do neither), and one scale for every demand can leave the QP
     infeasible, or scale down an obstacle's row for a task's sake. Then,
-    after the capping, the rows give way in order instead
+    instead of the capping and the scaling, the rows give way in order
     (:func:`_give_way`): each level of :data:`GIVE_WAY_ORDER` by its least
     violation (sum of squares) that the levels before it allow, the later
     levels left free meanwhile; the step is then the QP's own optimum within
@@ -163,6 +163,13 @@ def ease(
     )
     given = (lower[rows].copy(), upper[rows].copy())
     physical = not easable[problem.row_entry].all()
+    if physical:  # neither backing out at a pace nor scaling: giving way
+        return _give_way(
+            problem,
+            error,
+            solver,
+            np.where(easable, CONSTRAINTS, LIMITS) if levels is None else levels,
+        )
     if inequality.any():
         A = problem.A[:, :nv]
         reach_hi, reach_lo = _row_reach(A, lower, upper)
@@ -178,11 +185,6 @@ def ease(
                 backing = "eased to half of what the velocity bounds reach "
                 return x, Easing(what + backing + "(backing out)", None)
         lower[rows], upper[rows] = given  # infeasible, or equalities to scale
-
-    if physical:
-        if levels is None:
-            levels = np.where(easable, CONSTRAINTS, LIMITS)
-        return _give_way(problem, error, solver, levels)
 
     # An equality is scaled from the value its row has if the robot keeps
     # its velocity (the state's v; zero at rest), which the acceleration
