@@ -327,6 +327,22 @@ def test_an_obstacle_gives_way_only_by_what_the_limits_force() -> None:
     assert description.startswith("wall gave way")
 
 
+def test_a_wall_approached_faster_than_the_joint_brakes_gives_way_by_the_least() -> (
+    None
+):
+    """No row asks for motion, yet the braking joint overshoots: it gives way."""
+    problem = _problem(
+        [
+            ("brakes", [1.0, 0.0], 0.010, 0.012),  # still moving toward it
+            ("wall", [1.0, 0.0], -np.inf, 0.008),  # standing still would do
+            ("view", [0.0, 1.0], 0.0, 0.0),
+        ]
+    )
+    x, description = _ease(problem, [LIMITS, CONSTRAINTS, EQUALITIES])
+    np.testing.assert_allclose(x, [0.010, 0.0], atol=1e-7)  # braking its hardest
+    assert description.startswith("wall gave way")
+
+
 def test_the_give_way_levels_come_from_what_each_plugin_keeps(robots) -> None:
     """Acceleration and velocity limits never; position limits, then the rest."""
     robot = robots["youbot"]

@@ -62,7 +62,8 @@ class Easing:
     Attributes:
         description: which rows asked for too much, and what was done.
         scale: the factor every demand was scaled by (0: held, "no further");
-            None when the inequality demands were only capped (backing out).
+            None when the inequality demands were only capped (backing out),
+            or when the rows gave way in order.
     """
 
     description: str
@@ -133,8 +134,10 @@ def ease(
     When the QP has such rows, neither standing still nor keeping the present
     velocity need be within them (a joint braking before its position limit
     can do neither), and one scale for every demand can leave the QP
-    infeasible, or scale down an obstacle's row for a task's sake. Then,
-    instead of the capping and the scaling, the rows give way in order
+    infeasible, or scale down an obstacle's row for a task's sake; and a row
+    that asks for no motion can still not hold (an obstacle approached faster
+    than the robot can brake). Then, instead of the capping and the scaling,
+    the rows give way in order
     (:func:`_give_way`): each level of :data:`GIVE_WAY_ORDER` by its least
     violation (sum of squares) that the levels before it allow, the later
     levels left free meanwhile; the step is then the QP's own optimum within
@@ -146,6 +149,13 @@ def ease(
     Raises:
         SolveError: ``error``, when no easing makes the QP solvable.
     """
+    if not easable[problem.row_entry].all():  # rows of physical limits
+        return _give_way(
+            problem,
+            error,
+            solver,
+            np.where(easable, CONSTRAINTS, LIMITS) if levels is None else levels,
+        )
     lower, upper = problem.lower, problem.upper
     nv = len(v)
     # Hard (no slack variable) rows of easable entries.
@@ -162,14 +172,6 @@ def ease(
         "the limits allow together: "
     )
     given = (lower[rows].copy(), upper[rows].copy())
-    physical = not easable[problem.row_entry].all()
-    if physical:  # neither backing out at a pace nor scaling: giving way
-        return _give_way(
-            problem,
-            error,
-            solver,
-            np.where(easable, CONSTRAINTS, LIMITS) if levels is None else levels,
-        )
     if inequality.any():
         A = problem.A[:, :nv]
         reach_hi, reach_lo = _row_reach(A, lower, upper)
