@@ -52,6 +52,10 @@ from cbp.plugins.constraints.orbit_distance_constraint import (
     OrbitDistanceConstraint,
     OrbitDistanceParams,
 )
+from cbp.plugins.constraints.view_direction_constraint import (
+    ViewDirectionConstraint,
+    ViewDirectionParams,
+)
 from cbp.plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
 from cbp.plugins.tasks.joint_step_task import JointStepParams, JointStepTask
 from cbp.qp import Entry, QPProblem
@@ -160,6 +164,14 @@ VARIANTS = [
         "obstacle_ahead",
         v_y="-0.8 * smoothstep((t - 5) / 0.5)",
         obstacle=(0.3, 0.8),
+        min_distance=0.5,
+    ),
+    Variant(
+        "object_to_the_side",  # 97 deg off the line of sight at the start
+        object=(0.3, 0.9, 0.25),
+        v_y="0.1 * sin(2 * pi * t / 10)",
+        v_z="0.02",
+        obstacle=(-0.8, -0.5),
         min_distance=0.5,
     ),
     Variant(
@@ -393,6 +405,23 @@ def test_a_turning_base_ends_its_step_where_the_obstacle_row_said(robots) -> Non
     after = obstacle.compute_value(state)[0] - 0.5
     assert after >= (1.0 - k) * margin  # the feedback form's promise, kept
     assert after < 1.01 * (1.0 - k) * margin  # and the row held the step
+
+
+def test_the_view_rows_vanish_only_when_the_camera_looks_at_the_object(
+    robots,
+) -> None:
+    """The image form's rows are as long as the angle off the line of sight."""
+    robot = robots["youbot"]
+    state = RobotState(robot)
+    frame = robot.frame_id("camera_link")
+    camera, rotation = state.frame_position(frame), state.frame_rotation(frame)
+    for behind in (0.3, 1.0, 2.5, 3.1):  # [rad] off the line of sight
+        direction = rotation.dot([np.cos(behind), np.sin(behind), 0.0])
+        target = tuple(camera + 0.7 * direction)
+        plugin = ViewDirectionConstraint(ViewDirectionParams(object=target), robot)
+        value = plugin.compute_value(state)
+        assert np.linalg.norm(value) == pytest.approx(behind)
+        assert plugin.angle(state) == pytest.approx(behind)
 
 
 def test_a_steady_distance_profile_is_followed_without_lag(robots) -> None:

@@ -244,16 +244,20 @@ def _give_way(
     level[hard & equality & (level > LIMITS)] = EQUALITIES
     given = (lower.copy(), upper.copy(), equality.copy())
     gave: dict[int, float] = {}
+    fallback: FloatArray | None = None
     for stage in range(POSITIONS, EQUALITIES + 1):
         rows = np.flatnonzero(level == stage)
         if rows.size == 0:
             continue
         later = level > stage
-        violation = _least_violation(problem, rows, later, solver)
-        if violation is None:
+        found = _least_violation(problem, rows, later, solver)
+        if found is None:
             lower[:], upper[:], equality[:] = given
             raise error
-        giving = violation > GIVE_WAY_TOL
+        violation, fallback = found
+        # Every row the least violation leaves violated is widened by as much
+        # (and the solver's tolerance); past GIVE_WAY_TOL it "gave way".
+        giving = violation > 0.0
         if giving.any():
             widen = violation[giving] + GIVE_WAY_TOL
             lower[rows[giving]] -= widen
@@ -262,13 +266,16 @@ def _give_way(
             for r, amount in zip(
                 rows[giving].tolist(), violation[giving].tolist(), strict=True
             ):
-                entry = int(problem.row_entry[r])
-                gave[entry] = max(gave.get(entry, 0.0), amount)
+                if amount > GIVE_WAY_TOL:
+                    entry = int(problem.row_entry[r])
+                    gave[entry] = max(gave.get(entry, 0.0), amount)
     try:
         x = solver.solve(problem)
     except SolveError:
-        lower[:], upper[:], equality[:] = given
-        raise error from None
+        if fallback is None:
+            lower[:], upper[:], equality[:] = given
+            raise error from None
+        x = fallback  # the last level's least violation: within every bound
     names = ", ".join(problem.entry_names[i] for i in sorted(gave)) or "no row"
     return x, Easing(
         f"{names} gave way, in order (position limits, then other constraints, "
@@ -279,11 +286,12 @@ def _give_way(
 
 def _least_violation(
     problem: QPProblem, rows: IntArray, free: np.ndarray, solver: QPSolver
-) -> FloatArray | None:
+) -> tuple[FloatArray, FloatArray] | None:
     """The least violations of ``rows`` (sum of squares) the other rows allow.
 
-    Rows marked ``free`` are left out; the others keep their bounds. None when
-    even with ``rows`` left out the QP is infeasible.
+    Rows marked ``free`` are left out; the others keep their bounds. Returns
+    the violations and the QP's variables there; None when even with ``rows``
+    left out the QP is infeasible.
     """
     A, nv = problem.A, problem.nv
     n, k = A.shape[1], rows.size
@@ -321,7 +329,7 @@ def _least_violation(
         x = solver.solve(relaxed)
     except SolveError:
         return None
-    return np.maximum(np.asarray(x[n:]), 0.0)
+    return np.maximum(np.asarray(x[n:]), 0.0), np.asarray(x[:n])
 
 
 def _row_reach(
