@@ -112,6 +112,7 @@ __all__ = [
     "HoldsContacts",
     "InputValue",
     "Linearization",
+    "MovingBounds",
     "ParamsT",
     "Plugin",
     "PluginParams",
@@ -516,6 +517,24 @@ class DescribesInput(Protocol):
 
     def input_values(self) -> tuple[InputValue, ...]:
         """One description per input value, in the input's order."""
+
+
+@runtime_checkable
+class MovingBounds(Protocol):
+    """A constraint whose bounds move from step to step (an operator's input).
+
+    The feedback form removes a fraction k of the error each step, so bounds
+    that move at a steady rate are followed with a lag of rate / k per step.
+    An engine step given the robot's velocity moves the rows' bounds, after
+    the gain, by :meth:`bound_change` as well (feedforward: no lag).
+    """
+
+    def bound_change(self) -> FloatArray:
+        """How far the bounds are expected to move over the step (dim,).
+
+        Zeros when they are not moving steadily (a single jump is left to
+        the feedback).
+        """
 
 
 @runtime_checkable

@@ -261,6 +261,14 @@ class QPAssembler:
         # first control step; on the zero buffers it writes the initial problem.
         self._fill()
 
+    @property
+    def values(self) -> FloatArray:
+        """The values f of the hard entries' and soft constraints' rows, as assembled.
+
+        In the problem's row order (its first rows); the assembler's buffer.
+        """
+        return self._rows.f
+
     def assemble(self, state: RobotState) -> QPProblem:
         """Linearize every entry at ``state`` and return the QP (shared buffers).
 

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -10,8 +11,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from cbp.engine.ahead import CoastingDrift
 from cbp.engine.guard import StepGuard
-from cbp.engine.recovery import Easing, ease
+from cbp.engine.recovery import Easing, ease, give_way_levels
 from cbp.errors import ConfigError, InvalidStateError, SolveError, suggestion
 from cbp.plugin import AnyPlugin, Plugin
 from cbp.qp import Entry, QPAssembler, QPProblem
@@ -89,6 +91,10 @@ class Engine:
         self._latching = [p for p in plugins if type(p).prepare is not Plugin.prepare]
         # Per entry: whether its rows may be eased when the QP is infeasible.
         self._easable = np.array([p.easable for p in plugins], dtype=bool)
+        # Per entry: when its rows give way if not all can hold.
+        self._levels = give_way_levels(plugins)
+        # The second-order drift of the rows over a step of a moving robot.
+        self._drift = CoastingDrift(robot, self.entries)
 
     def plugin(self, name: str) -> AnyPlugin:
         """Return the plugin of the entry called ``name``."""
@@ -107,6 +113,9 @@ class Engine:
         that commands velocities gives its last command, and plugins read it as
         ``state.v`` (``joint_acceleration`` bounds the step's change of
         velocity with it). None: at rest, and the guard checks no acceleration.
+        Given, the bounds of the hard constraint rows are moved by the
+        second-order drift of coasting at ``v`` for ``dt``
+        (:class:`cbp.engine.ahead.CoastingDrift`).
 
         When the QP is infeasible because hard rows ask for more motion than the
         others allow (the arm inside its safety distance or in penetration, a
@@ -137,13 +146,26 @@ class Engine:
         for plugin in self._latching:
             plugin.prepare(state, dt)
         problem = self.assembler.assemble(state)
+        if v is not None:
+            self._drift.apply(problem, self.assembler.values, state, v, float(dt))
         eased: Easing | None = None
         try:
             x = self.solver.solve(problem)
         except SolveError as exc:
             x, eased = ease(
-                problem, exc, float(dt), self.solver, self._easable, state.v
+                problem,
+                exc,
+                float(dt),
+                self.solver,
+                self._easable,
+                state.v,
+                self._levels,
             )
+        if v is not None and self._drift.refine(problem, state, x[: self.robot.nv]):
+            # The rows that hold the step, with the drift of the step found;
+            # if that cannot be solved, the first answer (third order off).
+            with contextlib.suppress(SolveError):
+                x = self.solver.solve(problem)
         dq, slowed = self.guard.check(q, x[: self.robot.nv], dt, v)
         return StepResult(dq, problem, eased, slowed)
 

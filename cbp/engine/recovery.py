@@ -4,27 +4,55 @@
 When hard rows ask for more motion than the others allow (the arm inside its
 safety distance or in penetration, a joint past its limit), the step is solved
 again with those demands eased (:func:`ease`), and the engine's result says
-how (:class:`Easing`).
+how (:class:`Easing`). When the step also carries rows that no easing makes
+true (the acceleration limits of a robot in motion), what cannot hold gives
+way in a fixed order instead (:func:`give_way_levels`): the robot's velocity
+and acceleration limits never, then its position limits, then the other
+constraints (obstacles), then the tasks and equalities (the orbit's).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from cbp.errors import SolveError
+from cbp.plugin import AnyPlugin
 from cbp.qp import QPProblem
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, IntArray
 from cbp.solvers import QPSolver
 
-__all__ = ["Easing", "ease"]
+__all__ = ["GIVE_WAY_ORDER", "Easing", "ease", "give_way_levels"]
 
 #: A hard row's bound within this of zero does not count as asking for motion.
 EASE_TOL = 1e-12
 
 #: Bisection steps for the largest feasible scale of the demands (1/64).
 SCALE_BISECTIONS = 6
+
+#: What gives way, by level: level 0 (the robot's velocity and acceleration
+#: limits) never; then each level in turn, as little as it must, before the
+#: next one gives any way at all. Equality rows (tasks, the orbit's
+#: distance and view) are the last level, whatever their entry.
+GIVE_WAY_ORDER = (
+    "velocity and acceleration limits",
+    "position limits",
+    "constraints",
+    "tasks and equalities",
+)
+
+#: Give-way levels (:data:`GIVE_WAY_ORDER`).
+LIMITS, POSITIONS, CONSTRAINTS, EQUALITIES = range(4)
+
+#: A row gives way by its least violation plus this [its unit per step]: the
+#: solver meets bounds to about 1e-9.
+GIVE_WAY_TOL = 1e-8
+
+#: The weight of the joint step against the violations while the least
+#: violations of a level are found (it only makes that QP strictly convex).
+GIVE_WAY_REGULARIZATION = 1e-6
 
 
 @dataclass(frozen=True)
@@ -34,7 +62,8 @@ class Easing:
     Attributes:
         description: which rows asked for too much, and what was done.
         scale: the factor every demand was scaled by (0: held, "no further");
-            None when the inequality demands were only capped (backing out).
+            None when the inequality demands were only capped (backing out),
+            or when the rows gave way in order.
     """
 
     description: str
@@ -45,6 +74,27 @@ class Easing:
         return self.description
 
 
+def give_way_levels(plugins: Sequence[AnyPlugin]) -> IntArray:
+    """Per entry, when its hard inequality rows give way (:data:`GIVE_WAY_ORDER`).
+
+    A physical limit no easing makes true (``easable = False``) and the
+    velocity limits: never (0); the position limits: first (1); any other
+    constraint (an obstacle, the altitude): next (2). A hard equality row
+    gives way before any of them (3), whatever its entry.
+    """
+    return np.array(
+        [
+            LIMITS
+            if not p.easable or p.robot_limit in ("velocity", "acceleration")
+            else POSITIONS
+            if p.robot_limit == "position"
+            else CONSTRAINTS
+            for p in plugins
+        ],
+        dtype=np.intp,
+    )
+
+
 def ease(
     problem: QPProblem,
     error: SolveError,
@@ -52,6 +102,7 @@ def ease(
     solver: QPSolver,
     easable: np.ndarray,
     v: FloatArray,
+    levels: IntArray | None = None,
 ) -> tuple[FloatArray, Easing]:
     """Solve again with the hard rows that ask for motion eased; else re-raise.
 
@@ -63,6 +114,8 @@ def ease(
         easable: per entry, whether its rows may be eased
             (:attr:`cbp.plugin.Plugin.easable`).
         v: the robot's velocity at the step's start (nv; zero at rest).
+        levels: per entry, when its rows give way (:func:`give_way_levels`);
+            by default from ``easable`` alone.
 
     A hard row whose bounds exclude standing still asks the step for a
     motion of its own: an inequality row inside its safety distance or a
@@ -78,12 +131,31 @@ def ease(
     its acceleration limits always allow. Rows of plugins that are physical
     limits (``easable = False``: ``joint_acceleration``) are never eased.
 
+    When the QP has such rows, neither standing still nor keeping the present
+    velocity need be within them (a joint braking before its position limit
+    can do neither), and one scale for every demand can leave the QP
+    infeasible, or scale down an obstacle's row for a task's sake; and a row
+    that asks for no motion can still not hold (an obstacle approached faster
+    than the robot can brake). Then, instead of the capping and the scaling,
+    the rows give way in order
+    (:func:`_give_way`): each level of :data:`GIVE_WAY_ORDER` by its least
+    violation (sum of squares) that the levels before it allow, the later
+    levels left free meanwhile; the step is then the QP's own optimum within
+    the bounds so widened.
+
     Returns:
         The solution, and how the QP was eased.
 
     Raises:
         SolveError: ``error``, when no easing makes the QP solvable.
     """
+    if not easable[problem.row_entry].all():  # rows of physical limits
+        return _give_way(
+            problem,
+            error,
+            solver,
+            np.where(easable, CONSTRAINTS, LIMITS) if levels is None else levels,
+        )
     lower, upper = problem.lower, problem.upper
     nv = len(v)
     # Hard (no slack variable) rows of easable entries.
@@ -156,6 +228,108 @@ def ease(
     if low == 0.0:
         return best, Easing(what + "held (k = 0: no further, no change)", low)
     return best, Easing(what + "scaled down to what the limits allow", low)
+
+
+def _give_way(
+    problem: QPProblem, error: SolveError, solver: QPSolver, levels: IntArray
+) -> tuple[FloatArray, Easing]:
+    """The step with the rows that cannot hold given way in order; else re-raise.
+
+    Leaves the widened bounds of the answer in ``problem``.
+    """
+    nv = problem.nv
+    lower, upper, equality = problem.lower, problem.upper, problem.equality
+    hard = ~problem.A[:, nv:].any(axis=1)
+    level = np.where(hard, levels[problem.row_entry], LIMITS)
+    level[hard & equality & (level > LIMITS)] = EQUALITIES
+    given = (lower.copy(), upper.copy(), equality.copy())
+    gave: dict[int, float] = {}
+    fallback: FloatArray | None = None
+    for stage in range(POSITIONS, EQUALITIES + 1):
+        rows = np.flatnonzero(level == stage)
+        if rows.size == 0:
+            continue
+        later = level > stage
+        found = _least_violation(problem, rows, later, solver)
+        if found is None:
+            lower[:], upper[:], equality[:] = given
+            raise error
+        violation, fallback = found
+        # Every row the least violation leaves violated is widened by as much
+        # (and the solver's tolerance); past GIVE_WAY_TOL it "gave way".
+        giving = violation > 0.0
+        if giving.any():
+            widen = violation[giving] + GIVE_WAY_TOL
+            lower[rows[giving]] -= widen
+            upper[rows[giving]] += widen
+            equality[rows[giving]] = False
+            for r, amount in zip(
+                rows[giving].tolist(), violation[giving].tolist(), strict=True
+            ):
+                if amount > GIVE_WAY_TOL:
+                    entry = int(problem.row_entry[r])
+                    gave[entry] = max(gave.get(entry, 0.0), amount)
+    try:
+        x = solver.solve(problem)
+    except SolveError:
+        if fallback is None:
+            lower[:], upper[:], equality[:] = given
+            raise error from None
+        x = fallback  # the last level's least violation: within every bound
+    names = ", ".join(problem.entry_names[i] for i in sorted(gave)) or "no row"
+    return x, Easing(
+        f"{names} gave way, in order (position limits, then other constraints, "
+        "then tasks and equalities; never the velocity and acceleration limits)",
+        None,
+    )
+
+
+def _least_violation(
+    problem: QPProblem, rows: IntArray, free: np.ndarray, solver: QPSolver
+) -> tuple[FloatArray, FloatArray] | None:
+    """The least violations of ``rows`` (sum of squares) the other rows allow.
+
+    Rows marked ``free`` are left out; the others keep their bounds. Returns
+    the violations and the QP's variables there; None when even with ``rows``
+    left out the QP is infeasible.
+    """
+    A, nv = problem.A, problem.nv
+    n, k = A.shape[1], rows.size
+    kept = np.flatnonzero(~free)
+    kept = kept[~np.isin(kept, rows)]
+    H = np.zeros((n + k, n + k))
+    H[np.diag_indices(n)] = GIVE_WAY_REGULARIZATION
+    H[n:, n:] = np.eye(k)
+    eye = np.eye(k)
+    stacked = np.block(
+        [
+            [A[kept], np.zeros((kept.size, k))],
+            [A[rows], eye],  # A x + s >= lower
+            [A[rows], -eye],  # A x - s <= upper
+            [np.zeros((k, n)), eye],  # s >= 0
+        ]
+    )
+    inf = np.full(k, np.inf)
+    relaxed = QPProblem(
+        H=H,
+        g=np.zeros(n + k),
+        A=stacked,
+        lower=np.concatenate(
+            [problem.lower[kept], problem.lower[rows], -inf, np.zeros(k)]
+        ),
+        upper=np.concatenate([problem.upper[kept], inf, problem.upper[rows], inf]),
+        equality=np.concatenate([problem.equality[kept], np.zeros(3 * k, dtype=bool)]),
+        row_entry=np.concatenate(
+            [problem.row_entry[kept]] + [problem.row_entry[rows]] * 3
+        ),
+        entry_names=problem.entry_names,
+        nv=nv,
+    )
+    try:
+        x = solver.solve(relaxed)
+    except SolveError:
+        return None
+    return np.maximum(np.asarray(x[n:]), 0.0), np.asarray(x[:n])
 
 
 def _row_reach(

@@ -11,14 +11,21 @@ configurations (``scenarios/youbot_*.yaml``), not code here.
 Each step is given the last command as the robot's velocity: the engine's step
 guard refuses a command that changes a joint's velocity faster than its
 acceleration limit, and a ``joint_acceleration`` constraint (in
-``configs/orbit.yaml``) keeps the QP's answers within it. A bad input value is
-refused (the entry keeps its previous one); a QP that cannot be solved, or an
-answer the guard refuses, brakes the robot for that tick within its
-acceleration limits. Both are events, and the loop goes on.
+``configs/orbit.yaml``; the loader adds it, and says so, to a scenario that
+lists none) keeps the QP's answers within it. Hard inequality gains are held
+to what the robot can brake (:func:`braking_gains`), and when not every row
+can hold, the rows give way in order (:mod:`cbp.engine.recovery`): never the
+robot's velocity and acceleration limits, then its position limits, then the
+other constraints (obstacles), then the tasks and equalities (the orbit's).
+A bad input value is refused (the entry keeps its previous one); a QP that
+cannot be solved even so, or an answer the guard refuses, brakes the robot
+for that tick within its acceleration limits. All are events, and the loop
+goes on.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import math
@@ -32,8 +39,9 @@ from cbp.errors import PluginOutputError, SolveError
 from cbp.expressions import TimeFunction
 from cbp.methods import METHODS
 from cbp.methods.settings import VelocitySettings
-from cbp.plugin import ReportsSignals, TakesInput
+from cbp.plugin import Constraint, ReportsSignals, TakesInput, UsesCollisionWorld
 from cbp.progress import report_time
+from cbp.qp import Entry
 from cbp.robot import FloatArray
 from cbp.run.declared import DeclaredObjects
 from cbp.run.faults import Faults
@@ -42,7 +50,7 @@ from cbp.sim.mobile import MobileSimulation
 from cbp.state import RobotState
 from cbp.trace import Trace
 
-__all__ = ["VelocityLoop", "run_velocity"]
+__all__ = ["VelocityLoop", "braking_gains", "run_velocity"]
 
 log = logging.getLogger(__name__)
 
@@ -106,8 +114,11 @@ class VelocityLoop:
         """Build the engine and the recording."""
         robot = scenario.robot
         self.scenario, self.sim, self.robot = scenario, sim, robot
-        self.engine = scenario.make_engine()
         self.settings = scenario.spec.method.settings(VelocitySettings)
+        entries, lowered = braking_gains(scenario, self.settings.dt)
+        # The same plugins, with the gains the robot can brake.
+        braking = dataclasses.replace(scenario, entries=tuple(entries))
+        self.engine = braking.make_engine()
         self.names = {id(e.plugin): e.name for e in scenario.entries}
         self.rows: dict[str, list[Any]] = {
             k: [] for k in ("t", "q", "u", "time", "ee_p", "ee_R")
@@ -116,7 +127,7 @@ class VelocityLoop:
         self.values: dict[str, list[FloatArray]] = {
             self.names[id(p)]: [] for p, _ in scenario.inputs()
         }
-        self.events: list[tuple[float, str]] = []
+        self.events: list[tuple[float, str]] = [(0.0, m) for m in lowered]
         self.failing = 0
         self.reporters = [
             e.plugin for e in scenario.entries if isinstance(e.plugin, ReportsSignals)
@@ -124,6 +135,10 @@ class VelocityLoop:
         self.signals: dict[str, list[float]] = {}
         self.state = RobotState(robot)
         self.faults = Faults(lambda at, m: self.events.append((at, m)))
+        for entry in scenario.entries:  # rows the loader added: said once
+            added = getattr(entry.plugin, "added_because", None)
+            if added is not None:
+                self.events.append((0.0, added))
         if not any(e.plugin.robot_limit == "acceleration" for e in scenario.entries):
             self.events.append(
                 (
@@ -245,6 +260,67 @@ class VelocityLoop:
             transient_s=self.settings.transient_s,
             aborted=self.faults.aborted,
         )
+
+
+def braking_gains(scenario: Scenario, dt: float) -> tuple[list[Entry], list[str]]:
+    r"""The scenario's entries, each inequality's gain no more than the robot can brake.
+
+    A hard inequality row with gain k lets the robot approach its bound at
+    k / dt times its distance from it, so along that curve the robot must
+    slow at k / dt times its speed. At a joint's top speed :math:`v_j` that is
+    within its acceleration limit :math:`a_j` when
+    :math:`k \le \Delta t\, a_j / v_j`; the gain of every hard inequality
+    constraint that is not a limit of the robot's own is lowered to
+    :math:`\Delta t \min_j a_j / v_j` (over the joints with both limits) if
+    it is above it (for the youBot, 0.02 s x 1 m/s^2 / 0.8 m/s = 0.025).
+    Above it, a base at speed reaches a point where an obstacle's row asks
+    for more braking than it has, and the row gives way (still short of the
+    bound). Equality rows (the orbit's distance and view) keep their gains.
+
+    Returns:
+        The entries (new ones where a gain was lowered), and one message per
+        gain lowered.
+    """
+    robot = scenario.robot
+    a, v = robot.acceleration_limits, robot.velocity_limits
+    both = np.isfinite(a) & np.isfinite(v) & (v > 0)
+    if not both.any():
+        return list(scenario.entries), []
+    j = int(np.flatnonzero(both)[np.argmin(a[both] / v[both])])
+    cap = dt * float(a[j] / v[j])
+    state = RobotState(robot, scenario.q0)
+    entries, lowered = [], []
+    for entry in scenario.entries:
+        if entry.gain > cap and _brakes_toward(entry, state):
+            lowered.append(
+                f"gain of '{entry.name}' lowered from {entry.gain:g} to {cap:.4g}: "
+                f"an inequality row approaches its bound at gain / dt times its "
+                f"distance, and {robot.coordinate_names('v')[j]} slows from its "
+                f"top speed ({v[j]:g}) at {a[j]:g} per s^2 (dt {dt:g} s)"
+            )
+            entry = dataclasses.replace(entry, gain=cap)
+        entries.append(entry)
+    return entries, lowered
+
+
+def _brakes_toward(entry: Entry, state: RobotState) -> bool:
+    """Whether ``entry`` is a hard inequality other than a limit of the robot's own.
+
+    Its bounds at ``state`` differ (contact rows are inequalities whatever
+    their bounds say before any contact is latched).
+    """
+    plugin = entry.plugin
+    if not isinstance(plugin, Constraint) or entry.priority != "hard":
+        return False
+    if plugin.robot_limit is not None:
+        return False
+    if isinstance(plugin, UsesCollisionWorld):
+        return True
+    try:
+        lower, upper = plugin.compute_bounds(state)
+    except Exception:  # bounds that need a step's latch: an inequality
+        return True
+    return bool(np.any(np.asarray(lower) != np.asarray(upper)))
 
 
 def _evaluate(functions: list[TimeFunction], t: float) -> list[float]:

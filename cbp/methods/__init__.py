@@ -77,6 +77,10 @@ class Method:
         fresh_process: its planners keep process-wide state that a seed cannot
             reset (OMPL seeds its samplers once per process), so a sweep runs
             each of its runs in a new worker process to be reproducible.
+        commands_velocity: it gives each engine step the robot's last command,
+            so the step guard checks the acceleration limits; a scenario of it
+            that keeps no acceleration limits gets ``joint_acceleration``'s
+            rows from the robot's limits (the loader says so).
     """
 
     name: str
@@ -90,6 +94,7 @@ class Method:
     perceives: bool = False
     checks_collisions: bool = False
     fresh_process: bool = False
+    commands_velocity: bool = False
 
     def refuse_source(self, source: str, where: str) -> None:
         """Refuse an obstacle source this method cannot use.
@@ -192,6 +197,7 @@ METHODS: dict[str, Method] = {
             "one QP per control tick, velocities to a mobile manipulator (orbit "
             "object, pan object)",
             colour=(23, 190, 207),
+            commands_velocity=True,
         ),
     )
 }

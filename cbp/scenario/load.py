@@ -12,6 +12,7 @@ the nearest valid choice (:class:`~cbp.errors.ScenarioError`).
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -26,6 +27,7 @@ from cbp.errors import CbpError, ConfigError, ScenarioError, suggestion
 from cbp.expressions import check_over, compile_time_function, run_times
 from cbp.files import load_mesh
 from cbp.goals import GoalStream
+from cbp.methods import METHODS
 from cbp.perception.frame import camera_parent
 from cbp.plugin import Plugin, TakesInput, UsesCollisionWorld
 from cbp.qp import Entry
@@ -38,6 +40,8 @@ from cbp.schema import INVALID, Document, join_path, mapping_items, value_node
 from cbp.state import RobotState
 
 __all__ = ["load_scenario"]
+
+log = logging.getLogger(__name__)
 
 _ENTRY_KEYS = ("type", "name", "priority", "weight", "gain", "params")
 
@@ -105,6 +109,7 @@ def load_scenario(
                 )
         q0 = _initial_configuration(doc, robot_spec, robot, root)
         if spec is not INVALID:
+            entries += _acceleration_rows(doc, spec, entries, robot, items)
             _check_meshes(doc, spec, root, path.parent)
             _check_allowed_contact(doc, spec, robot, root)
             _check_goal(doc, spec, entries, root, path.parent)
@@ -187,6 +192,65 @@ def _check_initial_contact(doc: Document, scenario: Scenario, root: yaml.Node) -
             "robot.allow_initial_contact: true to start in contact (the arm then "
             "backs out)",
         )
+
+
+def _acceleration_rows(
+    doc: Document,
+    spec: ScenarioSpec,
+    entries: list[Entry],
+    robot: RobotModel,
+    items: Mapping[str, yaml.Node],
+) -> list[Entry]:
+    """The robot's acceleration rows, when the step guard checks them and none are.
+
+    A method that gives each step the robot's velocity
+    (:attr:`cbp.methods.Method.commands_velocity`) has the step guard refuse
+    every answer that accelerates past the robot's limits; a scenario of it
+    that lists its own constraints without ``joint_acceleration`` (or another
+    entry keeping those limits) would have every step refused and the robot
+    never move. The rows are added, at the position limits' margin, and the
+    loader says so (a log line; the run an event).
+    """
+    if not METHODS[spec.method.name].commands_velocity:
+        return []
+    if any(e.plugin.robot_limit == "acceleration" for e in entries):
+        return []
+    if not np.isfinite(robot.acceleration_limits).any():
+        return []
+    from cbp.plugins.constraints.joint_acceleration_constraint import (
+        JointAccelerationConstraint,
+        JointAccelerationParams,
+    )
+
+    margin = max(
+        (
+            float(getattr(e.plugin.params, "margin", 0.0))
+            for e in entries
+            if e.plugin.robot_limit == "position"
+        ),
+        default=0.0,
+    )
+    names = {e.name for e in entries}
+    name = "joint_acceleration"
+    while name in names:
+        name += "_added"
+    plugin = JointAccelerationConstraint(
+        JointAccelerationParams(margin=margin), robot, name
+    )
+    node = items.get("constraints")
+    where = (
+        f"line {node.start_mark.line + 1}: constraints"
+        if node is not None and node.start_mark is not None
+        else "constraints"
+    )
+    plugin.added_because = (
+        f"{where}: no entry keeps the robot's acceleration limits, which the "
+        f"{spec.method.name} executor's step guard checks: '{name}' "
+        f"(joint_acceleration, margin {margin:g}) was added from the robot's "
+        "limits; list it to choose its settings"
+    )
+    log.warning("%s, %s", doc.path, plugin.added_because)
+    return [Entry.make(plugin)]
 
 
 def _check_meshes(

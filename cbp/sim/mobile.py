@@ -2,9 +2,10 @@
 """A mobile manipulator in PyBullet: a holonomic base and an arm, by velocity.
 
 The base is driven like the youBot's omnidirectional base under its own
-velocity controller: each physics step integrates the commanded (v_x, v_y)
-[m/s, base frame] and yaw rate [rad/s] and places the base there (a kinematic
-base: its wheels and their slip are not simulated). The arm's joints follow the
+velocity controller: each physics step moves the base by the commanded
+(v_x, v_y) [m/s, base frame] and yaw rate [rad/s] held over it, along the arc
+they trace, and places it there (a kinematic base: its wheels and their slip
+are not simulated). The arm's joints follow the
 commanded velocities through PyBullet's joint motors, which track the
 integrated position reference and the velocity, limited by the joints'
 effort. The configuration is pinocchio's planar one:
@@ -92,6 +93,12 @@ class MobileSimulation:
         """Step the physics (and the base) until ``t_end`` [s]."""
         while self.t + 0.5 * self.dt < t_end:
             vx, vy, wz = self._command[:3]
+            # The base moves with a constant twist over the physics step: along
+            # the arc it traces (SE(2)'s exponential, as the model's integrate).
+            turn = wz * self.dt
+            if abs(turn) > 1e-9:
+                along, across = math.sin(turn) / turn, (1.0 - math.cos(turn)) / turn
+                vx, vy = along * vx - across * vy, across * vx + along * vy
             yaw = self._base[2]
             c, s = math.cos(yaw), math.sin(yaw)
             self._base += self.dt * np.array([c * vx - s * vy, s * vx + c * vy, wz])

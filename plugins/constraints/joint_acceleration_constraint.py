@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 
@@ -27,6 +27,12 @@ class JointAccelerationParams(PluginParams):
     margin: float = 0.0
     """Distance from each position limit at which a joint must be able to
     stop [rad or m]: the ``joint_limits`` constraint's margin."""
+    braking: Literal["slowest", "own"] = "slowest"
+    """How hard a joint may have to brake before its position limit:
+    ``slowest``, the smallest (scaled) acceleration limit of the robot's
+    joints, so that the joints that take over its share of a task (a mobile
+    base, slower than the arm) can keep up while it stops; ``own``, its own
+    limit (it runs closer to the limit before it brakes)."""
 
     def __post_init__(self) -> None:
         """Scale in (0, 1], limits positive, margin not negative."""
@@ -51,6 +57,10 @@ class JointAccelerationConstraint(
     stops within :math:`d` one tick later. Without it, a position limit met at
     speed would need more deceleration than the joint has, and the QP would be
     infeasible. A joint already too fast for that brakes as hard as it can.
+    With ``braking: slowest`` (the default) :math:`a` is the smallest limit of
+    any joint: an arm joint that stopped at 3 rad/s^2 would hand its share of
+    the orbit's view to a base that takes it up at 1 rad/s^2, and the view
+    would give way meanwhile.
 
     where :math:`q_0` is the configuration at the start of the step and
     :math:`v_0` its velocity (``state.v``: the executor's last command), both
@@ -72,6 +82,9 @@ class JointAccelerationConstraint(
     unit: ClassVar[str] = "rad"
     robot_limit: ClassVar[RobotLimit | None] = "acceleration"
     easable: ClassVar[bool] = False  # the robot cannot accelerate faster
+    #: Why the loader added this entry to a scenario that had none (None: the
+    #: scenario lists it).
+    added_because: str | None = None
 
     def __init__(
         self, params: JointAccelerationParams, robot: RobotModel, name: str = ""
@@ -94,6 +107,10 @@ class JointAccelerationConstraint(
         ]
         self._ranged = np.array([r for r, _ in ranged], dtype=int)
         self._ranged_q = np.array([qi for _, qi in ranged], dtype=int)
+        braking = self._acceleration[self._ranged]
+        if params.braking == "slowest" and braking.size:
+            braking = np.full(braking.size, float(np.min(self._acceleration)))
+        self._braking = braking
         self._low_limit = robot.lower_limits[self._ranged_q] + params.margin
         self._high_limit = robot.upper_limits[self._ranged_q] - params.margin
         self._lower = np.zeros(finite.size)
@@ -107,7 +124,7 @@ class JointAccelerationConstraint(
         lower, upper = v - reach, v + reach  # velocities
         if self._ranged.size:
             r = self._ranged
-            a = self._acceleration[r]
+            a = self._braking
             q = state.q[self._ranged_q]
             up = _braking_speed(a, dt, self._high_limit - q)
             down = _braking_speed(a, dt, q - self._low_limit)
@@ -126,7 +143,7 @@ class JointAccelerationConstraint(
         return (
             f"JointAccelerationConstraint(name={self.name!r}, "
             f"scale={self.params.scale}, limits={self.params.limits!r}, "
-            f"margin={self.params.margin})"
+            f"margin={self.params.margin}, braking={self.params.braking!r})"
         )
 
 

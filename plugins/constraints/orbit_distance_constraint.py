@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -38,6 +39,12 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
     with :math:`d = p_o - p_e`, :math:`\hat d = d / \|d\|` and :math:`J_t` the
     camera frame's linear Jacobian (world-aligned, arm and base). Dimension 1
     [m]. Singular when the camera is at the centre. Input: ``[r_d]``.
+
+    While r_d moves at a steady rate (the same sign and about the same change
+    over the last two steps), :meth:`bound_change` says how far it will move
+    over the next one, and an engine step given the robot's velocity follows
+    it without the feedback's lag (rate / k); a single jump is left to the
+    feedback.
     """
 
     type_name: ClassVar[str] = "orbit_distance"
@@ -52,6 +59,8 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
         self.frame_id = frame_of(robot, params.frame)
         self.object = ObjectTarget(params.object)
         self.distance = params.distance
+        # r_d at the last three steps' starts, newest last.
+        self._seen = [params.distance] * 3
 
     @property
     def dim(self) -> int:
@@ -75,6 +84,18 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
                 max(2.0 * self.params.distance, 1.0),
             ),
         )
+
+    def prepare(self, state: RobotState, dt: float) -> None:
+        """Note r_d at the step's start."""
+        self._seen = [*self._seen[1:], self.distance]
+
+    def bound_change(self) -> FloatArray:
+        """The change of r_d kept over the last two steps [m]; 0 if it was not."""
+        older, old, new = self._seen
+        now, before = new - old, old - older
+        if now * before <= 0.0:
+            return np.zeros(1)
+        return np.array([math.copysign(min(abs(now), abs(before)), now)])
 
     def compute_value(self, state: RobotState) -> FloatArray:
         """||p_o - p_e||."""

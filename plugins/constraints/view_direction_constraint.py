@@ -42,18 +42,23 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
       :math:`-\|d\|(1 - \cos\theta)`: quadratic in the angle θ, with a zero
       gradient at the solution.
     * ``form: image`` (two rows, = 0): the direction to the object in the
-      image plane, :math:`f = (y^T \hat d,\ z^T \hat d)` (the sines of the
-      angles off the line of sight), with
+      image plane, as long as the angle θ off the line of sight:
+      :math:`f = \theta\, s / \|s\|` with :math:`s = (y^T \hat d,\ z^T \hat d)`
+      (the sines of the angles off the line of sight, :math:`\|s\| = \sin\theta`)
+      and :math:`\theta = \operatorname{atan2}(\|s\|, x^T \hat d)`; with
       :math:`\partial (a^T \hat d)/\partial q = (a \times \hat d)^T J_\omega
-      - a^T \frac{I - \hat d \hat d^T}{\|d\|} J_t` for :math:`a = y, z`.
-      Zero also when the camera looks straight away; the orbit starts looking
-      at the object.
+      - a^T \frac{I - \hat d \hat d^T}{\|d\|} J_t` for :math:`a = x, y, z`.
+      Its rows vanish linearly at the solution (like :math:`s`, to which they
+      tend there), and only there: :math:`s` alone vanishes also when the
+      camera looks straight away, where a camera that starts more than 90 deg
+      off would settle.
 
-    Dimension 1 or 2 [m or 1]. Singular when the camera is at the centre.
+    Dimension 1 or 2 [m or rad]. Singular when the camera is at the centre, and
+    (image) when it looks straight away from it.
     """
 
     type_name: ClassVar[str] = "view_direction"
-    unit: ClassVar[str] = "1"
+    unit: ClassVar[str] = "rad"
 
     def __init__(
         self, params: ViewDirectionParams, robot: RobotModel, name: str = ""
@@ -75,7 +80,8 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
         direction, norm = unit(d)
         if self.params.form == "paper":
             return np.array([d.dot(R[:, 0]) - norm])
-        return np.array([R[:, 1].dot(direction), R[:, 2].dot(direction)])
+        sine = np.array([R[:, 1].dot(direction), R[:, 2].dot(direction)])
+        return _angle_scale(float(np.hypot(*sine)), R[:, 0].dot(direction))[0] * sine
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """Exact derivative along tangent directions (see the class docstring)."""
@@ -89,12 +95,19 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
             row = -x.dot(Jt) + cross3(x, d).dot(Jw) + direction.dot(Jt)
             return np.asarray(row[None, :])
         projector = (np.eye(3) - np.outer(direction, direction)) / norm
-        rows = np.empty((2, J.shape[1]))
-        for i, axis in enumerate((R[:, 1], R[:, 2])):
-            rows[i] = pin.skew(axis).dot(direction).dot(Jw) - axis.dot(projector).dot(
+        axes = np.empty((3, J.shape[1]))  # d(a^T d̂)/dq for a = x, y, z
+        for i in range(3):
+            axis = R[:, i]
+            axes[i] = pin.skew(axis).dot(direction).dot(Jw) - axis.dot(projector).dot(
                 Jt
             )
-        return rows
+        sine = R[:, 1:].T.dot(direction)
+        cosine = R[:, 0].dot(direction)
+        g, h = _angle_scale(float(np.hypot(*sine)), cosine)
+        # d(g s) = g ds + s g'(θ) dθ, dθ = (cos θ s^T ds / |s| - |s| dc), and
+        # g'(θ) / |s| = h.
+        d_theta_scaled = cosine * sine.dot(axes[1:]) - sine.dot(sine) * axes[0]
+        return np.asarray(g * axes[1:] + h * np.outer(sine, d_theta_scaled))
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """Zero: an equality when hard."""
@@ -111,3 +124,16 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
     def signals(self, state: RobotState) -> dict[str, float]:
         """``view_error_deg``: :meth:`angle` in degrees."""
         return {"view_error_deg": math.degrees(self.angle(state))}
+
+
+def _angle_scale(sine: float, cosine: float) -> tuple[float, float]:
+    """(θ / sin θ, (θ / sin θ)' / sin θ) for θ = atan2(sine, cosine), sine >= 0.
+
+    Series near θ = 0, where both differences cancel: 1 + θ²/6 and
+    1/3 + 2θ²/15.
+    """
+    theta = math.atan2(sine, cosine)
+    if theta < 1e-3:
+        t2 = theta * theta
+        return 1.0 + t2 / 6.0, 1.0 / 3.0 + 2.0 * t2 / 15.0
+    return theta / sine, (sine - theta * cosine) / sine**3
