@@ -28,6 +28,10 @@ from cbp.state import RobotState
 
 __all__ = ["SeparationMonitor"]
 
+#: The separation is restored when it is this much beyond the one needed [m]
+#: (a separation at the edge says so once, not at every period).
+RESTORED_BEYOND = 0.01
+
 
 class SeparationMonitor:
     """Watches the separation between the robot and the moving cells of the map.
@@ -63,7 +67,8 @@ class SeparationMonitor:
         )
         # The padded shapes' distances, as the constraints see them.
         distance = contacts.distance - world.padding - env.resolution
-        if not len(distance) or float(np.min(distance)) >= env.growth:
+        nearest = float(np.min(distance)) if len(distance) else np.inf
+        if nearest >= env.growth + (RESTORED_BEYOND if self.short else 0.0):
             self._restored(t)
             return
         if self.short:
