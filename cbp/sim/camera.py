@@ -4,9 +4,10 @@
 A camera renders with a compiled ray cast against the PyBullet scene's shapes
 (:class:`~cbp.sim.raycast.RayCaster`, ``renderer: raycast``, the default) or
 with PyBullet's tiny renderer (``renderer: tiny``); their pixels agree within
-1 mm of depth but on silhouette edges. Each capture is a :class:`~cbp.perception.frame.DepthFrame`, the same record a
-real sensor's driver would give the map (:mod:`cbp.perception`), which does not
-know what rendered it. The pixel convention and the clipping plane are
+1 mm of depth but on silhouette edges. Each capture is a
+:class:`~cbp.perception.frame.DepthFrame`, the same record a real sensor's
+driver would give the map (:mod:`cbp.perception`), which does not know what
+rendered it. The pixel convention and the clipping plane are
 described in :mod:`cbp.perception.frame`.
 """
 

@@ -27,6 +27,8 @@ silhouette edges, where one samples the surface and the other what is behind.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,7 +70,7 @@ class _Part:
     half_length: float = 0.0
 
 
-def _pose(position: object, quaternion: object) -> FloatArray:
+def _pose(position: Sequence[float], quaternion: Sequence[float]) -> FloatArray:
     """A 4x4 transform from PyBullet's position and (x, y, z, w) quaternion."""
     M = np.eye(4)
     M[:3, :3] = np.array(pb.getMatrixFromQuaternion(quaternion)).reshape(3, 3)
@@ -227,7 +229,7 @@ class RayCaster:
         """The base's frame in its inertial frame (4, 4), read once per body."""
         if body not in self._inertia:
             info = pb.getDynamicsInfo(body, -1, physicsClientId=self.client)
-            self._inertia[body] = np.linalg.inv(_pose(info[3], info[4]))
+            self._inertia[body] = np.asarray(np.linalg.inv(_pose(info[3], info[4])))
         return self._inertia[body]
 
     def _placements(self) -> FloatArray:
@@ -235,7 +237,7 @@ class RayCaster:
         c = self.client
         link_pose = np.empty((len(self._links), 4, 4))
         by_body: dict[int, list[int]] = {}
-        for i, (body, link) in enumerate(self._links):
+        for i, (body, _) in enumerate(self._links):
             by_body.setdefault(body, []).append(i)
         for body, rows in by_body.items():
             moving = [self._links[i][1] for i in rows if self._links[i][1] >= 0]
@@ -249,17 +251,17 @@ class RayCaster:
             k = 0
             for i in rows:
                 if self._links[i][1] < 0:  # the base: its inertial frame
-                    pos, orn = pb.getBasePositionAndOrientation(
-                        body, physicsClientId=c
-                    )
+                    pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=c)
                     link_pose[i] = _pose(pos, orn).dot(self._base_inertia(body))
                 else:  # the link's URDF frame
                     link_pose[i] = _pose(states[k][4], states[k][5])
                     k += 1
-        return np.asarray(np.einsum("nij,njk->nik", link_pose[self._part_link], self._part_local))
+        return np.asarray(
+            np.einsum("nij,njk->nik", link_pose[self._part_link], self._part_local)
+        )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _cast(
     triangles: FloatArray,
     tri_part: np.ndarray,
@@ -315,14 +317,16 @@ def _cast(
             out[r, c] = scale * (1.0 - near / d) if d < far else 1.0
 
 
-@numba.njit(inline="always")
-def _pixel(x: float, y: float, z: float, fx: float, fy: float, w: int, h: int) -> tuple[float, float]:  # pragma: no cover
+@numba.njit(cache=True, nogil=True, inline="always")
+def _pixel(
+    x: float, y: float, z: float, fx: float, fy: float, w: int, h: int
+) -> tuple[float, float]:  # pragma: no cover
     """Column and row (continuous) where the camera-frame point projects."""
     d = -z
     return (x / d * fx + 1.0) * 0.5 * w, h - 1.0 - (y / d * fy + 1.0) * 0.5 * h
 
 
-@numba.njit
+@numba.njit(cache=True, nogil=True)
 def _triangle(
     a: FloatArray,
     b: FloatArray,
@@ -335,7 +339,8 @@ def _triangle(
 ) -> None:  # pragma: no cover - compiled
     """Keep, at each pixel whose ray crosses triangle abc, the nearer depth."""
     h, w = depth.shape
-    # The plane n . p = k; a pixel's ray p = t (X, Y, -1) meets it at t = k / n.(X, Y, -1).
+    # The plane n . p = k; a pixel's ray p = t (X, Y, -1) meets it at
+    # t = k / n . (X, Y, -1).
     e1x, e1y, e1z = b[0] - a[0], b[1] - a[1], b[2] - a[2]
     e2x, e2y, e2z = c[0] - a[0], c[1] - a[1], c[2] - a[2]
     nx = e1y * e2z - e1z * e2y
@@ -378,7 +383,7 @@ def _triangle(
                 depth[row, col] = t
 
 
-@numba.njit
+@numba.njit(cache=True, nogil=True)
 def _analytic(
     shape: FloatArray,
     M: FloatArray,
@@ -429,9 +434,16 @@ def _analytic(
                 depth[row, col] = t
 
 
-@numba.njit(inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _sphere_hit(
-    r: float, ox: float, oy: float, oz: float, dx: float, dy: float, dz: float, near: float
+    r: float,
+    ox: float,
+    oy: float,
+    oz: float,
+    dx: float,
+    dy: float,
+    dz: float,
+    near: float,
 ) -> float:  # pragma: no cover - compiled
     """First t >= near where o + t d lies on the sphere of radius r at 0 (inf)."""
     a = dx * dx + dy * dy + dz * dz
@@ -440,15 +452,15 @@ def _sphere_hit(
     disc = b * b - a * c
     if disc < 0.0:
         return np.inf
-    root = np.sqrt(disc)
+    root = math.sqrt(disc)
     t = (-b - root) / a
     if t >= near:
         return t
     t = (-b + root) / a
-    return t if t >= near else np.inf
+    return t if t >= near else math.inf
 
 
-@numba.njit
+@numba.njit(cache=True, nogil=True)
 def _first_hit(
     kind: int,
     r: float,

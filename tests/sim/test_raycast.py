@@ -60,8 +60,11 @@ def _cameras() -> list[CameraSpec]:
 
 
 def _agreement(tiny: DepthFrame, cast: DepthFrame) -> np.ndarray:
-    """Which pixels agree: both background, both nearer than the minimum
-    range, or both a range and within the tolerance (H, W)."""
+    """Which pixels agree (H, W).
+
+    Both background, both nearer than the minimum range, or both a range and
+    within the tolerance.
+    """
     a, b = tiny.ranges(), cast.ranges()
     with np.errstate(invalid="ignore"):
         same = (np.isinf(a) & np.isinf(b)) | (np.isnan(a) & np.isnan(b))
@@ -113,7 +116,9 @@ def _surface_distance(points: np.ndarray) -> np.ndarray:
     """Distance of world points (n, 3) to the nearest primitive's surface [m]."""
     block, ball, can = PRIMITIVES
     B = block.pose.to_se3()
-    local = np.abs((points - B.translation).dot(B.rotation)) - np.array([0.15, 0.25, 0.05])
+    local = np.abs((points - B.translation).dot(B.rotation)) - np.array(
+        [0.15, 0.25, 0.05]
+    )
     outside = np.linalg.norm(np.maximum(local, 0.0), axis=1)
     to_block = np.where(np.any(local > 0, axis=1), outside, -np.max(local, axis=1))
     to_ball = np.abs(np.linalg.norm(points - ball.pose.position, axis=1) - 0.08)
