@@ -11,18 +11,23 @@ pass then finds, for every pixel's ray, the nearest surface:
   nearest crossing (the exact ray-plane depth, so a triangle-major cast);
 - spheres, cylinders and capsules are intersected analytically, ray by ray,
   over the pixels their bounding box covers: the true surface, where the tiny
-  renderer draws a coarse polyhedron (a sphere of radius r differs from it by
-  up to a few percent of r).
+  renderer draws a coarse polyhedron (measured: a sphere of 8 cm radius up to
+  5 mm inside its surface, a cylinder of 5 cm up to 1.3 mm).
 
 Pixels sample rays at PyBullet's convention (:mod:`cbp.perception.frame`);
 surfaces nearer than the clipping plane are cut away (what lies behind shows)
 and those at or beyond the far plane are not seen. The image is a depth buffer
 in [0, 1] like the tiny renderer's (1 where nothing is seen).
 
-Measured against the tiny renderer (``tests/sim/test_raycast.py``): on scenes
-of boxes and the Panda's meshes, from fixed and mounted cameras, at least
-99.5 % of the pixels both see agree within 1 mm of depth; the rest lie on
-silhouette edges, where one samples the surface and the other what is behind.
+Measured against the tiny renderer (``tests/sim/test_raycast.py``: the
+boards and the shelf, three arm configurations, five fixed cameras and one on
+the hand, 128 x 96): 99.9 % of all pixels agree within 1 mm of depth (both
+see nothing, or both a surface that near), every image at least 98.9 %. The
+rest lie on silhouette edges, or on triangles that cross the clipping plane,
+whose depth the tiny renderer gets about 1 mm wrong (a camera under a shelf
+board); there the cast depth is the plane's. A 320 x 240 frame of the shelf
+takes about 1 ms here against 10-35 ms with the tiny renderer, and 600 ms
+with PyBullet's ``rayTestBatch`` (one thread).
 """
 
 from __future__ import annotations
