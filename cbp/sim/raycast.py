@@ -36,6 +36,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numba
 import numpy as np
@@ -106,7 +107,7 @@ class RayCaster:
         self.client = client
         self._parts: dict[int, list[_Part]] = {}
         self._meshes: dict[tuple[str, tuple[float, ...]], FloatArray] = {}
-        self._layout: tuple[int, ...] | None = None
+        self._layout: tuple[tuple[int, tuple[object, ...]], ...] | None = None
         self._inertia: dict[int, FloatArray] = {}
         self._triangles = np.zeros((0, 3, 3))
         self._tri_part = np.zeros(0, dtype=np.intp)
@@ -155,16 +156,28 @@ class RayCaster:
         return depth
 
     def _sync(self) -> None:
-        """Read the visual shapes of bodies new since the last capture."""
+        """Read the visual shapes of bodies new since the last capture.
+
+        A body is known by its id and its visual shapes' description (PyBullet
+        may give a removed body's id to a new one).
+        """
         c = self.client
-        ids = tuple(
-            pb.getBodyUniqueId(i, physicsClientId=c)
-            for i in range(pb.getNumBodies(physicsClientId=c))
+        layout = tuple(
+            (b, tuple(pb.getVisualShapeData(b, physicsClientId=c)))
+            for b in (
+                pb.getBodyUniqueId(i, physicsClientId=c)
+                for i in range(pb.getNumBodies(physicsClientId=c))
+            )
         )
-        if ids == self._layout:
+        if layout == self._layout:
             return
-        self._parts = {b: self._parts.get(b) or self._read(b) for b in ids}
-        self._layout = ids
+        known = dict(self._layout or ())
+        self._parts = {
+            b: self._parts[b] if known.get(b) == data else self._read(data)
+            for b, data in layout
+        }
+        self._layout = layout
+        ids = [b for b, _ in layout]
         links: list[tuple[int, int]] = []
         part_link: list[int] = []
         local: list[FloatArray] = []
@@ -198,11 +211,11 @@ class RayCaster:
         self._shapes = np.array(shapes, dtype=float).reshape(-1, 3)
         self._shape_part = np.array(shape_part, dtype=np.intp)
 
-    def _read(self, body: int) -> list[_Part]:
-        """The visual shapes of ``body``, each in its link's frame."""
+    def _read(self, shapes: tuple[Any, ...]) -> list[_Part]:
+        """A body's visual shapes (``getVisualShapeData``), each in its link's frame."""
         parts = []
-        for data in pb.getVisualShapeData(body, physicsClientId=self.client):
-            link, kind, dims, filename = data[1], data[2], data[3], data[4]
+        for data in shapes:
+            body, link, kind, dims, filename = data[:5]
             local = _pose(data[5], data[6])
             if kind == pb.GEOM_MESH:
                 triangles = self._mesh(filename.decode(), tuple(dims))

@@ -146,8 +146,8 @@ def test_primitives_are_cast_on_their_true_surfaces() -> None:
     assert np.max(_surface_distance(seen)) < 1e-4
 
 
-def test_a_body_added_later_is_seen_at_the_next_capture() -> None:
-    """An object that appears after the first capture is in the next image."""
+def test_bodies_added_or_replaced_later_are_seen_at_the_next_capture() -> None:
+    """An object that appears is in the next image; one removed is not."""
     robot = load_scenario(SCENARIOS / "cat_boards.yaml").robot
     spec = CameraSpec(
         name="c", position=(1.4, 0.0, 0.6), target=(0.6, 0.0, 0.25), width=W,
@@ -158,9 +158,18 @@ def test_a_body_added_later_is_seen_at_the_next_capture() -> None:
         before = camera.capture().ranges()
         sim.add_object(PRIMITIVES[1], PRIMITIVES[1].pose.to_se3())
         after = camera.capture().ranges()
+        # The ball's body removed and a can added (PyBullet may reuse its id).
+        sim.remove_object("ball")
+        sim.add_object(PRIMITIVES[2], PRIMITIVES[2].pose.to_se3())
+        points, hit = camera.capture().points()
     changed = ~np.isclose(before, after, equal_nan=True)
     assert changed.sum() > 100
     assert np.all(after[changed] < 1.4)  # the ball, in front of what was there
+    seen = points[hit]
+    ball = PRIMITIVES[1]
+    on_ball = np.abs(np.linalg.norm(seen - ball.pose.position, axis=1) - 0.08) < 1e-3
+    assert not on_ball.any()
+    assert np.count_nonzero(_surface_distance(seen) < 1e-4) > 100  # the can
 
 
 def test_a_shape_that_cannot_be_cast_is_named() -> None:
