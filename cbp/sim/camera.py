@@ -1,9 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """Simulated depth cameras, fixed or on a robot link: ray cast or tiny renderer.
 
-A camera renders with a compiled ray cast against the PyBullet scene's shapes
-(:class:`~cbp.sim.raycast.RayCaster`, ``renderer: raycast``, the default) or
-with PyBullet's tiny renderer (``renderer: tiny``); their pixels agree within
+A camera renders with PyBullet's tiny renderer (``renderer: tiny``, the
+default) or with a compiled ray cast against the PyBullet scene's shapes
+(:class:`~cbp.sim.raycast.RayCaster`, ``renderer: raycast``); their pixels agree within
 1 mm of depth but on silhouette edges. Each capture is a
 :class:`~cbp.perception.frame.DepthFrame`, the same record a real sensor's
 driver would give the map (:mod:`cbp.perception`), which does not know what

@@ -20,6 +20,7 @@ from cbp.state import RobotState
 
 SCENARIOS = Path(__file__).parents[2] / "scenarios"
 EXACT = DepthNoise(enabled=False)
+CAST = "raycast"
 W, H = 128, 96
 
 #: Depths agree within this [m] ...
@@ -45,7 +46,7 @@ def _cameras() -> list[CameraSpec]:
     specs = [
         CameraSpec(
             name=f"c{i}", position=p, target=t, width=W, height=H, fov_deg=70.0,
-            far=2.5, noise=EXACT,
+            far=2.5, noise=EXACT, renderer=CAST,
         )
         for i, (p, t) in enumerate(fixed)
     ]  # fmt: skip
@@ -54,7 +55,7 @@ def _cameras() -> list[CameraSpec]:
         *specs,
         CameraSpec(
             name="wrist", parent="end_effector", offset=offset, width=W, height=H,
-            fov_deg=80.0, near=0.05, far=1.5, noise=EXACT,
+            fov_deg=80.0, near=0.05, far=1.5, noise=EXACT, renderer=CAST,
         ),
     ]  # fmt: skip
 
@@ -136,7 +137,7 @@ def test_primitives_are_cast_on_their_true_surfaces() -> None:
     robot = load_scenario(SCENARIOS / "cat_boards.yaml").robot
     spec = CameraSpec(
         name="c", position=(1.4, 0.0, 0.6), target=(0.6, 0.0, 0.25), width=W,
-        height=H, fov_deg=50.0, far=2.5, noise=EXACT,
+        height=H, fov_deg=50.0, far=2.5, noise=EXACT, renderer=CAST,
     )  # fmt: skip
     with PybulletScene(robot, PRIMITIVES) as sim:
         pb.removeBody(sim.robot_id, physicsClientId=sim.client)
@@ -151,7 +152,7 @@ def test_bodies_added_or_replaced_later_are_seen_at_the_next_capture() -> None:
     robot = load_scenario(SCENARIOS / "cat_boards.yaml").robot
     spec = CameraSpec(
         name="c", position=(1.4, 0.0, 0.6), target=(0.6, 0.0, 0.25), width=W,
-        height=H, fov_deg=50.0, far=2.5, noise=EXACT,
+        height=H, fov_deg=50.0, far=2.5, noise=EXACT, renderer=CAST,
     )  # fmt: skip
     with PybulletScene(robot, []) as sim:
         camera = DepthCamera(sim.client, spec, robot)
