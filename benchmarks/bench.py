@@ -30,7 +30,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
@@ -1192,6 +1192,199 @@ def _map_row(cfg: BenchConfig) -> list[Row]:
     return [moving, loaded, cold]
 
 
+# ---------------------------------------------------------------- runs in virtual time
+
+
+def _run_seconds(cfg: BenchConfig, full: float, quick: float) -> float:
+    """Simulated seconds of a run row: ``full``, ``quick``, or a moment (tests)."""
+    if cfg.repetitions >= BenchConfig().repetitions:
+        return full
+    return quick if cfg.repetitions >= BenchConfig.quick().repetitions else 0.3
+
+
+class _Stopwatch:
+    """CPU time spent in chosen methods while a run goes (patched, then restored).
+
+    Nested calls are counted once, in the outermost timed method of each
+    name; a method timed under another counts in both.
+    """
+
+    def __init__(self, targets: dict[str, tuple[Any, str]]) -> None:
+        self.seconds = dict.fromkeys(targets, 0.0)
+        self._targets = targets
+        self._saved: list[tuple[Any, str, Any]] = []
+
+    def __enter__(self) -> _Stopwatch:
+        for name, (owner, attr) in self._targets.items():
+            original = getattr(owner, attr)
+            self._saved.append((owner, attr, original))
+            setattr(owner, attr, self._timed(name, original))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for owner, attr, original in reversed(self._saved):
+            setattr(owner, attr, original)
+
+    def _timed(self, name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        depth = [0]
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            if depth[0]:
+                return fn(*args, **kwargs)
+            depth[0] += 1
+            start = time.process_time()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.seconds[name] += time.process_time() - start
+                depth[0] -= 1
+
+        return timed
+
+
+def _camera_overrides(renderer: str) -> dict[str, str]:
+    """Overrides giving every camera of ``configs/cat.yaml`` the renderer named."""
+    import yaml
+
+    config = yaml.safe_load((SCENARIOS / "configs" / "cat.yaml").read_text())
+    cameras = [c | {"renderer": renderer} for c in config["perception"]["cameras"]]
+    return {
+        "perception.cameras": yaml.safe_dump(cameras, default_flow_style=True),
+        "perception.source": "depth_camera",
+    }
+
+
+def _virtual_run(
+    path: Path, seconds: float, overrides: dict[str, str], watch: bool = False
+) -> tuple[float, dict[str, float]]:
+    """CPU seconds per simulated second of a CAT run on the virtual clock.
+
+    The process's CPU time, not the wall clock's: on a machine shared with
+    other work it is what the run would take on a core of its own (the run is
+    one thread). Loading the scenario is excluded (building the run's parts,
+    the cameras' first frames included, is not). With ``watch`` also the shares
+    of that time spent rendering, mapping, planning and in contact queries.
+    """
+    from cbp.collision.world import CollisionWorld
+    from cbp.executors.cat import CatPlanner, run_cat
+    from cbp.perception.mapper import MapUpdater
+    from cbp.scenario import load_scenario
+    from cbp.sim.camera import DepthCamera
+
+    scenario = load_scenario(
+        path,
+        overrides={
+            "method.cat.timing.clock": "virtual",
+            "duration": repr(seconds),
+            **overrides,
+        },
+    )
+    targets = {
+        "rendering": (DepthCamera, "capture"),
+        "map integration": (MapUpdater, "submit"),
+        "planning": (CatPlanner, "plan"),
+        "contact queries": (CollisionWorld, "query"),
+    }
+    with _Stopwatch(targets if watch else {}) as clock:
+        start = time.process_time()
+        trace = run_cat(scenario)
+        cpu = time.process_time() - start
+    shares = {k: v / cpu for k, v in clock.seconds.items()}
+    return cpu / float(trace.t[-1]), shares
+
+
+def _run_rows(cfg: BenchConfig) -> list[Row]:
+    """Whole CAT runs on the virtual clock: CPU time per simulated second.
+
+    The shelf reach with the five cameras of ``configs/cat.yaml`` (ray cast,
+    and with PyBullet's tiny renderer as before) against the same scene with
+    its declared objects; the boards (declared objects) against real time.
+    The twin and the ray-cast camera run twice in turn (the lesser of each
+    counts), the others once; the row's median is CPU microseconds per
+    simulated second (:func:`_virtual_run`). Before them, one frame of each of the
+    five cameras rendered both ways, in alternating rounds.
+    """
+    from cbp.scenario import load_scenario
+    from cbp.sim.camera import DepthCamera
+    from cbp.sim.raycast import RayCaster
+    from cbp.sim.scene import PybulletScene
+
+    shelf = SCENARIOS / "cat_shelf_reach.yaml"
+    scenario = load_scenario(shelf, overrides=_camera_overrides("raycast"))
+    specs = scenario.spec.perception.all_cameras
+    fixed = [c for c in specs if c.parent is None]
+    tiny_specs = [replace(c, renderer="tiny") for c in fixed]
+    with PybulletScene(scenario.robot, scenario.spec.world.objects, SCENARIOS) as scene:
+        scene.set_configuration(scenario.q0)
+        caster = RayCaster(scene.client)
+        cast = [DepthCamera(scene.client, c, None, caster) for c in fixed]
+        tiny = [DepthCamera(scene.client, c) for c in tiny_specs]
+        n = max(cfg.repetitions // 40, 4)
+        frames = measure_interleaved(
+            [
+                lambda i: cast[i % len(cast)].capture(),
+                lambda i: tiny[i % len(tiny)].capture(),
+            ],
+            n,
+            2,
+            rounds=min(n, 10),
+        )
+    size = f"{fixed[0].width}x{fixed[0].height}"
+    ray_row = Row(
+        "runs", f"one {size} frame, ray cast (the shelf, 4 fixed cameras in turn)",
+        *frames[0], n, note="depth noise included",
+    )  # fmt: skip
+    tiny_row = Row(
+        "runs", f"one {size} frame, PyBullet's tiny renderer (the same)",
+        *frames[1], n, ray_row.case, frames[1][0] / frames[0][0],
+    )  # fmt: skip
+    seconds = _run_seconds(cfg, 7.0, 3.0)
+    # The first camera run of a process loads the map's kernels (twice as long).
+    warm_up = [{}, _camera_overrides("raycast")] if seconds > 1.0 else []
+    for overrides in warm_up:
+        _virtual_run(shelf, 0.1, overrides)
+    # The twin and the camera run in turn, twice: the lesser of each (a slow
+    # spell of a shared machine raises CPU time too, by up to a fifth here).
+    runs: dict[str, list[tuple[float, dict[str, float]]]] = {"twin": [], "cast": []}
+    for _ in range(2):
+        runs["twin"].append(_virtual_run(shelf, seconds, {}))
+        cast_overrides = _camera_overrides("raycast")
+        runs["cast"].append(_virtual_run(shelf, seconds, cast_overrides, True))
+    twin, _ = min(runs["twin"], key=lambda run: run[0])
+    cameras, shares = min(runs["cast"], key=lambda run: run[0])
+    before, old = _virtual_run(shelf, seconds, _camera_overrides("tiny"), True)
+    boards = _run_seconds(cfg, 10.0, 10.0)
+    boards_cpu, _ = _virtual_run(SCENARIOS / "cat_boards.yaml", boards, {})
+
+    def account(parts: dict[str, float]) -> str:
+        return "of the CPU time: " + ", ".join(
+            f"{k} {100 * v:.0f} %" for k, v in parts.items()
+        )
+
+    twin_row = Row(
+        "runs", "CAT in the shelf, declared objects, virtual clock: CPU per "
+        "simulated second", twin * 1e6, twin * 1e6, 1,
+        note=f"{seconds:g} s simulated; the lesser of two runs",
+    )  # fmt: skip
+    camera_row = Row(
+        "runs", "CAT in the shelf, five cameras (ray cast), virtual clock: CPU "
+        "per simulated second", cameras * 1e6, cameras * 1e6, 1, twin_row.case,
+        cameras / twin, note=f"the lesser of two runs; {account(shares)}",
+    )  # fmt: skip
+    tiny_run = Row(
+        "runs", "CAT in the shelf, five cameras (tiny renderer, as before), "
+        "virtual clock: CPU per simulated second", before * 1e6, before * 1e6,
+        1, twin_row.case, before / twin, note=account(old),
+    )  # fmt: skip
+    real = Row("runs", "real time: one simulated second", 1e6, 1e6, 1)
+    boards_row = Row(
+        "runs", "CAT on the boards, declared objects, virtual clock: CPU per "
+        "simulated second", boards_cpu * 1e6, boards_cpu * 1e6, 1, real.case,
+        boards_cpu, note=f"{boards:g} s simulated: {1 / boards_cpu:.2f}x real time on one core",
+    )  # fmt: skip
+    return [ray_row, tiny_row, twin_row, camera_row, tiny_run, real, boards_row]
+
+
 # ---------------------------------------------------------------- profile and output
 
 
@@ -1262,6 +1455,7 @@ def run_bench(
         _mp_row,
         _orbit_row,
         _map_row,
+        _run_rows,
     ):
         for row in group(cfg):
             rows.append(row)
@@ -1576,6 +1770,23 @@ TARGETS = [
         1.5,
         "map update beside a busy control loop / alone (the map thread must not "
         "wait for the GIL)",
+    ),
+    (
+        "runs",
+        "CAT in the shelf, five cameras (ray cast)",
+        "runs",
+        "CAT in the shelf, declared objects",
+        1.3,
+        "a CAT run with the five cameras / its declared-object twin, virtual clock",
+    ),
+    (
+        "runs",
+        "CAT on the boards",
+        "runs",
+        "real time",
+        0.2,
+        "a CAT run of the boards on the virtual clock, CPU / simulated time (5x "
+        "real time on one core)",
     ),
 ]
 

@@ -20,6 +20,7 @@ def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:
         "planning",
         "orbit",
         "map",
+        "runs",
     }
     cases = [row["case"] for row in result["rows"]]
     assert any(c.startswith("pink") for c in cases)

@@ -388,19 +388,34 @@ def eroded_ranges(
                 metric[r, c] = far
             else:
                 metric[r, c] = far * near / (far - (far - near) * z)
-    out = np.empty((h, w))
+    # The least over 3 x 3 pixels, in two passes of three: along each row (NaN
+    # where all three are NaN), then down each column of those.
+    across = np.empty((h, w))
     for r in range(h):
         for c in range(w):
-            least = np.inf
-            seen = False
-            for rr in range(max(r - 1, 0), min(r + 2, h)):
-                for cc in range(max(c - 1, 0), min(c + 2, w)):
-                    m = metric[rr, cc]
-                    if not np.isnan(m):
-                        seen = True
-                        least = min(least, m)
-            out[r, c] = least if seen else -np.inf
+            least = np.nan
+            for cc in range(max(c - 1, 0), min(c + 2, w)):
+                least = _least(least, metric[r, cc])
+            across[r, c] = least
+    out = np.empty((h, w))
+    for r in range(h):
+        r0, r1 = max(r - 1, 0), min(r + 2, h)
+        for c in range(w):
+            least = np.nan
+            for rr in range(r0, r1):
+                least = _least(least, across[rr, c])
+            out[r, c] = -np.inf if np.isnan(least) else least
     return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _least(a: float, b: float) -> float:
+    """The lesser of two values, NaN counting as none (NaN if both are)."""
+    if np.isnan(a):
+        return b
+    if np.isnan(b):
+        return a
+    return min(a, b)
 
 
 @numba.njit(cache=True, nogil=True)

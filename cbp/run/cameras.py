@@ -32,6 +32,7 @@ from cbp.robot import FloatArray
 from cbp.run.events import RunLog
 from cbp.run.separation import SeparationMonitor
 from cbp.sim.camera import DepthCamera
+from cbp.sim.raycast import RayCaster
 from cbp.sim.simulation import Simulation
 from cbp.state import RobotState
 
@@ -80,7 +81,10 @@ class Cameras:
         robot = world.geometry.robot
         self._state = RobotState(robot)
         world.set_environment(PrimitiveEnvironment([]))
-        self.cameras = [DepthCamera(sim.client, c, robot) for c in spec.all_cameras]
+        caster = RayCaster(sim.client)  # one for all: meshes read once
+        self.cameras = [
+            DepthCamera(sim.client, c, robot, caster) for c in spec.all_cameras
+        ]
         n = len(self.cameras)
         limits = PlausibilityLimits(
             spec.max_far_fraction, spec.see_through_fraction, spec.see_through_tolerance

@@ -278,8 +278,8 @@ class Simulation:
         states = pb.getJointStates(
             self.scene.robot_id, self._indices, physicsClientId=self.client
         )
-        q = np.fromiter((s[0] for s in states), float, len(states))
-        v = np.fromiter((s[1] for s in states), float, len(states))
+        q = np.array([s[0] for s in states])
+        v = np.array([s[1] for s in states])
         return q, v
 
     def _contact(self) -> tuple[float, float, float]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from cbp.robot import FloatArray
@@ -96,30 +97,13 @@ class JointTrajectory:
             last = self.positions[-1]
             return last, np.zeros_like(last), np.zeros_like(last)
         i = int(np.searchsorted(times, t, side="right")) - 1
-        T = times[i + 1] - times[i]
-        s = (t - times[i]) / T
-        c = self._coefficients(i, T)
-        s2, s3, s4 = s * s, s * s * s, s * s * s * s
-        q = c[0] + s * c[1] + s2 * c[2] + s3 * c[3] + s4 * c[4] + s4 * s * c[5]
-        dq = c[1] + 2 * s * c[2] + 3 * s2 * c[3] + 4 * s3 * c[4] + 5 * s4 * c[5]
-        ddq = 2 * c[2] + 6 * s * c[3] + 12 * s2 * c[4] + 20 * s3 * c[5]
-        return q, dq / T, ddq / (T * T)
-
-    def _coefficients(self, i: int, T: float) -> FloatArray:
-        """Quintic coefficients of segment i in the normalized time s in [0, 1]."""
-        p0, p1 = self.positions[i], self.positions[i + 1]
-        v0, v1 = self.velocities[i] * T, self.velocities[i + 1] * T
-        a0, a1 = self.accelerations[i] * T * T, self.accelerations[i + 1] * T * T
-        dp = p1 - p0
-        return np.array(
-            [
-                p0,
-                v0,
-                0.5 * a0,
-                10 * dp - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1,
-                -15 * dp + 8 * v0 + 7 * v1 + 1.5 * a0 - a1,
-                6 * dp - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1,
-            ]
+        return _quintic(
+            self.positions,
+            self.velocities,
+            self.accelerations,
+            i,
+            times[i + 1] - times[i],
+            t - times[i],
         )
 
     def first_point_after(self, t: float) -> int | None:
@@ -308,3 +292,42 @@ def _start_speed(v0: FloatArray, d0: FloatArray) -> float:
         return 0.0
     cos = float(v0.dot(d0)) / (speed * norm)
     return speed / norm * min(1.0, max(0.0, cos) / ALIGNED_COS)
+
+
+@numba.njit(cache=True, nogil=True)
+def _quintic(
+    positions: FloatArray,
+    velocities: FloatArray,
+    accelerations: FloatArray,
+    i: int,
+    T: float,
+    dt: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """Position, velocity, acceleration ``dt`` into segment ``i`` of duration T.
+
+    The quintic matching both ends' position, velocity and acceleration, in
+    the normalised time s = dt / T, joint by joint (the operations in the order
+    numpy took them before this was compiled: the same numbers).
+    """
+    s = dt / T
+    s2, s3 = s * s, s * s * s
+    s4 = s3 * s
+    s5 = s4 * s
+    n = positions.shape[1]
+    q = np.empty(n)
+    dq = np.empty(n)
+    ddq = np.empty(n)
+    for j in range(n):
+        p0, p1 = positions[i, j], positions[i + 1, j]
+        v0, v1 = velocities[i, j] * T, velocities[i + 1, j] * T
+        a0 = accelerations[i, j] * T * T
+        a1 = accelerations[i + 1, j] * T * T
+        dp = p1 - p0
+        c2 = 0.5 * a0
+        c3 = 10.0 * dp - 6.0 * v0 - 4.0 * v1 - 1.5 * a0 + 0.5 * a1
+        c4 = -15.0 * dp + 8.0 * v0 + 7.0 * v1 + 1.5 * a0 - a1
+        c5 = 6.0 * dp - 3.0 * v0 - 3.0 * v1 - 0.5 * a0 + 0.5 * a1
+        q[j] = p0 + s * v0 + s2 * c2 + s3 * c3 + s4 * c4 + s5 * c5
+        dq[j] = (v0 + 2.0 * s * c2 + 3.0 * s2 * c3 + 4.0 * s3 * c4 + 5.0 * s4 * c5) / T
+        ddq[j] = (2.0 * c2 + 6.0 * s * c3 + 12.0 * s2 * c4 + 20.0 * s3 * c5) / (T * T)
+    return q, dq, ddq

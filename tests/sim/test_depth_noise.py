@@ -128,7 +128,8 @@ CAMERA = CameraSpec(name="c", position=(1.6, 0.0, 0.9), target=(0.4, 0.0, 0.3))
 
 def test_switched_off_frames_are_exactly_as_rendered(scene) -> None:
     """With ``noise: {enabled: false}`` a frame is PyBullet's depth buffer as is."""
-    camera = DepthCamera(scene.client, replace(CAMERA, noise=DepthNoise(enabled=False)))
+    exact = replace(CAMERA, noise=DepthNoise(enabled=False), renderer="tiny")
+    camera = DepthCamera(scene.client, exact)
     frame = camera.capture()
     _, _, _, depth, _ = pb.getCameraImage(
         CAMERA.width,
@@ -141,7 +142,7 @@ def test_switched_off_frames_are_exactly_as_rendered(scene) -> None:
     )
     rendered = np.asarray(depth, dtype=float).reshape(CAMERA.height, CAMERA.width)
     np.testing.assert_array_equal(frame.depth, rendered)
-    noisy = DepthCamera(scene.client, CAMERA).capture()  # on by default
+    noisy = DepthCamera(scene.client, replace(CAMERA, renderer="tiny")).capture()
     assert CAMERA.noise.enabled
     assert not np.array_equal(noisy.depth, rendered)
     assert 0.9 < noisy.valid().mean() < 1.0

@@ -105,3 +105,40 @@ def test_a_still_path_holds() -> None:
     assert traj is not None
     assert len(traj) == 1
     assert time_parameterize(path, 2.0, np.ones(2), np.zeros(2), VMAX, AMAX) is None
+
+
+def _numpy_sample(tr: JointTrajectory, t: float) -> tuple[np.ndarray, ...]:
+    """The quintic between two points, written with numpy (the reference)."""
+    i = int(np.searchsorted(tr.times, t, side="right")) - 1
+    T = tr.times[i + 1] - tr.times[i]
+    s = (t - tr.times[i]) / T
+    p0, p1 = tr.positions[i], tr.positions[i + 1]
+    v0, v1 = tr.velocities[i] * T, tr.velocities[i + 1] * T
+    a0, a1 = tr.accelerations[i] * T * T, tr.accelerations[i + 1] * T * T
+    dp = p1 - p0
+    c = [
+        p0,
+        v0,
+        0.5 * a0,
+        10 * dp - 6 * v0 - 4 * v1 - 1.5 * a0 + 0.5 * a1,
+        -15 * dp + 8 * v0 + 7 * v1 + 1.5 * a0 - a1,
+        6 * dp - 3 * v0 - 3 * v1 - 0.5 * a0 + 0.5 * a1,
+    ]
+    s2, s3, s4 = s * s, s * s * s, s * s * s * s
+    q = c[0] + s * c[1] + s2 * c[2] + s3 * c[3] + s4 * c[4] + s4 * s * c[5]
+    dq = c[1] + 2 * s * c[2] + 3 * s2 * c[3] + 4 * s3 * c[4] + 5 * s4 * c[5]
+    ddq = 2 * c[2] + 6 * s * c[3] + 12 * s2 * c[4] + 20 * s3 * c[5]
+    return q, dq / T, ddq / (T * T)
+
+
+def test_compiled_sampling_gives_the_numpy_formula_s_numbers() -> None:
+    """Sampling between points is bit for bit the quintic written in numpy."""
+    rng = np.random.default_rng(5)
+    n = 30
+    times = np.cumsum(rng.uniform(1e-4, 0.05, n))
+    tr = JointTrajectory(
+        times, rng.normal(size=(n, 7)), rng.normal(size=(n, 7)), rng.normal(size=(n, 7))
+    )
+    for t in rng.uniform(times[0], times[-1], 500):
+        for got, expected in zip(tr.sample(t), _numpy_sample(tr, t), strict=True):
+            np.testing.assert_array_equal(got, expected)
