@@ -67,8 +67,12 @@ browser:
 		 apt-get install -y -q chromium chromium-driver >/dev/null 2>&1) || \
 		echo "install chromium and chromium-driver for the viewer's browser test"
 
+# JOBS=2 runs the slow tests on two workers, a file per worker (as CI does):
+# their outcome does not depend on the machine's load, so two at a time on
+# two cores holds as well.
+JOBS ?= 1
 test-slow: $(DEV_STAMP) browser
-	$(BIN)/python -m pytest -m slow -q
+	$(BIN)/python -m pytest -m slow -q --durations=15 $(if $(filter-out 1,$(JOBS)),-n $(JOBS) --dist loadfile)
 
 test-all: lint
 	$(BIN)/python -m pytest -q
