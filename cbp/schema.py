@@ -731,9 +731,9 @@ def _build_dataclass(
                 else None
             )
             value = (
-                _build_dataclass(doc, tp, items[name], path, default)
-                if dataclasses.is_dataclass(tp)
-                and isinstance(default, tp)
+                _build_dataclass(doc, type(default), items[name], path, default)
+                if dataclasses.is_dataclass(default)
+                and type(default) is tp
                 and isinstance(items[name], yaml.MappingNode)
                 else _build(doc, tp, items[name], path)
             )
