@@ -224,8 +224,10 @@ class LookSettings:
     """Look when at least this share of the cube is unseen."""
     dwell: float = 0.4
     """How long the arm holds at the view while the map takes it in [s]."""
-    looks: int = 8
-    """Looks per goal at most (tries that find no view count)."""
+    looks: int = 16
+    """Looks per goal at most (tries that find no view count). Behind the
+    wall of ``cat_local_minimum`` the hybrid needed 11 (about a second each)
+    before the goal and the way to it were seen."""
 
     def __post_init__(self) -> None:
         """Positive distances and times, a share in (0, 1]."""
