@@ -691,7 +691,16 @@ def _build_dict(doc: Document, value_tp: Any, node: Node | None, where: str) -> 
     return INVALID if any(v is INVALID for v in built.values()) else built
 
 
-def _build_dataclass(doc: Document, cls: type, node: Node | None, where: str) -> Any:
+def _build_dataclass(
+    doc: Document, cls: type, node: Node | None, where: str, base: Any = None
+) -> Any:
+    """Build ``cls`` from ``node``; keys it leaves out keep ``base``'s values.
+
+    Without ``base``, a left-out key takes the field's default. A section
+    given in part (``timing: {clock: virtual}``) starts from its field's
+    default in the parent (``MpSettings.timing`` has MP's period, not the
+    class's own), so that it changes only the keys it names.
+    """
     if node is None or (isinstance(node, yaml.ScalarNode) and doc.scalar(node) is None):
         items: dict[str, Node] | None = {}
     else:
@@ -713,11 +722,27 @@ def _build_dataclass(doc: Document, cls: type, node: Node | None, where: str) ->
     kwargs: dict[str, Any] = {}
     for name, field in fields.items():
         if name in items:
-            value = _build(doc, hints[name], items[name], join_path(where, name))
+            tp, path = hints[name], join_path(where, name)
+            default = (
+                getattr(base, name)
+                if base is not None
+                else field.default_factory()
+                if field.default_factory is not dataclasses.MISSING
+                else None
+            )
+            value = (
+                _build_dataclass(doc, type(default), items[name], path, default)
+                if dataclasses.is_dataclass(default)
+                and type(default) is tp
+                and isinstance(items[name], yaml.MappingNode)
+                else _build(doc, tp, items[name], path)
+            )
             if value is INVALID:
                 ok = False
             else:
                 kwargs[name] = value
+        elif base is not None:
+            kwargs[name] = getattr(base, name)
         elif (
             field.default is dataclasses.MISSING
             and field.default_factory is dataclasses.MISSING

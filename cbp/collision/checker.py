@@ -36,8 +36,10 @@ class FreeSpaceChecker:
         environment: the obstacles (its :meth:`Environment.collision_objects`).
         padding: distance added around every robot shape [m].
         self_collision: also check the robot's own shape pairs.
-        tolerance: how deep a padded shape may reach into an obstacle and
-            still be free [m] (CAT's step validation accepts that much).
+        tolerance: how deep a padded shape may reach into an obstacle (grown
+            by the environment's resolution) and still be free [m] (CAT's
+            step validation accepts its penetration tolerance plus the
+            resolution).
 
     Not thread-safe: each thread needs its own checker (they are cheap to build).
     """
@@ -55,7 +57,14 @@ class FreeSpaceChecker:
         robot = geometry.robot
         self._model = robot.model
         self._data = robot.model.createData()
-        geometry_model = geometry.geometry_model(padding)
+        # Occupancy maps represent surfaces to half a cell: obstacle pairs collide
+        # that much earlier, as in the contact queries, and ``tolerance`` later.
+        # Coal takes that as a security margin on the pair, but not a negative
+        # one against an octree: a tolerance beyond the half cell shrinks the
+        # shapes' padding instead, and self pairs get it back as their margin.
+        margin = environment.resolution - tolerance
+        shrink = min(max(0.0, -margin), padding)
+        geometry_model = geometry.geometry_model(padding - shrink)
         n = len(geometry.shapes)
         obstacles = environment.collision_objects()
         for name, obstacle, placement in obstacles:
@@ -73,13 +82,10 @@ class FreeSpaceChecker:
                 geometry_model.addCollisionPair(pin.CollisionPair(i, j))
         self._geometry_model = geometry_model
         self._geometry_data = pin.GeometryData(geometry_model)
-        # Occupancy maps represent surfaces to half a cell: obstacle pairs collide
-        # that much earlier, as in the contact queries, and ``tolerance`` later
-        # (coal takes a negative margin: a collision deeper than it).
         for k, pair in enumerate(geometry_model.collisionPairs):
             request: coal.CollisionRequest = self._geometry_data.collisionRequests[k]
             request.security_margin = (
-                environment.resolution - tolerance if pair.second >= n else 0.0
+                max(0.0, margin + shrink) if pair.second >= n else 2.0 * shrink
             )
         self._manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
             self._model, geometry_model, self._geometry_data

@@ -269,10 +269,12 @@ class CollisionWorld:
         Against declared objects, the same answer as ``check(q).penetration ==
         0``, without the contacts (:class:`~cbp.collision.checker.FreeSpaceChecker`).
         Against an occupancy map, by the rule CAT's step validation uses: a
-        padded shape may reach ``collision.penetration_tolerance`` into the
-        map's cells. Space no camera has seen hugs the padded shapes of a robot
-        that has held it, so the strict rule would find no configuration near
-        the arm free, and the planners could not plan where CAT can move.
+        padded shape may reach ``collision.penetration_tolerance`` plus half
+        a cell into the map's cells inflated by half a cell (that is,
+        the tolerance into the cells themselves). Space no camera has seen
+        hugs the padded shapes of a robot that has held it, so the strict
+        rule would find no configuration near the arm free, and the planners
+        could not plan where CAT can move.
         """
         environment = self._environment
         checker = self._free_space
@@ -283,7 +285,7 @@ class CollisionWorld:
                 self.padding,
                 self.settings.self_collision,
                 tolerance=(
-                    self.settings.penetration_tolerance
+                    self.settings.penetration_tolerance + environment.resolution
                     if environment.resolution > 0.0
                     else 0.0
                 ),

@@ -33,9 +33,15 @@ is found within the budget, an event says so and CAT's safe stop stays; the
 same goal is searched again after ``retry_after`` (fresh random starts, a new
 RRT-Connect), up to ``tries`` searches, and after that not until it moves.
 
+With the cameras, where the IK search finds no configuration because the
+goal, or the space a configuration for it needs, is unseen, the hybrid says
+so and turns the camera on the arm to it first (:mod:`cbp.executors.look`):
+it follows the look's motion, holds while the map takes the frames in, and
+searches again from there (``planner.look``).
+
 The metrics count ``plans`` (plans spliced in), ``planning_attempts`` (stalls
-that started a search), and the joint-space length [rad] and duration [s] of
-the plans (timed from rest).
+that started a search), ``looks``, and the joint-space length [rad] and
+duration [s] of the plans (timed from rest).
 """
 
 from __future__ import annotations
@@ -50,7 +56,8 @@ from cbp.engine import Engine
 from cbp.executors.cat import CatPlanner
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch
-from cbp.executors.mp import RrtConnect, record_plan
+from cbp.executors.look import Looker
+from cbp.executors.mp import RrtConnect, plan_size, record_plan
 from cbp.executors.trajectory import Plan, run_periodic
 from cbp.methods.settings import CatSettings, HybridSettings
 from cbp.robot import FloatArray
@@ -138,6 +145,8 @@ class HybridPlanner:
             seeded=self.cat_settings.timing.clock == "virtual",
         )
         self.detector = StallDetector(self.settings)
+        self.looker = Looker(scenario, run, planner, "hybrid")
+        self._look_path: FloatArray | None = None  # a look's plan, to splice
         self.frame_id = self.robot.frame_id(run.ee_frame)
         self._data = self.robot.model.createData()
         self._rng = np.random.default_rng(self.settings.seed)
@@ -163,6 +172,7 @@ class HybridPlanner:
             planning_attempts=0.0,
             plan_path_length_rad=0.0,
             plan_duration_s=0.0,
+            looks=0.0,
         )
 
     @property
@@ -194,7 +204,7 @@ class HybridPlanner:
         if self.mode == "planning":
             return self._planning(q, goal, budget, run)
         if self.mode == "following":
-            plan = self._following(q, t, budget, run)
+            plan = self._following(q, goal, t, budget, run)
             if plan is not None:
                 return plan
         return self._tracking(q, goal, t, budget, run)
@@ -254,6 +264,7 @@ class HybridPlanner:
         self._from = None
         self._solved = False
         self._spent = 0.0
+        self._look_path = None
 
     def _planning(
         self, q: FloatArray, goal: pin.SE3, budget: Budget, run: RunParts
@@ -271,8 +282,12 @@ class HybridPlanner:
                 self._solved = self.rrt.grow(budget, left)
             lead = self._lead_in(q, start, run)
             if self._solved and budget.left() > 0 and lead is not None:
-                points, note = self.rrt.path(budget)
                 assert self._from is not None
+                points: FloatArray | None
+                if self._look_path is not None:
+                    points, note = self._look_path, "to a view of the unseen goal"
+                else:
+                    points, note = self.rrt.path(budget)
                 if points is None:
                     assert self._target is not None
                     run.event(t, f"hybrid: {note}; planning again")
@@ -326,7 +341,15 @@ class HybridPlanner:
                 self._target = self._nearest
                 self.rrt.begin(self._from[-1], self._nearest)
                 return
-        if not self._attempts:
+        if not self._attempts and not budget.spent():
+            look = self.looker.plan(self._from[-1], goal, budget, run, self.rrt.solve)
+            if look is not None:
+                self._target = look.view
+                self._solved = True
+                self._look_path = look.path
+                return
+            if self.looker.pending:
+                return  # views left to try, next period
             run.event(
                 run.sim.t,
                 "hybrid: no collision-free configuration reaches the goal (the IK "
@@ -389,11 +412,17 @@ class HybridPlanner:
     # ------------------------------------------------------------------ following
 
     def _following(
-        self, q: FloatArray, t: float, budget: Budget, run: RunParts
+        self, q: FloatArray, goal: pin.SE3, t: float, budget: Budget, run: RunParts
     ) -> Plan | None:
-        """Keep following the plan (no new path), or None to give CAT the period."""
+        """Keep following the plan (no new path), or None to give CAT the period.
+
+        A look's plan (to a view of an unseen goal) is followed to its end and
+        held there while the map takes the camera's frames in; then the search
+        for the goal begins again from there.
+        """
         assert self._plan is not None
         trajectory = run.sim.trajectory
+        look = self._look_path is not None
         if not self._taken:
             if not np.array_equal(trajectory.positions[-1], self._plan[-1]):
                 # The loop did not splice the plan (a missed deadline, or it
@@ -402,12 +431,23 @@ class HybridPlanner:
                 self.mode = "planning"
                 return Plan(None, 0, "hybrid: plan not taken; trying again")
             self._taken = True
-            length, duration = record_plan(run, self._plan, self._vmax, self._amax)
+            if look:
+                run.log.counters["looks"] += 1
+                length, duration = plan_size(self._plan, self._vmax, self._amax)
+            else:
+                length, duration = record_plan(run, self._plan, self._vmax, self._amax)
             run.event(
                 t - self.cat_settings.timing.period,
                 f"hybrid: {self._note}: {len(self._plan)} points, {length:.2f} rad, "
                 f"{duration:.2f} s; following it",
             )
+        if look and trajectory.end_time <= t + 1e-9:
+            if self.looker.holding(run):
+                return Plan(
+                    None, 0, "hybrid: looking at the goal from the arm's camera"
+                )
+            self._begin_planning(trajectory.positions[-1], goal)
+            return Plan(None, 0, "hybrid: looked; planning")
         if trajectory.end_time <= t + 1e-9:
             run.event(t, "hybrid: plan followed to its end; control returns to CAT")
             self._to_cat()
@@ -449,6 +489,8 @@ class HybridPlanner:
         self._plan = None
         self._target = None
         self._solved = False
+        self._look_path = None
+        self.looker.stop()
         self.detector.reset()
 
     # ------------------------------------------------------------------ helpers

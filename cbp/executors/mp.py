@@ -17,6 +17,11 @@ its budget lasts). It is timed to
 stop at its end and spliced in by the shared trajectory loop; while
 the goal stays the same the plan is followed, not replaced. A plan that does not
 finish in the budget counts as a miss, so the period grows.
+
+With the cameras, where the IK search finds nothing because the goal, or the
+space a configuration for it needs, is unseen, MP says so and turns the
+camera on the arm to it before it searches again (:mod:`cbp.executors.look`,
+``method.mp.look``; the metrics count ``looks``).
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ import pinocchio as pin
 
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch, SearchEvents
+from cbp.executors.look import Looker
 from cbp.executors.trajectory import Plan, run_periodic
 from cbp.methods.settings import MpSettings, PlannerSettings
 from cbp.robot import FloatArray, RobotModel
@@ -37,7 +43,14 @@ from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import time_parameterize
 from cbp.trace import Trace
 
-__all__ = ["MpPlanner", "RrtConnect", "make_planner", "record_plan", "run_mp"]
+__all__ = [
+    "MpPlanner",
+    "RrtConnect",
+    "make_planner",
+    "plan_size",
+    "record_plan",
+    "run_mp",
+]
 
 
 class RrtConnect:
@@ -180,6 +193,18 @@ class RrtConnect:
             self._budget = None
         return points, "planned"
 
+    def solve(
+        self, q: FloatArray, target: FloatArray, budget: Budget
+    ) -> FloatArray | None:
+        """:meth:`begin`, :meth:`grow`, :meth:`path` in ``budget`` (None: no path)."""
+        self.begin(q, target)
+        if not self.grow(
+            budget, budget.left() * (1.0 - self.settings.simplify_fraction)
+        ):
+            return None
+        points, _ = self.path(budget)
+        return points
+
     def _until(self, budget: Budget, seconds: float) -> object:
         """OMPL's termination condition: ``seconds`` more of ``budget`` used."""
         stop_at = budget.elapsed() + seconds
@@ -216,6 +241,8 @@ class MpPlanner:
             settings,
             seeded=settings.timing.clock == "virtual",
         )
+        self.looker = Looker(scenario, run, settings, "mp")
+        run.log.counters.update(looks=0.0)
 
     @property
     def checks(self) -> int:
@@ -240,8 +267,21 @@ class MpPlanner:
         s = self.settings
         target = self.search.solution_for(goal, q, budget)
         if target is None:
-            self.events.failed(run, goal, exhausted=not budget.spent())
+            exhausted = not budget.spent()
+            self.events.failed(run, goal, exhausted=exhausted)
+            if self.looker.holding(run):
+                return Plan(None, 0, "looking at the goal from the arm's camera")
+            look = (
+                self.looker.plan(q, goal, budget, run, self.rrt.solve)
+                if (exhausted or self.looker.pending)
+                and self.search.collision_free(q, budget)
+                else None
+            )
+            if look is not None:
+                run.log.counters["looks"] += 1
+                return Plan(look.path, len(look.path), "to a view of what is unseen")
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
+        self.looker.stop()
         self.events.solved(run)
         if np.max(np.abs(target - q)) < 1e-4:
             return Plan(None, 0, "at the goal")
@@ -284,10 +324,7 @@ def record_plan(
     ``plan_duration_s`` (timed from rest within ``vmax`` and ``amax``) add up
     over the run.
     """
-    zeros = np.zeros(points.shape[1])
-    timed = time_parameterize(points, 0.0, zeros, zeros, vmax, amax)
-    length = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
-    duration = timed.end_time if timed is not None else float("nan")
+    length, duration = plan_size(points, vmax, amax)
     counters = run.log.counters
     counters["plans"] = counters.get("plans", 0.0) + 1
     counters["plan_path_length_rad"] = (
@@ -295,6 +332,16 @@ def record_plan(
     )
     counters["plan_duration_s"] = counters.get("plan_duration_s", 0.0) + duration
     return length, duration
+
+
+def plan_size(
+    points: FloatArray, vmax: FloatArray, amax: FloatArray
+) -> tuple[float, float]:
+    """A path's joint-space length [rad] and duration [s] (timed from rest)."""
+    zeros = np.zeros(points.shape[1])
+    timed = time_parameterize(points, 0.0, zeros, zeros, vmax, amax)
+    length = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+    return length, timed.end_time if timed is not None else float("nan")
 
 
 def _resample(vertices: FloatArray, step: float) -> FloatArray:

@@ -20,6 +20,7 @@ __all__ = [
     "IkSettings",
     "JtSettings",
     "KinematicSettings",
+    "LookSettings",
     "MpSettings",
     "PlannerSettings",
     "VelocitySettings",
@@ -198,6 +199,46 @@ class IkSettings:
 
 
 @dataclass(frozen=True, kw_only=True)
+class LookSettings:
+    """The planners' ``look:`` section: turn the arm's camera to an unseen goal.
+
+    With the cameras and ``perception.unknown: occupied``, a goal in space no
+    camera has seen has no configuration the planners accept. When the IK
+    search finds none and at least ``unseen_share`` of the cube of ``radius``
+    about the goal is unseen, the planner says so and (with a camera mounted
+    on the arm) plans to a configuration from which that camera sees the
+    goal, holds there ``dwell`` while the map takes it in, and searches again
+    (:mod:`cbp.executors.look`).
+    """
+
+    enabled: bool = True
+    """Turn the camera (false: only say that the goal is unseen)."""
+    camera: str | None = None
+    """The camera to turn; default: the first camera mounted on the robot."""
+    spread: float = 0.6
+    """Views are sampled with each joint moved by up to this from the arm's
+    configuration [rad] (near it, the arm stays in space already seen)."""
+    radius: float = 0.05
+    """Half the side of the cube about the goal's position measured [m]."""
+    unseen_share: float = 0.25
+    """Look when at least this share of the cube is unseen."""
+    dwell: float = 0.4
+    """How long the arm holds at the view while the map takes it in [s]."""
+    looks: int = 16
+    """Looks per goal at most (tries that find no view count). Behind the
+    wall of ``cat_local_minimum`` the hybrid needed 11 (about a second each)
+    before the goal and the way to it were seen."""
+
+    def __post_init__(self) -> None:
+        """Positive distances and times, a share in (0, 1]."""
+        require(self, "in (0, 1]", "unseen_share")
+        require_between(self, 0.01, 3.2, "rad", "spread")
+        require_between(self, 0.005, 0.5, "m", "radius")
+        require_between(self, 0.0, 10.0, "s", "dwell")
+        require_between(self, 1, 100, "looks", "looks")
+
+
+@dataclass(frozen=True, kw_only=True)
 class PlannerSettings:
     """A global planner: IK for the goal, OMPL RRT-Connect to it (MP, hybrid)."""
 
@@ -221,6 +262,9 @@ class PlannerSettings:
     1 rad needs a fifth of the validity checks of OMPL's default."""
     waypoint_step: float = 0.05
     """The simplified path is resampled to this joint spacing for timing [rad]."""
+    look: LookSettings = field(default_factory=LookSettings)
+    """Where the goal lies in unseen space: look at it with the arm's camera
+    before planning."""
 
     def __post_init__(self) -> None:
         """Sensible fractions and steps."""

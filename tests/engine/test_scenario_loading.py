@@ -273,3 +273,16 @@ def test_a_negative_self_filter_margin_is_refused_at_its_line(tmp_path) -> None:
     assert "line 7: perception.robot_margin: must be in [0, 0.2] m, got -0.01" in str(
         info.value
     )
+
+
+def test_a_section_given_in_part_keeps_its_defaults_in_the_parent() -> None:
+    """method.mp.timing.clock alone keeps MP's 4 Hz period, not the class's 30 Hz."""
+    path = SCENARIOS[0].parent / "cat_boards.yaml"
+    plain = load_scenario(path, overrides={"method.name": "mp"})
+    virtual = load_scenario(
+        path, overrides={"method.name": "mp", "method.mp.timing.clock": "virtual"}
+    )
+    before, after = plain.spec.method.timing("mp"), virtual.spec.method.timing("mp")
+    assert after.clock == "virtual"
+    assert (after.period, after.max_period) == (before.period, before.max_period)
+    assert after.period == 0.25

@@ -1,0 +1,112 @@
+"""Planners that see: the camera on the arm turned to an unseen goal, and MP's reach."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from cbp.errors import ConfigError, ScenarioError
+from cbp.executors import load_executor
+from cbp.executors.look import sees
+from cbp.methods.settings import LookSettings
+from cbp.metrics import run_metrics
+from cbp.perception.kernels import FREE, OCCUPIED
+from cbp.perception.spec import CameraSpec
+from cbp.scenario import load_scenario
+from tests.conftest import VIRTUAL_CLOCK
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+CAMERAS = {"perception.source": "depth_camera", **VIRTUAL_CLOCK}
+
+
+def test_a_camera_sees_points_in_its_view_not_behind_an_occupied_cell() -> None:
+    """In the field of view and range and with a clear line: seen; else not."""
+    # Optical frame: +z along the axis, here the world's +x.
+    camera = pin.SE3(np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]]), np.zeros(3))
+    spec = CameraSpec(name="c", position=(0, 0, 0), target=(1, 0, 0), fov_deg=60.0)
+    cell = 0.01
+    wall = np.array([0.5, 0.3, 0.0])
+
+    def state_at(points: np.ndarray) -> np.ndarray:
+        near = np.all(np.abs(points - wall) <= cell / 2, axis=1)
+        return np.where(near, OCCUPIED, FREE).astype(np.uint8)
+
+    points = np.array(
+        [
+            [1.0, 0.0, 0.0],  # ahead
+            [1.0, 0.6, 0.0],  # ahead, behind the occupied cell
+            [-1.0, 0.0, 0.0],  # behind the camera
+            [1.0, 0.0, 2.0],  # out of the field of view
+            [0.05, 0.0, 0.0],  # nearer than the camera's range
+            [0.5, 0.3, 0.0],  # the occupied cell itself is seen
+        ]
+    )
+    got = sees(camera, spec, points, state_at, cell)
+    np.testing.assert_array_equal(got, [True, False, False, False, False, True])
+
+
+def test_look_settings_are_checked() -> None:
+    """A share outside (0, 1] or a look count of 0 is refused, naming the key."""
+    with pytest.raises(ConfigError) as info:
+        LookSettings(unseen_share=0.0)
+    assert info.value.location == "unseen_share"
+    with pytest.raises(ScenarioError, match="looks"):
+        load_scenario(
+            SCENARIOS / "cat_boards.yaml",
+            overrides={"method.name": "mp", "method.mp.look.looks": "0"},
+        )
+
+
+@pytest.mark.slow
+def test_mp_says_the_goal_is_unseen_and_turns_the_wrist_camera_to_it() -> None:
+    """Behind the wall with the cameras: an event names the unseen goal, the arm looks."""
+    scenario = load_scenario(
+        SCENARIOS / "cat_local_minimum.yaml",
+        overrides={"method.name": "mp", "duration": "2.5", **CAMERAS},
+    )
+    trace = load_executor("mp")(scenario, False)
+    m = run_metrics(trace, scenario.robot)
+    events = "\n".join(message for _, message in trace.events)
+    assert "mp: the goal lies in space no camera has seen" in events
+    assert "turning camera 'wrist' to look before planning" in events
+    assert "moving there to look" in events
+    assert m["looks"] >= 1
+    assert m["peak_contact_force_n"] == 0.0
+
+
+@pytest.mark.slow
+def test_mp_with_the_cameras_reaches_the_wrist_limit_goal() -> None:
+    """On the virtual clock MP keeps its own 4 Hz period and reaches, without contact."""
+    scenario = load_scenario(
+        SCENARIOS / "cat_wrist_limit.yaml", overrides={"method.name": "mp", **CAMERAS}
+    )
+    assert scenario.spec.method.timing("mp").period == 0.25
+    trace = load_executor("mp")(scenario, False)
+    m = run_metrics(trace, scenario.robot)
+    assert m["reached"], m["final_position_error_m"]
+    assert m["peak_contact_force_n"] == 0.0
+
+
+@pytest.mark.slow
+def test_the_hybrid_escapes_the_local_minimum_with_the_cameras() -> None:
+    """CAT stalls before the wall; the hybrid looks until it sees a way, plans, reaches.
+
+    The looks take about a second each, so the run is 20 s long (the
+    scene's own 8 s ends while the hybrid is still looking).
+    """
+    scenario = load_scenario(
+        SCENARIOS / "cat_local_minimum.yaml",
+        overrides={"method.name": "hybrid", "duration": "20", **CAMERAS},
+    )
+    trace = load_executor("hybrid")(scenario, False)
+    m = run_metrics(trace, scenario.robot)
+    events = "\n".join(message for _, message in trace.events)
+    assert "hybrid: the goal lies in space no camera has seen" in events
+    assert "hybrid: camera 'wrist' sees" in events
+    assert m["looks"] >= 1
+    assert m["plans"] == 1
+    assert m["reached"], m["final_position_error_m"]
+    assert m["peak_contact_force_n"] == 0.0
