@@ -99,7 +99,7 @@ class StepGuard:
         dq = np.ascontiguousarray(dq, dtype=float)
         if dq.shape != (robot.nv,):
             raise UnsafeStepError(f"step rejected: {dq.shape} values, not {robot.nv}")
-        if self._euclidean:
+        if self._euclidean and q.shape == dq.shape:
             # Every check in one compiled call; the messages below only when
             # one fails (the same checks, in the same order).
             code, _, slowed = _euclidean_check(

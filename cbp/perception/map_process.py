@@ -66,7 +66,7 @@ from cbp.perception.frame import (
 )
 from cbp.perception.mapper import Publication, SnapshotPublisher, cluster_motion
 from cbp.perception.motion import ApproachEstimator, MovingCluster, swept_snapshot
-from cbp.perception.moving import with_moving
+from cbp.perception.moving import moving_growth, with_moving
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
@@ -435,10 +435,11 @@ class ProcessMapUpdater(SnapshotPublisher):
         if speeds is not None and np.any(speeds > 0):
             out = out.ahead(speeds * horizon)
         grid = self.grid
+        age = max(0.0, self.submitted_t - (mapped.stamp or 0.0))
         out = with_moving(
             out,
             self._entered,
-            grid.spec.moving_speed * horizon,
+            moving_growth(grid.spec.moving_speed, self.look_ahead, age),
             grid.cells,
             grid.lower,
         )

@@ -32,7 +32,7 @@ from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.perception.frame import DepthFrame
 from cbp.perception.motion import ApproachEstimator, ClusterMotion, swept_snapshot
-from cbp.perception.moving import with_moving
+from cbp.perception.moving import moving_growth, with_moving
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
@@ -247,7 +247,7 @@ class MapUpdater(SnapshotPublisher):
         published = with_moving(
             published,
             self.grid.moving_centres(stamp),
-            self.grid.spec.moving_speed * self.look_ahead,
+            moving_growth(self.grid.spec.moving_speed, self.look_ahead, 0.0),
             self.grid.cells,
             self.grid.lower,
         )

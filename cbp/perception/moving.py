@@ -26,6 +26,8 @@ camera has seen, or a static obstacle, nearer to the arm does not hide it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from cbp.collision.contacts import ContactSet
@@ -35,7 +37,25 @@ from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.perception.kernels import UNKNOWN
 from cbp.robot import FloatArray
 
-__all__ = ["MovingCellsEnvironment", "with_moving"]
+__all__ = ["GROWTH_STEP", "MovingCellsEnvironment", "moving_growth", "with_moving"]
+
+#: The growth is rounded up to whole steps of this [m]: the compiled query's
+#: table is built per reach, so a growth that changed with every snapshot's
+#: age would rebuild it at every snapshot.
+GROWTH_STEP = 0.01
+
+
+def moving_growth(speed: float, look_ahead: float, age: float) -> float:
+    """How much nearer moving cells are measured [m]: 0 without a look-ahead.
+
+    ``speed`` [m/s] over the look-ahead and the snapshot's age [s], rounded
+    up to :data:`GROWTH_STEP`. An executor that plans nothing ahead (a
+    look-ahead of 0: JT, a run's last stretch) measures them where they are.
+    """
+    if not look_ahead > 0.0 or not speed > 0.0:
+        return 0.0
+    growth = speed * (look_ahead + max(0.0, age))
+    return math.ceil(growth / GROWTH_STEP - 1e-9) * GROWTH_STEP
 
 
 class MovingCellsEnvironment(OccupancyEnvironment):

@@ -71,9 +71,6 @@ __all__ = ["FrameSummary", "OccupancyGrid"]
 #: presence frees unseen space (and one cell more) [m].
 NEARBY_MARGIN = 0.02
 
-#: The most cells one frame reports entered (a frame's moving surfaces).
-MAX_ENTERED = 65536
-
 #: The self-filter's shapes when there is no robot: planes, plane starts,
 #: sphere centres and radii, reach (as ``insert_readings`` takes them).
 _NO_ROBOT = (
@@ -190,7 +187,7 @@ class OccupancyGrid:
         )
         # The cells entered by a frame (the kernel's output), and those entered
         # lately: flat indices and the last time each was entered [s].
-        self._entered = np.empty(MAX_ENTERED, np.int64)
+        self._entered = np.empty(0, np.int64)
         self._recent = (np.zeros(0, np.int64), np.zeros(0))
 
     # ------------------------------------------------------------------ copies
@@ -213,7 +210,7 @@ class OccupancyGrid:
         state["misses"] = self.misses.copy()
         state["_dirty"] = self._dirty.copy()
         state["_moved"] = {}
-        state["_entered"] = np.empty(MAX_ENTERED, np.int64)
+        state["_entered"] = np.empty(0, np.int64)
         state["_recent"] = (np.zeros(0, np.int64), np.zeros(0))
         out = OccupancyGrid.__new__(OccupancyGrid)
         out.__dict__.update(state)
@@ -301,6 +298,8 @@ class OccupancyGrid:
         limits = frame.buffer_limits
         seen = self._see_through(frame, depth, limits)
         nearest, far_plane, far_buffer = limits
+        if self._entered.size < depth.size:  # one entry a pixel at most
+            self._entered = np.empty(depth.size, np.int64)
         valid, removed, inserted, hidden, entered = insert_readings(
             depth,
             frame.unprojection,

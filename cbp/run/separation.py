@@ -61,7 +61,7 @@ class SeparationMonitor:
             self._restored(t)
             return
         self._state.update(q)
-        placed = world.placed(self._state)
+        placed = world.placed_apart(self._state)
         contacts = env.moving.query(
             placed, world.margin(env) + env.growth, world.settings.contacts_per_link
         )

@@ -7,14 +7,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cbp.collision import CollisionWorld, RobotGeometry
+from cbp.collision import CollisionWorld, OccupancyEnvironment, RobotGeometry
 from cbp.collision.checker import FreeSpaceChecker
 from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.mapper import MapUpdater
-from cbp.perception.moving import with_moving
+from cbp.perception.moving import moving_growth, with_moving
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec, DepthNoise, PerceptionSpec
+from cbp.run.events import RunLog
+from cbp.run.separation import SeparationMonitor
 from cbp.scenario import ObjectSpec
 from cbp.sim.camera import DepthCamera
 from cbp.sim.scene import PybulletScene
@@ -439,8 +441,8 @@ def test_a_static_scene_has_no_moving_cells(scene, robots) -> None:
     assert len(grid.moving_centres(0.5)) == 0
 
 
-def test_moving_cells_are_met_ahead_and_unseen_space_gives_way(scene, robots) -> None:
-    """The moving cells' contacts come growth nearer; unknown ones drop out then."""
+def _plate_before_the_hand(scene, robots):
+    """FRONT sees the hand, then a plate between them: grid, world, state, plate."""
     robot = robots["panda"]
     geometry = RobotGeometry(robot)
     grid = OccupancyGrid(SPEC, geometry)
@@ -453,10 +455,15 @@ def test_moving_cells_are_met_ahead_and_unseen_space_gives_way(scene, robots) ->
         grid.integrate(DepthCamera(scene.client, FRONT).capture(), state, 0.1)
     finally:
         scene.remove_object("plate")
+    return grid, CollisionWorld(geometry, grid.environment()), state, plate
+
+
+def test_moving_cells_are_met_ahead_and_unseen_space_gives_way(scene, robots) -> None:
+    """The moving cells' contacts come growth nearer; unknown ones drop out then."""
+    grid, world, state, plate = _plate_before_the_hand(scene, robots)
     mapped = grid.environment()
     centres = grid.moving_centres(0.1)
     assert len(centres)
-    world = CollisionWorld(geometry, mapped)
     still = world.query(state)
     unknown = grid.state_at(still.other_point - 0.25 * grid.cell * still.normal)
     assert np.any(unknown == UNKNOWN)  # the plate's shadow reaches the hand
@@ -474,3 +481,47 @@ def test_moving_cells_are_met_ahead_and_unseen_space_gives_way(scene, robots) ->
     )
     assert len(short) == len(still)
     np.testing.assert_allclose(np.sort(short.distance), np.sort(still.distance))
+
+
+def test_the_separation_monitor_says_when_a_moving_obstacle_is_too_near(
+    scene, robots
+) -> None:
+    """Once when the separation is short, once when it is 1 cm beyond again."""
+    grid, world, state, _ = _plate_before_the_hand(scene, robots)
+    mapped = grid.environment()
+    centres = grid.moving_centres(0.1)
+    plate = OccupancyEnvironment(centres, grid.cell)
+    reach = plate.query(world.placed_apart(state), 1.0, 3).distance
+    # As the monitor measures it: beyond the padding and half a cell.
+    nearest = float(np.min(reach)) - world.padding - plate.resolution
+    log = RunLog("cat")
+    monitor = SeparationMonitor(world, log, 0.25)
+
+    def check(t: float, growth: float | None) -> bool:
+        env = (
+            mapped
+            if growth is None
+            else with_moving(mapped, centres, growth, grid.cells, grid.lower)
+        )
+        world.set_environment(env)
+        monitor.check(t, state.q)
+        return monitor.short
+
+    assert not check(0.1, 0.01)
+    assert check(0.2, nearest + 0.02)
+    assert check(0.3, nearest + 0.02)
+    assert len(log.events) == 1
+    assert "the cameras see moving" in log.events[0][1]
+    # Within 1 cm beyond the separation it stays short; beyond, it is clear.
+    assert check(0.4, nearest - 0.005)
+    assert len(log.events) == 1
+    assert not check(0.5, None)
+    assert "clear of the arm again" in log.events[-1][1]
+    assert monitor.times_short == 1
+
+
+def test_moving_cells_grow_in_whole_centimetres_and_only_with_a_look_ahead() -> None:
+    assert moving_growth(0.25, 0.3, 0.0) == pytest.approx(0.08)
+    assert moving_growth(0.25, 0.3, 0.1) == pytest.approx(0.10)
+    assert moving_growth(0.25, 0.0, 0.5) == 0.0  # JT plans nothing ahead
+    assert moving_growth(0.0, 0.3, 0.0) == 0.0
