@@ -18,7 +18,7 @@ import hashlib
 import os
 import shutil
 import signal
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -62,28 +62,40 @@ def _alarm(signum: int, frame: object) -> None:
     raise HangError
 
 
-def load_or_refuse(path: Path) -> None:
-    """Load ``path``; anything but success or a CbpError within HANG s fails."""
+def refused_or_loaded(
+    path: Path, load: Callable[[Path], object], hang: float, kind: str
+) -> None:
+    """``load(path)``; anything but success or a CbpError within ``hang`` s fails.
+
+    ``hang`` is CPU time, not wall time: a loaded machine does not make a load
+    hang. A failing file is saved to ``out/fuzz/`` (named ``{kind}_`` and its
+    hash; scenarios by the hash alone), and the message says where.
+    """
     previous = signal.signal(signal.SIGPROF, _alarm)
-    # CPU time, not wall time: a loaded machine does not make a load hang.
-    signal.setitimer(signal.ITIMER_PROF, HANG)
+    signal.setitimer(signal.ITIMER_PROF, hang)
     try:
-        load_scenario(path)
+        load(path)
     except CbpError:
         pass
     except BaseException as exc:
         saved = ROOT / "out" / "fuzz"
         saved.mkdir(parents=True, exist_ok=True)
         data = path.read_bytes()
-        case = saved / f"{hashlib.sha256(data).hexdigest()[:12]}.yaml"
+        prefix = "" if kind == "scenario" else f"{kind}_"
+        case = saved / f"{prefix}{hashlib.sha256(data).hexdigest()[:12]}.yaml"
         case.write_bytes(data)
         what = "hang" if isinstance(exc, HangError) else type(exc).__name__
         raise AssertionError(
-            f"{what} loading a fuzzed scenario, saved as {case}"
+            f"{what} loading a fuzzed {kind}, saved as {case}"
         ) from exc
     finally:
         signal.setitimer(signal.ITIMER_PROF, 0)
         signal.signal(signal.SIGPROF, previous)
+
+
+def load_or_refuse(path: Path) -> None:
+    """Load ``path``; anything but success or a CbpError within HANG s fails."""
+    refused_or_loaded(path, load_scenario, HANG, "scenario")
 
 
 # ---------------------------------------------------------------- structure

@@ -14,9 +14,7 @@ failing file is written to ``out/fuzz/``; add it to
 
 from __future__ import annotations
 
-import hashlib
 import shutil
-import signal
 from pathlib import Path
 
 import pytest
@@ -24,17 +22,16 @@ import yaml
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cbp.errors import CbpError, ScenarioError
+from cbp.errors import ScenarioError
 from cbp.sweep import load_sweep
 from cbp.sweep.spec import expand, sweep_size
 from tests.engine.test_loader_fuzz import (
     EXTRA_KEYS,
     FUZZ,
     TOKENS,
-    HangError,
-    _alarm,
     damage_bytes,
     damage_structure,
+    refused_or_loaded,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -57,28 +54,15 @@ def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return target / "fuzz_sweeps"
 
 
+def _load_and_expand(path: Path) -> None:
+    spec = load_sweep(path)
+    if sweep_size(spec) <= EXPANDED:
+        expand(spec, path, [])
+
+
 def refuse_or_expand(path: Path) -> None:
     """Load (and expand, if small) ``path``; anything but a CbpError within HANG fails."""
-    previous = signal.signal(signal.SIGPROF, _alarm)
-    # CPU time, not wall time: a loaded machine does not make a load hang.
-    signal.setitimer(signal.ITIMER_PROF, HANG)
-    try:
-        spec = load_sweep(path)
-        if sweep_size(spec) <= EXPANDED:
-            expand(spec, path, [])
-    except CbpError:
-        pass
-    except BaseException as exc:
-        saved = ROOT / "out" / "fuzz"
-        saved.mkdir(parents=True, exist_ok=True)
-        data = path.read_bytes()
-        case = saved / f"sweep_{hashlib.sha256(data).hexdigest()[:12]}.yaml"
-        case.write_bytes(data)
-        what = "hang" if isinstance(exc, HangError) else type(exc).__name__
-        raise AssertionError(f"{what} loading a fuzzed sweep, saved as {case}") from exc
-    finally:
-        signal.setitimer(signal.ITIMER_PROF, 0)
-        signal.signal(signal.SIGPROF, previous)
+    refused_or_loaded(path, _load_and_expand, HANG, "sweep")
 
 
 @FUZZ
