@@ -430,12 +430,12 @@ class ProcessMapUpdater(SnapshotPublisher):
         when the plan made now has run.
         """
         speeds = self._speeds
-        horizon = self.look_ahead + max(0.0, self.submitted_t - (mapped.stamp or 0.0))
+        age = max(0.0, self.submitted_t - (mapped.stamp or 0.0))
+        horizon = self.look_ahead + age
         out = swept_snapshot(mapped, self._moving, horizon, self.grid.lower)
         if speeds is not None and np.any(speeds > 0):
             out = out.ahead(speeds * horizon)
         grid = self.grid
-        age = max(0.0, self.submitted_t - (mapped.stamp or 0.0))
         out = with_moving(
             out,
             self._entered,
