@@ -443,6 +443,46 @@ def hull_excesses(
 
 
 @numba.njit(cache=True, nogil=True)
+def face_grid(
+    normals: npt.NDArray[np.float32],
+    offsets: npt.NDArray[np.float32],
+    origin: FloatArray,
+    dims: npt.NDArray[np.int64],
+    step: float,
+    faces: npt.NDArray[np.int16],
+    values: npt.NDArray[np.float32],
+) -> None:
+    """A hull's largest face and its excess at every point of a grid (x major).
+
+    ``normals`` (n, 3) and ``offsets`` (n,): the hull's face planes (float32);
+    the grid starts at ``origin`` with ``dims`` points ``step`` apart. Points
+    and excesses are float32, and the first of equal faces wins, as a float32
+    product and argmax would give.
+    """
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    count = len(offsets)
+    k = 0
+    for i in range(nx):
+        x = np.float32(origin[0] + step * i)
+        for j in range(ny):
+            y = np.float32(origin[1] + step * j)
+            for m in range(nz):
+                z = np.float32(origin[2] + step * m)
+                best = np.float32(-np.inf)
+                face = 0
+                for f in range(count):
+                    v = (
+                        x * normals[f, 0] + y * normals[f, 1] + z * normals[f, 2]
+                    ) - offsets[f]
+                    if v > best:
+                        best = v
+                        face = f
+                faces[k] = face
+                values[k] = best
+                k += 1
+
+
+@numba.njit(cache=True, nogil=True)
 def candidates(
     bricks: Bricks,
     shapes: Shapes,

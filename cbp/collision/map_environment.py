@@ -127,6 +127,13 @@ class OccupancyEnvironment(Environment):
         blocked: the dense obstacle mask the cells are the shell of.
     """
 
+    #: The compiled query's tables are built for the query's reach (margin plus
+    #: half a cell) rounded up to whole steps of this [m]; 0: the reach itself.
+    #: A snapshot queried at a margin that changes from one snapshot to the
+    #: next (:mod:`cbp.perception.moving`) rounds it, so that a new table (a
+    #: build per hull) is rare.
+    reach_step: float = 0.0
+
     def __init__(
         self,
         centres: FloatArray,
@@ -183,7 +190,13 @@ class OccupancyEnvironment(Environment):
     def prepare(self, shapes: list[LinkShape], margin: float) -> None:
         """Compile the query (once per process) and pack the shapes (once)."""
         compile_kernels()
-        ShapeTable.for_shapes(shapes, margin + 0.5 * self.cell)
+        ShapeTable.for_shapes(shapes, self.table_reach(margin))
+
+    def table_reach(self, margin: float) -> float:
+        """The reach the query's table is built for at ``margin`` [m]."""
+        reach = margin + 0.5 * self.cell
+        step = self.reach_step
+        return math.ceil(reach / step - 1e-9) * step if step > 0.0 else reach
 
     @functools.cached_property
     def tree(self) -> cKDTree:
@@ -250,7 +263,7 @@ class OccupancyEnvironment(Environment):
             # from the cell toward the shape; a few per shape, spread over
             # directions; a metaball refinement in the same compiled call,
             # another after it.
-            table = ShapeTable.for_shapes(shapes, margin + 0.5 * self.cell)
+            table = ShapeTable.for_shapes(shapes, self.table_reach(margin))
             query = CellContactQuery(
                 table,
                 self.index,

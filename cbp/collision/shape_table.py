@@ -32,6 +32,7 @@ from cbp.collision.cell_kernels import (
     candidates,
     cell_contacts_flat,
     cell_hits,
+    face_grid,
     hull_excesses,
     spread_contacts,
 )
@@ -41,13 +42,32 @@ from cbp.robot import FloatArray, IntArray
 __all__ = [
     "DIRECTIONS",
     "FACE_GRID_STEP",
+    "FINE_REACH",
     "CellContactQuery",
     "ShapeTable",
     "compile_kernels",
+    "face_grid_step",
 ]
 
 #: Face-grid step [m]: fine enough that a ridge's neighbourhood is a few mm wide.
 FACE_GRID_STEP = 0.0075
+#: Beyond this reach [m], face grids coarsen with the reach (:func:`face_grid_step`).
+FINE_REACH = 0.1
+
+
+def face_grid_step(reach: float) -> float:
+    """The face grids' step for a table of ``reach`` [m].
+
+    :data:`FACE_GRID_STEP` up to :data:`FINE_REACH`; beyond, the step grows in
+    proportion, so a table built for a long reach (moving cells measured
+    ahead, :mod:`cbp.perception.moving`) has about as many grid points as one
+    at :data:`FINE_REACH`. A coarser grid only finds fewer candidate faces near
+    a hull's edges: the excess is then a lower bound further out (a distance
+    never overestimated), as everywhere beyond ``EXACT_WITHIN``.
+    """
+    return FACE_GRID_STEP * max(1.0, reach / FINE_REACH)
+
+
 #: Guards the module's caches of face grids and shape tables.
 _CACHE_LOCK = threading.Lock()
 
@@ -142,7 +162,7 @@ class ShapeTable:
         key = (tuple(id(shape) for shape in shapes), float(reach))
         found = _TABLES.get(key)
         if found is None:
-            found = (list(shapes), cls.build(shapes, reach))
+            found = (list(shapes), cls.build(shapes, reach, face_grid_step(reach)))
             with _CACHE_LOCK:  # the map thread and the control loop both look
                 if len(_TABLES) >= _TABLE_CACHE:
                     _TABLES.pop(next(iter(_TABLES)))
@@ -402,19 +422,21 @@ def _largest_faces(
     )
     found = _FACE_GRIDS.get(key)
     if found is None:
-        axes = [origin[k] + step * np.arange(dims[k]) for k in range(3)]
-        yz = np.stack(np.meshgrid(axes[1], axes[2], indexing="ij"), -1).reshape(-1, 2)
-        faces = np.empty((int(dims[0]), len(yz)), dtype=np.int16)
-        values = np.empty((int(dims[0]), len(yz)), dtype=np.float32)
-        points = np.empty((len(yz), 3), dtype=np.float32)
-        points[:, 1:] = yz
-        rows = np.arange(len(yz))
-        for i, x in enumerate(axes[0]):  # one slab at a time: bounded memory
-            points[:, 0] = x
-            excess = points.dot(shape.plane_normals_t) - shape.plane_offsets
-            faces[i] = excess.argmax(axis=1)
-            values[i] = excess[rows, faces[i]]
-        found = faces.reshape(-1), values.reshape(-1)
+        n = int(np.prod(dims))
+        faces = np.empty(n, dtype=np.int16)
+        values = np.empty(n, dtype=np.float32)
+        # Compiled and without the interpreter lock: a table built in the map's
+        # thread (a new reach) does not stop the control loop.
+        face_grid(
+            np.ascontiguousarray(shape.plane_normals_t.T, dtype=np.float32),
+            np.ascontiguousarray(shape.plane_offsets, dtype=np.float32),
+            np.asarray(origin, dtype=float),
+            np.asarray(dims, dtype=np.int64),
+            float(step),
+            faces,
+            values,
+        )
+        found = faces, values
         with _CACHE_LOCK:
             if len(_FACE_GRIDS) >= _FACE_GRID_CACHE:
                 _FACE_GRIDS.pop(next(iter(_FACE_GRIDS)))

@@ -22,6 +22,7 @@ from cbp.collision.cell_kernels import (
     VALUE_UNIT,
     Contacts,
     cell_hits,
+    face_grid,
     occupied_bits,
     spread_contacts,
 )
@@ -32,6 +33,7 @@ from cbp.collision.shape_table import (
     FACE_GRID_STEP,
     CellContactQuery,
     ShapeTable,
+    face_grid_step,
 )
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
@@ -125,13 +127,16 @@ def _points_in_hull_boxes(geometry: RobotGeometry, table: ShapeTable, seed: int)
         yield s, shape, rng.uniform(table.lower[s], table.upper[s], size=(20000, 3))
 
 
-def test_face_grid_gives_the_largest_excess_within_a_bound(geometry) -> None:
+@pytest.mark.parametrize("reach", [0.07, 0.25])
+def test_face_grid_gives_the_largest_excess_within_a_bound(geometry, reach) -> None:
     """Points measured through the face grid against all of a hull's faces.
 
     The grid picks the largest face exactly away from ridges between small faces;
-    near them it takes a neighbour's excess, a little smaller (never larger).
+    near them it takes a neighbour's excess, a little smaller (never larger). A
+    long reach's coarser grid keeps that, within a bound as much coarser.
     """
-    table = ShapeTable.build(geometry.shapes, 0.07)
+    step = face_grid_step(reach)
+    table = ShapeTable.build(geometry.shapes, reach, step)
     errors = []
     for s, shape, points in _points_in_hull_boxes(geometry, table, seed=3):
         excess = points.dot(shape.planes[:, :3].T) - shape.planes[:, 3]
@@ -143,7 +148,7 @@ def test_face_grid_gives_the_largest_excess_within_a_bound(geometry) -> None:
     error = np.concatenate(errors)
     assert error.min() > -1e-12  # never more than the largest excess
     assert np.mean(error < 1e-12) > 0.99  # exact almost everywhere
-    assert error.max() < 1e-3  # and within 1 mm near ridges
+    assert error.max() < 1e-3 * step / FACE_GRID_STEP  # 1 mm near ridges (fine grid)
 
 
 def test_far_points_are_measured_on_one_face_from_below(geometry) -> None:
@@ -555,3 +560,27 @@ assert len(contact_jacobian_rows.signatures) == 1, contact_jacobian_rows.signatu
         [sys.executable, "-c", script], capture_output=True, text=True, timeout=300
     )
     assert run.returncode == 0, run.stderr[-2000:]
+
+
+def test_face_grid_kernel_matches_the_float32_product(geometry) -> None:
+    """The compiled face grid gives the faces and excesses of a float32 argmax."""
+    shape = next(s for s in geometry.shapes if not isinstance(s.shape, coal.Capsule))
+    origin = shape.lower - 0.08
+    dims = np.ceil((shape.upper - shape.lower + 0.16) / FACE_GRID_STEP).astype(np.int64)
+    axes = [origin[k] + FACE_GRID_STEP * np.arange(dims[k]) for k in range(3)]
+    points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    excess = points.astype(np.float32).dot(shape.plane_normals_t) - shape.plane_offsets
+    faces = np.empty(len(points), dtype=np.int16)
+    values = np.empty(len(points), dtype=np.float32)
+    face_grid(
+        np.ascontiguousarray(shape.plane_normals_t.T),
+        shape.plane_offsets,
+        origin,
+        dims,
+        FACE_GRID_STEP,
+        faces,
+        values,
+    )
+    np.testing.assert_allclose(values, excess.max(axis=1), atol=1e-6)
+    picked = excess[np.arange(len(points)), faces]
+    np.testing.assert_allclose(picked, excess.max(axis=1), atol=1e-6)
