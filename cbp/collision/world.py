@@ -10,10 +10,11 @@ constraints of the next one (CAT Sec. IV-C).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import coal
@@ -83,6 +84,8 @@ class CollisionWorld:
 
     The environment can be replaced at any time, from any thread
     (:meth:`set_environment`); a query uses the snapshot current when it starts.
+    While a plan is made (:meth:`holding`), a new snapshot waits until the plan
+    is done: every step of one plan is measured against the same obstacles.
     """
 
     def __init__(
@@ -107,6 +110,9 @@ class CollisionWorld:
         self._request = coal.DistanceRequest()
         self._result = coal.DistanceResult()
         self.environment_version = 0
+        #: Plans in progress (:meth:`holding`), and the snapshot waiting for them.
+        self._holds = 0
+        self._waiting: Environment | None = None
         self._free_space: FreeSpaceChecker | None = None
         self._geometry_model = geometry.geometry_model()
         self._geometry_data = pin.GeometryData(self._geometry_model)
@@ -155,8 +161,36 @@ class CollisionWorld:
         """
         environment.prepare(self.geometry.shapes, self.margin(environment))
         with self._lock:
-            self._environment = environment
-            self.environment_version += 1
+            if self._holds:
+                self._waiting = environment
+            else:
+                self._swap(environment)
+
+    def _swap(self, environment: Environment) -> None:
+        """Make ``environment`` the current snapshot (the lock held)."""
+        self._environment = environment
+        self._waiting = None
+        self.environment_version += 1
+
+    @contextlib.contextmanager
+    def holding(self) -> Iterator[Environment]:
+        """Keep the current snapshot while a plan is made; yield it.
+
+        A map that publishes from its own thread would otherwise swap the
+        obstacles between two steps of one plan: a step validated against one
+        snapshot from a depth measured in another is rejected, and the steps'
+        contact rows change under the plan. The newest snapshot published
+        meanwhile is taken when the (outermost) hold ends.
+        """
+        with self._lock:
+            self._holds += 1
+        try:
+            yield self._environment
+        finally:
+            with self._lock:
+                self._holds -= 1
+                if not self._holds and self._waiting is not None:
+                    self._swap(self._waiting)
 
     def margin(self, environment: Environment) -> float:
         """How far from the unpadded shapes obstacles are reported [m].

@@ -25,6 +25,7 @@ to the low-level follower (CAT, and the IK and MP methods):
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
@@ -32,6 +33,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import pinocchio as pin
 
+from cbp.collision.world import CollisionWorld
 from cbp.compilation import CompileCounter
 from cbp.engine import Engine
 from cbp.executors.backout import back_out
@@ -164,6 +166,11 @@ class _LeavingContact:
         return Plan(path, len(path) - 1, "backing out of contact")
 
 
+def held(world: CollisionWorld | None) -> contextlib.AbstractContextManager[object]:
+    """``world``'s snapshot held while a plan is made (nothing without a world)."""
+    return contextlib.nullcontext() if world is None else world.holding()
+
+
 def _never() -> bool:
     return False
 
@@ -241,9 +248,11 @@ def run_trajectory_executor(
                 if hold is not None:
                     plan = Plan(None, 0, hold)
                 else:
-                    plan = leaving.plan(t, q_s) or planner.plan(
-                        q_s.copy(), goal, budget, run
-                    )
+                    # One snapshot of the obstacles for the whole plan.
+                    with held(run.world):
+                        plan = leaving.plan(t, q_s) or planner.plan(
+                            q_s.copy(), goal, budget, run
+                        )
                 note = plan.note
                 if plan.path is not None and len(plan.path) > 1:
                     new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)

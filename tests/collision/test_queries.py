@@ -366,3 +366,19 @@ def test_broad_phase_keeps_every_pair_within_the_margin(geometry, robots, rng) -
         )
         found += len(got)
     assert found > 30
+
+
+def test_a_snapshot_published_while_a_plan_is_made_waits_for_it(geometry) -> None:
+    """Within ``holding`` the obstacles stay; the newest published is taken after."""
+    world = CollisionWorld(geometry, PrimitiveEnvironment([]))
+    first = world.environment
+    second, third = PrimitiveEnvironment([]), PrimitiveEnvironment([])
+    with world.holding() as held:
+        assert held is first
+        with world.holding():  # nested: the outermost hold decides
+            world.set_environment(second)
+            world.set_environment(third)
+        assert world.environment is first
+    assert world.environment is third
+    world.set_environment(second)  # no plan in progress: at once
+    assert world.environment is second
