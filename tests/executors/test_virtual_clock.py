@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from cbp.executors import clock
 from cbp.executors.cat import run_cat
 from cbp.executors.clock import VirtualBudget, WallBudget
 from cbp.methods.settings import VirtualCosts
@@ -74,3 +75,21 @@ def test_a_virtual_run_under_load_matches_one_without() -> None:
             hog.join()
     assert loaded == quiet
     np.testing.assert_array_equal(q_loaded, q_quiet)
+
+
+def test_a_wall_budget_begins_no_unit_that_would_end_past_it(monkeypatch) -> None:
+    """The last unit's cost counts: work that would overrun the budget is not begun."""
+    now = [100.0]
+    monkeypatch.setattr(clock.time, "perf_counter", lambda: now[0])
+    budget = clock.WallBudget(0.1)
+    now[0] += 0.03  # a first step of 30 ms
+    budget.charge("qp_step")
+    assert not budget.spent()  # 30 ms used, 30 more end at 60
+    now[0] += 0.03
+    budget.charge("qp_step")
+    assert not budget.spent()  # the next would end at 90 ms
+    now[0] += 0.03
+    budget.charge("qp_step")
+    assert budget.spent()  # the next would end at 120 ms: not begun
+    assert budget.elapsed() == pytest.approx(0.09)
+    assert budget.left() == pytest.approx(0.01)
