@@ -12,7 +12,8 @@ give way.
 from __future__ import annotations
 
 import abc
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from typing import Any, ClassVar
 
 import numpy as np
@@ -38,8 +39,28 @@ class QPSolver(abc.ABC):
                 names the conflicting entries when they can be found.
         """
 
+    #: Whether an infeasible problem's error names the conflicting entries (a
+    #: second, relaxed solve, several times the first's cost).
+    diagnose: bool = True
+
+    @contextlib.contextmanager
+    def trials(self) -> Iterator[None]:
+        """Solves whose failure is an answer, not an error: not diagnosed.
+
+        The easing of an infeasible QP (:mod:`cbp.engine.recovery`) tries
+        bounds until one solves; naming the conflicts of every failed try
+        took a sixth of a CAT plan's time where obstacles pressed the arm.
+        """
+        before = self.diagnose
+        self.diagnose = False
+        try:
+            yield
+        finally:
+            self.diagnose = before
+
     def _fail(self, problem: QPProblem, status: str, infeasible: bool) -> SolveError:
-        conflicting = diagnose_infeasibility(problem) if infeasible else []
+        diagnose = infeasible and self.diagnose
+        conflicting = diagnose_infeasibility(problem) if diagnose else []
         what = _INFEASIBLE_HINT if infeasible else "the solver failed"
         names = f": {', '.join(conflicting)}" if conflicting else ""
         return SolveError(

@@ -149,6 +149,20 @@ def ease(
     Raises:
         SolveError: ``error``, when no easing makes the QP solvable.
     """
+    with solver.trials():
+        return _ease(problem, error, dt, solver, easable, v, levels)
+
+
+def _ease(
+    problem: QPProblem,
+    error: SolveError,
+    dt: float,
+    solver: QPSolver,
+    easable: np.ndarray,
+    v: FloatArray,
+    levels: IntArray | None,
+) -> tuple[FloatArray, Easing]:
+    """:func:`ease`, its trial solves not diagnosed (they are expected to fail)."""
     if not easable[problem.row_entry].all():  # rows of physical limits
         return _give_way(
             problem,
@@ -198,8 +212,15 @@ def ease(
     def scale(factor: float) -> None:
         """Set every demand's bounds to ``factor`` of what it asks."""
         lo, hi = given
-        lower[rows] = np.where(lo > anchor, anchor + factor * (lo - anchor), lo)
-        upper[rows] = np.where(hi < anchor, anchor + factor * (hi - anchor), hi)
+        # Only a demand is scaled: an infinite bound stays (and 0 x inf is
+        # never formed).
+        ask_lo, ask_hi = lo > anchor, hi < anchor
+        lower[rows] = np.where(
+            ask_lo, anchor + factor * (np.where(ask_lo, lo, anchor) - anchor), lo
+        )
+        upper[rows] = np.where(
+            ask_hi, anchor + factor * (np.where(ask_hi, hi, anchor) - anchor), hi
+        )
         lower[rows[equal]] = upper[rows[equal]] = anchor[equal] + factor * (
             lo[equal] - anchor[equal]
         )
