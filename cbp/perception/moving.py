@@ -13,7 +13,9 @@ obstacle can reach by then, as speed and separation monitoring (ISO/TS 15066)
 counts the separation the robot needs against an assumed approach speed.
 
 While a moving cell is that near the robot, space no camera has seen gives
-way: the snapshot's contacts with unknown cells are left out, so the arm may
+way: the snapshot's contacts are kept only with cells the newest grid holds
+occupied (unknown ones, and those seen through since the snapshot, are left
+out), so the arm may
 retreat into its own shadow rather than be pinned between an obstacle it sees
 come and space it has not seen (what gives way first: physical limits hold,
 then seen obstacles, then unseen space).
@@ -34,7 +36,7 @@ from cbp.collision.contacts import ContactSet
 from cbp.collision.environment import NarrowPhase
 from cbp.collision.geometry import LinkShape, PlacedShapes
 from cbp.collision.map_environment import OccupancyEnvironment
-from cbp.perception.kernels import UNKNOWN
+from cbp.perception.kernels import OCCUPIED
 from cbp.robot import FloatArray
 
 __all__ = [
@@ -85,8 +87,9 @@ class MovingCellsEnvironment(OccupancyEnvironment):
     Attributes:
         moving: the moving cells, as an environment of their own.
         growth: how much nearer they are measured [m].
-        states: the grid's cell states (live: the map's own array), which tell
-            unknown cells from occupied ones.
+        states: the grid's cell states (live: the map's own array, which may be
+            newer than the snapshot), which tell unknown cells from occupied
+            ones.
         lower: the grid's lower corner [m].
     """
 
@@ -125,7 +128,18 @@ class MovingCellsEnvironment(OccupancyEnvironment):
         return ContactSet.concatenate([self._seen(mapped), ahead])
 
     def _seen(self, contacts: ContactSet) -> ContactSet:
-        """``contacts`` less those with unknown cells."""
+        """``contacts`` with cells the newest grid holds occupied, and no others.
+
+        The cells are looked up in the grid as it is now, which a map in its
+        own thread or process has moved on from since this snapshot: a cell
+        unknown in the snapshot that a camera has since seen through is free
+        now. Before, such a cell was kept (it was not unknown any more), and
+        the unseen space it had been held the arm while obstacles came:
+        measured on the generated scene moving_3 in virtual time with the
+        snapshots installed 5 frames late, 39 kN, 1110 eased QPs; with this
+        rule 0 N (as without the delay), and 0 N in a wall-clock run with the
+        map in its own process.
+        """
         if not len(contacts):
             return contacts
         # A contact's obstacle point lies on its cell's surface toward the
@@ -134,10 +148,10 @@ class MovingCellsEnvironment(OccupancyEnvironment):
         ijk = np.floor((inner - self.lower) / self.cell).astype(np.intp)
         shape = np.array(self.states.shape)
         inside = np.all((ijk >= 0) & (ijk < shape), axis=1)
-        state = np.full(len(ijk), UNKNOWN + 1, dtype=np.int64)
+        state = np.full(len(ijk), OCCUPIED, dtype=np.int64)  # off the grid: kept
         i = ijk[inside]
         state[inside] = self.states[i[:, 0], i[:, 1], i[:, 2]]
-        keep = state != UNKNOWN
+        keep = state == OCCUPIED
         if keep.all():
             return contacts
         return ContactSet(

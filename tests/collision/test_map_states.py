@@ -525,3 +525,34 @@ def test_moving_cells_grow_in_whole_centimetres_and_only_with_a_look_ahead() -> 
     assert moving_growth(0.25, 0.3, 0.1) == pytest.approx(0.10)
     assert moving_growth(0.25, 0.0, 0.5) == 0.0  # JT plans nothing ahead
     assert moving_growth(0.0, 0.3, 0.0) == 0.0
+
+
+def test_a_snapshot_older_than_the_grid_is_read_with_the_newest_states(
+    scene, robots
+) -> None:
+    """Unknown cells a newer frame saw through do not hold the arm either.
+
+    A map in its own process publishes snapshots older than its grid: the
+    states looked up are the grid's newest, and a cell free there is no
+    obstacle (it held the arm while obstacles came, in wall-clock runs).
+    """
+    grid, world, state, _ = _plate_before_the_hand(scene, robots)
+    mapped = grid.environment()
+    centres = grid.moving_centres(0.1)
+    still = world.query(state)
+    inner = still.other_point - 0.25 * grid.cell * still.normal
+    shadow = grid.state_at(inner) == UNKNOWN
+    assert np.any(shadow)
+    # A newer frame saw through the shadow: the grid moved on, the snapshot not.
+    newer = grid.cells.copy()
+    seen = np.floor((inner[shadow] - grid.lower) / grid.cell).astype(np.intp)
+    newer[seen[:, 0], seen[:, 1], seen[:, 2]] = FREE
+    met = world.query(state, with_moving(mapped, centres, 0.3, newer, grid.lower))
+    assert len(met)
+    cells = np.floor(
+        (met.other_point - 0.25 * grid.cell * met.normal - grid.lower) / grid.cell
+    ).astype(np.intp)
+    held = {tuple(c) for c in cells}
+    assert not held & {tuple(c) for c in seen}
+    # The snapshot itself, read alone, still holds them (it is as it was).
+    assert np.any(grid.state_at(inner[shadow]) == UNKNOWN)
