@@ -86,10 +86,9 @@ class GoalPoseTask(Task[GoalPoseParams]):
         # Compile the pose error (or load it from numba's cache) now, on arrays
         # of the kinds a step passes, rather than in the first control step.
         state = RobotState(robot)
-        placement = state.frame_placement(self.frame_id)
         pose_error_into(
-            placement.rotation,
-            placement.translation,
+            state.frame_rotation(self.frame_id),
+            state.frame_position(self.frame_id),
             np.eye(3),
             np.zeros(3),
             state.frame_jacobian(self.frame_id),
@@ -165,13 +164,13 @@ class GoalPoseTask(Task[GoalPoseParams]):
         """Value and Jacobian written in place, sharing the rotation error matrix."""
         if not self._has_target:
             raise TargetNotSetError(f"{self.name} ({self.type_name}): no target set")
-        placement = state.frame_placement(self.frame_id)
+        frame = self.frame_id
         pose_error_into(
-            placement.rotation,
-            placement.translation,
+            state.frame_rotation(frame),
+            state.frame_position(frame),
             self._goal_rotation_t,
             self._goal_translation,
-            state.frame_jacobian(self.frame_id),
+            state.frame_jacobian(frame),
             value,
             jacobian,
         )
