@@ -659,6 +659,7 @@ def _bench(quick: bool, out: Path | None, results: Path | None) -> int:
     print("profile of the CAT step (largest own-time shares):")
     for name, pct in result["profile_cat_step"]:
         print(f"  {name}: {pct:.0f} %")
+    print("\n".join(bench.targets_table(result["rows"])), flush=True)
     if out is not None:
         bench.dump(result, out)
     if results is not None:

@@ -90,6 +90,18 @@ class StepDisplacement(JointDifference[ParamsT]):
         """The configuration at the start of the step."""
         return self.latched(self._q0)
 
+    def value_into(self, state: RobotState, value: FloatArray) -> None:
+        """Selected rows of q ⊖ q_0, written in place.
+
+        At the state :meth:`prepare` latched, on a Euclidean model, that is
+        q - q: zeros, written without the arithmetic (the engine's every step;
+        it has checked q finite).
+        """
+        if self._q0 is state.q and self.robot.is_euclidean:
+            value.fill(0.0)
+            return
+        super().value_into(state, value)
+
 
 def check_scaled_limits(scale: float, limits: Mapping[str, float]) -> None:
     """A limit plugin's parameters: ``scale`` in (0, 1], every limit positive.

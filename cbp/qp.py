@@ -209,39 +209,51 @@ class QPAssembler:
         # assembly, and each step only needs their values.
         constant = [(i, e) for i, e in soft if e.plugin.constant_jacobian]
         varying = [(i, e) for i, e in soft if not e.plugin.constant_jacobian]
-        self._soft = _Block(varying, nv)
-        self._constant = _Block(constant, nv)
-        self._constant_JtW = np.zeros((nv, self._constant.m))  # set at the first step
-        self._folded = False
-        # The constant tasks' step -k f is formed by the compiled pass, unless a
-        # task limits it (then in Python, by desired_change).
-        folded = self._constant
-        self._constant_step = (
-            (folded.desired, np.ones(folded.m))
-            if folded.limiting
-            else (folded.f, folded.negative_gains)
-        )
-        block = _Block([(i, e) for i, e in indexed if not _is_soft_task(e)], nv)
-        self._rows = block
+        hard = [(i, e) for i, e in indexed if not _is_soft_task(e)]
         soft_rows = np.concatenate(
-            [np.full(e.plugin.dim, e.priority == "soft") for e in block.entries]
+            [np.full(e.plugin.dim, e.priority == "soft") for _, e in hard]
             or [np.zeros(0, dtype=bool)]
         )
         self._slack_rows = np.flatnonzero(soft_rows)
-        m, ns = block.m, self._slack_rows.size
+        m_const = sum(e.plugin.dim for _, e in constant)
+        m, ns = int(soft_rows.size), int(self._slack_rows.size)
         self.n = n = nv + ns
-        self._H_base = np.zeros((n, n))
+        rows = m + 2 * ns
+        # Every float array the compiled pass reads or writes, in one buffer.
+        arena = _Arena(
+            sum(_Block.floats(b, nv) for b in (varying, constant, hard))
+            + m_const * (nv + 1)
+            + 2 * n * n
+            + n
+            + rows * (n + 2)
+        )
+        self._soft = _Block(varying, nv, arena)
+        self._constant = _Block(constant, nv, arena)
+        self._constant_JtW = arena.take((nv, m_const))  # set at the first step
+        self._folded = False
+        # The constant tasks' step -k f is formed by the compiled pass, unless a
+        # task limits it (then in Python, by desired_change).
+        folded, ones = self._constant, arena.take((m_const,), 1.0)
+        self._constant_step = (
+            (folded.desired, ones)
+            if folded.limiting
+            else (folded.f, folded.negative_gains)
+        )
+        block = _Block(hard, nv, arena)
+        self._rows = block
+        self._H_base = arena.take((n, n))
         self._H_base[nv:, nv:] = np.diag(block.weights[self._slack_rows])
         self._H_base[np.diag_indices(n)] += regularization
-        self._H = self._H_base.copy()
-        self._g = np.zeros(n)
-        self._A = np.zeros((m + 2 * ns, n))
+        self._H = arena.take((n, n))
+        self._H[...] = self._H_base
+        self._g = arena.take((n,))
+        self._A = arena.take((rows, n))
         slack = np.arange(ns)
         self._A[self._slack_rows, nv + slack] = 1.0  # lower side: C dq + s >= l
         self._A[m + slack, nv + slack] = -1.0  # upper side: C dq - s <= u
         self._A[m + ns + slack, nv + slack] = 1.0  # s >= 0
-        self._lower = np.full(m + 2 * ns, -np.inf)
-        self._upper = np.full(m + 2 * ns, np.inf)
+        self._lower = arena.take((rows,), -np.inf)
+        self._upper = arena.take((rows,), np.inf)
         self._lower[m + ns :] = 0.0
         self._row_entry = np.concatenate(
             [block.row_entry] + [block.row_entry[self._slack_rows]] * 2
@@ -252,11 +264,46 @@ class QPAssembler:
             A=self._A,
             lower=self._lower,
             upper=self._upper,
-            equality=np.zeros(m + 2 * ns, dtype=bool),
+            equality=np.zeros(rows, dtype=bool),
             row_entry=self._row_entry,
             entry_names=self.entry_names,
             nv=nv,
         )
+        self._floats = arena.full()
+        # Where the compiled pass finds its arrays in that buffer, and the
+        # integer arrays it reads (see fill_qp).
+        constant_step, constant_scale = self._constant_step
+        in_order = (
+            self._H_base,
+            self._H,
+            self._g,
+            self._soft.J,
+            self._soft.weights,
+            self._soft.desired,
+            self._constant_JtW,
+            constant_step,
+            constant_scale,
+            block.J,
+            block.f,
+            block.lower,
+            block.upper,
+            block.gains,
+            block.desired,
+            self._A,
+            self._lower,
+            self._upper,
+        )
+        sizes = [nv, n, self._soft.m, m_const, m, ns]
+        assert len(sizes) == _SIZES
+        assert len(in_order) == _ROW_KINDS - _SIZES
+        self._layout = np.concatenate(
+            [
+                sizes,
+                [arena.offset(a) for a in in_order],
+                block.task_rows,
+                self._slack_rows,
+            ]
+        ).astype(np.int64)
         # Compile the pass, or load it from numba's cache, here rather than in the
         # first control step; on the zero buffers it writes the initial problem.
         self._fill()
@@ -298,34 +345,7 @@ class QPAssembler:
 
     def _fill(self) -> int:
         """Run :func:`fill_qp` on the blocks' current outputs; return its status."""
-        soft, block = self._soft, self._rows
-        constant_step, constant_scale = self._constant_step
-        return int(
-            fill_qp(
-                self.nv,
-                self._H_base,
-                self._H,
-                self._g,
-                soft.J,
-                soft.weights,
-                soft.desired,
-                self._constant_JtW,
-                constant_step,
-                constant_scale,
-                block.J,
-                block.f,
-                block.lower,
-                block.upper,
-                block.gains,
-                block.task_rows,
-                block.desired,
-                self._slack_rows,
-                self._A,
-                self._lower,
-                self._upper,
-                self._problem.equality,
-            )
-        )
+        return int(fill_qp(self._floats, self._layout, self._problem.equality))
 
     def _raise(self, status: int) -> None:
         """Name the entry behind a non-finite output that :func:`fill_qp` found."""
@@ -350,11 +370,43 @@ class QPAssembler:
         """Add the constant soft tasks' J^T W J to H's base, keep J^T W for g."""
         constant, nv = self._constant, self.nv
         constant.fill(state)
-        JtW = (constant.J * constant.weights[:, None]).T.copy()
+        JtW = self._constant_JtW
+        JtW[...] = (constant.J * constant.weights[:, None]).T
         self._H_base[:nv, :nv] += JtW.dot(constant.J)
         self._H[:nv, :nv] = self._H_base[:nv, :nv]
-        self._constant_JtW = JtW
         self._folded = True
+
+
+class _Arena:
+    """One float buffer cut into arrays, so that the compiled pass takes one array.
+
+    Args:
+        size: how many floats the arrays take in all.
+    """
+
+    def __init__(self, size: int) -> None:
+        self._buffer = np.zeros(size)
+        self._used = 0
+
+    def take(self, shape: tuple[int, ...], fill: float = 0.0) -> FloatArray:
+        """The next ``shape`` floats of the buffer (a view), set to ``fill``."""
+        count = math.prod(shape)
+        start, self._used = self._used, self._used + count
+        if self._used > self._buffer.size:
+            raise AssertionError(f"QP buffers: {self._used} > {self._buffer.size}")
+        view = self._buffer[start : self._used].reshape(shape)
+        view[...] = fill
+        return view
+
+    def offset(self, view: FloatArray) -> int:
+        """Where ``view`` (taken from this buffer) starts in it."""
+        return (view.ctypes.data - self._buffer.ctypes.data) // view.itemsize
+
+    def full(self) -> FloatArray:
+        """The buffer, once every array is taken."""
+        if self._used != self._buffer.size:
+            raise AssertionError(f"QP buffers: {self._used} of {self._buffer.size}")
+        return self._buffer
 
 
 def _is_soft_task(entry: Entry) -> bool:
@@ -362,17 +414,22 @@ def _is_soft_task(entry: Entry) -> bool:
 
 
 class _Block:
-    """Preallocated rows of a group of entries: stacked values, Jacobians, weights."""
+    """Preallocated rows of a group of entries: stacked values, Jacobians, weights.
 
-    def __init__(self, entries: Sequence[tuple[int, Entry]], nv: int) -> None:
+    Its float arrays are cut from the assembler's buffer (:class:`_Arena`).
+    """
+
+    def __init__(
+        self, entries: Sequence[tuple[int, Entry]], nv: int, arena: _Arena
+    ) -> None:
         self.entries = [e for _, e in entries]
         dims = [e.plugin.dim for e in self.entries]
-        self.m = int(sum(dims))
+        self.m = m = int(sum(dims))
         self.nv = nv
-        self.J = np.zeros((self.m, nv))
-        self.f = np.zeros(self.m)
-        self.lower = np.full(self.m, -np.inf)
-        self.upper = np.full(self.m, np.inf)
+        self.J = arena.take((m, nv))
+        self.f = arena.take((m,))
+        self.lower = arena.take((m,), -np.inf)
+        self.upper = arena.take((m,), np.inf)
         starts = np.concatenate([[0], np.cumsum(dims)]).astype(int)
         self.slices = [slice(int(a), int(b)) for a, b in itertools.pairwise(starts)]
         self.items = [
@@ -389,18 +446,21 @@ class _Block:
             [np.full(d, i) for (i, _), d in zip(entries, dims, strict=True)]
             or [np.zeros(0)]
         ).astype(np.intp)
-        self.weights = np.concatenate([e.weight for e in self.entries] or [np.zeros(0)])
-        self.gains = np.concatenate(
-            [np.full(d, e.gain) for e, d in zip(self.entries, dims, strict=True)]
-            or [np.zeros(0)]
-        )
-        self.negative_gains = -self.gains
-        self.desired = np.zeros(self.m)
+        self.weights = arena.take((m,))
+        self.gains = arena.take((m,))
+        for sl, e in zip(self.slices, self.entries, strict=True):
+            self.weights[sl] = e.weight
+            self.gains[sl] = e.gain
+        self.negative_gains = arena.take((m,))
+        np.negative(self.gains, out=self.negative_gains)
+        self.desired = arena.take((m,))
         self.limiting: list[tuple[slice, Task[Any]]] = [
             (sl, p)
             for sl, p in self.items
             if isinstance(p, Task) and type(p).limit_step is not Task.limit_step
         ]
+        # The limiting tasks with their rows of ``desired`` (views, made once).
+        self._limited = [(task, self.desired[sl]) for sl, task in self.limiting]
         self.task_rows = np.concatenate(
             [
                 np.full(d, isinstance(e.plugin, Task))
@@ -412,6 +472,16 @@ class _Block:
         self.constraints: list[tuple[slice, Constraint[Any]]] = [
             (sl, p) for sl, p in self.items if isinstance(p, Constraint)
         ]
+        # The constraints with their rows of ``lower`` and ``upper`` (views).
+        self._bounded = [
+            (p, self.lower[sl], self.upper[sl]) for sl, p in self.constraints
+        ]
+
+    @staticmethod
+    def floats(entries: Sequence[tuple[int, Entry]], nv: int) -> int:
+        """How many floats a block of ``entries`` takes from the arena."""
+        m = sum(e.plugin.dim for _, e in entries)
+        return m * (nv + 7)
 
     def fill(self, state: RobotState) -> None:
         """Linearize every entry into its rows of the stacked buffers.
@@ -440,19 +510,19 @@ class _Block:
 
     def desired_change(self) -> None:
         """Write -k f of every row, after the tasks' step limits, into ``desired``."""
-        desired = self.desired
-        np.multiply(self.f, self.negative_gains, out=desired)
-        for sl, task in self.limiting:
-            desired[sl] = task.limit_step(desired[sl])
+        np.multiply(self.f, self.negative_gains, out=self.desired)
+        for task, rows in self._limited:
+            limited = task.limit_step(rows)
+            if limited is not rows:
+                rows[:] = limited
 
     def collect_bounds(self, state: RobotState) -> None:
         """Write every constraint's (lower, upper) on f into ``lower`` and ``upper``."""
-        given_lower, given_upper = self.lower, self.upper
-        for sl, plugin in self.constraints:
+        for plugin, given_lower, given_upper in self._bounded:
             lo, up = plugin.compute_bounds(state)
             try:
-                given_lower[sl] = lo
-                given_upper[sl] = up
+                given_lower[:] = lo
+                given_upper[:] = up
             except ValueError:
                 raise PluginOutputError(
                     f"{plugin.name} ({plugin.type_name}): bounds have shapes "
@@ -470,6 +540,10 @@ class _Block:
                 )
 
 
+# The layout read by fill_qp: 6 sizes, then 18 offsets, then the rows' kinds.
+_SIZES = 6
+_ROW_KINDS = _SIZES + 18
+
 # Bits of the status returned by fill_qp.
 _COST_NOT_FINITE = 1
 _ROWS_NOT_FINITE = 2
@@ -477,7 +551,55 @@ _BOUNDS_NAN = 4
 
 
 @numba.njit(cache=True, nogil=True)
-def fill_qp(
+def fill_qp(floats: FloatArray, layout: IntArray, equality: BoolArray) -> int:
+    r"""Turn the stacked plugin outputs into the QP, in place; return a status.
+
+    The arrays are cut from two buffers made once per problem shape by
+    :class:`QPAssembler`: ``floats`` holds every float array, ``layout`` the
+    sizes (nv, n, soft rows, constant soft rows, rows m, slacks), the offset
+    of each float array in ``floats`` (in :func:`_fill_arrays`'s order), then
+    the task rows (m, 0 or 1) and the slack rows. Three arguments rather than
+    twenty-two: numba's dispatch costs about 50 ns per array argument.
+    See :func:`_fill_arrays` for what is computed.
+    """
+    nv, n, ms, mc = layout[0], layout[1], layout[2], layout[3]
+    m, ns = layout[4], layout[5]
+    at = layout[_SIZES:_ROW_KINDS]  # the float arrays' offsets
+    rows = m + 2 * ns
+    return _fill_arrays(
+        nv,
+        _cut(floats, at[0], n, n),
+        _cut(floats, at[1], n, n),
+        floats[at[2] : at[2] + n],
+        _cut(floats, at[3], ms, nv),
+        floats[at[4] : at[4] + ms],
+        floats[at[5] : at[5] + ms],
+        _cut(floats, at[6], nv, mc),
+        floats[at[7] : at[7] + mc],
+        floats[at[8] : at[8] + mc],
+        _cut(floats, at[9], m, nv),
+        floats[at[10] : at[10] + m],
+        floats[at[11] : at[11] + m],
+        floats[at[12] : at[12] + m],
+        floats[at[13] : at[13] + m],
+        layout[_ROW_KINDS : _ROW_KINDS + m],
+        floats[at[14] : at[14] + m],
+        layout[_ROW_KINDS + m : _ROW_KINDS + m + ns],
+        _cut(floats, at[15], rows, n),
+        floats[at[16] : at[16] + rows],
+        floats[at[17] : at[17] + rows],
+        equality,
+    )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _cut(floats: FloatArray, start: int, rows: int, cols: int) -> FloatArray:
+    """The (rows, cols) matrix at ``start`` of the buffer (a view)."""
+    return floats[start : start + rows * cols].reshape((rows, cols))
+
+
+@numba.njit(cache=True, nogil=True)
+def _fill_arrays(
     nv: int,
     H_base: FloatArray,
     H: FloatArray,
@@ -493,7 +615,7 @@ def fill_qp(
     given_lower: FloatArray,
     given_upper: FloatArray,
     gains: FloatArray,
-    task_rows: BoolArray,
+    task_rows: IntArray,
     desired: FloatArray,
     slack_rows: IntArray,
     A: FloatArray,
@@ -501,7 +623,7 @@ def fill_qp(
     upper: FloatArray,
     equality: BoolArray,
 ) -> int:
-    r"""Turn the stacked plugin outputs into the QP, in place; return a status.
+    r"""The arithmetic of :func:`fill_qp`, on its arrays.
 
     Cost, over the joint block: :math:`H = H_0 + J_s^T W J_s` and
     :math:`g = -(J_s^T W d_s + (J_c^T W_c) d_c)`, with :math:`d = -k f` after the

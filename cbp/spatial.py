@@ -103,6 +103,57 @@ def checked_pose(
     return p, R
 
 
+@numba.njit(
+    "boolean(float64[:], float64[:, :], float64[::1], float64[:, ::1])",
+    cache=True,
+    nogil=True,
+)
+def checked_pose_into(
+    position: FloatArray,
+    rotation: FloatArray,
+    translation_out: FloatArray,
+    rotation_t_out: FloatArray,
+) -> bool:
+    """:func:`checked_pose`'s checks in one compiled call, for arrays of floats.
+
+    Writes the position (3,) into ``translation_out`` and the rotation's
+    transpose into ``rotation_t_out`` (3, 3), and returns True, when they are a
+    pose by the same arithmetic as :func:`checked_pose`; otherwise writes
+    nothing and returns False (call :func:`checked_pose` for the message). One
+    signature for any memory layout: nothing compiles at run time.
+    """
+    if position.shape[0] != 3 or rotation.shape[0] != 3 or rotation.shape[1] != 3:
+        return False
+    x, y, z = position[0], position[1], position[2]
+    a, b, c = rotation[0, 0], rotation[0, 1], rotation[0, 2]
+    d, e, f = rotation[1, 0], rotation[1, 1], rotation[1, 2]
+    g, h, i = rotation[2, 0], rotation[2, 1], rotation[2, 2]
+    if not math.isfinite(x + y + z + a + b + c + d + e + f + g + h + i):
+        return False
+    unit = max(
+        abs(a * a + d * d + g * g - 1.0),
+        abs(b * b + e * e + h * h - 1.0),
+        abs(c * c + f * f + i * i - 1.0),
+    )
+    orthogonal = max(
+        abs(a * b + d * e + g * h),
+        abs(a * c + d * f + g * i),
+        abs(b * c + e * f + h * i),
+    )
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if (
+        unit > _ORTHONORMAL_ATOL + _ORTHONORMAL_RTOL
+        or orthogonal > _ORTHONORMAL_ATOL
+        or det < 0.0
+    ):
+        return False
+    for k in range(3):
+        translation_out[k] = position[k]
+        for j in range(3):
+            rotation_t_out[k, j] = rotation[j, k]
+    return True
+
+
 def cross3(a: FloatArray, b: FloatArray) -> FloatArray:
     """Cross product of two 3-vectors (``np.cross`` costs ~10x more on them)."""
     a0, a1, a2 = a.tolist()

@@ -37,6 +37,9 @@ class RobotState:
         self.robot = robot
         self.data = robot.model.createData()
         self._jacobians: dict[int, FloatArray] = {}
+        # Per frame: its position and rotation in ``data`` (views, made once:
+        # pinocchio updates them in place).
+        self._frames: dict[int, tuple[FloatArray, FloatArray]] = {}
         self.q: FloatArray = np.empty(0)
         self._rest = _at_rest(robot.nv)
         self.v: FloatArray = self._rest
@@ -77,12 +80,27 @@ class RobotState:
         return J
 
     def frame_position(self, frame_id: int) -> FloatArray:
-        """Position of the frame's origin in the world [m], shape (3,)."""
-        return np.asarray(self.data.oMf[frame_id].translation)
+        """Position of the frame's origin in the world [m], shape (3,).
+
+        A view of :attr:`data`, which :meth:`update` rewrites: copy it to keep it.
+        """
+        return self._frame(frame_id)[0]
 
     def frame_rotation(self, frame_id: int) -> FloatArray:
-        """Rotation matrix from the frame to the world, shape (3, 3)."""
-        return np.asarray(self.data.oMf[frame_id].rotation)
+        """Rotation matrix from the frame to the world, shape (3, 3).
+
+        A view of :attr:`data`, which :meth:`update` rewrites: copy it to keep it.
+        """
+        return self._frame(frame_id)[1]
+
+    def _frame(self, frame_id: int) -> tuple[FloatArray, FloatArray]:
+        """The frame's position and rotation in :attr:`data` (views, made once)."""
+        views = self._frames.get(frame_id)
+        if views is None:
+            placement = self.data.oMf[frame_id]
+            views = np.asarray(placement.translation), np.asarray(placement.rotation)
+            self._frames[frame_id] = views
+        return views
 
     def frame_placement(self, frame_id: int) -> pin.SE3:
         """Placement of the frame in the world (a pinocchio SE3; do not modify)."""

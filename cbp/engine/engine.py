@@ -79,6 +79,7 @@ class Engine:
                 "(give each entry its own 'name')"
             )
         self.robot = robot
+        self._nq, self._nv = robot.nq, robot.nv
         self.entries = list(entries)
         self.solver = make_solver(solver) if isinstance(solver, str) else solver
         self.assembler = QPAssembler(self.entries, robot.nv, regularization)
@@ -161,12 +162,12 @@ class Engine:
                 state.v,
                 self._levels,
             )
-        if v is not None and self._drift.refine(problem, state, x[: self.robot.nv]):
+        if v is not None and self._drift.refine(problem, state, x[: self._nv]):
             # The rows that hold the step, with the drift of the step found;
             # if that cannot be solved, the first answer (third order off).
             with contextlib.suppress(SolveError):
                 x = self.solver.solve(problem)
-        dq, slowed = self.guard.check(q, x[: self.robot.nv], dt, v)
+        dq, slowed = self.guard.check(q, x[: self._nv], dt, v)
         return StepResult(dq, problem, eased, slowed)
 
     def _checked(self, q: FloatArray, dt: float) -> FloatArray:
@@ -175,11 +176,10 @@ class Engine:
             raise InvalidStateError(f"dt must be a finite number, got {dt!r}")
         if dt <= 0.0:
             raise InvalidStateError(f"dt must be > 0, got {dt}")
-        nq = self.robot.nq
         if (
             type(q) is np.ndarray
-            and q.dtype == np.float64
-            and q.shape == (nq,)
+            and q.dtype is _FLOAT
+            and q.shape == (self._nq,)
             and _all_finite(q)
         ):
             return q  # the common case, checked in one compiled pass
@@ -212,6 +212,11 @@ class Engine:
             if first <= i < first + size:
                 return f"'{model.names[j]}'"
         return str(i)
+
+
+#: The dtype of the configurations checked in one compiled pass (numpy's
+#: built-in dtypes are singletons; any other goes the long way).
+_FLOAT = np.dtype(np.float64)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -10,7 +10,7 @@ import numpy as np
 
 from cbp.errors import ConfigError, located
 from cbp.plugin import Constraint, FloatArray, PluginParams, RobotLimit
-from cbp.robot import RobotModel
+from cbp.robot import RobotModel, compact_rows
 from cbp.state import RobotState
 
 
@@ -65,6 +65,7 @@ class JointLimitsConstraint(Constraint[JointLimitsParams]):
             keep = np.isin(v_idx, wanted)
             q_idx, v_idx = q_idx[keep], v_idx[keep]
         self.q_idx, self.v_idx = q_idx, v_idx
+        self._q_rows = compact_rows(q_idx)  # a slice when consecutive
         self._lower = robot.lower_limits[q_idx] + params.margin
         self._upper = robot.upper_limits[q_idx] - params.margin
         short = np.flatnonzero(self._lower > self._upper)
@@ -96,6 +97,10 @@ class JointLimitsConstraint(Constraint[JointLimitsParams]):
     def compute_value(self, state: RobotState) -> FloatArray:
         """Positions of the limited joints."""
         return state.q[self.q_idx]
+
+    def value_into(self, state: RobotState, value: FloatArray) -> None:
+        """Positions of the limited joints, written in place."""
+        value[:] = state.q[self._q_rows]
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """Selection of the limited joints' tangent coordinates (read-only)."""

@@ -14,8 +14,12 @@ import pinocchio as pin
 from cbp.errors import ConfigError, TargetNotSetError, located
 from cbp.plugin import FloatArray, PluginParams, Task
 from cbp.robot import RobotModel
-from cbp.spatial import Pose, checked_pose, pose_error_into
+from cbp.spatial import Pose, checked_pose, checked_pose_into, pose_error_into
 from cbp.state import RobotState
+
+#: The dtype of the goals checked in one compiled call (numpy's built-in
+#: dtypes are singletons; any other goes the long way).
+_FLOAT = np.dtype(np.float64)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,13 +80,15 @@ class GoalPoseTask(Task[GoalPoseParams]):
         self.frame_id = located(robot.frame_id, self.frame, "frame")
         self._target: pin.SE3 | None = None
         self._has_target = False
+        # The goal, written in place by set_target (read by the pose error).
+        self._goal_translation = np.zeros(3)
+        self._goal_rotation_t = np.eye(3)
         # Compile the pose error (or load it from numba's cache) now, on arrays
         # of the kinds a step passes, rather than in the first control step.
         state = RobotState(robot)
-        placement = state.frame_placement(self.frame_id)
         pose_error_into(
-            placement.rotation,
-            placement.translation,
+            state.frame_rotation(self.frame_id),
+            state.frame_position(self.frame_id),
             np.eye(3),
             np.zeros(3),
             state.frame_jacobian(self.frame_id),
@@ -104,13 +110,27 @@ class GoalPoseTask(Task[GoalPoseParams]):
         Raises:
             InvalidTargetError: wrong shape, NaN or not a rotation; the goal is kept.
         """
+        if (
+            type(position) is np.ndarray
+            and type(rotation) is np.ndarray
+            and position.dtype is _FLOAT
+            and rotation.dtype is _FLOAT
+            and position.ndim == 1
+            and rotation.ndim == 2
+            and checked_pose_into(
+                position, rotation, self._goal_translation, self._goal_rotation_t
+            )
+        ):  # arrays of floats, checked and copied in one compiled call
+            self._target = None
+            self._has_target = True
+            return
         self._set(*checked_pose(position, rotation, f"{self.name} target"))
 
     def _set(self, position: FloatArray, rotation: FloatArray) -> None:
         # As numpy arrays, not read through pinocchio every step; the SE3 of
         # ``target`` is made when asked for.
-        self._goal_translation = position
-        self._goal_rotation_t = np.ascontiguousarray(rotation.T)  # one array kind
+        self._goal_translation[:] = position
+        self._goal_rotation_t[:] = rotation.T
         self._target = None
         self._has_target = True
 
@@ -144,13 +164,13 @@ class GoalPoseTask(Task[GoalPoseParams]):
         """Value and Jacobian written in place, sharing the rotation error matrix."""
         if not self._has_target:
             raise TargetNotSetError(f"{self.name} ({self.type_name}): no target set")
-        placement = state.frame_placement(self.frame_id)
+        frame = self.frame_id
         pose_error_into(
-            placement.rotation,
-            placement.translation,
+            state.frame_rotation(frame),
+            state.frame_position(frame),
             self._goal_rotation_t,
             self._goal_translation,
-            state.frame_jacobian(self.frame_id),
+            state.frame_jacobian(frame),
             value,
             jacobian,
         )

@@ -107,3 +107,58 @@ def test_pose_error_matches_pinocchio(robots, rng) -> None:
                 expected = pin.Jlog3(M).dot(M.T).dot(J_frame[3:])
                 np.testing.assert_allclose(jacobian[3:], expected, atol=1e-9)
         np.testing.assert_array_equal(jacobian[:3], J_frame[:3])
+
+
+def test_compiled_pose_check_accepts_what_checked_pose_accepts(rng) -> None:
+    """checked_pose_into agrees with checked_pose on noisy, reflected and NaN poses."""
+    from cbp.spatial import checked_pose, checked_pose_into
+
+    translation, rotation_t = np.zeros(3), np.eye(3)
+    agreed = {True: 0, False: 0}
+    for k in range(400):
+        rotation = pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3))
+        # Noise on both sides of the tolerance (about 1e-5 on R^T R).
+        rotation = rotation + 10.0 ** rng.uniform(-8, -4) * rng.normal(size=(3, 3))
+        if k % 10 == 0:
+            rotation = -rotation
+        position = rng.normal(size=3)
+        if k % 25 == 0:
+            position[k % 3] = np.nan
+        if k % 2:
+            rotation = np.asfortranarray(rotation)  # as pinocchio's are
+        try:
+            checked_pose(position, rotation)
+            expected = True
+        except InvalidTargetError:
+            expected = False
+        before = rotation_t.copy()
+        assert (
+            checked_pose_into(position, rotation, translation, rotation_t) is expected
+        )
+        if expected:
+            assert np.array_equal(translation, position)
+            assert np.array_equal(rotation_t, rotation.T)
+        else:
+            assert np.array_equal(rotation_t, before)  # nothing written
+        agreed[expected] += 1
+    assert min(agreed.values()) > 50  # both kinds were tried
+
+
+def test_goal_pose_keeps_its_goal_when_a_bad_one_is_set(robots) -> None:
+    """A refused target leaves the goal as it was, whatever the input's type."""
+    from cbp.plugins.tasks.goal_pose_task import GoalPoseParams, GoalPoseTask
+
+    task = GoalPoseTask(GoalPoseParams(), robots["panda"], "goal")
+    task.set_target(P, R)
+    for position, rotation in [
+        (P, R * 1.001),
+        (np.array([0.4, np.nan, 0.5]), R),
+        (P.tolist(), (-R).tolist()),
+        (P[:2], R),
+    ]:
+        with pytest.raises(InvalidTargetError):
+            task.set_target(position, rotation)
+        assert np.array_equal(task.target.translation, P)
+        assert np.allclose(task.target.rotation, R, atol=0.0, rtol=0.0)
+    task.set_target((P + 1.0).tolist(), R.tolist())  # lists: the long way
+    assert np.array_equal(task.target.translation, P + 1.0)
