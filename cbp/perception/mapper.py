@@ -102,6 +102,12 @@ class SnapshotPublisher:
         self.submitted_t = 0.0
         self.stamp = 0.0
 
+    def release(self, t: float) -> None:
+        """Install the snapshots due by ``t`` [s] (a virtual map's latency).
+
+        Nothing to do where the map publishes as soon as it is done.
+        """
+
     def hold_reason(self, timeout: float) -> str | None:
         """Why the robot must hold, or None: the map failed, or lags.
 
@@ -126,6 +132,11 @@ class MapUpdater(SnapshotPublisher):
         world: the collision world whose environment is replaced.
         synchronous: integrate in :meth:`submit` itself (for tests and
             deterministic replays) instead of a worker thread.
+        latency: with ``synchronous``, each snapshot is installed this long
+            after the capture of its newest frame [s of the run's clock], at
+            the first :meth:`release` from then on, and measured ahead over
+            that age as a map process's snapshots are
+            (``perception.virtual_latency``); 0: at once.
         estimator: measures how fast the map's obstacles approach the robot
             (None: snapshots as mapped; with it and
             ``perception.cluster_motion``, moving clusters are swept too).
@@ -139,12 +150,16 @@ class MapUpdater(SnapshotPublisher):
         world: CollisionWorld,
         synchronous: bool = False,
         estimator: ApproachEstimator | None = None,
+        latency: float = 0.0,
     ) -> None:
         """Start the worker (unless synchronous)."""
         super().__init__()
         self.grid = grid
         self.world = world
         self.synchronous = synchronous
+        self.latency = float(latency) if synchronous else 0.0
+        #: Snapshots made, waiting for their time: (due [s], snapshot).
+        self._due: deque[tuple[float, OccupancyEnvironment]] = deque()
         self.estimator = estimator
         self._mapped: OccupancyEnvironment | None = None  # the last, as mapped
         #: Velocities of the mapped obstacles, cluster by cluster (with an
@@ -227,7 +242,7 @@ class MapUpdater(SnapshotPublisher):
                 shapes = self.grid.geometry.world_shapes(self._state)
                 moving = self.clusters.update(stamp, self.grid.cells, shapes)
                 published = swept_snapshot(
-                    mapped, moving, self.look_ahead, self.grid.lower
+                    mapped, moving, self.look_ahead + self.latency, self.grid.lower
                 )
             except Exception as exc:  # the map itself is still published
                 self.error = RuntimeError(
@@ -238,7 +253,9 @@ class MapUpdater(SnapshotPublisher):
             try:
                 speeds = self.estimator.update(t, self._state, self._mapped, mapped)
                 if np.any(speeds > 0):
-                    published = published.ahead(speeds * self.look_ahead)
+                    published = published.ahead(
+                        speeds * (self.look_ahead + self.latency)
+                    )
             except Exception as exc:  # the map itself is still published
                 self.error = RuntimeError(
                     f"approach estimate failed, map published without it: {exc}"
@@ -247,14 +264,16 @@ class MapUpdater(SnapshotPublisher):
         published = with_moving(
             published,
             self.grid.moving_centres(stamp),
-            moving_growth(self.grid.spec.moving_speed, self.look_ahead, 0.0),
+            moving_growth(self.grid.spec.moving_speed, self.look_ahead, self.latency),
             self.grid.cells,
             self.grid.lower,
         )
         published.stamp = stamp
-        self.world.set_environment(published)
-        self.stamp = max(self.stamp, stamp)
-        self.updates += 1
+        if self.latency > 0.0:
+            self._due.append((stamp + self.latency, published))
+            self.release(self.submitted_t)
+        else:
+            self._install(published)
         done = time.perf_counter()
         self.last_update_s = done - start
         self.published.append(
@@ -262,6 +281,20 @@ class MapUpdater(SnapshotPublisher):
                 stamp, len(frames), start, integrated - start, done - integrated, done
             )
         )
+
+    def release(self, t: float) -> None:
+        """Install the newest snapshot due by ``t`` [s] (see ``latency``)."""
+        newest = None
+        while self._due and self._due[0][0] <= t + 1e-9:
+            newest = self._due.popleft()[1]
+        if newest is not None:
+            self._install(newest)
+
+    def _install(self, published: OccupancyEnvironment) -> None:
+        """Hand ``published`` to the world."""
+        self.world.set_environment(published)
+        self.stamp = max(self.stamp, published.stamp or 0.0)
+        self.updates += 1
 
     def close(self) -> None:
         """Stop the worker."""

@@ -311,6 +311,15 @@ class PerceptionSpec:
     frame against 13-39 ms; the loop's QP steps per period 39-123 against
     30-69; peak forces 0-173 N against 0-707 N (0 N in virtual time). Under a
     load average of 6 (and frames still sent by a queue) neither was better."""
+    virtual_latency: float = 0.0
+    """In virtual-time runs, install each map snapshot this long after the
+    capture of its newest frame [s], and measure it ahead over that age, as a
+    map in its own process is in wall-clock runs (capture to use: see
+    ``map_process``); 0: at once, as virtual time always did. A run that is
+    safe only with a map that never lags is not safe beside a real one: with
+    snapshots 67 ms late, the generated scene moving_3 pressed the arm with
+    39 kN where it stayed at 0 N without the delay, until unseen space was
+    read from the newest map (:mod:`cbp.perception.moving`)."""
     refine_normals: bool = True
     """Re-estimate contact normals from a metaball surface (CAT Sec. IV-B)."""
     metaball_radius_cells: float = 3.0
@@ -338,6 +347,10 @@ class PerceptionSpec:
         if not 0.0 <= self.moving_speed <= 10.0:
             raise ConfigError(
                 f"must be in [0, 10] m/s, got {self.moving_speed}", "moving_speed"
+            )
+        if not 0.0 <= self.virtual_latency <= 10.0:
+            raise ConfigError(
+                f"must be in [0, 10] s, got {self.virtual_latency}", "virtual_latency"
             )
         if not 0.0 <= self.shadow_hold <= 60.0:
             raise ConfigError(

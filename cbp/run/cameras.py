@@ -111,8 +111,16 @@ class Cameras:
         updater = (
             ProcessMapUpdater if spec.map_process and clock != "virtual" else MapUpdater
         )
-        self.mapper: MapUpdater | ProcessMapUpdater = updater(
-            grid, world, synchronous=clock == "virtual", estimator=estimator
+        self.mapper: MapUpdater | ProcessMapUpdater = (
+            MapUpdater(
+                grid,
+                world,
+                synchronous=True,
+                estimator=estimator,
+                latency=spec.virtual_latency,
+            )
+            if clock == "virtual"
+            else updater(grid, world, estimator=estimator)
         )
         self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
         #: Says when a moving obstacle comes nearer than the arm can afford.
@@ -157,6 +165,7 @@ class Cameras:
                 error, self.mapper.error = self.mapper.error, None
                 self._log.event(sim.t, f"map update: {error}")
             due[i] += 1.0 / self.cameras[i].spec.rate_hz
+        self.mapper.release(t)
         self.separation.check(sim.t, sim.q)
 
     def hold_reason(self, t: float) -> str | None:

@@ -556,3 +556,31 @@ def test_a_snapshot_older_than_the_grid_is_read_with_the_newest_states(
     assert not held & {tuple(c) for c in seen}
     # The snapshot itself, read alone, still holds them (it is as it was).
     assert np.any(grid.state_at(inner[shadow]) == UNKNOWN)
+
+
+def test_a_virtual_map_with_latency_installs_each_snapshot_that_much_later(
+    scene, robots
+) -> None:
+    """perception.virtual_latency: a snapshot reaches the world at capture + latency."""
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(SPEC, geometry)
+    world = CollisionWorld(geometry, grid.environment())
+    before = world.environment
+    updater = MapUpdater(grid, world, synchronous=True, latency=0.05)
+    updater.look_ahead = 0.1
+    updater.submit(DepthCamera(scene.client, FRONT).capture(), robot.home(), 0.1)
+    assert world.environment is before
+    assert updater.updates == 0
+    updater.release(0.149)
+    assert world.environment is before
+    updater.release(0.15)
+    assert world.environment is not before
+    assert world.environment.stamp == 0.1
+    assert updater.stamp == 0.1
+    assert updater.updates == 1
+    # Without latency, at once (as virtual time always did).
+    now = MapUpdater(grid, world, synchronous=True)
+    now.submit(DepthCamera(scene.client, FRONT).capture(), robot.home(), 0.2)
+    assert now.updates == 1
+    assert now.stamp == 0.2

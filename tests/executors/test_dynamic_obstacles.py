@@ -344,19 +344,28 @@ def test_every_method_backs_out_of_an_allowed_start_in_contact(
 
 
 @pytest.mark.slow
-def test_a_pincer_of_moving_obstacles_is_outrun_with_the_cameras(tmp_path) -> None:
+@pytest.mark.parametrize("latency", [0.0, 0.1])
+def test_a_pincer_of_moving_obstacles_is_outrun_with_the_cameras(
+    tmp_path, latency: float
+) -> None:
     """Generated scene 3: a ball and a post close on the arm from two sides.
 
-    Virtual time (the wall-clock runs are tabulated in docs/moving_scenes.md:
-    their outcome depends on the machine's load, a test's must not). With the
-    cameras the map's moving cells are measured ahead and the arm retreats
-    into its own shadow: 0 N, as with the declared objects. Without them
-    (``moving_speed: 0``) the arm was pinned between the obstacles and unseen
-    space (1.4 MN).
+    Virtual time, with the map's snapshots at once and 0.1 s late (as a map in
+    its own process delivers them in wall-clock runs, whose outcome depends on
+    the machine's load, which a test's must not: they are tabulated in
+    docs/moving_scenes.md). With the cameras the map's moving cells are
+    measured ahead and the arm retreats into its own shadow: 0 N, as with the
+    declared objects. Without them (``moving_speed: 0``) the arm was pinned
+    between the obstacles and unseen space (1.4 MN); with snapshots 67 ms late,
+    before unseen space was read from the newest map's states, 15 kN.
     """
     (path,) = write_scenes(tmp_path, 1, seed=3, moving=True)
     assert path.stem == "moving_3"
-    seen = {"method.cat.timing.clock": "virtual", "perception.source": "depth_camera"}
+    seen = {
+        "method.cat.timing.clock": "virtual",
+        "perception.source": "depth_camera",
+        "perception.virtual_latency": str(latency),
+    }
     trace = run_cat(load_scenario(path, overrides=seen))
     assert run_metrics(trace)["peak_contact_force_n"] == 0.0
     assert any("the cameras see moving" in message for _, message in trace.events)
