@@ -1271,13 +1271,16 @@ def _virtual_run(
     other work it is what the run would take on a core of its own (the run is
     one thread). Loading the scenario is excluded (building the run's parts,
     the cameras' first frames included, is not). With ``watch`` also the shares
-    of that time spent rendering, mapping, planning and in contact queries.
+    of that time spent rendering, mapping (of it, the snapshots), planning, in
+    contact queries and in the simulation's steps.
     """
     from cbp.collision.world import CollisionWorld
     from cbp.executors.cat import CatPlanner, run_cat
     from cbp.perception.mapper import MapUpdater
+    from cbp.perception.occupancy import OccupancyGrid
     from cbp.scenario import load_scenario
     from cbp.sim.camera import DepthCamera
+    from cbp.sim.simulation import Simulation
 
     scenario = load_scenario(
         path,
@@ -1290,8 +1293,10 @@ def _virtual_run(
     targets = {
         "rendering": (DepthCamera, "capture"),
         "map integration": (MapUpdater, "submit"),
+        "of it the snapshot": (OccupancyGrid, "environment"),
         "planning": (CatPlanner, "plan"),
         "contact queries": (CollisionWorld, "query"),
+        "simulation": (Simulation, "step"),
     }
     with _Stopwatch(targets if watch else {}) as clock:
         start = time.process_time()

@@ -14,6 +14,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+import numpy.typing as npt
 
 from cbp.collision.cell_kernels import (
     SLOT_BRICK,
@@ -75,6 +76,7 @@ class CellIndex:
         cell: float,
         brick: int,
         dims: IntArray,
+        slots: npt.NDArray[np.uint64] | None = None,
     ) -> CellIndex:
         """An index of centres already sorted by brick (a map's compiled pass).
 
@@ -85,6 +87,9 @@ class CellIndex:
             cell: cell size [m].
             brick: cells per brick side.
             dims: bricks along x, y and z; bricks are numbered in C order.
+            slots: each brick's occupied places as bits, its cells in place
+                order (:attr:`Bricks.slots`), when the pass that sorted the
+                centres gave them; None: computed here.
         """
         index = cls.__new__(cls)
         index.cell = float(cell)
@@ -94,7 +99,7 @@ class CellIndex:
         index.centres = np.ascontiguousarray(centres, dtype=float)
         index.start = np.ascontiguousarray(start, dtype=np.int64)
         index.occupied = occupied_bits(index.start, index.dims)
-        index.slots = _place_bits(index)
+        index.slots = _place_bits(index) if slots is None else slots
         return index
 
     def __len__(self) -> int:

@@ -10,26 +10,110 @@ thread runs beside the control loop.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
+import numpy.typing as npt
 
+from cbp.collision.cell_kernels import SLOT_BRICK
 from cbp.collision.geometry import inside_any, inside_convex
 from cbp.robot import FloatArray, IntArray
 
-PixelHistory = tuple[FloatArray, FloatArray, FloatArray]
-"""A camera's pixels: the range seen free along each, the last reading's range
-[m], and when it last moved [s], each (H, W); (0, 0) arrays: not tracked."""
+SlotArray = npt.NDArray[np.uint64]
+"""Each brick's occupied places as bits (``Bricks.slots`` of
+:mod:`cbp.collision.cell_kernels`)."""
+
+
+class PixelHistory(NamedTuple):
+    """A camera's pixels, each (H, W); (0, 0) arrays: not tracked.
+
+    The range seen free along each [m], the last reading's range [m], and when
+    it last moved [s].
+    """
+
+    seen_to: FloatArray
+    last: FloatArray
+    moved_at: FloatArray
+
+
+class GridArrays(NamedTuple):
+    """A grid's arrays as the passes update them (built once per grid).
+
+    The cell states (nx, ny, nz) (:data:`UNKNOWN`, :data:`FREE`,
+    :data:`OCCUPIED`) and the misses of occupied cells, both updated in place;
+    the grid's lower corner [m] and cell size [m]; per brick of ``brick``
+    cells a side, ``dirty``: True where a cell changed state (set by the
+    passes, cleared by :func:`shell_update`), and ``clear``: True where every
+    cell was free at the last :func:`shell_update` (a brick clear and not
+    dirty holds free cells only: :func:`mark_seen` skips it).
+    """
+
+    cells: np.ndarray
+    misses: np.ndarray
+    lower: FloatArray
+    cell: float
+    dirty: np.ndarray
+    brick: int
+    clear: np.ndarray
+
+
+class RobotShapes(NamedTuple):
+    """The robot's shapes placed for one frame, as the self-filter takes them.
+
+    The shapes as :class:`~cbp.collision.geometry.WorldShapes` gives them
+    (face planes (P, 4) and each shape's first plane (S + 1,), bounding sphere
+    centres (S, 3) and radii (S,) [m]), how far around each shape a reading
+    is the robot's (``reach`` (S,) [m]), and how far beyond each shape
+    hidden space stops (``held`` (S,) [m]). No shapes: no robot.
+    """
+
+    planes: FloatArray
+    plane_start: IntArray
+    centres: FloatArray
+    radii: FloatArray
+    reach: FloatArray
+    held: FloatArray
+
+
+class FrameArrays(NamedTuple):
+    """One depth frame as :func:`insert_readings` reads it.
+
+    The depth buffer (H, W) and ``unproject``, the inverse of projection times
+    view (4, 4), as :meth:`~cbp.perception.frame.DepthFrame.points` uses it;
+    depth buffer values ``nearest`` (the minimum range), ``far_plane`` (from
+    there on: nothing seen) and ``far_buffer`` (the largest valid); the
+    optical centre ``camera`` [m]; ``max_range`` [m], beyond which readings
+    are dropped; and ``spread``, how far the camera's noise spreads a reading:
+    the projection's near and far planes [m] and c0, c2, z0 [m], c0 + c2 (z -
+    z0)^2 along the axis at depth z (so many sigmas of the noise; c0 and c2 0:
+    no noise).
+    """
+
+    depth: FloatArray
+    unproject: FloatArray
+    nearest: float
+    far_plane: float
+    far_buffer: float
+    camera: FloatArray
+    max_range: float
+    spread: FloatArray
+
 
 __all__ = [
     "FREE",
     "OCCUPIED",
     "UNKNOWN",
+    "FrameArrays",
+    "GridArrays",
     "PixelHistory",
+    "RobotShapes",
     "carve_shapes",
     "eroded_ranges",
     "insert_readings",
     "mark_seen",
+    "merge_entered",
+    "occupied_centres",
     "shell_update",
 ]
 
@@ -43,10 +127,7 @@ OCCUPIED = 2
 
 @numba.njit(cache=True, nogil=True)
 def mark_seen(
-    grid: np.ndarray,
-    misses: np.ndarray,
-    lower: FloatArray,
-    cell: float,
+    grid: GridArrays,
     box: IntArray,
     clip: FloatArray,
     axis: FloatArray,
@@ -55,8 +136,6 @@ def mark_seen(
     near: float,
     max_range: float,
     misses_to_clear: int,
-    dirty: np.ndarray,
-    brick: int,
 ) -> int:
     """Mark the cells a depth image sees through; return how many changed state.
 
@@ -65,13 +144,12 @@ def mark_seen(
     eroded over the cell's footprint, so a cell at a depth edge is not taken as
     seen). Unknown cells seen through become free; occupied cells count a miss
     and become free after ``misses_to_clear``. Free cells are skipped: only a
-    depth reading (inserted by the caller) makes them occupied.
+    depth reading (inserted by the caller) makes them occupied, and bricks
+    that hold only free cells (``grid.clear`` and not ``grid.dirty``) are
+    not visited.
 
     Args:
-        grid: cell states (nx, ny, nz), updated in place.
-        misses: misses of occupied cells, updated in place.
-        lower: the grid's lower corner [m].
-        cell: cell size [m].
+        grid: the grid's arrays; cells, misses and dirty bricks updated in place.
         box: index range [i0, i1, j0, j1, k0, k1) to visit (the frustum's box).
         clip: the first, second and fourth rows of P V (3, 4): world to clip x,
             y and w.
@@ -83,14 +161,19 @@ def mark_seen(
             possible reading) [m].
         max_range: cells farther from the camera are not marked [m].
         misses_to_clear: misses that clear an occupied cell.
-        dirty: per brick of ``brick`` cells a side, True where a cell changed
-            state (updated in place, for :func:`shell_update`).
-        brick: cells per brick side.
     """
+    lower, cell, dirty, clear, brick = (
+        grid.lower,
+        grid.cell,
+        grid.dirty,
+        grid.clear,
+        grid.brick,
+    )
     h, w = ranges.shape
-    _, ny, nz = grid.shape
-    flat = grid.reshape(-1)
-    missed = misses.reshape(-1)
+    _, ny, nz = grid.cells.shape
+    flat = grid.cells.reshape(-1)
+    missed = grid.misses.reshape(-1)
+    span = _open_spans(clear, dirty, brick, nz)
     changed = 0
     limit2 = (max_range - cell) * (max_range - cell)
     slack = 1.0 + 2.0 / min(h, w)  # a pixel of the side planes' rounding
@@ -129,6 +212,10 @@ def mark_seen(
                 continue
             k_lo = max(box[4], math.floor((lo - lower[2]) / cell - 0.5) - 1)
             k_hi = min(box[5], math.ceil((hi - lower[2]) / cell - 0.5) + 2)
+            # Only the cells between the column's first and last bricks that
+            # may hold a cell not free.
+            k_lo = max(k_lo, span[i // brick, j // brick, 0])
+            k_hi = min(k_hi, span[i // brick, j // brick, 1])
             for k in range(k_lo, k_hi):
                 c = row + k
                 state = flat[c]
@@ -167,6 +254,29 @@ def mark_seen(
 
 
 @numba.njit(cache=True, nogil=True)
+def _open_spans(clear: np.ndarray, dirty: np.ndarray, brick: int, nz: int) -> IntArray:
+    """Per column of bricks, the cells from its first to its last brick not clear.
+
+    (bx, by, 2): the first such cell's k and one past the last's; a column
+    whose bricks are all clear and not dirty (only free cells) has an empty
+    span.
+    """
+    bx, by, bz = clear.shape
+    span = np.zeros((bx, by, 2), dtype=np.int64)
+    for p in range(bx):
+        for q in range(by):
+            first, last = bz, -1
+            for r in range(bz):
+                if dirty[p, q, r] or not clear[p, q, r]:
+                    first = min(first, r)
+                    last = r
+            if last >= 0:
+                span[p, q, 0] = first * brick
+                span[p, q, 1] = min((last + 1) * brick, nz)
+    return span
+
+
+@numba.njit(cache=True, nogil=True)
 def _half_line(lo: float, hi: float, a: float, b: float) -> tuple[float, float]:
     """The interval [lo, hi] cut to where a + b z >= 0."""
     if b > 0.0:
@@ -180,17 +290,13 @@ def _half_line(lo: float, hi: float, a: float, b: float) -> tuple[float, float]:
 
 @numba.njit(cache=True, nogil=True)
 def carve_shapes(
-    grid: np.ndarray,
-    lower: FloatArray,
-    cell: float,
+    grid: GridArrays,
     planes: FloatArray,
     plane_start: IntArray,
     centres: FloatArray,
     radii: FloatArray,
     boxes: FloatArray,
     grow: float,
-    dirty: np.ndarray,
-    brick: int,
 ) -> int:
     """Mark unknown cells whose centre is inside a grown shape free; return count.
 
@@ -198,10 +304,11 @@ def carve_shapes(
     obstacle seen inside the robot's padding is real). The shapes as
     :class:`~cbp.collision.geometry.WorldShapes` gives them; ``boxes``
     (shapes, 6) holds each grown shape's world bounding box (lower corner,
-    upper corner). ``dirty`` and ``brick`` as in :func:`mark_seen`.
+    upper corner). Cells and dirty bricks (``grid``) are updated in place.
     """
-    nx, ny, nz = grid.shape
-    flat = grid.reshape(-1)
+    lower, cell, dirty, brick = grid.lower, grid.cell, grid.dirty, grid.brick
+    nx, ny, nz = grid.cells.shape
+    flat = grid.cells.reshape(-1)
     size = (nx, ny, nz)
     lo = np.empty(3, dtype=np.int64)
     hi = np.empty(3, dtype=np.int64)
@@ -234,16 +341,13 @@ def carve_shapes(
 
 @numba.njit(cache=True, nogil=True)
 def shell_update(
-    grid: np.ndarray,
+    grid: GridArrays,
     blocked: np.ndarray,
-    dirty: np.ndarray,
-    lower: FloatArray,
-    cell: float,
-    brick: int,
     unknown_blocks: bool,
     old_centres: FloatArray,
     old_start: IntArray,
-) -> tuple[FloatArray, IntArray]:
+    old_slots: SlotArray,
+) -> tuple[FloatArray, IntArray, SlotArray]:
     """The obstacle cells next to open space, brick by brick, redone where changed.
 
     A cell is blocked when occupied, or unknown and ``unknown_blocks``; it is in
@@ -256,24 +360,29 @@ def shell_update(
     last update) have their ``blocked`` mask recomputed, and only they and
     their six neighbouring bricks (whose face cells border them) are scanned for
     the shell; every other brick's run is copied from ``old_centres``. A map
-    whose view does not change costs a copy of its shell.
+    whose view does not change costs a copy of its shell. Bricks of
+    :data:`~cbp.collision.cell_kernels.SLOT_BRICK` cells also get their
+    occupied places as bits (:attr:`~cbp.collision.cell_kernels.Bricks.slots`:
+    the scan visits a brick's cells in place order), so the index of the
+    shell does not read its centres again.
 
     Args:
-        grid: cell states (nx, ny, nz).
+        grid: the grid's arrays: its dirty bricks are cleared here, and each
+            one's ``clear`` flag (all its cells free) set anew.
         blocked: the blocked mask (nx, ny, nz), kept up to date in place.
-        dirty: per brick (bx, by, bz), True where cells changed; cleared here.
-        lower: the grid's lower corner [m].
-        cell: cell size [m].
-        brick: cells per brick side.
         unknown_blocks: unknown cells are obstacles.
         old_centres: the last update's shell (its result), brick by brick.
         old_start: its runs (bricks + 1,).
+        old_slots: its places as bits (bricks,), empty for other bricks.
 
     Returns:
-        (centres (N, 3) in brick order, start (bricks + 1,)): brick b's cells
-        are ``centres[start[b]:start[b + 1]]``, bricks numbered in C order.
+        (centres (N, 3) in brick order, start (bricks + 1,), slots (bricks,)
+        or empty): brick b's cells are ``centres[start[b]:start[b + 1]]``,
+        bricks numbered in C order.
     """
-    nx, ny, nz = grid.shape
+    cells, dirty, clear = grid.cells, grid.dirty, grid.clear
+    lower, cell, brick = grid.lower, grid.cell, grid.brick
+    nx, ny, nz = cells.shape
     bx, by, bz = dirty.shape
     redo = np.zeros((bx, by, bz), dtype=np.bool_)
     for p in range(bx):
@@ -281,13 +390,16 @@ def shell_update(
             for r in range(bz):
                 if not dirty[p, q, r]:
                     continue
+                free = True
                 for i in range(p * brick, min((p + 1) * brick, nx)):
                     for j in range(q * brick, min((q + 1) * brick, ny)):
                         for k in range(r * brick, min((r + 1) * brick, nz)):
-                            v = grid[i, j, k]
+                            v = cells[i, j, k]
+                            free = free and v == FREE
                             blocked[i, j, k] = v == OCCUPIED or (
                                 unknown_blocks and v == UNKNOWN
                             )
+                clear[p, q, r] = free
                 redo[p, q, r] = True
                 if p > 0:
                     redo[p - 1, q, r] = True
@@ -302,44 +414,73 @@ def shell_update(
                 if r + 1 < bz:
                     redo[p, q, r + 1] = True
                 dirty[p, q, r] = False
-    centres = np.empty((len(old_centres) + 1024, 3))
-    start = np.zeros(bx * by * bz + 1, dtype=np.int64)
+    # The redone bricks' shell cells first, each brick's run in ``fresh``
+    # (its start in ``first``); then each brick's run from there or the old
+    # shell, into an array of the exact size (the snapshot's own).
+    n_bricks = bx * by * bz
+    with_slots = brick == SLOT_BRICK
+    slots = np.zeros(n_bricks if with_slots else 0, dtype=np.uint64)
+    first = np.zeros(n_bricks + 1, dtype=np.int64)
+    fresh = np.empty((1024, 3))
     count = 0
+    total = 0
     b = 0
     for p in range(bx):
         for q in range(by):
             for r in range(bz):
-                if len(centres) - count < brick**3:  # room for a brick's cells
-                    grown = np.empty((2 * len(centres), 3))
-                    grown[:count] = centres[:count]
-                    centres = grown
+                first[b] = count
                 if not redo[p, q, r]:
-                    first, last = old_start[b], old_start[b + 1]
-                    if len(centres) - count < last - first:
-                        grown = np.empty((2 * len(centres) + last - first, 3))
-                        grown[:count] = centres[:count]
-                        centres = grown
-                    centres[count : count + last - first] = old_centres[first:last]
-                    count += last - first
-                else:
-                    for i in range(p * brick, min((p + 1) * brick, nx)):
-                        for j in range(q * brick, min((q + 1) * brick, ny)):
-                            for k in range(r * brick, min((r + 1) * brick, nz)):
-                                if blocked[i, j, k] and (
-                                    (k > 0 and not blocked[i, j, k - 1])
-                                    or (k + 1 < nz and not blocked[i, j, k + 1])
-                                    or (j > 0 and not blocked[i, j - 1, k])
-                                    or (j + 1 < ny and not blocked[i, j + 1, k])
-                                    or (i > 0 and not blocked[i - 1, j, k])
-                                    or (i + 1 < nx and not blocked[i + 1, j, k])
-                                ):
-                                    centres[count, 0] = lower[0] + (i + 0.5) * cell
-                                    centres[count, 1] = lower[1] + (j + 0.5) * cell
-                                    centres[count, 2] = lower[2] + (k + 0.5) * cell
-                                    count += 1
+                    total += old_start[b + 1] - old_start[b]
+                    if with_slots:
+                        slots[b] = old_slots[b]
+                    b += 1
+                    continue
+                if len(fresh) - count < brick**3:  # room for a brick's cells
+                    grown = np.empty((2 * len(fresh) + brick**3, 3))
+                    grown[:count] = fresh[:count]
+                    fresh = grown
+                bits = np.uint64(0)
+                for i in range(p * brick, min((p + 1) * brick, nx)):
+                    for j in range(q * brick, min((q + 1) * brick, ny)):
+                        for k in range(r * brick, min((r + 1) * brick, nz)):
+                            if blocked[i, j, k] and (
+                                (k > 0 and not blocked[i, j, k - 1])
+                                or (k + 1 < nz and not blocked[i, j, k + 1])
+                                or (j > 0 and not blocked[i, j - 1, k])
+                                or (j + 1 < ny and not blocked[i, j + 1, k])
+                                or (i > 0 and not blocked[i - 1, j, k])
+                                or (i + 1 < nx and not blocked[i + 1, j, k])
+                            ):
+                                fresh[count, 0] = lower[0] + (i + 0.5) * cell
+                                fresh[count, 1] = lower[1] + (j + 0.5) * cell
+                                fresh[count, 2] = lower[2] + (k + 0.5) * cell
+                                count += 1
+                                if with_slots:  # (i, j, k) in the brick
+                                    a = (i % brick * brick + j % brick) * brick
+                                    place = a + k % brick
+                                    bits |= np.uint64(1) << np.uint64(place)
+                total += count - first[b]
+                if with_slots:
+                    slots[b] = bits
                 b += 1
-                start[b] = count
-    return centres[:count].copy(), start
+    first[n_bricks] = count
+    centres = np.empty((total, 3))
+    start = np.zeros(n_bricks + 1, dtype=np.int64)
+    n = 0
+    b = 0
+    for p in range(bx):
+        for q in range(by):
+            for r in range(bz):
+                if redo[p, q, r]:
+                    run = first[b + 1] - first[b]
+                    centres[n : n + run] = fresh[first[b] : first[b + 1]]
+                else:
+                    run = old_start[b + 1] - old_start[b]
+                    centres[n : n + run] = old_centres[old_start[b] : old_start[b + 1]]
+                n += run
+                b += 1
+                start[b] = n
+    return centres, start, slots
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -420,57 +561,36 @@ def _least(a: float, b: float) -> float:
 
 @numba.njit(cache=True, nogil=True)
 def insert_readings(
-    depth: FloatArray,
-    unproject: FloatArray,
-    nearest: float,
-    far_plane: float,
-    far_buffer: float,
-    camera: FloatArray,
-    max_range: float,
-    planes: FloatArray,
-    plane_start: IntArray,
-    centres: FloatArray,
-    radii: FloatArray,
-    reach: FloatArray,
-    grid: np.ndarray,
-    misses: np.ndarray,
-    lower: FloatArray,
-    cell: float,
-    dirty: np.ndarray,
-    brick: int,
+    frame: FrameArrays,
+    robot: RobotShapes,
+    grid: GridArrays,
     moved: PixelHistory,
     t: float,
     hold: float,
-    held: FloatArray,
-    spread: FloatArray,
     entered: np.ndarray,
 ) -> tuple[int, int, int, int, int]:
     """Mark the cells depth readings fall in occupied; count valid, robot, inserted.
 
-    Each pixel that holds a reading nearer than the far plane is unprojected
-    (``unproject``: the inverse of projection times view, as
-    :meth:`~cbp.perception.frame.DepthFrame.points` does), dropped when
-    farther than ``max_range`` from ``camera`` or within ``reach[s]`` of a
-    robot shape s (the shapes as :class:`~cbp.collision.geometry.WorldShapes`
-    gives them; no shapes: no robot) grown by how far the camera's noise
-    spreads the reading along its ray (``spread``: the projection's near and
-    far planes [m] and c0, c2, z0 [m]: c0 + c2 (z - z0)^2 along the axis at
-    depth z, so many sigmas of the noise; c0 and c2 0: no noise), and its cell made
-    occupied with no
-    misses. One pass, one call: the map thread takes the GIL once per frame
-    for it, not once per array operation. ``dirty`` and ``brick`` as in
-    :func:`mark_seen`.
+    Each pixel of ``frame`` that holds a reading nearer than the far plane is
+    unprojected (as :meth:`~cbp.perception.frame.DepthFrame.points` does),
+    dropped when farther than ``max_range`` from the camera or within
+    ``robot.reach[s]`` of a robot shape s grown by how far the camera's noise
+    spreads the reading along its ray (``frame.spread``), and its cell made
+    occupied with no misses. One pass, one call: the map thread takes the GIL
+    once per frame for it, not once per array operation. A reading outside
+    the box around every shape's grown bounding sphere is not tested against
+    the shapes (it cannot be in one).
 
     Space that comes to be hidden (``moved``, the camera's pixel history; empty
     arrays: not tracked): where a pixel's reading, not the robot, is more than
     two cells (and sqrt(2) times the spread, what two noisy readings of one
     surface differ by) nearer than the range the camera saw free along it,
-    something came between, and the free cells behind the reading are made unknown, up
-    to the robot's shapes grown by ``held[s]`` or that range
+    something came between, and the free cells behind the reading are made
+    unknown, up to the robot's shapes grown by ``robot.held[s]`` or that range
     (:func:`_hide_ray`). It is done again at every frame while the reading
     moves (by more than half a cell and the spread) and for ``hold`` seconds
-    after (``t``: the frame's time); then the
-    nearer range is what the camera sees free along the pixel.
+    after (``t``: the frame's time); then the nearer range is what the camera
+    sees free along the pixel.
 
     The cells those nearer readings fall in are where something entered space
     the camera saw free: a moving obstacle's leading surface. Their flat grid
@@ -480,11 +600,17 @@ def insert_readings(
     Returns (pixels holding a reading, readings taken for the robot, readings
     inserted, cells hidden, cells entered).
     """
+    depth, u, camera, spread = frame.depth, frame.unproject, frame.camera, frame.spread
+    nearest, far_plane, far_buffer = frame.nearest, frame.far_plane, frame.far_buffer
+    max_range = frame.max_range
+    planes, plane_start = robot.planes, robot.plane_start
+    centres, radii, reach = robot.centres, robot.radii, robot.reach
+    cells, misses, lower, cell = grid.cells, grid.misses, grid.lower, grid.cell
+    dirty, brick = grid.dirty, grid.brick
     h, w = depth.shape
-    nx, ny, nz = grid.shape
-    u = unproject
+    nx, ny, nz = cells.shape
     valid = 0
-    robot = 0
+    on_robot = 0
     inserted = 0
     hidden = 0
     n_entered = 0
@@ -492,6 +618,16 @@ def insert_readings(
     track = seen_to.shape[0] == h
     gap = 2.0 * cell
     noisy = spread[2] > 0.0 or spread[3] > 0.0
+    # The box around the shapes' grown spheres (a millimetre wider: the sphere
+    # test rounds differently), grown by each reading's spread below.
+    box = np.empty(6)
+    box[:3] = np.inf
+    box[3:] = -np.inf
+    for s in range(radii.size):
+        r = radii[s] + reach[s] + 1e-3
+        for a in range(3):
+            box[a] = min(box[a], centres[s, a] - r)
+            box[3 + a] = max(box[3 + a], centres[s, a] + r)
     for r in range(h):
         y = 2.0 * (h - 1 - r) / h - 1.0
         for c in range(w):
@@ -524,10 +660,15 @@ def insert_readings(
                 )
                 extra = spread[2] + spread[3] * (axial - spread[4]) ** 2
                 extra *= distance / axial
-            if inside_any(
+            near_robot = (
+                box[0] - extra <= px <= box[3] + extra
+                and box[1] - extra <= py <= box[4] + extra
+                and box[2] - extra <= pz <= box[5] + extra
+            )
+            if near_robot and inside_any(
                 px, py, pz, planes, plane_start, centres, radii, reach, extra
             ):
-                robot += 1
+                on_robot += 1
                 if track:  # seen free up to the robot; it hides nothing new
                     seen_to[r, c] = max(seen_to[r, c], distance)
                 continue
@@ -546,16 +687,8 @@ def insert_readings(
                         dz / distance,
                         distance + cell,
                         seen_to[r, c],
-                        planes,
-                        plane_start,
-                        centres,
-                        radii,
-                        held,
+                        robot,
                         grid,
-                        lower,
-                        cell,
-                        dirty,
-                        brick,
                     )
                     if t - moved_at[r, c] >= hold:  # it stopped: its shadow now
                         seen_to[r, c] = distance
@@ -568,13 +701,13 @@ def insert_readings(
                 continue
             inserted += 1
             misses[i, j, k] = 0
-            if grid[i, j, k] != OCCUPIED:
-                grid[i, j, k] = OCCUPIED
+            if cells[i, j, k] != OCCUPIED:
+                cells[i, j, k] = OCCUPIED
                 dirty[i // brick, j // brick, k // brick] = True
             if came and n_entered < entered.shape[0]:
                 entered[n_entered] = (i * ny + j) * nz + k
                 n_entered += 1
-    return valid, robot, inserted, hidden, n_entered
+    return valid, on_robot, inserted, hidden, n_entered
 
 
 @numba.njit(cache=True, nogil=True)
@@ -585,25 +718,18 @@ def _hide_ray(
     uz: float,
     start: float,
     stop: float,
-    planes: FloatArray,
-    plane_start: IntArray,
-    centres: FloatArray,
-    radii: FloatArray,
-    held: FloatArray,
-    grid: np.ndarray,
-    lower: FloatArray,
-    cell: float,
-    dirty: np.ndarray,
-    brick: int,
+    robot: RobotShapes,
+    grid: GridArrays,
 ) -> int:
     """Make the free cells along a ray unknown, from ``start`` to ``stop`` [m].
 
     In half-cell steps from ``camera`` along the unit direction (ux, uy, uz);
-    the march ends where it enters a robot shape grown by ``held`` (what lies
-    behind the robot was hidden by it, not by the new surface). Returns the
-    cells made unknown.
+    the march ends where it enters a robot shape grown by ``robot.held`` (what
+    lies behind the robot was hidden by it, not by the new surface). Returns
+    the cells made unknown.
     """
-    nx, ny, nz = grid.shape
+    cells, lower, cell = grid.cells, grid.lower, grid.cell
+    nx, ny, nz = cells.shape
     step = 0.5 * cell
     hidden = 0
     s = start
@@ -612,15 +738,95 @@ def _hide_ray(
         y = camera[1] + uy * s
         z = camera[2] + uz * s
         s += step
-        if inside_any(x, y, z, planes, plane_start, centres, radii, held):
+        if inside_any(
+            x,
+            y,
+            z,
+            robot.planes,
+            robot.plane_start,
+            robot.centres,
+            robot.radii,
+            robot.held,
+        ):
             break
         i = math.floor((x - lower[0]) / cell)
         j = math.floor((y - lower[1]) / cell)
         k = math.floor((z - lower[2]) / cell)
         if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
             continue
-        if grid[i, j, k] == FREE:
-            grid[i, j, k] = UNKNOWN
-            dirty[i // brick, j // brick, k // brick] = True
+        if cells[i, j, k] == FREE:
+            cells[i, j, k] = UNKNOWN
+            grid.dirty[i // grid.brick, j // grid.brick, k // grid.brick] = True
             hidden += 1
     return hidden
+
+
+@numba.njit(cache=True, nogil=True)
+def merge_entered(
+    flat: IntArray,
+    when: FloatArray,
+    entered: IntArray,
+    t: float,
+    oldest: float,
+) -> tuple[IntArray, FloatArray]:
+    """The cells entered lately, with the cells a frame entered at ``t`` added.
+
+    ``flat`` and ``when``: the kept cells' flat indices and when each was last
+    entered [s]; those entered before ``oldest`` are dropped, and those in
+    ``entered`` (the frame's cells, repeats allowed) move to the end, sorted
+    and once each, entered at ``t``. One call: the map thread does not wait for
+    the interpreter lock between array operations.
+    """
+    new = np.sort(entered)
+    unique = 0
+    for a in range(new.size):
+        if unique == 0 or new[a] != new[unique - 1]:
+            new[unique] = new[a]
+            unique += 1
+    new = new[:unique]
+    out_flat = np.empty(flat.size + unique, dtype=np.int64)
+    out_when = np.empty(flat.size + unique)
+    n = 0
+    for a in range(flat.size):
+        if not when[a] >= oldest:
+            continue
+        b = np.searchsorted(new, flat[a])
+        if b < unique and new[b] == flat[a]:
+            continue
+        out_flat[n] = flat[a]
+        out_when[n] = when[a]
+        n += 1
+    out_flat[n : n + unique] = new
+    out_when[n : n + unique] = t
+    n += unique
+    return out_flat[:n].copy(), out_when[:n].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def occupied_centres(
+    flat: IntArray,
+    when: FloatArray,
+    oldest: float,
+    cells: np.ndarray,
+    lower: FloatArray,
+    cell: float,
+) -> FloatArray:
+    """Centres (N, 3) [m] of the cells of ``flat`` entered since ``oldest``, occupied.
+
+    In the order of ``flat``; ``cells``: the grid's states.
+    """
+    _, ny, nz = cells.shape
+    states = cells.reshape(-1)
+    out = np.empty((flat.size, 3))
+    n = 0
+    for a in range(flat.size):
+        f = flat[a]
+        if not when[a] >= oldest or states[f] != OCCUPIED:
+            continue
+        i, rest = divmod(f, ny * nz)
+        j, k = divmod(rest, nz)
+        out[n, 0] = lower[0] + (i + 0.5) * cell
+        out[n, 1] = lower[1] + (j + 0.5) * cell
+        out[n, 2] = lower[2] + (k + 0.5) * cell
+        n += 1
+    return out[:n].copy()

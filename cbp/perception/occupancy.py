@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cbp.collision.cell_index import BRICK, MAX_BRICKS, CellIndex
+from cbp.collision.cell_kernels import SLOT_BRICK
 from cbp.collision.geometry import RobotGeometry, WorldShapes
 from cbp.collision.map_environment import (
     BlockedGrid,
@@ -54,11 +55,16 @@ from cbp.perception.kernels import (
     FREE,
     OCCUPIED,
     UNKNOWN,
+    FrameArrays,
+    GridArrays,
     PixelHistory,
+    RobotShapes,
     carve_shapes,
     eroded_ranges,
     insert_readings,
     mark_seen,
+    merge_entered,
+    occupied_centres,
     shell_update,
 )
 from cbp.perception.spec import PerceptionSpec
@@ -71,19 +77,19 @@ __all__ = ["FrameSummary", "OccupancyGrid"]
 #: presence frees unseen space (and one cell more) [m].
 NEARBY_MARGIN = 0.02
 
-#: The self-filter's shapes when there is no robot: planes, plane starts,
-#: sphere centres and radii, reach (as ``insert_readings`` takes them).
-_NO_ROBOT = (
+#: The self-filter's shapes when there is no robot.
+_NO_ROBOT = RobotShapes(
     np.zeros((0, 4)),
     np.zeros(1, np.int64),
     np.zeros((0, 3)),
+    np.zeros(0),
     np.zeros(0),
     np.zeros(0),
 )
 
 
 #: A camera's pixel history when hidden space is not tracked.
-_UNTRACKED: PixelHistory = (np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)))
+_UNTRACKED = PixelHistory(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)))
 
 
 @dataclass(frozen=True)
@@ -173,7 +179,14 @@ class OccupancyGrid:
         # changed since the last snapshot, and the last shell.
         self._blocked = np.zeros(self.shape, dtype=np.bool_)
         self._dirty = np.ones(tuple(int(n) for n in dims), dtype=np.bool_)
-        self._shell = (np.empty((0, 3)), np.zeros(int(np.prod(dims)) + 1, np.int64))
+        # Per brick: all its cells were free at the last snapshot (mark_seen
+        # skips such bricks while they are not dirty).
+        self._clear = np.zeros(tuple(int(n) for n in dims), dtype=np.bool_)
+        self._shell = (
+            np.empty((0, 3)),
+            np.zeros(int(np.prod(dims)) + 1, np.int64),
+            np.zeros(int(np.prod(dims)) if brick == SLOT_BRICK else 0, np.uint64),
+        )
         self._snapshot: OccupancyEnvironment | None = None
         self._mounted = {c.name for c in spec.all_cameras if c.parent is not None}
         self._noise = {c.name: c.noise for c in spec.all_cameras}
@@ -209,6 +222,8 @@ class OccupancyGrid:
         state["cells"] = self.cells.copy()
         state["misses"] = self.misses.copy()
         state["_dirty"] = self._dirty.copy()
+        state["_clear"] = self._clear.copy()
+        state["_blocked"] = self._blocked.copy()
         state["_moved"] = {}
         state["_entered"] = np.empty(0, np.int64)
         state["_recent"] = (np.zeros(0, np.int64), np.zeros(0))
@@ -230,24 +245,31 @@ class OccupancyGrid:
         and occupied still: what moves into space the cameras saw free.
         """
         flat, when = self._recent
-        keep = when >= t - self.spec.shadow_hold
-        flat = flat[keep]
-        ijk = np.stack(np.unravel_index(flat, self.shape), axis=1)
-        if len(flat):
-            ijk = ijk[self.cells.reshape(-1)[flat] == OCCUPIED]
-        return np.asarray(self.lower + (ijk + 0.5) * self.cell).reshape(-1, 3)
+        oldest = t - self.spec.shadow_hold
+        return occupied_centres(flat, when, oldest, self.cells, self.lower, self.cell)
 
     def _remember_entered(self, n: int, t: float) -> None:
         """Keep the ``n`` cells the last frame entered, at time ``t``."""
         flat, when = self._recent
-        keep = when >= t - self.spec.shadow_hold
-        flat, when = flat[keep], when[keep]
-        if n:
-            new = np.unique(self._entered[:n])
-            old = ~np.isin(flat, new)
-            flat = np.concatenate([flat[old], new])
-            when = np.concatenate([when[old], np.full(len(new), t)])
-        self._recent = (flat, when)
+        oldest = t - self.spec.shadow_hold
+        self._recent = merge_entered(flat, when, self._entered[:n], t, oldest)
+
+    @property
+    def arrays(self) -> GridArrays:
+        """The grid's arrays as the compiled passes take them.
+
+        Built at each call (a few microseconds): the map process swaps
+        :attr:`cells` for shared memory.
+        """
+        return GridArrays(
+            self.cells,
+            self.misses,
+            self.lower,
+            float(self.cell),
+            self._dirty,
+            int(self._brick),
+            self._clear,
+        )
 
     def count(self, state: int) -> int:
         """Number of cells in ``state``."""
@@ -287,12 +309,13 @@ class OccupancyGrid:
         if state is not None and self.geometry is not None:
             shapes = self.geometry.world_shapes(state)
             carved = self.carve_robot(state, shapes)
-            robot = (
+            robot = RobotShapes(
                 shapes.planes,
                 shapes.plane_start,
                 shapes.centres,
                 shapes.radii,
                 self._robot_reach,
+                self._held,
             )
         depth = np.ascontiguousarray(frame.depth, dtype=float)
         limits = frame.buffer_limits
@@ -300,26 +323,23 @@ class OccupancyGrid:
         nearest, far_plane, far_buffer = limits
         if self._entered.size < depth.size:  # one entry a pixel at most
             self._entered = np.empty(depth.size, np.int64)
-        valid, removed, inserted, hidden, entered = insert_readings(
+        readings = FrameArrays(
             depth,
             frame.unprojection,
             nearest,
             far_plane,
             far_buffer,
             np.ascontiguousarray(frame.position),
-            self.spec.max_range,
-            *robot,
-            self.cells,
-            self.misses,
-            self.lower,
-            self.cell,
-            self._dirty,
-            self._brick,
-            self._pixels(frame, t),
-            0.0 if t is None else t,
-            self.spec.shadow_hold,
-            self._held,
+            float(self.spec.max_range),
             self._spread(frame),
+        )
+        valid, removed, inserted, hidden, entered = insert_readings(
+            readings,
+            robot,
+            self.arrays,
+            self._pixels(frame, t),
+            0.0 if t is None else float(t),
+            float(self.spec.shadow_hold),
             self._entered,
         )
         if t is not None:
@@ -369,7 +389,9 @@ class OccupancyGrid:
         if kept is not None and np.array_equal(kept[0], frame.view):
             return kept[1]
         shape = frame.depth.shape
-        pixels = (np.full(shape, -np.inf), np.full(shape, -np.inf), np.zeros(shape))
+        pixels = PixelHistory(
+            np.full(shape, -np.inf), np.full(shape, -np.inf), np.zeros(shape)
+        )
         self._moved[frame.camera] = (frame.view.copy(), pixels)
         return pixels
 
@@ -410,17 +432,13 @@ class OccupancyGrid:
         boxes = np.hstack([centre - half, centre + half])
         return int(
             carve_shapes(
-                self.cells,
-                self.lower,
-                self.cell,
+                self.arrays,
                 shapes.planes,
                 shapes.plane_start,
                 shapes.centres,
                 shapes.radii,
                 boxes,
                 grow,
-                self._dirty,
-                self._brick,
             )
         )
 
@@ -448,10 +466,7 @@ class OccupancyGrid:
         clip = np.ascontiguousarray(PV[[0, 1, 3]])
         return int(
             mark_seen(
-                self.cells,
-                self.misses,
-                self.lower,
-                self.cell,
+                self.arrays,
                 box,
                 clip,
                 np.ascontiguousarray(frame.view[2]),
@@ -460,8 +475,6 @@ class OccupancyGrid:
                 frame.closest,
                 self.spec.max_range,
                 self.spec.misses_to_clear,
-                self._dirty,
-                self._brick,
             )
         )
 
@@ -498,22 +511,24 @@ class OccupancyGrid:
         """
         if self._snapshot is not None and not self._dirty.any():
             return self._snapshot
-        centres, start = shell_update(
-            self.cells,
+        centres, start, slots = shell_update(
+            self.arrays,
             self._blocked,
-            self._dirty,
-            self.lower,
-            self.cell,
-            self._brick,
             self.spec.unknown_blocks,
             *self._shell,
         )
-        self._shell = (centres, start)
-        self._snapshot = self.snapshot_of(centres, start, self._blocked.copy())
+        self._shell = (centres, start, slots)
+        self._snapshot = self.snapshot_of(
+            centres, start, self._blocked.copy(), slots if len(slots) else None
+        )
         return self._snapshot
 
     def snapshot_of(
-        self, centres: FloatArray, start: np.ndarray, blocked: np.ndarray
+        self,
+        centres: FloatArray,
+        start: np.ndarray,
+        blocked: np.ndarray,
+        slots: np.ndarray | None = None,
     ) -> OccupancyEnvironment:
         """The snapshot of a shell this grid's :meth:`environment` computed.
 
@@ -521,6 +536,8 @@ class OccupancyGrid:
             centres: the shell's cell centres (N, 3), brick by brick [m].
             start: brick b's cells are ``centres[start[b]:start[b + 1]]``.
             blocked: the obstacle mask (the grid's shape); the snapshot keeps it.
+            slots: each brick's occupied places as bits, when the shell's
+                pass gave them (None: computed from the centres).
 
         (A map updated in another process sends these three arrays; this
         grid's bounds and bricks index them.)
@@ -535,7 +552,7 @@ class OccupancyGrid:
             else None
         )
         index = CellIndex.from_bricks(
-            centres, start, self.lower, self.cell, self._brick, self._dims
+            centres, start, self.lower, self.cell, self._brick, self._dims, slots
         )
         return OccupancyEnvironment(
             centres,
