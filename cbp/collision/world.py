@@ -445,7 +445,7 @@ class CollisionWorld:
         out_second = np.empty(n, dtype=np.intp)
         floats = np.empty((4, n, 3))
         left = np.empty(n, dtype=np.intp)
-        count, missed = self_contacts(  # type: ignore[call-arg]  # tuples of known length
+        count, missed = self_contacts(
             robot.centres,
             robot.halves,
             robot.radii,
