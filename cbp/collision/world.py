@@ -312,13 +312,7 @@ class CollisionWorld:
 
     def shape_placements(self, state: RobotState) -> ShapePlacements:
         """Every robot shape's world placement at ``state``, in one pinocchio call."""
-        pin.updateGeometryPlacements(
-            self.geometry.robot.model,
-            state.data,
-            self._geometry_model,
-            self._geometry_data,
-        )
-        oMg = self._geometry_data.oMg
+        oMg = self._pinocchio_placements(state)
         # By index: faster than iterating over pinocchio's vector.
         return ShapePlacements([oMg[i] for i in range(len(self.geometry.shapes))])
 
@@ -332,15 +326,22 @@ class CollisionWorld:
         """
         if self._kinematics is not None:
             return self._kinematics(state.q)
+        oMg = self._pinocchio_placements(state)
+        count = len(self.geometry.shapes)
+        return np.array([oMg[i].homogeneous for i in range(count)]).reshape(-1, 4, 4)
+
+    def _pinocchio_placements(self, state: RobotState) -> pin.StdVec_SE3:
+        """The shapes' placements in pinocchio's geometry data (``oMg``) at ``state``.
+
+        Writes the world's own geometry data (another thread: :meth:`placed_apart`).
+        """
         pin.updateGeometryPlacements(
             self.geometry.robot.model,
             state.data,
             self._geometry_model,
             self._geometry_data,
         )
-        oMg = self._geometry_data.oMg
-        count = len(self.geometry.shapes)
-        return np.array([oMg[i].homogeneous for i in range(count)]).reshape(-1, 4, 4)
+        return self._geometry_data.oMg
 
     def shape_bounds(
         self, placements: ShapePlacements
