@@ -1252,20 +1252,25 @@ def compile_convex_kernels() -> None:
     radii = np.full(4, 0.2)
     out = np.empty((4, 16, 3))
     index = np.empty(16, dtype=np.intp)
+    first = np.array([0, 1], dtype=np.intp)
+    # The same shapes as objects: boxes, candidates, frames, tables, skip, guess.
+    objects: tuple[Any, ...] = (
+        centres - 0.1,
+        centres + 0.1,
+        np.arange(4, dtype=np.intp),
+        frames,
+        *fields(shapes),
+        np.zeros((4, 4), dtype=np.bool_),
+        np.zeros((4, 4, 5)),
+    )
     for ahead in (False, True):
-        obstacle_contacts(
+        obstacle_contacts(  # type: ignore[call-arg]  # *objects: a tuple
             centres,
             halves,
             radii,
             frames,
             *fields(shapes),
-            centres - 0.1,
-            centres + 0.1,
-            np.arange(4, dtype=np.intp),
-            frames,
-            *fields(shapes),
-            np.zeros((4, 4), dtype=np.bool_),
-            np.zeros((4, 4, 5)),
+            *objects,
             np.zeros((4, 3)),
             ahead,
             0.1,
@@ -1275,21 +1280,13 @@ def compile_convex_kernels() -> None:
             index.copy(),
             index.copy(),
         )
-    first = np.array([0, 1], dtype=np.intp)
-    for ahead in (False, True):
-        declared_contacts(
+        declared_contacts(  # type: ignore[call-arg]  # *objects: a tuple
             frames,
             centres,
             halves,
             radii,
             *fields(shapes),
-            centres - 0.1,
-            centres + 0.1,
-            np.arange(4, dtype=np.intp),
-            frames,
-            *fields(shapes),
-            np.zeros((4, 4), dtype=np.bool_),
-            np.zeros((4, 4, 5)),
+            *objects,
             np.zeros((4, 3)),
             ahead,
             0.1,
