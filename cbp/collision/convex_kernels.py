@@ -948,8 +948,8 @@ def _self_pairs(
 
 
 # The kernels called from Python take each table's arrays one by one: numba
-# dispatches them faster than a tuple of them (about 1 us a call measured on
-# declared_contacts, a seventh of its time on the boards).
+# dispatches them faster than tuples of them (measured: tuples added about
+# 1 us to declared_contacts' 6.4 us on the boards).
 
 
 @numba.njit(cache=True, nogil=True)

@@ -442,8 +442,7 @@ class CollisionWorld:
         if not n:
             return ContactSet.empty()
         pad2 = 2.0 * self.padding
-        out_first = np.empty(n, dtype=np.intp)
-        out_second = np.empty(n, dtype=np.intp)
+        index = np.empty((2, n), dtype=np.intp)
         floats = np.empty((4, n, 3))
         left = np.empty(n, dtype=np.intp)
         count, missed = self_contacts(
@@ -457,19 +456,12 @@ class CollisionWorld:
             guess,
             self.settings.activation_distance + pad2,
             pad2,
-            out_first,
-            out_second,
+            index[0],
+            index[1],
             floats,
             left,
         )
-        found = ContactSet(
-            out_first[:count],
-            out_second[:count],
-            floats[0, :count],
-            floats[1, :count],
-            floats[2, :count],
-            floats[3, :count, 0],
-        )
+        found = ContactSet.packed(index, floats, 0, count)
         if not missed:
             return found
         return ContactSet.concatenate(
