@@ -46,6 +46,16 @@ MOVING_START = 2.0
 MOVING_REGION = ((-0.1, -0.7, 0.05), (1.1, 0.7, 0.9))
 
 
+def _table() -> dict[str, Any]:
+    """The table the objects stand on (its top at z = 0)."""
+    return {
+        "name": "table",
+        "shape": "box",
+        "size": [0.7, 1.2, 0.04],
+        "pose": {"position": [0.55, 0.0, -0.02]},
+    }
+
+
 def _object(rng: np.random.Generator, k: int) -> dict[str, Any]:
     kind = rng.choice(["box", "box", "cylinder", "sphere"])
     x = rng.uniform(REGION[0][0], REGION[1][0])
@@ -123,12 +133,7 @@ def generate_scene(seed: int, objects: tuple[int, int] = (3, 7)) -> dict[str, An
         "goal": {"type": "keyframes", "keyframes": keyframes},
         "world": {
             "objects": [
-                {
-                    "name": "table",
-                    "shape": "box",
-                    "size": [0.7, 1.2, 0.04],
-                    "pose": {"position": [0.55, 0.0, -0.02]},
-                },
+                _table(),
                 *placed,
             ]
         },
@@ -239,12 +244,7 @@ def generate_moving_scene(
         },
         "world": {
             "objects": [
-                {
-                    "name": "table",
-                    "shape": "box",
-                    "size": [0.7, 1.2, 0.04],
-                    "pose": {"position": [0.55, 0.0, -0.02]},
-                },
+                _table(),
                 *placed,
             ]
         },

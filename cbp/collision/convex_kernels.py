@@ -38,8 +38,11 @@ tolerance), so two threads that query the same environment at once (each
 writing its guesses) change how many iterations a pair takes, not the
 contacts.
 
-Shapes are packed in flat arrays (:class:`ConvexShapes`): numba dispatches flat
-arrays faster than named tuples.
+Shapes are packed in flat arrays (:class:`ConvexShapes`): numba dispatches
+flat arrays faster than tuples of them, so the kernels called from Python take
+each array on its own and pass them on as a :data:`Table`. Inside the kernels,
+one shape where it stands is a :class:`PlacedConvex`, and one function gives
+the support point of A - B for GJK and EPA alike.
 """
 
 from __future__ import annotations
@@ -47,7 +50,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import coal
 import numba
@@ -71,7 +74,9 @@ __all__ = [
     "SPHERE",
     "UNSUPPORTED",
     "ConvexShapes",
+    "PlacedConvex",
     "RobotTable",
+    "Table",
     "compile_convex_kernels",
     "declared_contacts",
     "fields",
@@ -160,6 +165,39 @@ class RobotTable:
         return (self.centres, self.halves, self.radii, *fields(self.shapes))
 
 
+class PlacedConvex(NamedTuple):
+    """One packed shape at its world placement, as :func:`pair_distance` reads it.
+
+    Attributes:
+        kind: :data:`CONVEX`, ... (:attr:`ConvexShapes.kind`).
+        size: its size (:attr:`ConvexShapes.size`) (3,) [m].
+        radius: its core's growth [m].
+        vertices: the vertices of its table (a hull's are rows
+            ``start:stop``).
+        start: its first vertex.
+        stop: past its last.
+        neighbor_start: its table's :attr:`ConvexShapes.neighbor_start`.
+        neighbors: its table's :attr:`ConvexShapes.neighbors`.
+        frame: its world placement (4, 4).
+    """
+
+    kind: int
+    size: FloatArray
+    radius: float
+    vertices: FloatArray
+    start: int
+    stop: int
+    neighbor_start: IntArray
+    neighbors: IntArray
+    frame: FloatArray
+
+
+#: A packed table's arrays, in :func:`fields`' order, as they pass inside the kernels.
+Table = tuple[
+    IntArray, FloatArray, FloatArray, IntArray, FloatArray, IntArray, IntArray
+]
+
+
 def pack_shapes(shapes: list[coal.CollisionGeometry]) -> ConvexShapes:
     """Pack coal shapes; those the kernels do not measure are :data:`UNSUPPORTED`."""
     n = len(shapes)
@@ -221,18 +259,7 @@ def _neighbours(shape: coal.Convex, offset: int) -> list[list[int]]:
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _support(
-    kind: int,
-    size: FloatArray,
-    vertices: FloatArray,
-    start: int,
-    stop: int,
-    neighbor_start: IntArray,
-    neighbors: IntArray,
-    hint: int,
-    frame: FloatArray,
-    dx: float,
-    dy: float,
-    dz: float,
+    shape: PlacedConvex, hint: int, dx: float, dy: float, dz: float
 ) -> tuple[float, float, float, int]:
     """The core's point farthest along the world direction d, in the world.
 
@@ -240,6 +267,9 @@ def _support(
     last one found, or any of the hull's): on a convex hull a vertex that no
     neighbour beats is the farthest. Returns the point and that vertex.
     """
+    kind, size, frame = shape.kind, shape.size, shape.frame
+    vertices, start, stop = shape.vertices, shape.start, shape.stop
+    neighbor_start, neighbors = shape.neighbor_start, shape.neighbors
     lx = frame[0, 0] * dx + frame[1, 0] * dy + frame[2, 0] * dz
     ly = frame[0, 1] * dx + frame[1, 1] * dy + frame[2, 1] * dz
     lz = frame[0, 2] * dx + frame[1, 2] * dy + frame[2, 2] * dz
@@ -276,6 +306,25 @@ def _support(
         frame[2, 0] * px + frame[2, 1] * py + frame[2, 2] * pz + frame[2, 3],
         top,
     )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _support_pair(
+    a: PlacedConvex,
+    b: PlacedConvex,
+    hint_a: int,
+    hint_b: int,
+    dx: float,
+    dy: float,
+    dz: float,
+) -> tuple[float, float, float, float, float, float, int, int]:
+    """A's support point along d and B's against it (A - B's along d).
+
+    Returns A's point, B's point and the vertices found (the next hints).
+    """
+    pax, pay, paz, hint_a = _support(a, hint_a, dx, dy, dz)
+    pbx, pby, pbz, hint_b = _support(b, hint_b, -dx, -dy, -dz)
+    return pax, pay, paz, pbx, pby, pbz, hint_a, hint_b
 
 
 @numba.njit(cache=True, nogil=True)
@@ -398,24 +447,8 @@ def _compact(
 
 @numba.njit(cache=True, nogil=True)
 def pair_distance(
-    kind_a: int,
-    size_a: FloatArray,
-    radius_a: float,
-    vertices_a: FloatArray,
-    start_a: int,
-    stop_a: int,
-    na_start: IntArray,
-    na: IntArray,
-    frame_a: FloatArray,
-    kind_b: int,
-    size_b: FloatArray,
-    radius_b: float,
-    vertices_b: FloatArray,
-    start_b: int,
-    stop_b: int,
-    nb_start: IntArray,
-    nb: IntArray,
-    frame_b: FloatArray,
+    shape_a: PlacedConvex,
+    shape_b: PlacedConvex,
     guess: FloatArray,
     work: FloatArray,
     out: FloatArray,
@@ -423,25 +456,8 @@ def pair_distance(
     """Signed distance of shape A from shape B, witnesses and normal (B toward A).
 
     Args:
-        kind_a: A's kind (:data:`CONVEX`, ...).
-        size_a: its size (:attr:`ConvexShapes.size`).
-        radius_a: its core's growth [m].
-        vertices_a: the vertices of its table (a hull's are rows
-            ``start_a:stop_a``).
-        start_a: A's first vertex.
-        stop_a: past its last.
-        na_start: its table's :attr:`ConvexShapes.neighbor_start`.
-        na: its table's :attr:`ConvexShapes.neighbors`.
-        frame_a: A's world placement (4, 4).
-        kind_b: B's, likewise.
-        size_b: B's.
-        radius_b: B's.
-        vertices_b: B's.
-        start_b: B's.
-        stop_b: B's.
-        nb_start: B's.
-        nb: B's.
-        frame_b: B's.
+        shape_a: A where it stands.
+        shape_b: B, likewise.
         guess: (5,): where to start, updated for the next call: the last
             normal (zeros: none yet) and the hulls' last support vertices.
             Between small motions, GJK then needs a few iterations.
@@ -461,9 +477,9 @@ def pair_distance(
     hint_a, hint_b = int(guess[3]), int(guess[4])
     vx, vy, vz = guess[0], guess[1], guess[2]
     if vx * vx + vy * vy + vz * vz < 1e-24:
-        vx = frame_a[0, 3] - frame_b[0, 3]
-        vy = frame_a[1, 3] - frame_b[1, 3]
-        vz = frame_a[2, 3] - frame_b[2, 3]
+        vx = shape_a.frame[0, 3] - shape_b.frame[0, 3]
+        vy = shape_a.frame[1, 3] - shape_b.frame[1, 3]
+        vz = shape_a.frame[2, 3] - shape_b.frame[2, 3]
     if vx * vx + vy * vy + vz * vz < 1e-24:
         vx, vy, vz = 1.0, 0.0, 0.0
     n = 0
@@ -471,33 +487,8 @@ def pair_distance(
     ax = ay = az = bx = by = bz = 0.0
     overlap = False
     for _ in range(_GJK_ITERATIONS):
-        pax, pay, paz, hint_a = _support(
-            kind_a,
-            size_a,
-            vertices_a,
-            start_a,
-            stop_a,
-            na_start,
-            na,
-            hint_a,
-            frame_a,
-            -vx,
-            -vy,
-            -vz,
-        )
-        pbx, pby, pbz, hint_b = _support(
-            kind_b,
-            size_b,
-            vertices_b,
-            start_b,
-            stop_b,
-            nb_start,
-            nb,
-            hint_b,
-            frame_b,
-            vx,
-            vy,
-            vz,
+        pax, pay, paz, pbx, pby, pbz, hint_a, hint_b = _support_pair(
+            shape_a, shape_b, hint_a, hint_b, -vx, -vy, -vz
         )
         wx, wy, wz = pax - pbx, pay - pby, paz - pbz
         if n > 0:
@@ -542,31 +533,7 @@ def pair_distance(
         core = math.sqrt(vv)
         ux, uy, uz = vx / core, vy / core, vz / core
     else:
-        status = _epa(
-            kind_a,
-            size_a,
-            vertices_a,
-            start_a,
-            stop_a,
-            na_start,
-            na,
-            hint_a,
-            frame_a,
-            kind_b,
-            size_b,
-            vertices_b,
-            start_b,
-            stop_b,
-            nb_start,
-            nb,
-            hint_b,
-            frame_b,
-            W,
-            WA,
-            WB,
-            n,
-            out,
-        )
+        status = _epa(shape_a, shape_b, hint_a, hint_b, W, WA, WB, n, out)
         if status != 0:
             return status
         core = out[0]
@@ -575,9 +542,10 @@ def pair_distance(
         ux, uy, uz = out[7], out[8], out[9]
     guess[0], guess[1], guess[2] = ux, uy, uz
     guess[3], guess[4] = hint_a, hint_b
-    out[0] = core - radius_a - radius_b
-    out[1], out[2], out[3] = ax - radius_a * ux, ay - radius_a * uy, az - radius_a * uz
-    out[4], out[5], out[6] = bx + radius_b * ux, by + radius_b * uy, bz + radius_b * uz
+    ra, rb = shape_a.radius, shape_b.radius
+    out[0] = core - ra - rb
+    out[1], out[2], out[3] = ax - ra * ux, ay - ra * uy, az - ra * uz
+    out[4], out[5], out[6] = bx + rb * ux, by + rb * uy, bz + rb * uz
     out[7], out[8], out[9] = ux, uy, uz
     return 0
 
@@ -600,24 +568,10 @@ def _face_plane(P: FloatArray, faces: IntArray, f: int, plane: FloatArray) -> bo
 
 @numba.njit(cache=True, nogil=True)
 def _epa(
-    kind_a: int,
-    size_a: FloatArray,
-    vertices_a: FloatArray,
-    start_a: int,
-    stop_a: int,
-    na_start: IntArray,
-    na: IntArray,
+    shape_a: PlacedConvex,
+    shape_b: PlacedConvex,
     hint_a: int,
-    frame_a: FloatArray,
-    kind_b: int,
-    size_b: FloatArray,
-    vertices_b: FloatArray,
-    start_b: int,
-    stop_b: int,
-    nb_start: IntArray,
-    nb: IntArray,
     hint_b: int,
-    frame_b: FloatArray,
     W: FloatArray,
     WA: FloatArray,
     WB: FloatArray,
@@ -677,33 +631,8 @@ def _epa(
         bax = bay = baz = bbx = bby = bbz = 0.0
         for k in range(count):
             dx, dy, dz = directions[k, 0], directions[k, 1], directions[k, 2]
-            pax, pay, paz, hint_a = _support(
-                kind_a,
-                size_a,
-                vertices_a,
-                start_a,
-                stop_a,
-                na_start,
-                na,
-                hint_a,
-                frame_a,
-                dx,
-                dy,
-                dz,
-            )
-            pbx, pby, pbz, hint_b = _support(
-                kind_b,
-                size_b,
-                vertices_b,
-                start_b,
-                stop_b,
-                nb_start,
-                nb,
-                hint_b,
-                frame_b,
-                -dx,
-                -dy,
-                -dz,
+            pax, pay, paz, pbx, pby, pbz, hint_a, hint_b = _support_pair(
+                shape_a, shape_b, hint_a, hint_b, dx, dy, dz
             )
             P[n, 0], P[n, 1], P[n, 2] = pax - pbx, pay - pby, paz - pbz
             reach = _off_span(P, n)
@@ -741,33 +670,8 @@ def _epa(
         if nearest < 0:
             return FAILED
         dx, dy, dz = plane[nearest, 0], plane[nearest, 1], plane[nearest, 2]
-        pax, pay, paz, hint_a = _support(
-            kind_a,
-            size_a,
-            vertices_a,
-            start_a,
-            stop_a,
-            na_start,
-            na,
-            hint_a,
-            frame_a,
-            dx,
-            dy,
-            dz,
-        )
-        pbx, pby, pbz, hint_b = _support(
-            kind_b,
-            size_b,
-            vertices_b,
-            start_b,
-            stop_b,
-            nb_start,
-            nb,
-            hint_b,
-            frame_b,
-            -dx,
-            -dy,
-            -dz,
+        pax, pay, paz, pbx, pby, pbz, hint_a, hint_b = _support_pair(
+            shape_a, shape_b, hint_a, hint_b, dx, dy, dz
         )
         wx, wy, wz = pax - pbx, pay - pby, paz - pbz
         if dx * wx + dy * wy + dz * wz - least <= EPA_TOLERANCE:
@@ -890,53 +794,34 @@ def _barycentric(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _placed(table: Table, frames: FloatArray, s: int) -> PlacedConvex:
+    """Shape s of a packed table at its placement ``frames[s]``."""
+    kind, size, radius, vertex_start, vertices, neighbor_start, neighbors = table
+    return PlacedConvex(
+        kind[s],
+        size[s],
+        radius[s],
+        vertices,
+        vertex_start[s],
+        vertex_start[s + 1],
+        neighbor_start,
+        neighbors,
+        frames[s],
+    )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _measure(
-    a: int,
-    frames_a: FloatArray,
-    kind_a: IntArray,
-    size_a: FloatArray,
-    radius_a: FloatArray,
-    start_a: IntArray,
-    vertices_a: FloatArray,
-    neighbor_start_a: IntArray,
-    neighbors_a: IntArray,
-    b: int,
-    frames_b: FloatArray,
-    kind_b: IntArray,
-    size_b: FloatArray,
-    radius_b: FloatArray,
-    start_b: IntArray,
-    vertices_b: FloatArray,
-    neighbor_start_b: IntArray,
-    neighbors_b: IntArray,
+    a: PlacedConvex,
+    b: PlacedConvex,
     guess: FloatArray,
     work: FloatArray,
     out: FloatArray,
 ) -> int:
-    """:func:`pair_distance` of shape a of one table from shape b of another."""
-    return pair_distance(
-        kind_a[a],
-        size_a[a],
-        radius_a[a],
-        vertices_a,
-        start_a[a],
-        start_a[a + 1],
-        neighbor_start_a,
-        neighbors_a,
-        frames_a[a],
-        kind_b[b],
-        size_b[b],
-        radius_b[b],
-        vertices_b,
-        start_b[b],
-        start_b[b + 1],
-        neighbor_start_b,
-        neighbors_b,
-        frames_b[b],
-        guess,
-        work,
-        out,
-    )
+    """:func:`pair_distance`, or :data:`FAILED` for a shape the kernels skip."""
+    if a.kind == UNSUPPORTED or b.kind == UNSUPPORTED:
+        return FAILED
+    return pair_distance(a, b, guess, work, out)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -947,6 +832,124 @@ def _write(floats: FloatArray, row: int, out: FloatArray, distance: float) -> No
         floats[1, row, k] = out[4 + k]
         floats[2, row, k] = out[7 + k]
     floats[3, row, 0] = distance
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _obstacle_pairs(
+    centres: FloatArray,
+    halves: FloatArray,
+    radii: FloatArray,
+    frames: FloatArray,
+    robot: Table,
+    lower: FloatArray,
+    upper: FloatArray,
+    candidates: IntArray,
+    object_frames: FloatArray,
+    objects: Table,
+    skip: npt.NDArray[np.bool_],
+    guess: FloatArray,
+    ahead: FloatArray,
+    moving: bool,
+    margin: float,
+    shape_out: IntArray,
+    object_out: IntArray,
+    floats: FloatArray,
+    left_shape: IntArray,
+    left_object: IntArray,
+) -> tuple[int, int]:
+    """:func:`obstacle_contacts` of the tables ``robot`` and ``objects``."""
+    capacity = len(centres) * len(candidates)
+    near_shape = np.empty(capacity, dtype=np.intp)
+    near_object = np.empty(capacity, dtype=np.intp)
+    pairs = near_objects(
+        centres,
+        halves,
+        radii,
+        lower,
+        upper,
+        candidates,
+        margin,
+        near_shape,
+        near_object,
+    )
+    work = np.empty((16, 3))
+    out = np.empty(10)
+    count = 0
+    left = 0
+    for p in range(pairs):
+        s, k = near_shape[p], near_object[p]
+        if skip[s, k]:
+            continue
+        status = _measure(
+            _placed(robot, frames, s),
+            _placed(objects, object_frames, k),
+            guess[s, k],
+            work,
+            out,
+        )
+        if status != 0:
+            left_shape[left], left_object[left] = s, k
+            left += 1
+            continue
+        d = out[0]
+        if moving:
+            d -= max(
+                out[7] * ahead[k, 0] + out[8] * ahead[k, 1] + out[9] * ahead[k, 2],
+                0.0,
+            )
+        if d < margin:
+            shape_out[count], object_out[count] = s, k
+            _write(floats, count, out, d)
+            count += 1
+    return count, left
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _self_pairs(
+    centres: FloatArray,
+    halves: FloatArray,
+    radii: FloatArray,
+    frames: FloatArray,
+    robot: Table,
+    first: IntArray,
+    second: IntArray,
+    self_guess: FloatArray,
+    margin: float,
+    padding: float,
+    first_out: IntArray,
+    second_out: IntArray,
+    floats: FloatArray,
+    left: IntArray,
+) -> tuple[int, int]:
+    """:func:`self_contacts` of the table ``robot``."""
+    near = np.empty(len(first), dtype=np.intp)
+    pairs = near_pairs(centres, halves, radii, first, second, margin, near)
+    work = np.empty((16, 3))
+    out = np.empty(10)
+    count = 0
+    missed = 0
+    for p in range(pairs):
+        i, j = first[near[p]], second[near[p]]
+        status = _measure(
+            _placed(robot, frames, i),
+            _placed(robot, frames, j),
+            self_guess[near[p]],
+            work,
+            out,
+        )
+        if status != 0:
+            left[missed] = near[p]
+            missed += 1
+        elif out[0] < margin:
+            first_out[count], second_out[count] = i, j
+            _write(floats, count, out, out[0] - padding)
+            count += 1
+    return count, missed
+
+
+# The kernels called from Python take each table's arrays one by one: numba
+# dispatches them faster than tuples of them (measured: tuples added about
+# 1 us to declared_contacts' 6.4 us on the boards).
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1001,69 +1004,38 @@ def obstacle_contacts(
     Returns:
         (contacts written, pairs left for coal).
     """
-    capacity = len(centres) * len(candidates)
-    near_shape = np.empty(capacity, dtype=np.intp)
-    near_object = np.empty(capacity, dtype=np.intp)
-    pairs = near_objects(
+    robot = (kind, size, radius, vertex_start, vertices, neighbor_start, neighbors)
+    objects = (
+        object_kind,
+        object_size,
+        object_radius,
+        object_start,
+        object_vertices,
+        object_neighbor_start,
+        object_neighbors,
+    )
+    return _obstacle_pairs(
         centres,
         halves,
         radii,
+        frames,
+        robot,
         lower,
         upper,
         candidates,
+        object_frames,
+        objects,
+        skip,
+        guess,
+        ahead,
+        moving,
         margin,
-        near_shape,
-        near_object,
+        shape_out,
+        object_out,
+        floats,
+        left_shape,
+        left_object,
     )
-    work = np.empty((16, 3))
-    out = np.empty(10)
-    count = 0
-    left = 0
-    for p in range(pairs):
-        s, k = near_shape[p], near_object[p]
-        if skip[s, k]:
-            continue
-        if kind[s] == UNSUPPORTED or object_kind[k] == UNSUPPORTED:
-            status = FAILED
-        else:
-            status = _measure(
-                s,
-                frames,
-                kind,
-                size,
-                radius,
-                vertex_start,
-                vertices,
-                neighbor_start,
-                neighbors,
-                k,
-                object_frames,
-                object_kind,
-                object_size,
-                object_radius,
-                object_start,
-                object_vertices,
-                object_neighbor_start,
-                object_neighbors,
-                guess[s, k],
-                work,
-                out,
-            )
-        if status != 0:
-            left_shape[left], left_object[left] = s, k
-            left += 1
-            continue
-        d = out[0]
-        if moving:
-            d -= max(
-                out[7] * ahead[k, 0] + out[8] * ahead[k, 1] + out[9] * ahead[k, 2],
-                0.0,
-            )
-        if d < margin:
-            shape_out[count], object_out[count] = s, k
-            _write(floats, count, out, d)
-            count += 1
-    return count, left
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1101,47 +1073,23 @@ def self_contacts(
     Returns:
         (contacts written, pairs left for coal).
     """
-    near = np.empty(len(first), dtype=np.intp)
-    pairs = near_pairs(centres, halves, radii, first, second, margin, near)
-    work = np.empty((16, 3))
-    out = np.empty(10)
-    count = 0
-    missed = 0
-    for p in range(pairs):
-        i, j = first[near[p]], second[near[p]]
-        status = FAILED
-        if kind[i] != UNSUPPORTED and kind[j] != UNSUPPORTED:
-            status = _measure(
-                i,
-                frames,
-                kind,
-                size,
-                radius,
-                vertex_start,
-                vertices,
-                neighbor_start,
-                neighbors,
-                j,
-                frames,
-                kind,
-                size,
-                radius,
-                vertex_start,
-                vertices,
-                neighbor_start,
-                neighbors,
-                self_guess[near[p]],
-                work,
-                out,
-            )
-        if status != 0:
-            left[missed] = near[p]
-            missed += 1
-        elif out[0] < margin:
-            first_out[count], second_out[count] = i, j
-            _write(floats, count, out, out[0] - padding)
-            count += 1
-    return count, missed
+    robot = (kind, size, radius, vertex_start, vertices, neighbor_start, neighbors)
+    return _self_pairs(
+        centres,
+        halves,
+        radii,
+        frames,
+        robot,
+        first,
+        second,
+        self_guess,
+        margin,
+        padding,
+        first_out,
+        second_out,
+        floats,
+        left,
+    )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1206,107 +1154,62 @@ def declared_contacts(
     centres = np.empty((n, 3))
     halves = np.empty((n, 3))
     shape_bounds(frames, centres_local, halves_local, centres, halves)
-    capacity = n * len(candidates)
-    near_shape = np.empty(capacity, dtype=np.intp)
-    near_object = np.empty(capacity, dtype=np.intp)
-    pairs = near_objects(
+    robot = (kind, size, radius, vertex_start, vertices, neighbor_start, neighbors)
+    objects = (
+        object_kind,
+        object_size,
+        object_radius,
+        object_start,
+        object_vertices,
+        object_neighbor_start,
+        object_neighbors,
+    )
+    obstacles, obstacles_missed = _obstacle_pairs(
         centres,
         halves,
         radii,
+        frames,
+        robot,
         lower,
         upper,
         candidates,
+        object_frames,
+        objects,
+        skip,
+        guess,
+        ahead,
+        moving,
         margin,
-        near_shape,
-        near_object,
+        index[0],
+        index[1],
+        floats,
+        left[0],
+        left[1],
     )
-    work = np.empty((16, 3))
-    out = np.empty(10)
-    count = 0
-    missed = 0
-    for p in range(pairs):
-        s, k = near_shape[p], near_object[p]
-        if skip[s, k]:
-            continue
-        status = FAILED
-        if kind[s] != UNSUPPORTED and object_kind[k] != UNSUPPORTED:
-            status = _measure(
-                s,
-                frames,
-                kind,
-                size,
-                radius,
-                vertex_start,
-                vertices,
-                neighbor_start,
-                neighbors,
-                k,
-                object_frames,
-                object_kind,
-                object_size,
-                object_radius,
-                object_start,
-                object_vertices,
-                object_neighbor_start,
-                object_neighbors,
-                guess[s, k],
-                work,
-                out,
-            )
-        if status != 0:
-            left[0, missed], left[1, missed] = s, k
-            missed += 1
-            continue
-        d = out[0]
-        if moving:
-            d -= max(
-                out[7] * ahead[k, 0] + out[8] * ahead[k, 1] + out[9] * ahead[k, 2],
-                0.0,
-            )
-        if d < margin:
-            index[0, count], index[1, count] = s, -1
-            _write(floats, count, out, d - padding)
-            count += 1
-    obstacles = count
-    obstacles_missed = missed
+    for c in range(obstacles):
+        index[1, c] = -1
+        floats[3, c, 0] -= padding
+    own = own_missed = 0
     if len(first):
-        near = np.empty(len(first), dtype=np.intp)
-        pairs = near_pairs(centres, halves, radii, first, second, self_margin, near)
-        for p in range(pairs):
-            i, j = first[near[p]], second[near[p]]
-            status = FAILED
-            if kind[i] != UNSUPPORTED and kind[j] != UNSUPPORTED:
-                status = _measure(
-                    i,
-                    frames,
-                    kind,
-                    size,
-                    radius,
-                    vertex_start,
-                    vertices,
-                    neighbor_start,
-                    neighbors,
-                    j,
-                    frames,
-                    kind,
-                    size,
-                    radius,
-                    vertex_start,
-                    vertices,
-                    neighbor_start,
-                    neighbors,
-                    self_guess[near[p]],
-                    work,
-                    out,
-                )
-            if status != 0:
-                left[0, missed], left[1, missed] = -1, near[p]
-                missed += 1
-            elif out[0] < self_margin:
-                index[0, count], index[1, count] = i, j
-                _write(floats, count, out, out[0] - self_padding)
-                count += 1
-    return obstacles, count - obstacles, obstacles_missed, missed - obstacles_missed
+        own, own_missed = _self_pairs(
+            centres,
+            halves,
+            radii,
+            frames,
+            robot,
+            first,
+            second,
+            self_guess,
+            self_margin,
+            self_padding,
+            index[0, obstacles:],
+            index[1, obstacles:],
+            floats[:, obstacles:],
+            left[1, obstacles_missed:],
+        )
+        for c in range(obstacles_missed, obstacles_missed + own_missed):
+            left[0, c] = -1
+    return obstacles, own, obstacles_missed, own_missed
 
 
 #: Packed robot shapes by the shapes' identities, with the shapes they are for.
@@ -1349,20 +1252,25 @@ def compile_convex_kernels() -> None:
     radii = np.full(4, 0.2)
     out = np.empty((4, 16, 3))
     index = np.empty(16, dtype=np.intp)
+    first = np.array([0, 1], dtype=np.intp)
+    # The same shapes as objects: boxes, candidates, frames, tables, skip, guess.
+    objects: tuple[Any, ...] = (
+        centres - 0.1,
+        centres + 0.1,
+        np.arange(4, dtype=np.intp),
+        frames,
+        *fields(shapes),
+        np.zeros((4, 4), dtype=np.bool_),
+        np.zeros((4, 4, 5)),
+    )
     for ahead in (False, True):
-        obstacle_contacts(  # type: ignore[call-arg]  # tuples of known length
+        obstacle_contacts(  # type: ignore[call-arg]  # *objects: a tuple
             centres,
             halves,
             radii,
             frames,
             *fields(shapes),
-            centres - 0.1,
-            centres + 0.1,
-            np.arange(4, dtype=np.intp),
-            frames,
-            *fields(shapes),
-            np.zeros((4, 4), dtype=np.bool_),
-            np.zeros((4, 4, 5)),
+            *objects,
             np.zeros((4, 3)),
             ahead,
             0.1,
@@ -1372,21 +1280,13 @@ def compile_convex_kernels() -> None:
             index.copy(),
             index.copy(),
         )
-    first = np.array([0, 1], dtype=np.intp)
-    for ahead in (False, True):
-        declared_contacts(  # type: ignore[call-arg]  # tuples of known length
+        declared_contacts(  # type: ignore[call-arg]  # *objects: a tuple
             frames,
             centres,
             halves,
             radii,
             *fields(shapes),
-            centres - 0.1,
-            centres + 0.1,
-            np.arange(4, dtype=np.intp),
-            frames,
-            *fields(shapes),
-            np.zeros((4, 4), dtype=np.bool_),
-            np.zeros((4, 4, 5)),
+            *objects,
             np.zeros((4, 3)),
             ahead,
             0.1,
@@ -1400,7 +1300,7 @@ def compile_convex_kernels() -> None:
             np.empty((4, 32, 3)),
             np.empty((2, 32), dtype=np.intp),
         )
-    self_contacts(  # type: ignore[call-arg]  # tuples of known length
+    self_contacts(
         centres,
         halves,
         radii,
@@ -1418,8 +1318,8 @@ def compile_convex_kernels() -> None:
     )
 
 
-def fields(shapes: ConvexShapes) -> tuple[Any, ...]:
-    """The arrays in the kernels' order."""
+def fields(shapes: ConvexShapes) -> Table:
+    """The arrays in the kernels' order (a :data:`Table`)."""
     return (
         shapes.kind,
         shapes.size,

@@ -332,7 +332,7 @@ class PrimitiveEnvironment(Environment):
         floats = np.empty((4, capacity, 3))
         left_shape = np.empty(capacity, dtype=np.intp)
         left_object = np.empty(capacity, dtype=np.intp)
-        count, left = obstacle_contacts(  # type: ignore[call-arg]  # tuples of known length
+        count, left = obstacle_contacts(
             robot.centres,
             robot.halves,
             robot.radii,

@@ -346,13 +346,7 @@ class CollisionWorld:
 
     def shape_placements(self, state: RobotState) -> ShapePlacements:
         """Every robot shape's world placement at ``state``, in one pinocchio call."""
-        pin.updateGeometryPlacements(
-            self.geometry.robot.model,
-            state.data,
-            self._geometry_model,
-            self._geometry_data,
-        )
-        oMg = self._geometry_data.oMg
+        oMg = self._pinocchio_placements(state)
         # By index: faster than iterating over pinocchio's vector.
         return ShapePlacements([oMg[i] for i in range(len(self.geometry.shapes))])
 
@@ -366,15 +360,22 @@ class CollisionWorld:
         """
         if self._kinematics is not None:
             return self._kinematics(state.q)
+        oMg = self._pinocchio_placements(state)
+        count = len(self.geometry.shapes)
+        return np.array([oMg[i].homogeneous for i in range(count)]).reshape(-1, 4, 4)
+
+    def _pinocchio_placements(self, state: RobotState) -> pin.StdVec_SE3:
+        """The shapes' placements in pinocchio's geometry data (``oMg``) at ``state``.
+
+        Writes the world's own geometry data (another thread: :meth:`placed_apart`).
+        """
         pin.updateGeometryPlacements(
             self.geometry.robot.model,
             state.data,
             self._geometry_model,
             self._geometry_data,
         )
-        oMg = self._geometry_data.oMg
-        count = len(self.geometry.shapes)
-        return np.array([oMg[i].homogeneous for i in range(count)]).reshape(-1, 4, 4)
+        return self._geometry_data.oMg
 
     def shape_bounds(
         self, placements: ShapePlacements
@@ -475,11 +476,10 @@ class CollisionWorld:
         if not n:
             return ContactSet.empty()
         pad2 = 2.0 * self.padding
-        out_first = np.empty(n, dtype=np.intp)
-        out_second = np.empty(n, dtype=np.intp)
+        index = np.empty((2, n), dtype=np.intp)
         floats = np.empty((4, n, 3))
         left = np.empty(n, dtype=np.intp)
-        count, missed = self_contacts(  # type: ignore[call-arg]  # tuples of known length
+        count, missed = self_contacts(
             robot.centres,
             robot.halves,
             robot.radii,
@@ -490,19 +490,12 @@ class CollisionWorld:
             guess,
             self.settings.activation_distance + pad2,
             pad2,
-            out_first,
-            out_second,
+            index[0],
+            index[1],
             floats,
             left,
         )
-        found = ContactSet(
-            out_first[:count],
-            out_second[:count],
-            floats[0, :count],
-            floats[1, :count],
-            floats[2, :count],
-            floats[3, :count, 0],
-        )
+        found = ContactSet.packed(index, floats, 0, count)
         if not missed:
             return found
         return ContactSet.concatenate(

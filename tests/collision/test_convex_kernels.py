@@ -47,6 +47,7 @@ from cbp.collision import (
 from cbp.collision.convex_kernels import (
     CONVEX,
     FAILED,
+    PlacedConvex,
     pack_shapes,
     pair_distance,
 )
@@ -95,28 +96,27 @@ def _rotation(rng: np.random.Generator) -> np.ndarray:
     return np.asarray(pin.Quaternion(q[0], q[1], q[2], q[3]).matrix())
 
 
+def _placed(packed, s, M) -> PlacedConvex:
+    """Shape s of a packed table at placement M."""
+    return PlacedConvex(
+        packed.kind[s],
+        packed.size[s],
+        packed.radius[s],
+        packed.vertices,
+        packed.vertex_start[s],
+        packed.vertex_start[s + 1],
+        packed.neighbor_start,
+        packed.neighbors,
+        M.homogeneous,
+    )
+
+
 def _measure(packed_a, a, Ma, packed_b, b, Mb) -> tuple[int, np.ndarray]:
     """The kernel's (status, [distance, point on a, point on b, normal])."""
     out = np.empty(10)
     status = pair_distance(
-        packed_a.kind[a],
-        packed_a.size[a],
-        packed_a.radius[a],
-        packed_a.vertices,
-        packed_a.vertex_start[a],
-        packed_a.vertex_start[a + 1],
-        packed_a.neighbor_start,
-        packed_a.neighbors,
-        Ma.homogeneous,
-        packed_b.kind[b],
-        packed_b.size[b],
-        packed_b.radius[b],
-        packed_b.vertices,
-        packed_b.vertex_start[b],
-        packed_b.vertex_start[b + 1],
-        packed_b.neighbor_start,
-        packed_b.neighbors,
-        Mb.homogeneous,
+        _placed(packed_a, a, Ma),
+        _placed(packed_b, b, Mb),
         np.zeros(5),
         np.empty((16, 3)),
         out,
