@@ -41,7 +41,7 @@ from results_file import put_section  # this folder: scripts run from it
 
 from cbp.teleop import TeleopSession
 from cbp.teleop.goal_page import TeleopPage
-from cbp.teleop.page import UPDATE_RATE
+from cbp.teleop.page import MAX_UPDATE_RATE
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Hand motion that counts as the page showing the moved hand [m].
@@ -69,6 +69,21 @@ new MutationObserver(() => {
   requestAnimationFrame(() => window.cbpHand.push(
     [seen, performance.timeOrigin + performance.now(), x]));
 }).observe(document.body, {subtree: true, childList: true, characterData: true});
+"""
+
+
+# Before the page's scripts: when each message batch from the websocket worker
+# (viser's client receives in a web worker) reaches the page's main thread.
+_MESSAGES = """
+window.cbpMessages = [];
+const NativeWorker = window.Worker;
+window.Worker = class extends NativeWorker {
+  constructor(...args) {
+    super(...args);
+    this.addEventListener('message', () => window.cbpMessages.push(
+      performance.timeOrigin + performance.now()));
+  }
+};
 """
 
 
@@ -145,6 +160,9 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
     try:
         session.start()
         page.start()
+        browser.execute_cdp_cmd(
+            "Page.addScriptToEvaluateOnNewDocument", {"source": _MESSAGES}
+        )
         browser.get(page.url)
         deadline = time.monotonic() + 120
         while not browser.find_elements(By.XPATH, "//button[normalize-space()='+x']"):
@@ -185,6 +203,7 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
             (a / 1e3, b / 1e3, x)
             for a, b, x in browser.execute_script("return window.cbpHand")
         ]
+        messages = np.array(browser.execute_script("return window.cbpMessages")) / 1e3
     finally:
         for burner in burning:
             burner.kill()
@@ -192,9 +211,18 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
         browser.quit()
         page.close()
         session.stop()
-    commands = {n: start + perf_to_epoch for n, _, start in session.commands()}
+    done = {c.number: c for c in session.commands()}
+    commands = {n: c.commanded + perf_to_epoch for n, c in done.items()}
     numbers = sorted(arrivals)
     to_server, to_command, on_page, on_dom, to_sent = [], [], [], [], []
+    # The moved hand's way through the browser: server sent -> main thread
+    # got the batch -> panel changed -> animation frame [ms].
+    browser_part: dict[str, list[float]] = {"received": [], "dom": [], "frame": []}
+    stages: dict[str, list[float]] = {"taken": [], "planned": [], "commanded": []}
+    for c in done.values():
+        stages["taken"].append(1e3 * (c.sampled - c.arrival))
+        stages["planned"].append(1e3 * (c.planned - c.sampled))
+        stages["commanded"].append(1e3 * (c.commanded - c.planned))
     for i, pressed in enumerate(keys_at[: len(numbers)]):
         number = numbers[i]
         to_server.append(1e3 * (arrivals[number] - pressed))
@@ -218,12 +246,21 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
         ]
         if moved_sent:
             to_sent.append(1e3 * (moved_sent[0] - pressed))
+        if moved and moved_sent:
+            seen, frame = moved[0]
+            before = messages[(messages <= seen) & (messages >= moved_sent[0] - 0.002)]
+            if before.size:
+                browser_part["received"].append(1e3 * (before[0] - moved_sent[0]))
+                browser_part["dom"].append(1e3 * (seen - before[0]))
+                browser_part["frame"].append(1e3 * (frame - seen))
     return {
         "burners": burners,
         "keys": len(keys_at),
         "goals": len(numbers),
         "to_server": _percentiles(to_server),
         "to_command": _percentiles(to_command),
+        "stages": {k: _percentiles(v) for k, v in stages.items()},
+        "browser": {k: _percentiles(v) for k, v in browser_part.items()},
         "n_command": len(to_command),
         "on_dom": _percentiles(on_dom),
         "to_sent": _percentiles(to_sent),
@@ -244,15 +281,30 @@ def main() -> None:
     parser.add_argument("--keys", type=int, default=60)
     parser.add_argument("--burners", type=int, default=2)
     parser.add_argument("--append", type=Path, default=None)
+    parser.add_argument(
+        "--only", type=int, default=None, help="one row: this many CPU-bound processes"
+    )
     args = parser.parse_args()
-    rows = [measure(args.keys, b) for b in (0, args.burners)]
+    loads = (0, args.burners) if args.only is None else (args.only,)
+    rows = [measure(args.keys, b) for b in loads]
+    for r in rows:
+        print(
+            f"{r['burners']} CPU-bound: goal arrival -> taken by the loop -> "
+            "planned -> commanded, median / p95 [ms]: "
+            + ", ".join(f"{a:.1f} / {b:.1f}" for a, b in r["stages"].values())
+        )
+        print(
+            f"{r['burners']} CPU-bound: moved hand sent -> batch on the page's main "
+            "thread -> panel changed -> animation frame, median / p95 [ms]: "
+            + ", ".join(f"{a:.1f} / {b:.1f}" for a, b in r["browser"].values())
+        )
     lines = [
         "",
         "## Teleoperation: latency from a key in the browser "
         "(benchmarks/teleop_browser_latency.py)",
         "",
-        f"Boards, CAT, the page in headless Chromium (software WebGL) updating at "
-        f"{UPDATE_RATE:g} Hz; {args.keys} presses of the page's w and s keys "
+        "Boards, CAT, the page in headless Chromium (software WebGL) updated at "
+        f"each change of the session (at most {MAX_UPDATE_RATE:g} Hz); {args.keys} presses of the page's w and s keys "
         "(real key events through ChromeDriver, 0.3 s apart; each jogs the goal "
         "2 cm along x). From the key event in the page to the goal's arrival in "
         "the session (to server), to the first command of the trajectory planned "

@@ -235,15 +235,15 @@ def run_trajectory_executor(
             failed = False
             compiled = compiles.count
             hold: str | None = None
+            backing: Plan | None = None
             try:
                 goal = run.goal.send(t)
                 hold = run.hold_reason(t)
                 if hold is not None:
                     plan = Plan(None, 0, hold)
                 else:
-                    plan = leaving.plan(t, q_s) or planner.plan(
-                        q_s.copy(), goal, budget, run
-                    )
+                    backing = leaving.plan(t, q_s)
+                    plan = backing or planner.plan(q_s.copy(), goal, budget, run)
                 note = plan.note
                 if plan.path is not None and len(plan.path) > 1:
                     new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)
@@ -257,6 +257,7 @@ def run_trajectory_executor(
             if (failed or hold is not None or plan.stop) and i is not None:
                 new = stopping_trajectory(current, i, vmax, amax)
             compute = budget.elapsed()
+            timed_out, steps = plan.timed_out, plan.steps
             try:
                 # The robot moves on while the result is computed.
                 run.advance(t_f, look_ahead)
@@ -265,16 +266,41 @@ def run_trajectory_executor(
             except Exception as exc:
                 failed = True
                 note = faults.fault(t, "simulation", exc)
+            if pacer is not None and not (
+                failed or hold is not None or backing is not None or plan.stop
+            ):
+                try:
+                    again = _plan_while_waiting(
+                        pacer, t, t_f, q_s, planner, run, timing, lo
+                    )
+                except Exception as exc:  # as a failing period: hold the robot
+                    failed = True
+                    plan = Plan(None, 0, faults.fault(t, "planning", exc))
+                    note = plan.note
+                    again = None
+                    if i is not None:
+                        new = stopping_trajectory(current, i, vmax, amax)
+                if again is not None:
+                    plan, note = again, again.note
+                    steps += plan.steps
+                    new = None
+                    if plan.stop:
+                        if i is not None:
+                            new = stopping_trajectory(current, i, vmax, amax)
+                    elif plan.path is not None and len(plan.path) > 1:
+                        new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)
+                        if new is None:
+                            note = "path too short to stop on; current trajectory kept"
             if not failed:
                 faults.ok()
             # A period that compiled kernels (numba, at start-up) is not a miss.
             startup = compiles.count > compiled
             if startup:
                 note = f"{note}; compiled kernels ({compute * 1e3:.0f} ms)".lstrip("; ")
-            missed = (compute > period or plan.timed_out) and not failed and not startup
+            missed = (compute > period or timed_out) and not failed and not startup
             spliced = False
             if missed:
-                why = plan.note if plan.timed_out else "result discarded"
+                why = note if timed_out else "result discarded"
                 misses.missed(t, compute, period, why)
             else:
                 misses.met(t)
@@ -285,7 +311,7 @@ def run_trajectory_executor(
                     spliced = True
             next_period = adapter.next(t, period, compute, missed)
             run.log.periods.append(
-                PeriodRecord(t, period, plan.steps, compute, missed, spliced, note)
+                PeriodRecord(t, period, steps, compute, missed, spliced, note)
             )
             t, period = t_f, next_period
         misses.flush(t)
@@ -301,6 +327,46 @@ def run_trajectory_executor(
         finally:
             trace = run.finish()
     return trace
+
+
+def _plan_while_waiting(
+    pacer: WallClockPacer,
+    t: float,
+    t_f: float,
+    q_s: FloatArray,
+    planner: Planner,
+    run: RunParts,
+    timing: ExecutorTiming,
+    shortest: float,
+) -> Plan | None:
+    """A plan for a goal that arrived while the loop waited for its deadline.
+
+    A live goal sets the pacer's wake event: the wait ends, and when at least
+    half the shortest period is left until ``t_f``, the planner plans again
+    from the same start point toward the new goal, within the time left, so
+    the goal is commanded at ``t_f`` and not a period later. The wait then
+    goes on until ``t_f`` (again for a goal that arrives meanwhile). None when
+    no goal arrived in time, and for a plan that ran out of time before it had
+    a result (the period's own plan stands).
+    """
+    result: Plan | None = None
+    while True:
+        pacer.wait_until(t_f)
+        left = pacer.left(t_f)
+        if left <= 0:
+            return result
+        if not run.goal.changed() or left < 0.5 * shortest:
+            # Woken with too little time to plan: the goal waits for the
+            # next period, which starts at t_f.
+            pacer.wait_until(t_f, wakeable=False)
+            return result
+        budget = make_budget(
+            timing.clock, timing.time_budget * left, timing.virtual_costs
+        )
+        goal = run.goal.resend(t)
+        plan = planner.plan(q_s.copy(), goal, budget, run)
+        if not plan.timed_out:
+            result = plan
 
 
 def stopping_trajectory(

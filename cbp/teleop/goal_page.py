@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,8 +68,8 @@ CONTACT_ARROW = 0.04
 STALLED_FOR = 0.5
 #: Cells drawn at most (the nearest to the hand first).
 MAX_CELLS = 60_000
-#: The readout and the plot are redrawn at every this many page updates.
-PANEL_EVERY = 4
+#: The readout and the plot are redrawn at most this often [s of wall time].
+PANEL_PERIOD = 0.2
 #: Length of a blocked direction's arrow as drawn [m].
 BLOCKED_ARROW = 0.06
 #: Opacity of the declared objects while the arm holds short of the goal
@@ -295,7 +296,7 @@ class TeleopPage(Page[TeleopSession]):
         self._space: tuple[object, tuple[float, ...], GoalSpace] = (None, (), "free")
         #: The session's snapshot the page last drew (None before the first).
         self.shown: Snapshot | None = None
-        self._updates = 0
+        self._panel_at = -math.inf
         #: Why the arm holds (None while it follows the goal), and since when.
         self.hold: Hold | None = None
         self._hold_since: float | None = None
@@ -343,12 +344,12 @@ class TeleopPage(Page[TeleopSession]):
     # ------------------------------------------------------------------ output
 
     def update(self) -> None:
-        """Bring the page up to date with the session (called at UPDATE_RATE).
+        """Bring the page up to date with the session (at each of its changes).
 
         The robot, the goal, the contacts and the path at every update; the
-        readout and the plot at :data:`PANEL_EVERY`-th one, or at once when
-        the hold changes (each redraw of them costs the browser a render of
-        the panel, on the cores the control loop runs on).
+        readout and the plot every :data:`PANEL_PERIOD`, or at once when the
+        hold changes (each redraw of them costs the browser a render of the
+        panel, on the cores the control loop runs on).
         """
         session = self.session
         snap = session.snapshot()
@@ -368,8 +369,9 @@ class TeleopPage(Page[TeleopSession]):
         self._history.append((snap.t, 1e3 * error, snap.contact_force))
         while self._history and self._history[0][0] < snap.t - PLOT_SECONDS:
             self._history.popleft()
-        self._updates += 1
-        if self._updates % PANEL_EVERY == 1 or hold != self.hold:
+        now = time.monotonic()
+        if now >= self._panel_at + PANEL_PERIOD or hold != self.hold:
+            self._panel_at = now
             self.readout.content = "\n".join(
                 readout_lines(snap, error, self.hold, self._hold_since)
             )
