@@ -663,3 +663,39 @@ def test_the_page_updates_on_a_goal_change_without_a_sampling_tick() -> None:
         page.close()
         session.parts.close()
         session.planner.close()
+
+
+def test_the_page_sends_a_path_again_only_when_it_looks_different() -> None:
+    """A new trajectory drawing the same hand path is not sent; a moved one is."""
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    import dataclasses
+
+    from cbp.teleop.goal_page import TeleopPage
+
+    session = TeleopSession(BOARDS, "cat")
+    page = TeleopPage(session, port=free_port())
+    try:
+        sim = session.parts.sim
+        q0 = np.array(sim.q, dtype=float)
+        moving = dataclasses.replace(
+            sim.trajectory,
+            times=np.array([0.0, 1.0]),
+            positions=np.stack([q0, q0 + 0.2]),
+            velocities=np.zeros((2, q0.size)),
+            accelerations=np.zeros((2, q0.size)),
+        )
+        sim.follow(moving)
+        page.update()
+        drawn = page._path_lines
+        assert drawn is not None
+        assert len(drawn) > 0
+        sim.follow(dataclasses.replace(moving))  # a new object, the same path
+        page.update()
+        assert page._path_lines is drawn  # not sent again
+        sim.follow(dataclasses.replace(moving, positions=np.stack([q0, q0 - 0.2])))
+        page.update()
+        assert page._path_lines is not drawn
+    finally:
+        page.close()
+        session.parts.close()
+        session.planner.close()

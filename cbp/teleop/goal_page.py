@@ -113,6 +113,19 @@ _KEYS_HTML = (
 )
 
 
+#: Lines drawn (and a robot's joints) that differ by less than this from those
+#: on the page are not sent again: each change costs the browser a frame
+#: [m, colour 0-1, rad].
+DRAWN_TOLERANCE = 2e-4
+
+
+def _same(drawn: np.ndarray, new: np.ndarray) -> bool:
+    """Whether ``new`` would look like ``drawn`` (same shape, within tolerance)."""
+    return drawn.shape == new.shape and bool(
+        np.allclose(drawn, new, rtol=0.0, atol=DRAWN_TOLERANCE)
+    )
+
+
 def _unit_rgb(colour: tuple[int, int, int]) -> tuple[float, float, float]:
     """An RGB colour 0-255 as 0-1 (ViserUrdf's colours)."""
     return (colour[0] / 255, colour[1] / 255, colour[2] / 255)
@@ -304,6 +317,10 @@ class TeleopPage(Page[TeleopSession]):
         self._hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
         self._drawn_path: object = None
         self._drawn_contacts: object = False  # nothing drawn yet
+        #: The contacts' lines and holding flags as last sent.
+        self._contact_lines: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: The commanded path's segments as last sent.
+        self._path_lines: np.ndarray | None = None
         #: Whether the arm has stopped short of the goal (drawn as a gripper,
         #: with the posture it stopped in).
         self.unreachable = False
@@ -355,7 +372,10 @@ class TeleopPage(Page[TeleopSession]):
         snap = session.snapshot()
         if self.robot is not None:
             q = self._cfg(snap.q)
-            if not np.array_equal(q, self._drawn_q) or self.shown is None:
+            moved = q.shape != self._drawn_q.shape or not np.allclose(
+                q, self._drawn_q, rtol=0.0, atol=DRAWN_TOLERANCE
+            )
+            if moved or self.shown is None:
                 self._drawn_q = q
                 self.robot.update_cfg(q)
         if session.goal.count != self._shown_goal:  # sent from elsewhere
@@ -479,6 +499,15 @@ class TeleopPage(Page[TeleopSession]):
             )
             colours = np.repeat(rgb[:, None, :], 2, axis=1)
             holding = contacts.distance <= HOLDING_DISTANCE
+        drawn = self._contact_lines
+        if (
+            drawn is not None
+            and _same(drawn[0], points)
+            and _same(drawn[1], colours)
+            and np.array_equal(drawn[2], holding)
+        ):
+            return  # as drawn: nothing sent (each change costs the browser a frame)
+        self._contact_lines = (points, colours, holding)
         self.server.scene.add_line_segments(
             "/contacts", points, colours, thickness=3.0, thickness_units="screen"
         )
@@ -524,13 +553,17 @@ class TeleopPage(Page[TeleopSession]):
                 if len(hands) > 1
                 else np.zeros((0, 2, 3))
             )
-            self.server.scene.add_line_segments(
-                "/commanded",
-                segments,
-                PATH,
-                thickness=2.0,
-                thickness_units="screen",
-            )
+            # A trajectory spliced in at rest draws the same path: not sent
+            # (each change costs the browser a frame).
+            if self._path_lines is None or not _same(self._path_lines, segments):
+                self._path_lines = segments
+                self.server.scene.add_line_segments(
+                    "/commanded",
+                    segments,
+                    PATH,
+                    thickness=2.0,
+                    thickness_units="screen",
+                )
         end = trajectory.positions[-1]
         self._state.update(end)
         heading = self._state.frame_position(self._hand)
