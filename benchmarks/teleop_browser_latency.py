@@ -27,10 +27,10 @@ back) and measures per key, on the machine's wall clock:
   given too. The earlier measure (the panel's marker changed, watched by a
   MutationObserver, then the next animation frame) is printed as well.
 
-Idle, and with two CPU-bound processes beside it (``--burners``). The browser
-and the server read the same system clock; the script checks that they agree
-(their difference is printed). The load average is recorded: the machine may
-be shared.
+Idle, and with two CPU-bound processes beside it (``--burners``; started once
+the page is up). The browser and the server read the same system clock; the
+script checks that they agree (their difference is printed). The load average
+is recorded: the machine may be shared.
 
 Run: .venv/bin/python benchmarks/teleop_browser_latency.py --append benchmarks/RESULTS.md
 """
@@ -190,10 +190,7 @@ def measure(keys: int, burners: int, dpr: float | None = None) -> dict[str, Any]
         return number
 
     session.goal.set = stamped  # type: ignore[method-assign]
-    burning = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"])
-        for _ in range(burners)
-    ]
+    burning: list[subprocess.Popen[bytes]] = []
     browser = headless_chromium()
     load = [os.getloadavg()[0]]
     try:
@@ -209,6 +206,12 @@ def measure(keys: int, burners: int, dpr: float | None = None) -> dict[str, Any]
                 raise RuntimeError("the page never showed its jog buttons")
             time.sleep(0.2)
         browser.execute_script(_WATCH)
+        # Started once the page is up (on a loaded machine, Chromium beside
+        # them took over the driver's 120 s to load it).
+        burning += [
+            subprocess.Popen([sys.executable, "-c", "while True: pass"])
+            for _ in range(burners)
+        ]
         time.sleep(3.0)  # the robot drawn, the page settled
         checks = []  # (round trip, browser clock - server clock) [ms]
         for _ in range(5):
@@ -350,8 +353,9 @@ def main() -> None:
     )
     args = parser.parse_args()
     loads = (0, args.burners) if args.only is None else (args.only,)
-    rows = [measure(args.keys, b, args.dpr) for b in loads]
-    for r in rows:
+    rows = []
+    for burners in loads:
+        rows.append(r := measure(args.keys, burners, args.dpr))
         print(
             f"{r['burners']} CPU-bound: goal arrival -> taken by the loop -> "
             "planned -> commanded, median / p95 [ms]: "

@@ -5,7 +5,9 @@ The loop of CAT Sec. IV-D, shared by every method that sends joint trajectories
 to the low-level follower (CAT, and the IK and MP methods):
 
 1. At the start of a period (time t, length P) the operator's latest goal is
-   taken. The deadline is t_f = t + P.
+   taken. The deadline is t_f = t + P. In a live session, a goal that arrives
+   after the planning is planned for again in the time left before t_f
+   (the wall-clock pacer's wait ends on it), so it too is commanded at t_f.
 2. The planning starts from the first point of the current trajectory scheduled
    after t_f (its position, velocity and acceleration), so the robot keeps
    moving while the planner works.
@@ -281,16 +283,20 @@ def run_trajectory_executor(
                     if i is not None:
                         new = stopping_trajectory(current, i, vmax, amax)
                 if again is not None:
-                    plan, note = again, again.note
-                    steps += plan.steps
-                    new = None
-                    if plan.stop:
-                        if i is not None:
+                    steps += again.steps
+                    timed: JointTrajectory | None = None
+                    if again.path is not None and len(again.path) > 1:
+                        timed = time_parameterize(again.path, t_s, v_s, a_s, vmax, amax)
+                    if timed is not None:
+                        plan, note, new = again, again.note, timed
+                    elif again.stop or again.path is None or len(again.path) < 2:
+                        # The planner's answer for the new goal: brake, or no
+                        # motion (the current trajectory goes on).
+                        plan, note = again, again.note
+                        new = None
+                        if again.stop and i is not None:
                             new = stopping_trajectory(current, i, vmax, amax)
-                    elif plan.path is not None and len(plan.path) > 1:
-                        new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)
-                        if new is None:
-                            note = "path too short to stop on; current trajectory kept"
+                    # else: too short to stop on; the period's own plan stands.
             if not failed:
                 faults.ok()
             # A period that compiled kernels (numba, at start-up) is not a miss.
@@ -329,6 +335,12 @@ def run_trajectory_executor(
     return trace
 
 
+#: A goal that arrives while the loop waits for its period's end is planned for
+#: when at least this share of the shortest period is left (else it waits for
+#: the next period, which starts by then).
+REPLAN_SHARE = 0.2
+
+
 def _plan_while_waiting(
     pacer: WallClockPacer,
     t: float,
@@ -342,9 +354,11 @@ def _plan_while_waiting(
     """A plan for a goal that arrived while the loop waited for its deadline.
 
     A live goal sets the pacer's wake event: the wait ends, and when at least
-    half the shortest period is left until ``t_f``, the planner plans again
-    from the same start point toward the new goal, within the time left, so
-    the goal is commanded at ``t_f`` and not a period later. The wait then
+    :data:`REPLAN_SHARE` of the shortest period is left until ``t_f`` (a goal
+    that came while the robot's motion was simulated finds the wait's event
+    set), the planner plans again from the same start point toward the new
+    goal, within the time left, so the goal is commanded at ``t_f`` and not a
+    period later. The wait then
     goes on until ``t_f`` (again for a goal that arrives meanwhile). None when
     no goal arrived in time, and for a plan that ran out of time before it had
     a result (the period's own plan stands).
@@ -355,7 +369,7 @@ def _plan_while_waiting(
         left = pacer.left(t_f)
         if left <= 0:
             return result
-        if not run.goal.changed() or left < 0.5 * shortest:
+        if not run.goal.changed() or left < REPLAN_SHARE * shortest:
             # Woken with too little time to plan: the goal waits for the
             # next period, which starts at t_f.
             pacer.wait_until(t_f, wakeable=False)
