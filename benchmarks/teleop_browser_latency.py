@@ -192,6 +192,9 @@ def measure(keys: int, burners: int, dpr: float | None = None) -> dict[str, Any]
     session.goal.set = stamped  # type: ignore[method-assign]
     burning: list[subprocess.Popen[bytes]] = []
     browser = headless_chromium()
+    # On a shared machine beside the CPU-bound processes, one answer of the
+    # page took over the driver's default 120 s.
+    browser.command_executor.client_config.timeout = 300
     load = [os.getloadavg()[0]]
     try:
         session.start()
