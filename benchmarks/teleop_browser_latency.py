@@ -11,16 +11,26 @@ back) and measures per key, on the machine's wall clock:
   page's key handler clicks the jog button, viser sends the click over its
   websocket, the server moves the goal);
 - **to the command**: to the moment the first trajectory planned for that goal
-  starts to be commanded to the robot (the splice point);
-- **hand on page**: to the first animation frame after the page received a
-  drawn hand that has moved 1 mm toward the new goal (the page sends the hand
-  with every update; a marker of its position in the panel is watched by a
-  MutationObserver, and the frame that follows it is the one that draws it).
+  starts to be commanded to the robot (the splice point), and its stages: the
+  control loop took the goal, planned for it, commanded it
+  (:class:`~cbp.teleop.goal_session.Commanded`);
+- **hand drawn**: to the end of the animation frame that drew a hand moved
+  1 mm toward the new goal. The server sends the hand with every page update
+  (a marker of it in the panel); a script installed before the page's own
+  records when each message batch from viser's websocket worker reaches the
+  page's main thread and when each animation frame that issues WebGL draws
+  begins and ends. The batch that carried the moved hand is the first to
+  arrive after the server sent it; the frame that drew it, the first drawing
+  frame to begin after that (viser applies a batch at the start of a frame).
+  The GL commands are issued then; SwiftShader rasterizes them and the
+  compositor shows them after, so the start of the next drawing frame is
+  given too. The earlier measure (the panel's marker changed, watched by a
+  MutationObserver, then the next animation frame) is printed as well.
 
-Idle, and with two CPU-bound processes beside it (``--burners``). The browser
-and the server read the same system clock; the script checks that they agree
-(their difference is printed). The load average is recorded: the machine may
-be shared.
+Idle, and with two CPU-bound processes beside it (``--burners``; started once
+the page is up). The browser and the server read the same system clock; the
+script checks that they agree (their difference is printed). The load average
+is recorded: the machine may be shared.
 
 Run: .venv/bin/python benchmarks/teleop_browser_latency.py --append benchmarks/RESULTS.md
 """
@@ -41,7 +51,7 @@ from results_file import put_section  # this folder: scripts run from it
 
 from cbp.teleop import TeleopSession
 from cbp.teleop.goal_page import TeleopPage
-from cbp.teleop.page import UPDATE_RATE
+from cbp.teleop.page import MAX_UPDATE_RATE
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Hand motion that counts as the page showing the moved hand [m].
@@ -55,6 +65,10 @@ window.addEventListener('keydown', e => {
   window.cbpKeysAt.push(performance.timeOrigin + e.timeStamp);
 }, true);
 window.cbpHand = [];
+window.cbpLong = [];
+new PerformanceObserver(list => {
+  for (const e of list.getEntries()) window.cbpLong.push(e.duration);
+}).observe({entryTypes: ['longtask']});
 let last = null;
 let el = null;
 new MutationObserver(() => {
@@ -69,6 +83,43 @@ new MutationObserver(() => {
   requestAnimationFrame(() => window.cbpHand.push(
     [seen, performance.timeOrigin + performance.now(), x]));
 }).observe(document.body, {subtree: true, childList: true, characterData: true});
+"""
+
+
+# Before the page's scripts: when each message batch from the websocket worker
+# (viser's client receives in a web worker) reaches the page's main thread, and
+# the start and end of each animation frame that drew the scene (WebGL draws).
+_MESSAGES = """
+window.cbpMessages = [];
+window.cbpFrames = [];
+window.cbpDraws = 0;
+for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
+  for (const f of ['drawElements', 'drawArrays', 'drawElementsInstanced',
+                   'drawArraysInstanced']) {
+    const native = C.prototype[f];
+    if (native) C.prototype[f] = function (...a) {
+      window.cbpDraws++;
+      return native.apply(this, a);
+    };
+  }
+}
+const nativeFrame = window.requestAnimationFrame.bind(window);
+window.requestAnimationFrame = cb => nativeFrame(ts => {
+  const draws = window.cbpDraws;
+  const start = performance.timeOrigin + performance.now();
+  try { cb(ts); } finally {
+    if (window.cbpDraws > draws) window.cbpFrames.push(
+      [start, performance.timeOrigin + performance.now()]);
+  }
+});
+const NativeWorker = window.Worker;
+window.Worker = class extends NativeWorker {
+  constructor(...args) {
+    super(...args);
+    this.addEventListener('message', () => window.cbpMessages.push(
+      performance.timeOrigin + performance.now()));
+  }
+};
 """
 
 
@@ -101,8 +152,11 @@ def _percentiles(values: list[float]) -> tuple[float, float]:
     return float(np.median(a)), float(np.percentile(a, 95))
 
 
-def measure(keys: int, burners: int) -> dict[str, Any]:
-    """One session: ``keys`` key presses, ``burners`` CPU-bound processes beside it."""
+def measure(keys: int, burners: int, dpr: float | None = None) -> dict[str, Any]:
+    """One session: ``keys`` key presses, ``burners`` CPU-bound processes beside it.
+
+    ``dpr``: the page's pixel ratio (viser's ``fixedDpr``; None: its adaptive one).
+    """
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
 
@@ -136,22 +190,31 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
         return number
 
     session.goal.set = stamped  # type: ignore[method-assign]
-    burning = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"])
-        for _ in range(burners)
-    ]
+    burning: list[subprocess.Popen[bytes]] = []
     browser = headless_chromium()
+    # On a shared machine beside the CPU-bound processes, one answer of the
+    # page took over the driver's default 120 s.
+    browser.command_executor.client_config.timeout = 300
     load = [os.getloadavg()[0]]
     try:
         session.start()
         page.start()
-        browser.get(page.url)
+        browser.execute_cdp_cmd(
+            "Page.addScriptToEvaluateOnNewDocument", {"source": _MESSAGES}
+        )
+        browser.get(page.url if dpr is None else f"{page.url}/?fixedDpr={dpr:g}")
         deadline = time.monotonic() + 120
         while not browser.find_elements(By.XPATH, "//button[normalize-space()='+x']"):
             if time.monotonic() > deadline:
                 raise RuntimeError("the page never showed its jog buttons")
             time.sleep(0.2)
         browser.execute_script(_WATCH)
+        # Started once the page is up (on a loaded machine, Chromium beside
+        # them took over the driver's 120 s to load it).
+        burning += [
+            subprocess.Popen([sys.executable, "-c", "while True: pass"])
+            for _ in range(burners)
+        ]
         time.sleep(3.0)  # the robot drawn, the page settled
         checks = []  # (round trip, browser clock - server clock) [ms]
         for _ in range(5):
@@ -185,6 +248,9 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
             (a / 1e3, b / 1e3, x)
             for a, b, x in browser.execute_script("return window.cbpHand")
         ]
+        messages = np.array(browser.execute_script("return window.cbpMessages")) / 1e3
+        long_tasks = browser.execute_script("return window.cbpLong")
+        frames = np.array(browser.execute_script("return window.cbpFrames")) / 1e3
     finally:
         for burner in burning:
             burner.kill()
@@ -192,9 +258,19 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
         browser.quit()
         page.close()
         session.stop()
-    commands = {n: start + perf_to_epoch for n, _, start in session.commands()}
+    done = {c.number: c for c in session.commands()}
+    commands = {n: c.commanded + perf_to_epoch for n, c in done.items()}
     numbers = sorted(arrivals)
     to_server, to_command, on_page, on_dom, to_sent = [], [], [], [], []
+    drawn, next_frame = [], []
+    # The moved hand's way through the browser: server sent -> main thread
+    # got the batch -> the frame that drew it began -> ended [ms].
+    browser_part: dict[str, list[float]] = {"received": [], "begun": [], "drawn": []}
+    stages: dict[str, list[float]] = {"taken": [], "planned": [], "commanded": []}
+    for c in done.values():
+        stages["taken"].append(1e3 * (c.sampled - c.arrival))
+        stages["planned"].append(1e3 * (c.planned - c.sampled))
+        stages["commanded"].append(1e3 * (c.commanded - c.planned))
     for i, pressed in enumerate(keys_at[: len(numbers)]):
         number = numbers[i]
         to_server.append(1e3 * (arrivals[number] - pressed))
@@ -218,16 +294,44 @@ def measure(keys: int, burners: int) -> dict[str, Any]:
         ]
         if moved_sent:
             to_sent.append(1e3 * (moved_sent[0] - pressed))
+        if not moved_sent:
+            continue
+        # The batch that carried it: the first to reach the page after it was
+        # sent (the clocks agree to about 2 ms); the frame that drew it: the
+        # first frame with WebGL draws that began after the batch came.
+        got = messages[messages >= moved_sent[0] - 0.002]
+        if not got.size or not frames.size:
+            continue
+        after = frames[frames[:, 0] >= got[0]]
+        if not after.size:
+            continue
+        begun, ended = after[0]
+        later = frames[frames[:, 0] >= ended]
+        browser_part["received"].append(1e3 * (got[0] - moved_sent[0]))
+        browser_part["begun"].append(1e3 * (begun - got[0]))
+        browser_part["drawn"].append(1e3 * (ended - begun))
+        drawn.append(1e3 * (ended - pressed))
+        if later.size:
+            next_frame.append(1e3 * (later[0, 0] - pressed))
     return {
         "burners": burners,
+        "dpr": dpr,
         "keys": len(keys_at),
         "goals": len(numbers),
         "to_server": _percentiles(to_server),
         "to_command": _percentiles(to_command),
+        "stages": {k: _percentiles(v) for k, v in stages.items()},
+        "browser": {k: _percentiles(v) for k, v in browser_part.items()},
+        "long_tasks": (len(long_tasks), sum(long_tasks) / 1e3 / wall),
         "n_command": len(to_command),
         "on_dom": _percentiles(on_dom),
         "to_sent": _percentiles(to_sent),
         "on_page": _percentiles(on_page),
+        "drawn": _percentiles(drawn),
+        "next_frame": _percentiles(next_frame),
+        "frame_ms": _percentiles(list(1e3 * np.diff(frames[:, 0])))
+        if len(frames) > 1
+        else (float("nan"),) * 2,
         "n_page": len(on_page),
         "clock_ms": clock_ms,
         "trip_ms": trip_ms,
@@ -244,37 +348,77 @@ def main() -> None:
     parser.add_argument("--keys", type=int, default=60)
     parser.add_argument("--burners", type=int, default=2)
     parser.add_argument("--append", type=Path, default=None)
+    parser.add_argument(
+        "--dpr", type=float, default=None, help="the page's fixed pixel ratio"
+    )
+    parser.add_argument(
+        "--only", type=int, default=None, help="one row: this many CPU-bound processes"
+    )
     args = parser.parse_args()
-    rows = [measure(args.keys, b) for b in (0, args.burners)]
+    loads = (0, args.burners) if args.only is None else (args.only,)
+    rows = []
+    for burners in loads:
+        rows.append(r := measure(args.keys, burners, args.dpr))
+        print(
+            f"{r['burners']} CPU-bound: goal arrival -> taken by the loop -> "
+            "planned -> commanded, median / p95 [ms]: "
+            + ", ".join(f"{a:.1f} / {b:.1f}" for a, b in r["stages"].values())
+        )
+        print(
+            f"{r['burners']} CPU-bound: moved hand sent -> batch on the page's main "
+            "thread -> the frame that drew it begun -> ended, median / p95 [ms]: "
+            + ", ".join(f"{a:.1f} / {b:.1f}" for a, b in r["browser"].values())
+            + "; the page's main thread in tasks over 50 ms: "
+            f"{r['long_tasks'][1]:.0%} of the time ({r['long_tasks'][0]} tasks); "
+            f"frames drawn every {r['frame_ms'][0]:.0f} / {r['frame_ms'][1]:.0f} ms; "
+            f"hand drawn {r['drawn'][0]:.0f} / {r['drawn'][1]:.0f} ms after the key, "
+            f"next frame {r['next_frame'][0]:.0f} / {r['next_frame'][1]:.0f} ms; "
+            f"the earlier measure (panel marker, then a frame) {r['on_page'][0]:.0f}"
+            f" / {r['on_page'][1]:.0f} ms"
+        )
+    dpr = "" if args.dpr is None else f" (`?fixedDpr={args.dpr:g}`)"
     lines = [
         "",
         "## Teleoperation: latency from a key in the browser "
         "(benchmarks/teleop_browser_latency.py)",
         "",
-        f"Boards, CAT, the page in headless Chromium (software WebGL) updating at "
-        f"{UPDATE_RATE:g} Hz; {args.keys} presses of the page's w and s keys "
+        f"Boards, CAT, the page in headless Chromium{dpr} (software WebGL), "
+        "updated at each change of the session (at most "
+        f"{MAX_UPDATE_RATE:g} Hz); {args.keys} presses of the page's w and s keys "
         "(real key events through ChromeDriver, 0.3 s apart; each jogs the goal "
         "2 cm along x). From the key event in the page to the goal's arrival in "
         "the session (to server), to the first command of the trajectory planned "
-        "for it (to command), and to the first animation frame after the page "
-        f"received a hand moved {MOVED * 1e3:g} mm toward the new goal (hand on "
-        "page; also the medians of when the server sent the moved hand and when "
-        "the panel's marker of it changed in the page). "
+        "for it (to command; its stages, medians: the loop took the goal, "
+        "planned for it, commanded it), and to the end of the animation frame "
+        f"that drew the hand moved {MOVED * 1e3:g} mm toward the new goal (hand "
+        "drawn: the first frame with WebGL draws after the batch that carried "
+        "it reached the page's main thread; SwiftShader's rasterization and "
+        "the compositor come after it, so also the next drawing frame's start). "
+        "The moved hand's way, medians: sent by the server, its batch on the "
+        "page's main thread, the drawing frame begun, ended. "
         f"{platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}. Command: `.venv/bin/python "
         "benchmarks/teleop_browser_latency.py --append benchmarks/RESULTS.md`.",
         "",
-        "| CPU-bound processes | load average | keys / goals | to server median / p95 [ms] | to command median / p95 [ms] | hand on page median / p95 [ms] | moved hand sent / marker changed, medians [ms] | deadline misses | CPU: Chromium / session (page updates) [cores] | browser clock - server clock [ms] |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|---|---:|",
+        "| CPU-bound processes | load average | keys / goals | to server median / p95 [ms] | to command median / p95 [ms] | taken / planned / commanded, medians [ms] | hand drawn median / p95 [ms] | next frame median / p95 [ms] | sent / on page / frame begun / drawn, medians [ms] | frame interval median [ms] | deadline misses | CPU: Chromium / session (page updates) [cores] | browser clock - server clock [ms] |",
+        "|---:|---|---:|---:|---:|---|---:|---:|---|---:|---:|---|---:|",
     ]
     for r in rows:
+        st, br = r["stages"], r["browser"]
+        sent = r["to_sent"][0]
+        on_page = sent + br["received"][0]
+        begun = on_page + br["begun"][0]
         lines.append(
             f"| {r['burners']} | {r['load'][0]:.1f}-{r['load'][1]:.1f} | "
             f"{r['keys']} / {r['goals']} | "
             f"{r['to_server'][0]:.1f} / {r['to_server'][1]:.1f} | "
             f"{r['to_command'][0]:.1f} / {r['to_command'][1]:.1f} | "
-            f"{r['on_page'][0]:.1f} / {r['on_page'][1]:.1f} | "
-            f"{r['to_sent'][0]:.0f} / {r['on_dom'][0]:.0f} | "
+            f"{st['taken'][0]:.1f} / {st['planned'][0]:.1f} / "
+            f"{st['commanded'][0]:.1f} | "
+            f"{r['drawn'][0]:.0f} / {r['drawn'][1]:.0f} | "
+            f"{r['next_frame'][0]:.0f} / {r['next_frame'][1]:.0f} | "
+            f"{sent:.0f} / {on_page:.0f} / {begun:.0f} / "
+            f"{begun + br['drawn'][0]:.0f} | {r['frame_ms'][0]:.0f} | "
             f"{r['misses']} of {r['periods']} | {r['cpu'][0]:.2f} / {r['cpu'][1]:.2f} "
             f"({r['cpu'][2]:.2f}) | {r['clock_ms']:.1f} "
             f"(+-{r['trip_ms'] / 2:.1f}) |"

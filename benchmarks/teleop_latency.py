@@ -1,20 +1,23 @@
 """Teleoperation: goal-to-command latency, real-time factor and page update rate.
 
 A :class:`~cbp.teleop.TeleopSession` on the boards runs in real time with its
-page served (viser, updating at 20 Hz; no browser connected, or headless
-Chromium with ``--browser``). A script jogs the goal 2 cm back and forth every
-0.25 s through the session's own interface (what the page's buttons call).
-Measured per goal: the time from its arrival at the server to the wall-clock
-time at which the first trajectory planned for it starts to be commanded (the
-splice point). Also: simulated time over wall time, and page updates per second.
+page served (viser, updated at each change of the session, at most 50 Hz; no
+browser connected, or headless Chromium with ``--browser``). A script jogs the
+goal 2 cm back and forth every 0.25 s through the session's own interface
+(what the page's buttons call). Measured per goal: the time from its arrival
+at the server to the wall-clock time at which the first trajectory planned for
+it starts to be commanded (the splice point). Also: simulated time over wall
+time, and page updates per second.
 
 The issue's target is a latency under one command period (33 ms). The loop
-samples the goal at the start of a period (CAT also takes a goal that arrives
-while it plans) and the new trajectory starts one period later (the robot
-moves on while the planner works), so the latency is the wait for the next
-period plus one period. Two rows: the nominal 33 ms period throughout, and the
-session's default, which lets the period shrink to 15 ms while planning leaves
-time to spare.
+samples the goal at the start of a period; CAT also takes a goal that arrives
+while it plans, and a goal that arrives later in the period (while the loop
+simulates the period's motion or waits for its end) ends the wait and is
+planned for in the time left. Its trajectory starts at the period's end (the
+robot moves on while the planner works), so the latency is about the rest of
+the period in which it arrives. Two rows: the nominal 33 ms period
+throughout, and the session's default, which lets the period shrink to 15 ms
+while planning leaves time to spare.
 
 Run: .venv/bin/python benchmarks/teleop_latency.py --append benchmarks/RESULTS.md
 """
@@ -117,7 +120,7 @@ def main() -> None:
         f"{'headless Chromium on the page' if args.browser else 'no browser'} "
         "(benchmarks/teleop_latency.py)",
         "",
-        f"Boards, CAT, the page served at 20 Hz ({'headless Chromium connected' if args.browser else 'no browser connected'}); "
+        f"Boards, CAT, the page served, updated at each change of the session ({'headless Chromium connected' if args.browser else 'no browser connected'}); "
         f"{args.goals} goals sent 0.25 s apart through the session's interface. "
         f"{platform.machine()}, Python {platform.python_version()}. Command: "
         f"`.venv/bin/python benchmarks/teleop_latency.py{' --browser' if args.browser else ''}"

@@ -22,6 +22,7 @@ from cbp.goals import recorded_goal_overrides
 from cbp.metrics import run_metrics
 from cbp.plugin import HoldsContacts
 from cbp.scenario import load_scenario
+from cbp.state import RobotState
 from cbp.teleop import GOAL_FILE, LiveGoal, TeleopSession
 from tests.conftest import free_port, headless_chromium, run_cbp
 
@@ -73,6 +74,7 @@ def test_the_live_goal_reports_each_sampled_goal_once() -> None:
     taken = goal.take_sampled()
     assert taken is not None
     assert taken[0] == 2
+    assert taken[1] <= taken[2]  # arrived before it was sampled
     assert goal.take_sampled() is None  # measured once; 1 was never sampled
 
 
@@ -560,3 +562,140 @@ def test_a_signal_ends_a_session_that_saves_and_replays(
         "method.cat.timing.clock=virtual",
     )
     assert replay.returncode == 0, replay.stderr
+
+
+def test_a_goal_set_tells_the_listeners_and_wakes_the_loop_at_once() -> None:
+    """set_goal, jog and reset each tell the listeners; the loop's sample quiets it."""
+    session = TeleopSession(BOARDS, "cat")
+    told: list[int] = []
+    session.listen(lambda: told.append(session.goal.count))
+    assert not session.goal.arrived.is_set()
+    session.jog("x", 0.02)
+    assert told == [1]
+    assert session.goal.arrived.is_set()  # the pacer's wait ends on it
+    session.goal.sample(0.0)
+    assert not session.goal.arrived.is_set()
+    session.set_goal(*session.goal.pose())
+    session.reset()
+    assert told == [1, 2, 3]
+
+
+def test_the_session_pacer_tells_the_listeners_when_a_period_s_end_is_now() -> None:
+    """A wait that reaches its time tells; one a new goal ends early does not."""
+    import threading
+
+    from cbp.teleop.changes import Changes
+    from cbp.teleop.goal_session import _TellingPacer
+
+    changes, wake = Changes(), threading.Event()
+    told: list[bool] = []
+    changes.listen(lambda: told.append(True))
+    pacer = _TellingPacer(changes, wake)
+    pacer.start(0.0)
+    pacer.wait_until(-1.0)  # behind: the time is now at once
+    assert told == [True]
+    wake.set()
+    assert pacer.wait_until(3600.0) == 0.0  # woken early
+    assert pacer.left(3600.0) > 0
+    assert told == [True]
+
+
+def test_a_goal_that_arrives_while_the_loop_waits_is_planned_for_before_the_deadline() -> (
+    None
+):
+    """The wait ends on the new goal; the plan is made toward it for the same splice."""
+    from cbp.executors.trajectory import _plan_while_waiting
+    from cbp.run import WallClockPacer
+
+    session = TeleopSession(BOARDS, "cat")
+    try:
+        run, goal = session.parts, session.goal
+        pacer = WallClockPacer(wake=goal.arrived)
+        pacer.start(0.0)
+        q = np.array(run.sim.q, dtype=float)
+        t_f = 0.5  # the period's end, half a second from now
+        plan = _plan_while_waiting(
+            pacer, 0.0, t_f, q, session.planner, run, session.timing, 0.015
+        )
+        assert plan is None  # no goal came: the wait ran out
+        assert pacer.left(t_f) <= 0
+        pacer.start(0.0)
+        number = session.jog("x", 0.05)
+        plan = _plan_while_waiting(
+            pacer, 0.0, t_f, q, session.planner, run, session.timing, 0.015
+        )
+        assert plan is not None
+        assert plan.path is not None
+        assert not goal.changed()  # the new goal was taken
+        taken = goal.take_sampled()
+        assert taken is not None
+        assert taken[0] == number
+        assert pacer.left(t_f) <= 0  # and the deadline kept
+        hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
+        state = RobotState(session.scenario.robot, plan.path[-1])
+        start = RobotState(session.scenario.robot, q)
+        moved = state.frame_position(hand) - start.frame_position(hand)
+        assert moved[0] > 0.005  # toward the goal jogged along +x
+    finally:
+        session.parts.close()
+        session.planner.close()
+
+
+def test_the_page_updates_on_a_goal_change_without_a_sampling_tick() -> None:
+    """With no idle updates at all, a goal set from a script still reaches the page."""
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    from cbp.teleop.goal_page import TeleopPage
+
+    session = TeleopSession(BOARDS, "cat")
+    page = TeleopPage(session, port=free_port())
+    try:
+        # Not one idle update in a day: only the session's changes wake it.
+        page.start(idle_rate=1.0 / 86400.0, while_running=False)
+        assert _wait(lambda: page.updates >= 1, 60.0), "no first update"
+        assert page.update_causes == ["idle"]  # the first, at the start
+        position, rotation = session.goal.pose()
+        moved = position + np.array([0.0, 0.03, 0.0])
+        session.set_goal(moved, rotation)
+        assert _wait(lambda: page.updates >= 2, 60.0), "the change was not shown"
+        assert page.update_causes[:2] == ["idle", "change"]
+        np.testing.assert_allclose(page.state().goal_position, moved)
+    finally:
+        page.close()
+        session.parts.close()
+        session.planner.close()
+
+
+def test_the_page_sends_a_path_again_only_when_it_looks_different() -> None:
+    """A new trajectory drawing the same hand path is not sent; a moved one is."""
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    import dataclasses
+
+    from cbp.teleop.goal_page import TeleopPage
+
+    session = TeleopSession(BOARDS, "cat")
+    page = TeleopPage(session, port=free_port())
+    try:
+        sim = session.parts.sim
+        q0 = np.array(sim.q, dtype=float)
+        moving = dataclasses.replace(
+            sim.trajectory,
+            times=np.array([0.0, 1.0]),
+            positions=np.stack([q0, q0 + 0.2]),
+            velocities=np.zeros((2, q0.size)),
+            accelerations=np.zeros((2, q0.size)),
+        )
+        sim.follow(moving)
+        page.update()
+        drawn = page._path_lines
+        assert drawn is not None
+        assert len(drawn) > 0
+        sim.follow(dataclasses.replace(moving))  # a new object, the same path
+        page.update()
+        assert page._path_lines is drawn  # not sent again
+        sim.follow(dataclasses.replace(moving, positions=np.stack([q0, q0 - 0.2])))
+        page.update()
+        assert page._path_lines is not drawn
+    finally:
+        page.close()
+        session.parts.close()
+        session.planner.close()

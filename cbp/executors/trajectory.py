@@ -5,7 +5,9 @@ The loop of CAT Sec. IV-D, shared by every method that sends joint trajectories
 to the low-level follower (CAT, and the IK and MP methods):
 
 1. At the start of a period (time t, length P) the operator's latest goal is
-   taken. The deadline is t_f = t + P.
+   taken. The deadline is t_f = t + P. In a live session, a goal that arrives
+   after the planning is planned for again in the time left before t_f
+   (the wall-clock pacer's wait ends on it), so it too is commanded at t_f.
 2. The planning starts from the first point of the current trajectory scheduled
    after t_f (its position, velocity and acceleration), so the robot keeps
    moving while the planner works.
@@ -242,6 +244,7 @@ def run_trajectory_executor(
             failed = False
             compiled = compiles.count
             hold: str | None = None
+            backing: Plan | None = None
             try:
                 goal = run.goal.send(t)
                 hold = run.hold_reason(t)
@@ -250,9 +253,8 @@ def run_trajectory_executor(
                 else:
                     # One snapshot of the obstacles for the whole plan.
                     with held(run.world):
-                        plan = leaving.plan(t, q_s) or planner.plan(
-                            q_s.copy(), goal, budget, run
-                        )
+                        backing = leaving.plan(t, q_s)
+                        plan = backing or planner.plan(q_s.copy(), goal, budget, run)
                 note = plan.note
                 if plan.path is not None and len(plan.path) > 1:
                     new = time_parameterize(plan.path, t_s, v_s, a_s, vmax, amax)
@@ -266,6 +268,7 @@ def run_trajectory_executor(
             if (failed or hold is not None or plan.stop) and i is not None:
                 new = stopping_trajectory(current, i, vmax, amax)
             compute = budget.elapsed()
+            timed_out, steps = plan.timed_out, plan.steps
             try:
                 # The robot moves on while the result is computed.
                 run.advance(t_f, look_ahead)
@@ -274,16 +277,45 @@ def run_trajectory_executor(
             except Exception as exc:
                 failed = True
                 note = faults.fault(t, "simulation", exc)
+            if pacer is not None and not (
+                failed or hold is not None or backing is not None or plan.stop
+            ):
+                try:
+                    again = _plan_while_waiting(
+                        pacer, t, t_f, q_s, planner, run, timing, lo
+                    )
+                except Exception as exc:  # as a failing period: hold the robot
+                    failed = True
+                    plan = Plan(None, 0, faults.fault(t, "planning", exc))
+                    note = plan.note
+                    again = None
+                    if i is not None:
+                        new = stopping_trajectory(current, i, vmax, amax)
+                if again is not None:
+                    steps += again.steps
+                    timed: JointTrajectory | None = None
+                    if again.path is not None and len(again.path) > 1:
+                        timed = time_parameterize(again.path, t_s, v_s, a_s, vmax, amax)
+                    if timed is not None:
+                        plan, note, new = again, again.note, timed
+                    elif again.stop or again.path is None or len(again.path) < 2:
+                        # The planner's answer for the new goal: brake, or no
+                        # motion (the current trajectory goes on).
+                        plan, note = again, again.note
+                        new = None
+                        if again.stop and i is not None:
+                            new = stopping_trajectory(current, i, vmax, amax)
+                    # else: too short to stop on; the period's own plan stands.
             if not failed:
                 faults.ok()
             # A period that compiled kernels (numba, at start-up) is not a miss.
             startup = compiles.count > compiled
             if startup:
                 note = f"{note}; compiled kernels ({compute * 1e3:.0f} ms)".lstrip("; ")
-            missed = (compute > period or plan.timed_out) and not failed and not startup
+            missed = (compute > period or timed_out) and not failed and not startup
             spliced = False
             if missed:
-                why = plan.note if plan.timed_out else "result discarded"
+                why = note if timed_out else "result discarded"
                 misses.missed(t, compute, period, why)
             else:
                 misses.met(t)
@@ -294,7 +326,7 @@ def run_trajectory_executor(
                     spliced = True
             next_period = adapter.next(t, period, compute, missed)
             run.log.periods.append(
-                PeriodRecord(t, period, plan.steps, compute, missed, spliced, note)
+                PeriodRecord(t, period, steps, compute, missed, spliced, note)
             )
             t, period = t_f, next_period
         misses.flush(t)
@@ -310,6 +342,55 @@ def run_trajectory_executor(
         finally:
             trace = run.finish()
     return trace
+
+
+#: A goal that arrives while the loop waits for its period's end is planned for
+#: when at least this share of the shortest period is left (else it waits for
+#: the next period, which starts by then).
+REPLAN_SHARE = 0.2
+
+
+def _plan_while_waiting(
+    pacer: WallClockPacer,
+    t: float,
+    t_f: float,
+    q_s: FloatArray,
+    planner: Planner,
+    run: RunParts,
+    timing: ExecutorTiming,
+    shortest: float,
+) -> Plan | None:
+    """A plan for a goal that arrived while the loop waited for its deadline.
+
+    A live goal sets the pacer's wake event: the wait ends, and when at least
+    :data:`REPLAN_SHARE` of the shortest period is left until ``t_f`` (a goal
+    that came while the robot's motion was simulated finds the wait's event
+    set), the planner plans again from the same start point toward the new
+    goal, within the time left, so the goal is commanded at ``t_f`` and not a
+    period later. The wait then
+    goes on until ``t_f`` (again for a goal that arrives meanwhile). None when
+    no goal arrived in time, and for a plan that ran out of time before it had
+    a result (the period's own plan stands).
+    """
+    result: Plan | None = None
+    while True:
+        pacer.wait_until(t_f)
+        left = pacer.left(t_f)
+        if left <= 0:
+            return result
+        if not run.goal.changed() or left < REPLAN_SHARE * shortest:
+            # Woken with too little time to plan: the goal waits for the
+            # next period, which starts at t_f.
+            pacer.wait_until(t_f, wakeable=False)
+            return result
+        budget = make_budget(
+            timing.clock, timing.time_budget * left, timing.virtual_costs
+        )
+        goal = run.goal.resend(t)
+        with held(run.world):
+            plan = planner.plan(q_s.copy(), goal, budget, run)
+        if not plan.timed_out:
+            result = plan
 
 
 def stopping_trajectory(

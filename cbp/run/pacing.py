@@ -24,7 +24,8 @@ class WallClockPacer:
     Args:
         max_lag: the longest the loop may be behind before the pacer gives up
             the lost time [s] (inf: always catch up).
-        wake: an event that ends any wait at once (a stop request).
+        wake: an event that ends any wait at once (a stop request; a live
+            session's new goal).
 
     The wall-clock origin is taken at the first :meth:`wait_until` (or
     :meth:`start`): the loop's time then is now.
@@ -56,11 +57,11 @@ class WallClockPacer:
         assert self._origin is not None
         return self._origin + t
 
-    def wait_until(self, t: float) -> float:
+    def wait_until(self, t: float, wakeable: bool = True) -> float:
         """Wait until the loop's time ``t`` is now; return how late it was [s].
 
-        Returns at once when the loop is behind (the lateness, > 0) or when
-        ``wake`` is set.
+        Returns at once when the loop is behind (the lateness, > 0) or, when
+        ``wakeable``, when ``wake`` is set (:meth:`left` then says how early).
         """
         due = self.wall_time(t)
         now = time.perf_counter()
@@ -70,8 +71,12 @@ class WallClockPacer:
             self._origin += late - self.max_lag
         if late >= 0:
             return late
-        if self.wake is not None:
+        if self.wake is not None and wakeable:
             self.wake.wait(-late)
         else:
             time.sleep(-late)
         return 0.0
+
+    def left(self, t: float) -> float:
+        """How long until the loop's time ``t`` is now [s] (< 0: past)."""
+        return self.wall_time(t) - time.perf_counter()

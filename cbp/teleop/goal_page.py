@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,8 +68,8 @@ CONTACT_ARROW = 0.04
 STALLED_FOR = 0.5
 #: Cells drawn at most (the nearest to the hand first).
 MAX_CELLS = 60_000
-#: The readout and the plot are redrawn at every this many page updates.
-PANEL_EVERY = 4
+#: The readout and the plot are redrawn at most this often [s of wall time].
+PANEL_PERIOD = 0.2
 #: Length of a blocked direction's arrow as drawn [m].
 BLOCKED_ARROW = 0.06
 #: Opacity of the declared objects while the arm holds short of the goal
@@ -110,6 +111,19 @@ _KEYS_HTML = (
     + "if(b.textContent.trim()===l){b.click();e.preventDefault();break;}}});}"
     + '">'
 )
+
+
+#: Lines drawn (and a robot's joints) that differ by less than this from those
+#: on the page are not sent again: each change costs the browser a frame
+#: [m, colour 0-1, rad].
+DRAWN_TOLERANCE = 2e-4
+
+
+def _same(drawn: np.ndarray, new: np.ndarray) -> bool:
+    """Whether ``new`` would look like ``drawn`` (same shape, within tolerance)."""
+    return drawn.shape == new.shape and bool(
+        np.allclose(drawn, new, rtol=0.0, atol=DRAWN_TOLERANCE)
+    )
 
 
 def _unit_rgb(colour: tuple[int, int, int]) -> tuple[float, float, float]:
@@ -295,7 +309,7 @@ class TeleopPage(Page[TeleopSession]):
         self._space: tuple[object, tuple[float, ...], GoalSpace] = (None, (), "free")
         #: The session's snapshot the page last drew (None before the first).
         self.shown: Snapshot | None = None
-        self._updates = 0
+        self._panel_at = -math.inf
         #: Why the arm holds (None while it follows the goal), and since when.
         self.hold: Hold | None = None
         self._hold_since: float | None = None
@@ -303,6 +317,10 @@ class TeleopPage(Page[TeleopSession]):
         self._hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
         self._drawn_path: object = None
         self._drawn_contacts: object = False  # nothing drawn yet
+        #: The contacts' lines and holding flags as last sent.
+        self._contact_lines: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: The commanded path's segments as last sent.
+        self._path_lines: np.ndarray | None = None
         #: Whether the arm has stopped short of the goal (drawn as a gripper,
         #: with the posture it stopped in).
         self.unreachable = False
@@ -343,18 +361,21 @@ class TeleopPage(Page[TeleopSession]):
     # ------------------------------------------------------------------ output
 
     def update(self) -> None:
-        """Bring the page up to date with the session (called at UPDATE_RATE).
+        """Bring the page up to date with the session (at each of its changes).
 
         The robot, the goal, the contacts and the path at every update; the
-        readout and the plot at :data:`PANEL_EVERY`-th one, or at once when
-        the hold changes (each redraw of them costs the browser a render of
-        the panel, on the cores the control loop runs on).
+        readout and the plot every :data:`PANEL_PERIOD`, or at once when the
+        hold changes (each redraw of them costs the browser a render of the
+        panel, on the cores the control loop runs on).
         """
         session = self.session
         snap = session.snapshot()
         if self.robot is not None:
             q = self._cfg(snap.q)
-            if not np.array_equal(q, self._drawn_q) or self.shown is None:
+            moved = q.shape != self._drawn_q.shape or not np.allclose(
+                q, self._drawn_q, rtol=0.0, atol=DRAWN_TOLERANCE
+            )
+            if moved or self.shown is None:
                 self._drawn_q = q
                 self.robot.update_cfg(q)
         if session.goal.count != self._shown_goal:  # sent from elsewhere
@@ -368,8 +389,9 @@ class TeleopPage(Page[TeleopSession]):
         self._history.append((snap.t, 1e3 * error, snap.contact_force))
         while self._history and self._history[0][0] < snap.t - PLOT_SECONDS:
             self._history.popleft()
-        self._updates += 1
-        if self._updates % PANEL_EVERY == 1 or hold != self.hold:
+        now = time.monotonic()
+        if now >= self._panel_at + PANEL_PERIOD or hold != self.hold:
+            self._panel_at = now
             self.readout.content = "\n".join(
                 readout_lines(snap, error, self.hold, self._hold_since)
             )
@@ -477,6 +499,15 @@ class TeleopPage(Page[TeleopSession]):
             )
             colours = np.repeat(rgb[:, None, :], 2, axis=1)
             holding = contacts.distance <= HOLDING_DISTANCE
+        drawn = self._contact_lines
+        if (
+            drawn is not None
+            and _same(drawn[0], points)
+            and _same(drawn[1], colours)
+            and np.array_equal(drawn[2], holding)
+        ):
+            return  # as drawn: nothing sent (each change costs the browser a frame)
+        self._contact_lines = (points, colours, holding)
         self.server.scene.add_line_segments(
             "/contacts", points, colours, thickness=3.0, thickness_units="screen"
         )
@@ -522,13 +553,17 @@ class TeleopPage(Page[TeleopSession]):
                 if len(hands) > 1
                 else np.zeros((0, 2, 3))
             )
-            self.server.scene.add_line_segments(
-                "/commanded",
-                segments,
-                PATH,
-                thickness=2.0,
-                thickness_units="screen",
-            )
+            # A trajectory spliced in at rest draws the same path: not sent
+            # (each change costs the browser a frame).
+            if self._path_lines is None or not _same(self._path_lines, segments):
+                self._path_lines = segments
+                self.server.scene.add_line_segments(
+                    "/commanded",
+                    segments,
+                    PATH,
+                    thickness=2.0,
+                    thickness_units="screen",
+                )
         end = trajectory.positions[-1]
         self._state.update(end)
         heading = self._state.frame_position(self._hand)

@@ -15,9 +15,10 @@ import math
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -32,6 +33,7 @@ from cbp.run import RunParts, WallClockPacer, build_run
 from cbp.scenario import load_scenario
 from cbp.sim.trajectory import JointTrajectory
 from cbp.state import RobotState
+from cbp.teleop.changes import Changes
 from cbp.teleop.live_goal import LiveGoal
 from cbp.teleop.switching import SwitchingPlanner
 from cbp.trace import Trace
@@ -41,6 +43,7 @@ __all__ = [
     "LONGEST",
     "METHODS",
     "MIN_PERIOD",
+    "Commanded",
     "Snapshot",
     "TeleopSession",
     "latency_summary",
@@ -61,6 +64,28 @@ LONGEST = 86400.0
 MIN_PERIOD = 0.015
 #: The operator's goal stream file in a session's outputs.
 GOAL_FILE = "operator_goal.csv"
+
+
+class Commanded(NamedTuple):
+    """Where one goal's time went, from its arrival to its first command.
+
+    Times are ``time.perf_counter()`` [s].
+
+    Attributes:
+        number: the goal's number (:meth:`LiveGoal.set`).
+        arrival: when it was set (the page's handler, a script).
+        sampled: when the control loop first took it (at a period's start,
+            while CAT planned, or on waking from the period's wait).
+        planned: when the plan that was commanded for it was made.
+        commanded: when the first trajectory planned for it started to be
+            commanded (the splice point, or the splice itself if later).
+    """
+
+    number: int
+    arrival: float
+    sampled: float
+    planned: float
+    commanded: float
 
 
 @dataclass(frozen=True)
@@ -155,9 +180,14 @@ class TeleopSession:
             raise
         self.timing = self.scenario.spec.method.timing("cat")
         self._stopping = threading.Event()
-        self._pacer = WallClockPacer()
+        #: Told at each change a page shows: a command period's end (the
+        #: arm's state at it is now), a new goal, a new trajectory.
+        self.changes = Changes()
+        # A new goal ends the loop's wait for its deadline: it is planned for
+        # at once and commanded at that deadline, not a period later.
+        self._pacer = _TellingPacer(self.changes, wake=self.goal.arrived)
         self._latencies: list[float] = []
-        self._commands: list[tuple[int, float, float]] = []
+        self._commands: list[Commanded] = []
         self._state = RobotState(robot)
         self._frame = robot.frame_id(self.scenario.ee_frame)
         self._periods_counted = self._misses = 0
@@ -193,16 +223,28 @@ class TeleopSession:
     def _commanded(self, t_start: float) -> None:
         """Measure the latency of the goal this trajectory was planned for."""
         taken = self.goal.take_sampled()
+        self.changes.notify()
         if taken is None or not self._pacer.started:
             return
-        number, arrival = taken
+        number, arrival, sampled = taken
         starts = max(time.perf_counter(), self._pacer.wall_time(t_start))
         self._latencies.append(starts - arrival)
-        self._commands.append((number, arrival, starts))
+        planned = self.planner.planned_at
+        self._commands.append(Commanded(number, arrival, sampled, planned, starts))
 
     def set_goal(self, position: FloatArray, rotation: FloatArray) -> int:
         """Send a goal (the page's gizmo, a script); return its number."""
-        return self.goal.set(position, rotation)
+        number = self.goal.set(position, rotation)
+        self.changes.notify()
+        return number
+
+    def listen(self, callback: Callable[[], None]) -> None:
+        """Call ``callback`` (quick; from any thread) at each change.
+
+        A command period's end (the arm's state at it is now), a new
+        trajectory commanded, a goal set through :meth:`set_goal`.
+        """
+        self.changes.listen(callback)
 
     def jog(self, axis: str, step: float, frame: str = "world") -> int:
         """Move the goal by ``step`` along or about an axis.
@@ -332,13 +374,29 @@ class TeleopSession:
         """Goal-to-command latencies measured so far [ms]."""
         return [1e3 * x for x in self._latencies]
 
-    def commands(self) -> list[tuple[int, float, float]]:
-        """Each goal commanded so far: (its number, its arrival, its command).
-
-        Times are ``time.perf_counter()`` [s]; the command is when the first
-        trajectory planned for the goal started to be commanded.
-        """
+    def commands(self) -> list[Commanded]:
+        """Each goal commanded so far, with where its time went."""
         return list(self._commands)
+
+
+class _TellingPacer(WallClockPacer):
+    """The session's pacer: tells the listeners when a period's end is now.
+
+    The loop has simulated the arm to the period's end before it waits for
+    it; at the end, that state is the arm's state now, for a page to show.
+    """
+
+    def __init__(self, changes: Changes, wake: threading.Event) -> None:
+        """Pace the loop; a set ``wake`` (a new goal) ends a wait early."""
+        super().__init__(wake=wake)
+        self._changes = changes
+
+    def wait_until(self, t: float, wakeable: bool = True) -> float:
+        """Wait as :class:`WallClockPacer` does; tell the listeners if ``t`` is now."""
+        late = super().wait_until(t, wakeable)
+        if late > 0 or self.left(t) <= 0:
+            self._changes.notify()
+        return late
 
 
 def latency_summary(latencies_ms: list[float]) -> dict[str, Any]:

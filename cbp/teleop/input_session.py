@@ -10,6 +10,7 @@ inputs and switches between them within the run (:class:`InputSession`).
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from cbp.methods import METHODS
 from cbp.robot import FloatArray
 from cbp.run import WallClockPacer
 from cbp.scenario import load_scenario
+from cbp.teleop.changes import Changes
 from cbp.teleop.goal_session import LONGEST
 from cbp.trace import Trace
 
@@ -118,6 +120,7 @@ class InputSession:
         self.active = first.spec.name
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self._changes = Changes()
         self._thread: threading.Thread | None = None
         self.events: list[tuple[float, str]] = []
         self.t = 0.0
@@ -168,6 +171,10 @@ class InputSession:
         self._thread = threading.Thread(target=self._run, name="teleop", daemon=True)
         self._thread.start()
 
+    def listen(self, callback: Callable[[], None]) -> None:
+        """Call ``callback`` (quick; from the ticks' thread) after each tick."""
+        self._changes.listen(callback)
+
     @property
     def running(self) -> bool:
         """Whether the ticks run."""
@@ -188,6 +195,7 @@ class InputSession:
                     loop.set_input(plugin, t, value.tolist)
                 loop.tick(t)
                 self.t = t + dt
+                self._changes.notify()
                 k += 1
                 if loop.faults.aborted is not None:
                     break

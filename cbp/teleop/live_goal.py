@@ -36,7 +36,12 @@ class LiveGoal:
         #: Number of goals set so far (the starting one is 0).
         self.count = 0
         self._arrival: dict[int, float] = {0: time.perf_counter()}
+        #: When the control loop first sampled each goal (``time.perf_counter()``).
+        self._taken: dict[int, float] = {}
         self._sampled = 0
+        #: Set when a goal is set, cleared when the control loop samples it:
+        #: a live loop's pacer waits on it, so a new goal ends its wait.
+        self.arrived = threading.Event()
 
     @property
     def rate_hz(self) -> float:
@@ -50,6 +55,7 @@ class LiveGoal:
             self._rotation = np.array(rotation, dtype=float).reshape(3, 3)
             self.count += 1
             self._arrival[self.count] = time.perf_counter()
+            self.arrived.set()
             return self.count
 
     def pose(self) -> tuple[FloatArray, FloatArray]:
@@ -61,18 +67,28 @@ class LiveGoal:
         """The latest goal; the control loop's sample at ``t`` [s]."""
         with self._lock:
             self._sampled = self.count
+            self.arrived.clear()
+            self._taken.setdefault(self.count, time.perf_counter())
             return self._position.copy(), self._rotation.copy()
 
     def changed(self) -> bool:
         """Whether a goal was set after the last sample."""
         return self.count != self._sampled
 
-    def take_sampled(self) -> tuple[int, float] | None:
-        """The number and arrival time of the latest sampled goal, once each."""
+    def take_sampled(self) -> tuple[int, float, float] | None:
+        """The latest sampled goal's number, arrival and first sample, once each.
+
+        Times are ``time.perf_counter()`` [s].
+        """
         with self._lock:
             n = self._sampled
             arrival = self._arrival.pop(n, None)
+            taken = self._taken.pop(n, None)
             # Goals superseded before they were sampled have no latency.
             for old in [k for k in self._arrival if k < n]:
                 del self._arrival[old]
-        return None if arrival is None else (n, arrival)
+            for old in [k for k in self._taken if k < n]:
+                del self._taken[old]
+        if arrival is None or taken is None:
+            return None
+        return n, arrival, taken

@@ -1,21 +1,33 @@
 # SPDX-License-Identifier: Apache-2.0
-"""What every live page shares: a viser server, a stop button, an update loop."""
+"""What every live page shares: a viser server, a stop button, an update loop.
+
+A page is updated when its session changes, not on a timer: the session tells
+it at each change (a command period's end, a new goal) and the page's thread
+wakes and sends the change at once, at most :data:`MAX_UPDATE_RATE` times a
+second; without changes it updates at :data:`IDLE_UPDATE_RATE` (the readout's
+clock, a session that has stopped).
+"""
 
 from __future__ import annotations
 
 import abc
 import logging
 import threading
-from typing import Generic, Protocol, TypeVar
+import time
+from collections.abc import Callable
+from typing import Any, Generic, Protocol, TypeVar
 
-from cbp.run import WallClockPacer
-
-__all__ = ["UPDATE_RATE", "Page", "Session"]
+__all__ = ["IDLE_UPDATE_RATE", "MAX_UPDATE_RATE", "Page", "Session"]
 
 log = logging.getLogger(__name__)
 
-#: Page updates per second.
-UPDATE_RATE = 20.0
+#: The most page updates per second: a change is sent at once unless the
+#: last update was less than this rate's interval ago (then at its end). Each
+#: update costs the session's interpreter and the browser's rendering, on the
+#: cores the control loop runs on.
+MAX_UPDATE_RATE = 50.0
+#: Page updates per second while the session tells of no change.
+IDLE_UPDATE_RATE = 5.0
 
 
 class Session(Protocol):
@@ -24,6 +36,10 @@ class Session(Protocol):
     @property
     def running(self) -> bool:
         """Whether the session's loop runs."""
+        ...
+
+    def listen(self, callback: Callable[[], None]) -> None:
+        """Call ``callback`` (from any thread) whenever the session changes."""
         ...
 
 
@@ -54,7 +70,16 @@ class Page(abc.ABC, Generic[S]):
         #: Set by the page's "stop and save" button.
         self.stopped = threading.Event()
         self._close = threading.Event()
+        #: Set when the session changed (or the page closes): update now.
+        self._changed = threading.Event()
+        #: Page updates made so far (each one message batch to the browsers).
+        self.updates = 0
+        #: Why each update was made: ``change`` (the session told of one) or
+        #: ``idle`` (none for :data:`IDLE_UPDATE_RATE`'s interval), the latest
+        #: last (up to 100).
+        self.update_causes: list[str] = []
         self._thread: threading.Thread | None = None
+        session.listen(self._changed.set)
 
     @property
     def url(self) -> str:
@@ -106,14 +131,27 @@ class Page(abc.ABC, Generic[S]):
             self.update()
         self.server.flush()
 
-    def run(self) -> None:
-        """Update the page until :meth:`close`, the stop button or the session's end."""
-        period = 1.0 / UPDATE_RATE
-        # On a fixed schedule; an update that ran late is not made up.
-        pacer = WallClockPacer(max_lag=period, wake=self._close)
-        k = 0
+    def run(
+        self,
+        max_rate: float = MAX_UPDATE_RATE,
+        idle_rate: float = IDLE_UPDATE_RATE,
+        while_running: bool = True,
+    ) -> None:
+        """Update the page until :meth:`close`, the stop button or the session's end.
+
+        At each change the session tells of, at most ``max_rate`` times a
+        second; ``idle_rate`` times a second without changes. With
+        ``while_running`` False, a session that does not run (not started
+        yet) does not end the updates.
+        """
+        gap, idle = 1.0 / max_rate, 1.0 / idle_rate
         failing: str | None = None
+        cause = "idle"
         while not self._close.is_set() and not self.stopped.is_set():
+            started = time.perf_counter()
+            # Cleared first: a change while the page updates wakes it again.
+            self._changed.clear()
+            self.update_causes = [*self.update_causes[-99:], cause]
             try:
                 self.refresh()
             except Exception as exc:  # the page must not stop the session
@@ -123,19 +161,27 @@ class Page(abc.ABC, Generic[S]):
                 failing = message
             else:
                 failing = None
-            if not self.session.running:
+            self.updates += 1
+            if while_running and not self.session.running:
                 break
-            k += 1
-            pacer.wait_until(k * period)
+            cause = "change" if self._changed.wait(idle) else "idle"
+            # Not more often than max_rate: the rest of the gap is waited out
+            # (changes meanwhile are sent together at its end).
+            rest = started + gap - time.perf_counter()
+            if rest > 0:
+                self._close.wait(rest)
 
-    def start(self) -> None:
-        """Update the page in a thread of its own."""
-        self._thread = threading.Thread(target=self.run, name="page", daemon=True)
+    def start(self, **run: Any) -> None:
+        """Update the page in a thread of its own (``run``: :meth:`run`'s options)."""
+        self._thread = threading.Thread(
+            target=self.run, kwargs=run, name="page", daemon=True
+        )
         self._thread.start()
 
     def close(self) -> None:
         """Stop updating and serving."""
         self._close.set()
+        self._changed.set()
         if self._thread is not None:
             self._thread.join(5.0)
         self.server.stop()

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pinocchio as pin
 
 from cbp.collision.contacts import ContactSet
@@ -48,6 +50,8 @@ class SwitchingPlanner:
         self.wanted = method
         self.paused = False
         self.held_by: frozenset[str] = frozenset()
+        #: When the last plan was made (``time.perf_counter()``; -inf: none).
+        self.planned_at = -float("inf")
         #: The contact sets last merged by :meth:`contacts`, and the result.
         self._merged: tuple[list[ContactSet], ContactSet] = ([], ContactSet.empty())
         self.planner(method)
@@ -69,10 +73,12 @@ class SwitchingPlanner:
             self.method = self.wanted
         if self.paused:
             self.held_by = frozenset()
+            self.planned_at = time.perf_counter()
             return Plan(None, 0, "paused", stop=True)
         planner = self.planner(self.method)
         plan = planner.plan(q, goal, budget, run)
         self.held_by = held_by(planner)
+        self.planned_at = time.perf_counter()
         return plan
 
     def engine(self) -> Engine | None:
