@@ -275,6 +275,30 @@ class OccupancyGrid:
         """Number of cells in ``state``."""
         return int(np.count_nonzero(self.cells == state))
 
+    def occupied_in_view(self, frame: DepthFrame, stride: int = 16) -> float:
+        """The fraction of ``frame``'s view in which the map holds an obstacle.
+
+        Along the rays of every ``stride``-th pixel (both ways), from the
+        camera to the far plane in half-cell steps: the fraction of rays that
+        meet a cell the grid holds occupied. What a camera that reads
+        nothing there contradicts (:class:`~cbp.perception.plausibility.FrameCheck`).
+        """
+        h, w = frame.depth.shape
+        u = np.arange(stride // 2, w, stride)
+        v = np.arange(stride // 2, h, stride)
+        x = 2.0 * (u + 0.5) / w - 1.0
+        y = 2.0 * (h - 1 - v + 0.5) / h - 1.0
+        X, Y = np.meshgrid(x, y)
+        far = np.stack([X, Y, np.ones_like(X), np.ones_like(X)], -1).reshape(-1, 4)
+        far = far.dot(frame.unprojection.T)
+        far = far[:, :3] / far[:, 3:4]
+        start = frame.position
+        length = float(np.max(np.linalg.norm(far - start, axis=1)))
+        steps = np.arange(0.0, 1.0, 0.5 * self.cell / max(length, self.cell))
+        points = start + steps[None, :, None] * (far - start)[:, None, :]
+        met = self.state_at(points.reshape(-1, 3)) == OCCUPIED
+        return float(np.mean(met.reshape(len(far), -1).any(axis=1)))
+
     def state_at(self, points: FloatArray) -> np.ndarray:
         """The state of the cell of each point (n, 3); outside the grid: FREE.
 

@@ -8,7 +8,9 @@ without one for ``perception.camera_timeout`` stops the arm) when
 
 * it reads **nothing up to its far plane** in almost every pixel
   (``perception.max_far_fraction``): a blinded or failed sensor, whose frame
-  would clear the map in front of it;
+  would clear the map in front of it. A camera on the robot may look into open
+  space: its frame is refused only where the map holds obstacles in its view
+  (:data:`EXPECTED_IN_VIEW`); a fixed camera, which sees the workcell, always;
 * it is **frozen**: the very same image as the camera's last one, while the arm
   moved in its view or the camera moved with the arm (a real sensor's noise
   alone makes two frames differ; a stuck driver repeats its last frame);
@@ -22,6 +24,7 @@ without one for ``perception.camera_timeout`` stops the arm) when
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +32,7 @@ import numpy as np
 from cbp.perception.frame import DepthFrame
 from cbp.robot import FloatArray
 
-__all__ = ["FrameCheck", "PlausibilityLimits"]
+__all__ = ["EXPECTED_IN_VIEW", "FrameCheck", "PlausibilityLimits"]
 
 #: Depth-buffer values from here up read the far plane (nothing seen up to it).
 _FAR_PLANE = 1.0 - 1e-6
@@ -39,6 +42,9 @@ _MOVED = 1e-3
 _CAMERA_MOVED = 1e-3
 #: ... or its axes turned by more than this (sum of direction-cosine changes).
 _CAMERA_TURNED = 1e-3
+#: A camera on the robot that reads nothing up to its far plane is believed
+#: unless the map holds obstacles in at least this fraction of its view.
+EXPECTED_IN_VIEW = 0.05
 #: Robot points in view below this number do not decide whether a camera sees
 #: the robot where it must.
 _MIN_POINTS = 3
@@ -80,22 +86,30 @@ class FrameCheck:
         self.limits = limits
         self._last: tuple[DepthFrame, FloatArray] | None = None
 
-    def check(self, frame: DepthFrame, q: FloatArray, joints: FloatArray) -> str | None:
+    def check(
+        self,
+        frame: DepthFrame,
+        q: FloatArray,
+        joints: FloatArray,
+        in_view: Callable[[DepthFrame], float] | None = None,
+    ) -> str | None:
         """Why ``frame`` should not be believed, or None.
 
         Args:
             frame: the frame (already well formed: :meth:`DepthFrame.problem`).
             q: the robot's configuration when it was taken.
             joints: the robot's joint positions in the world then (n, 3) [m].
+            in_view: the fraction of a frame's view in which the map holds
+                obstacles (:meth:`OccupancyGrid.occupied_in_view
+                <cbp.perception.occupancy.OccupancyGrid.occupied_in_view>`);
+                None: every camera's frame that reads nothing is refused.
         """
         last, self._last = self._last, (frame, np.array(q, dtype=float))
         far = float(np.count_nonzero(frame.depth >= _FAR_PLANE)) / frame.depth.size
         if far >= self.limits.max_far_fraction and self.limits.max_far_fraction < 1.0:
-            return (
-                f"reads nothing up to its far plane in {far:.1%} of its pixels "
-                f"(perception.max_far_fraction: {self.limits.max_far_fraction:g}): "
-                "a blinded or failed sensor, not believed"
-            )
+            blind = self._blind(frame, far, in_view)
+            if blind is not None:
+                return blind
         rows, cols, depth = frame.project(np.asarray(joints, dtype=float))
         seen = (rows >= 0) & (depth > frame.closest) & (depth < frame.far)
         if last is not None:
@@ -105,6 +119,31 @@ class FrameCheck:
         if self.mounted or self.limits.see_through_fraction >= 1.0:
             return None
         return self._sees_through(frame, rows[seen], cols[seen], depth[seen])
+
+    def _blind(
+        self,
+        frame: DepthFrame,
+        far: float,
+        in_view: Callable[[DepthFrame], float] | None,
+    ) -> str | None:
+        """A problem for a frame that reads nothing in ``far`` of its pixels.
+
+        None for a camera on the robot looking where the map holds nothing.
+        """
+        limit = self.limits.max_far_fraction
+        said = (
+            f"reads nothing up to its far plane in {far:.1%} of its pixels "
+            f"(perception.max_far_fraction: {limit:g})"
+        )
+        if not self.mounted or in_view is None:
+            return f"{said}: a blinded or failed sensor, not believed"
+        mapped = in_view(frame)
+        if mapped < EXPECTED_IN_VIEW:
+            return None  # open space ahead of a camera on the robot
+        return (
+            f"{said} where the map holds obstacles in {mapped:.0%} of its view: "
+            "a blinded or failed sensor, not believed"
+        )
 
     def _frozen(
         self,

@@ -94,7 +94,7 @@ class Cameras:
         self._last_valid = [0.0] * n
         self._failing = [False] * n
         self._stale: str | None = None
-        grid = OccupancyGrid(spec, world.geometry)
+        grid = self._grid = OccupancyGrid(spec, world.geometry)
         first = MapUpdater(grid, world, synchronous=True)
         for i in range(n):
             frame = self._checked_frame(i, 0.0)
@@ -212,7 +212,10 @@ class Cameras:
             problem = frame.problem(self._spec.min_valid_fraction)
             if problem is None:
                 problem = self._checks[i].check(
-                    frame, self._state.q, self._joint_positions()
+                    frame,
+                    self._state.q,
+                    self._joint_positions(),
+                    self._grid.occupied_in_view,
                 )
         except Exception as exc:  # a camera that fails is a camera without frames
             frame, problem = None, f"capture failed ({type(exc).__name__}: {exc})"

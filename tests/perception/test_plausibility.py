@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from cbp.perception.frame import DepthFrame
-from cbp.perception.plausibility import FrameCheck, PlausibilityLimits
-from cbp.perception.spec import CameraSpec
+from cbp.perception.occupancy import OccupancyGrid
+from cbp.perception.plausibility import EXPECTED_IN_VIEW, FrameCheck, PlausibilityLimits
+from cbp.perception.spec import CameraSpec, PerceptionSpec
 from cbp.scenario import ObjectSpec
 from cbp.sim.camera import DepthCamera
 from cbp.sim.scene import PybulletScene
@@ -112,3 +113,30 @@ def test_the_checks_can_be_turned_off() -> None:
     off = PlausibilityLimits(max_far_fraction=1.0, see_through_fraction=1.0)
     joints = np.zeros((4, 3))
     assert FrameCheck("c", False, off).check(blind, np.zeros(7), joints) is None
+
+
+def test_a_camera_on_the_robot_may_look_into_open_space(seen) -> None:
+    """Nothing up to the far plane: believed where the map holds nothing in view.
+
+    A wrist camera turned away from the workcell reads nothing, and is right;
+    the same frame where the map holds the table in view is a blind sensor.
+    """
+    robot, _, camera, q = seen
+    frame = camera.capture()
+    blind = dataclasses.replace(frame, depth=np.ones_like(frame.depth))
+    spec = PerceptionSpec(cell_size=0.02, bounds=((-0.2, -0.8, 0.0), (1.2, 0.8, 1.0)))
+    empty = OccupancyGrid(spec, None)
+    assert empty.occupied_in_view(blind) == 0.0
+    wrist = FrameCheck("wrist", mounted=True, limits=LIMITS)
+    assert wrist.check(blind, q, _joints(robot, q), empty.occupied_in_view) is None
+    mapped = OccupancyGrid(spec, None)
+    mapped.integrate(frame, None, 0.0)
+    assert mapped.occupied_in_view(blind) > EXPECTED_IN_VIEW
+    problem = FrameCheck("wrist", True, LIMITS).check(
+        blind, q, _joints(robot, q), mapped.occupied_in_view
+    )
+    assert problem is not None
+    assert "where the map holds obstacles" in problem
+    # A fixed camera sees the workcell: reading nothing is never believed.
+    fixed = FrameCheck("side", False, LIMITS)
+    assert fixed.check(blind, q, _joints(robot, q), empty.occupied_in_view)
