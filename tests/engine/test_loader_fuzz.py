@@ -48,9 +48,16 @@ SOURCES = sorted((ROOT / "scenarios").glob("*.yaml"))
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A copy of ``scenarios/``, so that relative includes and files resolve."""
+    """A copy of ``scenarios/``, so that relative includes and files resolve.
+
+    Each scenario is loaded once first, outside the hang watchdog: a first
+    load compiles the kernels it needs (seconds of CPU on a cold numba cache,
+    as on a fresh clone when this module runs first), which is no hang.
+    """
     target = tmp_path_factory.mktemp("fuzz") / "scenarios"
     shutil.copytree(ROOT / "scenarios", target)
+    for source in SOURCES:
+        load_scenario(target / source.name)
     return target
 
 
