@@ -73,34 +73,15 @@ def checked_pose(
             f"{what}: position must have shape (3,) and rotation (3, 3); got "
             f"{p.shape} and {R.shape}"
         )
-    # Scalar arithmetic: this runs on every goal update, where a dozen numpy
-    # calls on 3x3 arrays cost more than the whole check.
-    x, y, z = p.tolist()
-    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    # One compiled call (a dozen numpy calls on 3x3 arrays cost more than the
+    # whole check, which runs on every goal update); the message after it.
+    if checked_pose_into(p, R, np.empty(3), np.empty((3, 3))):
+        return p, R
     # A NaN or an infinity makes the sum NaN or infinite (so do finite entries
     # near 1e308, which are no pose either).
-    if not math.isfinite(x + y + z + a + b + c + d + e + f + g + h + i):
+    if not math.isfinite(float(p.sum() + R.sum())):
         raise InvalidTargetError(f"{what}: not finite (position {p}, rotation {R})")
-    # Columns orthonormal (R^T R = I, as numpy's allclose(atol=1e-6) would judge
-    # it) and det R = +1.
-    unit = max(
-        abs(a * a + d * d + g * g - 1.0),
-        abs(b * b + e * e + h * h - 1.0),
-        abs(c * c + f * f + i * i - 1.0),
-    )
-    orthogonal = max(
-        abs(a * b + d * e + g * h),
-        abs(a * c + d * f + g * i),
-        abs(b * c + e * f + h * i),
-    )
-    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    if (
-        unit > _ORTHONORMAL_ATOL + _ORTHONORMAL_RTOL
-        or orthogonal > _ORTHONORMAL_ATOL
-        or det < 0.0
-    ):
-        raise InvalidTargetError(f"{what}: rotation is not a rotation matrix: {R}")
-    return p, R
+    raise InvalidTargetError(f"{what}: rotation is not a rotation matrix: {R}")
 
 
 @numba.njit(

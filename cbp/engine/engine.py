@@ -153,15 +153,16 @@ class Engine:
         try:
             x = self.solver.solve(problem)
         except SolveError as exc:
-            x, eased = ease(
-                problem,
-                exc,
-                float(dt),
-                self.solver,
-                self._easable,
-                state.v,
-                self._levels,
-            )
+            with self.solver.trials():  # expected to fail: not diagnosed
+                x, eased = ease(
+                    problem,
+                    exc,
+                    float(dt),
+                    self.solver,
+                    self._easable,
+                    state.v,
+                    self._levels,
+                )
         if v is not None and self._drift.refine(problem, state, x[: self._nv]):
             # The rows that hold the step, with the drift of the step found;
             # if that cannot be solved, the first answer (third order off).

@@ -148,21 +148,10 @@ def ease(
 
     Raises:
         SolveError: ``error``, when no easing makes the QP solvable.
+
+    Call it within ``solver.trials()``: its trial solves are expected to fail,
+    and naming their conflicts would cost more than the solves.
     """
-    with solver.trials():
-        return _ease(problem, error, dt, solver, easable, v, levels)
-
-
-def _ease(
-    problem: QPProblem,
-    error: SolveError,
-    dt: float,
-    solver: QPSolver,
-    easable: np.ndarray,
-    v: FloatArray,
-    levels: IntArray | None,
-) -> tuple[FloatArray, Easing]:
-    """:func:`ease`, its trial solves not diagnosed (they are expected to fail)."""
     if not easable[problem.row_entry].all():  # rows of physical limits
         return _give_way(
             problem,
