@@ -85,6 +85,8 @@ class FrameCheck:
         self.mounted = mounted
         self.limits = limits
         self._last: tuple[DepthFrame, FloatArray] | None = None
+        #: The camera was found frozen, and its image has not changed since.
+        self._stuck = False
 
     def check(
         self,
@@ -152,10 +154,18 @@ class FrameCheck:
         last: tuple[DepthFrame, FloatArray],
         robot_in_view: bool,
     ) -> str | None:
-        """A problem when ``frame`` repeats the last one while something moved."""
+        """A problem when ``frame`` repeats the last one while something moved.
+
+        A camera found frozen stays so until its image changes: once the arm
+        has stopped for it, nothing moves, and its stuck image would be
+        believed again (the arm then crept on, stopped and went on).
+        """
         before, q_before = last
         if not np.array_equal(frame.depth, before.depth, equal_nan=True):
+            self._stuck = False
             return None
+        if self._stuck:
+            return "frozen: the same image as its last frame since it froze"
         if self.mounted:
             moved = (
                 float(np.linalg.norm(frame.position - before.position)) > _CAMERA_MOVED
@@ -168,6 +178,7 @@ class FrameCheck:
             what = "the arm moved in its view"
         if not moved:
             return None
+        self._stuck = True
         return f"frozen: the same image as its last frame while {what}"
 
     def _sees_through(

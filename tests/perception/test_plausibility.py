@@ -77,6 +77,10 @@ def test_a_frozen_frame_is_refused_only_when_the_arm_moved_in_view(seen) -> None
     problem = check.check(frame, moved, _joints(robot, moved))
     assert problem is not None
     assert problem.startswith("frozen")
+    # Stuck: the arm stopped for it, and its image is still refused.
+    still = check.check(frame, moved, _joints(robot, moved))
+    assert still is not None
+    assert still.startswith("frozen")
     scene.set_configuration(moved)  # a live sensor shows the arm where it went
     assert check.check(camera.capture(), moved, _joints(robot, moved)) is None
 
