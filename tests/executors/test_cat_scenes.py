@@ -25,9 +25,20 @@ pytestmark = pytest.mark.slow
 
 
 @cache
-def _run(scene: str, source: str = "ground_truth") -> tuple[Trace, dict[str, Any]]:
+def _run(
+    scene: str, source: str = "ground_truth", clock: str = "virtual"
+) -> tuple[Trace, dict[str, Any]]:
+    """One run of a paper scene, by default on the virtual clock.
+
+    Outcomes are asserted on the virtual clock, where they do not depend on the
+    machine's load: on the wall clock of a loaded 2-core machine the retreat
+    with the cameras was held at the middle board's hidden front edge for 2-9 s
+    rather than 1.5 s, and once not reached within the scene's 12 s (0 N in
+    every run). Only the test of steps per period reads the wall clock.
+    """
     scenario = load_scenario(
-        SCENARIOS / f"cat_{scene}.yaml", overrides={"perception.source": source}
+        SCENARIOS / f"cat_{scene}.yaml",
+        overrides={"perception.source": source, "method.cat.timing.clock": clock},
     )
     trace = run_cat(scenario)
     return trace, run_metrics(trace)
@@ -107,7 +118,7 @@ def test_wrist_limit_is_reached() -> None:
 def test_many_steps_per_period_on_boards_and_shelf() -> None:
     """More QP steps per 33 ms period than the paper's 15-20."""
     for scene in ("boards", "shelf_reach"):
-        _, m = _run(scene)
+        _, m = _run(scene, clock="wall")
         assert m["steps_per_full_period_median"] > 20, (scene, m)
 
 
