@@ -153,6 +153,8 @@ class SolveError(CbpError):
         status: the solver's own status, as text.
         conflicting: names of the entries whose rows could not be met together,
             found by a relaxed solve with slack variables; empty when unknown.
+        infeasible: whether the solver found the problem infeasible (rather
+            than failing on it).
     """
 
     def __init__(
@@ -162,11 +164,13 @@ class SolveError(CbpError):
         problem: Any = None,
         status: str = "",
         conflicting: Sequence[str] = (),
+        infeasible: bool = False,
     ) -> None:
         """Keep the problem and the solver's answer for post-mortem."""
         self.problem = problem
         self.status = status
         self.conflicting = list(conflicting)
+        self.infeasible = infeasible
         super().__init__(message)
 
 

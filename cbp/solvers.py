@@ -63,6 +63,27 @@ class QPSolver(abc.ABC):
     def _fail(self, problem: QPProblem, status: str, infeasible: bool) -> SolveError:
         diagnose = infeasible and self.diagnose
         conflicting = diagnose_infeasibility(problem) if diagnose else []
+        return self._error(problem, status, infeasible, conflicting)
+
+    def explained(self, error: SolveError) -> SolveError:
+        """``error`` naming the conflicting entries, if a trial left them out.
+
+        For a solve tried within :meth:`trials` whose failure turned out to
+        be the answer after all: the diagnosis runs once, on the problem as
+        the error holds it.
+        """
+        if error.conflicting or not error.infeasible or error.problem is None:
+            return error
+        conflicting = diagnose_infeasibility(error.problem)
+        return self._error(error.problem, error.status, True, conflicting)
+
+    def _error(
+        self,
+        problem: QPProblem,
+        status: str,
+        infeasible: bool,
+        conflicting: list[str],
+    ) -> SolveError:
         what = _INFEASIBLE_HINT if infeasible else "the solver failed"
         names = f": {', '.join(conflicting)}" if conflicting else ""
         return SolveError(
@@ -70,6 +91,7 @@ class QPSolver(abc.ABC):
             problem=problem,
             status=status,
             conflicting=conflicting,
+            infeasible=infeasible,
         )
 
 

@@ -615,14 +615,14 @@ def test_a_goal_that_arrives_while_the_loop_waits_is_planned_for_before_the_dead
         q = np.array(run.sim.q, dtype=float)
         t_f = 0.5  # the period's end, half a second from now
         plan = _plan_while_waiting(
-            pacer, 0.0, t_f, q, session.planner, run, session.timing, 0.015
+            pacer, 0.0, t_f, q, session.planner, run, session.timing, 0.015, 0.015
         )
         assert plan is None  # no goal came: the wait ran out
         assert pacer.left(t_f) <= 0
         pacer.start(0.0)
         number = session.jog("x", 0.05)
         plan = _plan_while_waiting(
-            pacer, 0.0, t_f, q, session.planner, run, session.timing, 0.015
+            pacer, 0.0, t_f, q, session.planner, run, session.timing, 0.015, 0.015
         )
         assert plan is not None
         assert plan.path is not None

@@ -63,6 +63,8 @@ class CatPlanner:
         self._unseen_holds = False
         self._unseen_said = -np.inf
         self._stepper: ValidatedStepper | None = None
+        #: The duration of the last step taken [s] (``step_dt``, or stretched).
+        self._dt = settings.step_dt
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts
@@ -83,6 +85,7 @@ class CatPlanner:
         self.blocked_by = set()
         path = [q]
         steps = rejections = still = 0
+        covered = 0.0  # the path's duration at the steps' velocity bounds [s]
         note = FULL_PERIOD_NOTE
         while steps < s.max_steps:
             if budget.spent():
@@ -90,7 +93,8 @@ class CatPlanner:
             steps += 1
             if run.goal.changed():  # a live goal moved: steer toward it now
                 run.goal.resend(run.sim.t)
-            step = stepper.step(q, s.step_dt)
+            dt = self._step_dt(budget, covered)
+            step = stepper.step(q, dt)
             budget.charge("qp_step")
             if step.outcome == "failed":
                 note = f"QP step failed, path ends here: {step.reason}"
@@ -105,6 +109,7 @@ class CatPlanner:
             rejections = 0
             q = step.q
             path.append(q)
+            covered += dt
             assert step.dq is not None
             if float(np.max(np.abs(step.dq))) < s.converged_step:
                 still += 1
@@ -120,6 +125,23 @@ class CatPlanner:
             self.blocked_by = last.problem.active_entries(step.dq) - self.step_limits
         self._say_if_unseen_space_holds(run)
         return Plan(np.array(path), steps, note)
+
+    def _step_dt(self, budget: Budget, covered: float) -> float:
+        """The next step's duration: ``step_dt``, longer when few steps fit.
+
+        The path must reach over the period it is followed for (``covered``
+        of it so far [s]); when the steps that still fit in the budget, at
+        the last one's cost, cannot cover the rest at ``step_dt``, each
+        covers its share, up to ``max_step_stretch`` times ``step_dt``. The
+        first step of a period, before any is timed, takes the last one's.
+        """
+        s = self.settings
+        fits = budget.fits("qp_step")
+        if fits is not None:
+            need = budget.horizon - covered
+            share = need / max(fits, 1)
+            self._dt = min(max(share, s.step_dt), s.max_step_stretch * s.step_dt)
+        return self._dt
 
     def close(self) -> None:
         """Nothing to release (the engine is the scenario's)."""

@@ -41,6 +41,10 @@ __all__ = [
 class Budget(Protocol):
     """A period's planning budget (see the module docstring)."""
 
+    #: How long the path planned within this budget is followed [s]: the
+    #: command period (the next plan replaces it then).
+    horizon: float
+
     def charge(self, work: Work, count: int = 1) -> None:
         """Count ``count`` units of ``work`` (a virtual budget advances its time)."""
 
@@ -53,6 +57,9 @@ class Budget(Protocol):
     def left(self) -> float:
         """Budget left [s] (negative once overrun)."""
 
+    def fits(self, work: Work) -> int | None:
+        """How many more units of ``work`` fit in the budget (None: not known yet)."""
+
 
 class WallBudget:
     """A budget of wall-clock seconds from now.
@@ -63,10 +70,11 @@ class WallBudget:
     the deadline, it overran the period, and the whole plan was discarded.
     """
 
-    def __init__(self, seconds: float) -> None:
+    def __init__(self, seconds: float, horizon: float = 0.0) -> None:
         """Start the clock."""
         self.start = time.perf_counter()
         self.seconds = seconds
+        self.horizon = horizon
         self._mark = self.start
         #: The longest a unit of any kind took at its last charge [s].
         self._unit: dict[Work, float] = {}
@@ -91,13 +99,23 @@ class WallBudget:
         """Seconds to the deadline."""
         return self.seconds - self.elapsed()
 
+    def fits(self, work: Work) -> int | None:
+        """Units that fit at the last one's cost; None before the first."""
+        unit = self._unit.get(work)
+        if unit is None or not unit > 0.0:
+            return None
+        return max(0, int(self.left() // unit))
+
 
 class VirtualBudget:
     """A budget of counted work, at the costs of :class:`VirtualCosts`."""
 
-    def __init__(self, seconds: float, costs: VirtualCosts) -> None:
+    def __init__(
+        self, seconds: float, costs: VirtualCosts, horizon: float = 0.0
+    ) -> None:
         """Nothing charged yet."""
         self.seconds = seconds
+        self.horizon = horizon
         self.costs = costs
         self.used = 0.0
 
@@ -117,9 +135,18 @@ class VirtualBudget:
         """Budget minus charged time [s]."""
         return self.seconds - self.used
 
+    def fits(self, work: Work) -> int | None:
+        """Units that fit at the work's cost."""
+        cost = float(getattr(self.costs, work))
+        if not cost > 0.0:
+            return None
+        return max(0, int(self.left() // cost))
 
-def make_budget(kind: ClockKind, seconds: float, costs: VirtualCosts) -> Budget:
-    """A new budget of ``seconds``, counted as ``kind`` says."""
+
+def make_budget(
+    kind: ClockKind, seconds: float, costs: VirtualCosts, horizon: float = 0.0
+) -> Budget:
+    """A new budget of ``seconds`` for a path followed ``horizon`` [s]."""
     if kind == "virtual":
-        return VirtualBudget(seconds, costs)
-    return WallBudget(seconds)
+        return VirtualBudget(seconds, costs, horizon)
+    return WallBudget(seconds, horizon)

@@ -233,7 +233,10 @@ def run_trajectory_executor(
             else:
                 t_s, q_s, v_s, a_s = current.point(i)
             budget = make_budget(
-                timing.clock, timing.time_budget * period, timing.virtual_costs
+                timing.clock,
+                timing.time_budget * period,
+                timing.virtual_costs,
+                horizon=period,
             )
             # The plan made now starts a period from now and runs until the next
             # one replaces it, a period later; from there the robot may need its
@@ -282,7 +285,7 @@ def run_trajectory_executor(
             ):
                 try:
                     again = _plan_while_waiting(
-                        pacer, t, t_f, q_s, planner, run, timing, lo
+                        pacer, t, t_f, q_s, planner, run, timing, lo, period
                     )
                 except Exception as exc:  # as a failing period: hold the robot
                     failed = True
@@ -359,6 +362,7 @@ def _plan_while_waiting(
     run: RunParts,
     timing: ExecutorTiming,
     shortest: float,
+    period: float,
 ) -> Plan | None:
     """A plan for a goal that arrived while the loop waited for its deadline.
 
@@ -384,7 +388,10 @@ def _plan_while_waiting(
             pacer.wait_until(t_f, wakeable=False)
             return result
         budget = make_budget(
-            timing.clock, timing.time_budget * left, timing.virtual_costs
+            timing.clock,
+            timing.time_budget * left,
+            timing.virtual_costs,
+            horizon=period,
         )
         goal = run.goal.resend(t)
         with held(run.world):

@@ -395,3 +395,35 @@ def test_rows_asking_for_more_than_the_limits_allow_are_eased(robots) -> None:
     assert engine.step(q, dt).eased == result.eased  # the same easing again
     # Within the range again, the step is solved as assembled.
     assert engine.step(robot.home(), dt).eased is None
+
+
+def test_an_eased_step_does_not_name_conflicts(robots, monkeypatch) -> None:
+    """Naming the conflicts is a second solve, spent only on a step that fails.
+
+    Where obstacles pressed the arm, diagnosing every first solve that the
+    easing then answered took a fifth of the step's time.
+    """
+    import cbp.solvers
+
+    calls: list[int] = []
+    diagnose = cbp.solvers.diagnose_infeasibility
+
+    def counted(problem, tol=1e-7):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        return diagnose(problem, tol)
+
+    monkeypatch.setattr(cbp.solvers, "diagnose_infeasibility", counted)
+    robot = robots["panda"]
+    q = robot.home()
+    q[3] = robot.lower_limits[3] - 0.3
+    engine = Engine(
+        robot,
+        [
+            Entry.make(PostureTask(PostureParams(), robot), weight=1e-3),
+            Entry.make(JointLimitsConstraint(JointLimitsParams(), robot), gain=1.0),
+            Entry.make(JointVelocityConstraint(JointVelocityParams(), robot)),
+        ],
+    )
+    assert engine.step(q, 0.01).eased is not None
+    assert calls == []
+    assert engine.solver.diagnose  # as it was before the step

@@ -134,3 +134,38 @@ def test_cbp_run_writes_trace_metrics_and_plots(tmp_path: Path) -> None:
     bad = run_cbp("run", str(SCENARIOS / "cat_free_step.yaml"), "--method", "catt")
     assert bad.returncode == 2
     assert "'cat'" in bad.stderr
+
+
+def test_when_one_step_fits_a_period_the_steps_stretch_to_cover_it() -> None:
+    """A QP step that costs most of the budget: the path still spans the period.
+
+    On the virtual clock, one step's cost set to 20 ms of the 27 ms budget:
+    two steps fit a 33 ms period. At ``step_dt`` (10 ms here) their path
+    spans 20 ms, and the arm, stopped at the path's end each period, moves
+    at 60 % of its speed at most; stretched, the first step spans the
+    period. The hand's steps are clipped loosely here, so that the velocity
+    bounds, which follow the step's duration, are what limits it.
+    """
+    tasks = (
+        "[{type: goal_pose, weight: [1.0, 1.0, 1.0, 0.3, 0.3, 0.3],"
+        " params: {max_step_translation: 0.05, max_step_rotation: 0.5}},"
+        " {type: joint_step, weight: 1.0e-3}]"
+    )
+    reached = {}
+    for stretch in ("1.0", "3.0"):
+        scenario = load_virtual(
+            SCENARIOS / "cat_free_step.yaml",
+            {
+                "method.cat.step_dt": "0.01",
+                "method.cat.max_step_stretch": stretch,
+                "method.cat.timing.virtual_costs.qp_step": "0.02",
+                "tasks": tasks,
+            },
+        )
+        trace = run_cat(scenario)
+        m = run_metrics(trace)
+        assert m["peak_contact_force_n"] == 0.0
+        assert all(p.steps <= 2 for p in trace.periods)
+        reached[stretch] = m["total_time_s"]
+    assert reached["3.0"] is not None
+    assert reached["1.0"] is None or reached["3.0"] < 0.8 * reached["1.0"], reached
