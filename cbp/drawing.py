@@ -18,7 +18,7 @@ import numpy as np
 from cbp.robot import FloatArray
 from cbp.spatial import Pose
 
-__all__ = ["add_gripper", "draw_objects", "joint_values", "wxyz"]
+__all__ = ["add_gripper", "add_robot", "draw_objects", "joint_values", "wxyz"]
 
 #: The colour of declared objects (RGB 0-255).
 OBJECT_COLOUR = (170, 170, 170)
@@ -69,6 +69,36 @@ def draw_objects(server: Any, description: dict[str, Any]) -> dict[str, Any]:
                 name, mesh, wxyz=quat, position=tuple(pose.translation)
             )
     return handles
+
+
+def add_robot(
+    server: Any, urdf: str | Path, name: str, colour: tuple[int, int, int]
+) -> Any:
+    """A robot drawn from its URDF's collision meshes, in one colour.
+
+    Args:
+        server: the viser server.
+        urdf: the robot's URDF file.
+        name: the scene node the robot hangs under (``/robot``).
+        colour: RGB 0-255.
+
+    Returns:
+        viser's ``ViserUrdf`` of it (its ``update_cfg`` poses it).
+    """
+    from viser.extras import ViserUrdf
+
+    return ViserUrdf(
+        server,
+        Path(urdf),
+        root_node_name=name,
+        load_meshes=False,
+        load_collision_meshes=True,
+        collision_mesh_color_override=(
+            colour[0] / 255,
+            colour[1] / 255,
+            colour[2] / 255,
+        ),
+    )
 
 
 def wxyz(rotation: FloatArray) -> tuple[float, float, float, float]:

@@ -29,12 +29,11 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cbp.drawing import add_gripper, draw_objects, joint_values, wxyz
+from cbp.drawing import add_gripper, add_robot, draw_objects, joint_values, wxyz
 from cbp.executors.cat import HOLDING_DISTANCE
 from cbp.perception.kernels import OCCUPIED, UNKNOWN
 from cbp.run.goal_input import GoalBounds
@@ -126,11 +125,6 @@ def _same(drawn: np.ndarray, new: np.ndarray) -> bool:
     )
 
 
-def _unit_rgb(colour: tuple[int, int, int]) -> tuple[float, float, float]:
-    """An RGB colour 0-255 as 0-1 (ViserUrdf's colours)."""
-    return (colour[0] / 255, colour[1] / 255, colour[2] / 255)
-
-
 _JOGS = [
     ("+x", "x", 1.0),
     ("-x", "x", -1.0),
@@ -201,23 +195,13 @@ class TeleopPage(Page[TeleopSession]):
         """Build the scene and the panel."""
         import viser
         import viser.uplot
-        from viser.extras import ViserUrdf
 
         super().__init__(session, host, port)
         description = scene_description(session.scenario, duration=0.0)
         urdf = description.get("urdf")
         self._locked = description.get("locked_joints", {})
         self.robot = (
-            ViserUrdf(
-                self.server,
-                Path(urdf),
-                root_node_name="/robot",
-                load_meshes=False,
-                load_collision_meshes=True,
-                collision_mesh_color_override=_unit_rgb(ARM),
-            )
-            if urdf is not None
-            else None
+            add_robot(self.server, urdf, "/robot", ARM) if urdf is not None else None
         )
         self._joints = self.robot.get_actuated_joint_names() if self.robot else []
         self._drawn_q = np.zeros(len(self._joints))
@@ -281,14 +265,7 @@ class TeleopPage(Page[TeleopSession]):
         # goal drawn as a gripper (the CAT paper's operator view), each with
         # a label drawn through obstacles.
         self.ghost = (
-            ViserUrdf(
-                self.server,
-                Path(urdf),
-                root_node_name="/reachable",
-                load_meshes=False,
-                load_collision_meshes=True,
-                collision_mesh_color_override=_unit_rgb(CLOSEST_POSTURE),
-            )
+            add_robot(self.server, urdf, "/reachable", CLOSEST_POSTURE)
             if urdf is not None
             else None
         )
