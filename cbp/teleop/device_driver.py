@@ -35,6 +35,7 @@ from cbp.teleop.devices import (
     deadman_held,
     move_goal,
 )
+from cbp.teleop.failures import Guarded
 from cbp.teleop.profiles import (
     GOAL_COMPONENTS,
     VELOCITY_COMPONENTS,
@@ -302,17 +303,9 @@ class DeviceDriver:
         def run() -> None:
             pacer = WallClockPacer(max_lag=STEP_PERIOD, wake=self._stop)
             k = 0
-            failing = ""
+            step = Guarded(log, "device step")  # a device must not stop the session
             while not self._stop.is_set():
-                try:
-                    self.step()
-                except Exception as exc:  # a device must not stop the session
-                    message = f"{type(exc).__name__}: {exc}"
-                    if message != failing:
-                        log.warning("device step failed: %s", message)
-                    failing = message
-                else:
-                    failing = ""
+                step.call(self.step)
                 k += 1
                 pacer.wait_until(k * STEP_PERIOD)
 

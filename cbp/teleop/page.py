@@ -17,6 +17,8 @@ import time
 from collections.abc import Callable
 from typing import Any, Generic, Protocol, TypeVar
 
+from cbp.teleop.failures import Guarded
+
 __all__ = ["IDLE_UPDATE_RATE", "MAX_UPDATE_RATE", "Page", "Session"]
 
 log = logging.getLogger(__name__)
@@ -145,22 +147,14 @@ class Page(abc.ABC, Generic[S]):
         yet) does not end the updates.
         """
         gap, idle = 1.0 / max_rate, 1.0 / idle_rate
-        failing: str | None = None
+        refresh = Guarded(log, "page update")  # the page must not stop the session
         cause = "idle"
         while not self._close.is_set() and not self.stopped.is_set():
             started = time.perf_counter()
             # Cleared first: a change while the page updates wakes it again.
             self._changed.clear()
             self.update_causes = [*self.update_causes[-99:], cause]
-            try:
-                self.refresh()
-            except Exception as exc:  # the page must not stop the session
-                message = f"{type(exc).__name__}: {exc}"
-                if message != failing:
-                    log.warning("page update failed: %s", message)
-                failing = message
-            else:
-                failing = None
+            refresh.call(self.refresh)
             self.updates += 1
             if while_running and not self.session.running:
                 break
