@@ -91,19 +91,13 @@ def cost(scene: str = "shelf_reach", repeats: int = 300) -> None:
 
     from cbp.sim.camera import DepthCamera
     from cbp.sim.depth_noise import NoisyDepth
+    from cbp.sim.scene import simulate
     from cbp.sim.simulation import Simulation
     from cbp.state import RobotState
 
     scenario = load_scenario(ROOT / "scenarios" / f"cat_{scene}.yaml", overrides=BASE)
     spec = scenario.spec
-    sim = Simulation(
-        scenario.robot,
-        spec.world.objects,
-        scenario.q0,
-        spec.simulation,
-        scenario.path.parent,
-        False,
-    )
+    sim = simulate(Simulation, scenario)
     state = RobotState(scenario.robot)
     state.update(sim.q.copy())
     print(

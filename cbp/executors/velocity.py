@@ -47,6 +47,7 @@ from cbp.run.declared import DeclaredObjects
 from cbp.run.faults import Faults
 from cbp.scenario.runtime import Scenario
 from cbp.sim.mobile import MobileSimulation
+from cbp.sim.scene import simulate
 from cbp.state import RobotState
 from cbp.trace import Trace
 
@@ -65,14 +66,7 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
         scenario.spec.perception.source, f"{scenario.path}: perception.source"
     )
     settings = scenario.spec.method.settings(VelocitySettings)
-    sim = MobileSimulation(
-        scenario.robot,
-        scenario.spec.world.objects,
-        scenario.q0,
-        scenario.spec.simulation,
-        scenario.path.parent,
-        gui,
-    )
+    sim = simulate(MobileSimulation, scenario, gui)
     loop = VelocityLoop(scenario, sim)
     inputs = scenario.inputs()
     try:

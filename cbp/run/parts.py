@@ -30,6 +30,7 @@ from cbp.run.faults import Faults
 from cbp.run.goal_input import GoalBounds, GoalInput
 from cbp.run.recording import make_trace
 from cbp.scenario.runtime import Scenario
+from cbp.sim.scene import simulate
 from cbp.sim.simulation import Simulation
 from cbp.trace import Trace
 
@@ -195,14 +196,7 @@ def build_run(
     row.refuse_source(spec.perception.source, f"{scenario.path}: perception.source")
     use_cameras = spec.perception.source == "depth_camera"
     log = RunLog(method)
-    sim = Simulation(
-        scenario.robot,
-        spec.world.objects,
-        scenario.q0,
-        spec.simulation,
-        scenario.path.parent,
-        gui,
-    )
+    sim = simulate(Simulation, scenario, gui)
     try:
         world = (
             scenario.world_for_run()

@@ -8,16 +8,51 @@ The robot comes from its folder's URDF and the objects from the scenario's
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 import pinocchio as pin
 
 from cbp.robot import FloatArray, RobotModel
-from cbp.scenario.scene import ObjectSpec
+from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.sim.bullet import pb
 
-__all__ = ["PybulletScene"]
+if TYPE_CHECKING:
+    from cbp.scenario.runtime import Scenario
+
+__all__ = ["PybulletScene", "simulate"]
+
+S = TypeVar("S")
+
+
+def simulate(
+    kind: Callable[
+        [RobotModel, list[ObjectSpec], FloatArray, SimulationSettings, Path, bool],
+        S,
+    ],
+    scenario: Scenario,
+    gui: bool = False,
+) -> S:
+    """A simulation of ``scenario``: its robot at its start, its objects.
+
+    Args:
+        kind: the simulation class (:class:`~cbp.sim.simulation.Simulation`,
+            :class:`~cbp.sim.mobile.MobileSimulation`).
+        scenario: the loaded scenario (its ``simulation:`` settings, its
+            folder for object meshes).
+        gui: open a window instead of running headless.
+    """
+    spec = scenario.spec
+    return kind(
+        scenario.robot,
+        spec.world.objects,
+        scenario.q0,
+        spec.simulation,
+        scenario.path.parent,
+        gui,
+    )
 
 
 class PybulletScene:

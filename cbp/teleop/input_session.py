@@ -74,6 +74,7 @@ class InputSession:
         """Load every configuration and build their loops on one simulation."""
         from cbp.executors.velocity import VelocityLoop
         from cbp.sim.mobile import MobileSimulation
+        from cbp.sim.scene import simulate
 
         values = {"duration": str(LONGEST), **(overrides or {})}
         self.scenarios = [load_scenario(p, overrides=values) for p in paths]
@@ -93,14 +94,7 @@ class InputSession:
             METHODS["velocity"].refuse_source(
                 scenario.spec.perception.source, f"{scenario.path}: perception.source"
             )
-        self.sim = MobileSimulation(
-            first.robot,
-            first.spec.world.objects,
-            first.q0,
-            first.spec.simulation,
-            first.path.parent,
-            False,
-        )
+        self.sim = simulate(MobileSimulation, first)
         command = np.zeros(first.robot.nv)
         self.loops = {
             s.spec.name: VelocityLoop(s, self.sim, command) for s in self.scenarios
