@@ -239,6 +239,22 @@ class HandWritten:
         x, _, _, _ = daqp.solve(H, g, self.A, upper, lower, self.sense)
         return np.asarray(x)
 
+    def stepper(self, q0: np.ndarray) -> Callable[[int], object]:
+        """Call ``i`` of a reach from ``q0``, as the benchmarks time it.
+
+        Each call steps from where the last one left the arm, toward
+        ``GOALS[(i // 64) % len(GOALS)]``, and returns dq.
+        """
+        current = {"q": q0.copy()}
+
+        def step(i: int) -> object:
+            self.goal = GOALS[(i // 64) % len(GOALS)]
+            dq = self.step(current["q"])
+            current["q"] = pin.integrate(self.model, current["q"], dq)
+            return dq
+
+        return step
+
 
 #: A step to time: (case, function of the call index, note).
 Step = tuple[str, Callable[[int], object], str]
@@ -255,15 +271,7 @@ def _reaching_rows(cfg: BenchConfig) -> list[Row]:
     robot = RobotModel.load("franka_panda")
     q0 = robot.home()
     n, w = cfg.repetitions, cfg.warmup
-    hand = HandWritten(robot)
-    hand_q = {"q": q0.copy()}
-
-    def hand_step(i: int) -> object:
-        hand.goal = GOALS[(i // 64) % len(GOALS)]
-        dq = hand.step(hand_q["q"])
-        hand_q["q"] = pin.integrate(robot.model, hand_q["q"], dq)
-        return dq
-
+    hand_step = HandWritten(robot).stepper(q0)
     base = "hand-written: pinocchio + numpy + daqp (no framework)"
     steps: list[Step] = [(base, hand_step, "")]
     steps += [
@@ -641,15 +649,7 @@ def narrow_phase_rows(cfg: BenchConfig) -> list[Row]:
 
     n, w = max(cfg.repetitions // 2, 20), min(cfg.warmup, 50)
     robot = RobotModel.load("franka_panda")
-    hand = HandWritten(robot)
-    hand_q = {"q": robot.home()}
-
-    def hand_step(i: int) -> object:
-        hand.goal = GOALS[(i // 64) % len(GOALS)]
-        dq = hand.step(hand_q["q"])
-        hand_q["q"] = pin.integrate(robot.model, hand_q["q"], dq)
-        return dq
-
+    hand_step = HandWritten(robot).stepper(robot.home())
     base = "hand-written reaching step (as in reaching)"
     steps: list[tuple[str, Callable[[int], object]]] = [(base, hand_step)]
     checks: list[tuple[str, Callable[[int], object]]] = []
