@@ -17,7 +17,7 @@ import platform
 from pathlib import Path
 
 import numpy as np
-from results_file import put_section  # this folder: scripts run from it
+from results_file import publish  # this folder: scripts run from it
 
 from cbp.executors.cat import run_cat
 from cbp.methods.settings import CatSettings
@@ -81,9 +81,7 @@ def main() -> None:
             "",
         ]
     )
-    if args.append is not None:
-        put_section(args.append, text)
-    print(text)
+    publish(text, args.append)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from results_file import put_section  # this folder: scripts run from it
+from results_file import publish  # this folder: scripts run from it
 
 from cbp.collision import (
     CollisionSettings,
@@ -129,9 +129,7 @@ def main() -> None:
         "",
     ]
     text = "\n".join(lines)
-    print(text)
-    if args.append:
-        put_section(args.append, text)
+    publish(text, args.append)
 
 
 if __name__ == "__main__":

@@ -162,7 +162,7 @@ def main() -> None:
     parser.add_argument("--repetitions", type=int, default=2000)
     parser.add_argument("--append", type=Path)
     args = parser.parse_args()
-    from results_file import put_section  # this folder
+    from results_file import publish  # this folder
 
     from benchmarks.bench import BenchConfig, narrow_phase_rows
 
@@ -191,9 +191,7 @@ def main() -> None:
         ratio = f"{row.ratio:.2f}x {row.ratio_to}" if row.ratio is not None else ""
         lines.append(f"| {row.case} | {row.median_us:.1f} | {ratio} |")
     text = "\n".join(lines) + "\n"
-    print(text)
-    if args.append is not None:
-        put_section(args.append, text)
+    publish(text, args.append)
 
 
 if __name__ == "__main__":

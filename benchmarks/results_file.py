@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["keep_other_sections", "put_section", "sections"]
+__all__ = ["keep_other_sections", "publish", "put_section", "sections"]
 
 
 def sections(text: str) -> tuple[str, list[tuple[str, str]]]:
@@ -50,6 +50,13 @@ def put_section(path: Path, text: str) -> None:
             out.append(body)
     out += [body for heading, body in new if heading not in placed]
     path.write_text(old_head + "".join(_ending(body) for body in out))
+
+
+def publish(text: str, path: Path | None) -> None:
+    """Print a script's section, and put it into ``path`` (its ``--append``) if given."""
+    print(text)
+    if path is not None:
+        put_section(path, text)
 
 
 def keep_other_sections(path: Path, text: str) -> str:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 import yaml
-from results_file import put_section  # this folder: scripts run from it
+from results_file import publish  # this folder: scripts run from it
 
 from cbp.executors.cat import CatPlanner
 from cbp.executors.trajectory import run_trajectory_executor
@@ -209,9 +209,7 @@ def main() -> None:
             )
             results.append(result)
     text = _markdown(results, args.minutes, args.seed)
-    print(text)
-    if args.append is not None:
-        put_section(args.append, text)
+    publish(text, args.append)
 
 
 if __name__ == "__main__":

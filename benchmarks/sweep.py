@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from results_file import put_section  # this folder: scripts run from it
+from results_file import publish  # this folder: scripts run from it
 
 from cbp.executors.cat import run_cat
 from cbp.scenario import load_scenario
@@ -86,9 +86,7 @@ def main() -> None:
             "",
         ]
     )
-    print(text)
-    if args.append is not None:
-        put_section(args.append, text)
+    publish(text, args.append)
 
 
 if __name__ == "__main__":

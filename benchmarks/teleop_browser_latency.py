@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from results_file import put_section  # this folder: scripts run from it
+from results_file import publish  # this folder: scripts run from it
 
 from cbp.teleop import TeleopSession
 from cbp.teleop.goal_page import TeleopPage
@@ -424,9 +424,7 @@ def main() -> None:
             f"(+-{r['trip_ms'] / 2:.1f}) |"
         )
     text = "\n".join(lines) + "\n"
-    print(text)
-    if args.append is not None:
-        put_section(args.append, text)
+    publish(text, args.append)
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from results_file import put_section  # this folder: scripts run from it
+from results_file import publish  # this folder: scripts run from it
 
 from cbp.teleop import TeleopSession, latency_summary
 from cbp.teleop.goal_page import TeleopPage
@@ -136,9 +136,7 @@ def main() -> None:
             f"{r['misses']} of {r['periods']} | {r['force']:.1f} |"
         )
     text = "\n".join(lines) + "\n"
-    print(text)
-    if args.append is not None:
-        put_section(args.append, text)
+    publish(text, args.append)
 
 
 if __name__ == "__main__":
