@@ -61,7 +61,7 @@ from cbp.collision.broad import near_objects, near_pairs, shape_bounds
 from cbp.robot import FloatArray, IntArray
 
 if TYPE_CHECKING:
-    from cbp.collision.geometry import LinkShape
+    from cbp.collision.geometry import LinkShape, PlacedShapes
 
 __all__ = [
     "BOX",
@@ -84,6 +84,7 @@ __all__ = [
     "pack_shapes",
     "packed_robot",
     "pair_distance",
+    "placed_robot",
     "self_contacts",
 ]
 
@@ -1233,6 +1234,24 @@ def packed_robot(shapes: list[LinkShape]) -> ConvexShapes:
                 _ROBOTS.pop(next(iter(_ROBOTS)))
             _ROBOTS[key] = found
     return found[1]
+
+
+def placed_robot(
+    robot: PlacedShapes,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, *Table]:
+    """A placed robot's arrays in the order the kernels take them.
+
+    As :func:`obstacle_contacts` and :func:`self_contacts` take them: its
+    bounds (centres, halves, radii), world placements (n, 4, 4) and packed
+    shapes (:func:`packed_robot`).
+    """
+    return (
+        robot.centres,
+        robot.halves,
+        robot.radii,
+        robot.placements.homogeneous,
+        *fields(packed_robot(robot.shapes)),
+    )
 
 
 def compile_convex_kernels() -> None:

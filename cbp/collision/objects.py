@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import coal
 import numpy as np
@@ -29,6 +30,7 @@ from cbp.collision.convex_kernels import (
     obstacle_contacts,
     pack_shapes,
     packed_robot,
+    placed_robot,
 )
 from cbp.collision.environment import Environment, NarrowPhase, signed_distance
 from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
@@ -214,6 +216,28 @@ class PrimitiveEnvironment(Environment):
             found = self._skips[id(shapes)] = (shapes, skip, guess)
         return found[1], found[2]
 
+    def _kernel_objects(
+        self, candidates: IntArray, shapes: list[LinkShape], margin: float
+    ) -> tuple[Any, ...]:
+        """The objects' arguments of the compiled queries, in their order.
+
+        As :func:`obstacle_contacts` and :func:`declared_contacts` take them
+        after the robot's: the objects' swept bounds, the ``candidates``, their
+        placements and packed shapes, the wanted contacts and GJK starts of
+        ``shapes``, their displacements and whether any moves, and ``margin``.
+        """
+        return (
+            self._lower,
+            self._upper,
+            candidates,
+            self._frames,
+            *self._fields,
+            *self._skip(shapes),
+            self._ahead,
+            self._moving,
+            float(margin),
+        )
+
     def query(
         self,
         robot: PlacedShapes,
@@ -264,15 +288,7 @@ class PrimitiveEnvironment(Environment):
         obstacles, own, missed, missed_own = declared_contacts(  # type: ignore[call-arg]  # tuples of known length
             frames,
             *table.arrays,
-            self._lower,
-            self._upper,
-            candidates,
-            self._frames,
-            *self._fields,
-            *self._skip(shapes),
-            self._ahead,
-            self._moving,
-            float(margin),
+            *self._kernel_objects(candidates, shapes, margin),
             float(padding),
             table.first,
             table.second,
@@ -332,21 +348,9 @@ class PrimitiveEnvironment(Environment):
         floats = np.empty((4, capacity, 3))
         left_shape = np.empty(capacity, dtype=np.intp)
         left_object = np.empty(capacity, dtype=np.intp)
-        count, left = obstacle_contacts(
-            robot.centres,
-            robot.halves,
-            robot.radii,
-            robot.placements.homogeneous,
-            *fields(packed_robot(robot.shapes)),
-            self._lower,
-            self._upper,
-            candidates,
-            self._frames,
-            *self._fields,
-            *self._skip(robot.shapes),
-            self._ahead,
-            self._moving,
-            float(margin),
+        count, left = obstacle_contacts(  # type: ignore[call-arg]  # tuples of known length
+            *placed_robot(robot),
+            *self._kernel_objects(candidates, robot.shapes, margin),
             shape,
             obstacle,
             floats,

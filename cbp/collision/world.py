@@ -27,8 +27,8 @@ from cbp.collision.contacts import ContactRow, ContactSet
 from cbp.collision.convex_kernels import (
     RobotTable,
     compile_convex_kernels,
-    fields,
     packed_robot,
+    placed_robot,
     self_contacts,
 )
 from cbp.collision.environment import Environment, signed_distance
@@ -480,11 +480,7 @@ class CollisionWorld:
         floats = np.empty((4, n, 3))
         left = np.empty(n, dtype=np.intp)
         count, missed = self_contacts(
-            robot.centres,
-            robot.halves,
-            robot.radii,
-            robot.placements.homogeneous,
-            *fields(packed_robot(geometry.shapes)),
+            *placed_robot(robot),
             first,
             second,
             guess,
