@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from cbp.drawing import draw_objects, joint_values
+from cbp.drawing import add_robot, draw_objects, joint_values
 from cbp.errors import ConfigError
 from cbp.methods import method_colour
 from cbp.robot import FloatArray
@@ -111,7 +111,6 @@ class Replay:
     def __init__(self, out: Path, host: str = "127.0.0.1", port: int = 8080) -> None:
         """Load the recordings and build the scene and the panel."""
         import viser
-        from viser.extras import ViserUrdf
 
         self.scene, self.recordings = load_recordings(out)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
@@ -122,18 +121,7 @@ class Replay:
         self._robots = []
         for recording in self.recordings:
             colour = method_colour(recording.method)
-            robot = ViserUrdf(
-                self.server,
-                Path(urdf),
-                root_node_name=f"/{recording.method}",
-                load_meshes=False,
-                load_collision_meshes=True,
-                collision_mesh_color_override=(
-                    colour[0] / 255,
-                    colour[1] / 255,
-                    colour[2] / 255,
-                ),
-            )
+            robot = add_robot(self.server, urdf, f"/{recording.method}", colour)
             self._robots.append((recording, robot, robot.get_actuated_joint_names()))
         self._objects = draw_objects(self.server, self.scene)
         self.server.initial_camera.position = (1.9, -1.4, 1.3)

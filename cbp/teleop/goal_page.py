@@ -125,22 +125,17 @@ def _same(drawn: np.ndarray, new: np.ndarray) -> bool:
     )
 
 
-_JOGS = [
-    ("+x", "x", 1.0),
-    ("-x", "x", -1.0),
-    ("+y", "y", 1.0),
-    ("-y", "y", -1.0),
-    ("+z", "z", 1.0),
-    ("-z", "z", -1.0),
-]
-_TURNS = [
-    ("+roll", "rx", 1.0),
-    ("-roll", "rx", -1.0),
-    ("+pitch", "ry", 1.0),
-    ("-pitch", "ry", -1.0),
-    ("+yaw", "rz", 1.0),
-    ("-yaw", "rz", -1.0),
-]
+def _both_ways(axes: list[tuple[str, str]]) -> list[tuple[str, str, float]]:
+    """Jog buttons (label, axis, sign) for each (name, axis): + then -."""
+    return [
+        (f"{s}{name}", axis, sign)
+        for name, axis in axes
+        for s, sign in (("+", 1.0), ("-", -1.0))
+    ]
+
+
+_JOGS = _both_ways([("x", "x"), ("y", "y"), ("z", "z")])
+_TURNS = _both_ways([("roll", "rx"), ("pitch", "ry"), ("yaw", "rz")])
 
 
 @dataclass(frozen=True)

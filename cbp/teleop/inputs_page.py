@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cbp.drawing import draw_objects, joint_values
+from cbp.drawing import add_robot, draw_objects, joint_values
 from cbp.errors import ConfigError
 from cbp.plugin import DescribesInput
 from cbp.robot import FloatArray
@@ -86,20 +85,13 @@ class InputsPage(Page[InputSession]):
         self, session: InputSession, host: str = "127.0.0.1", port: int = 8080
     ) -> None:
         """Build the scene and the panel."""
-        from viser.extras import ViserUrdf
-
         super().__init__(session, host, port)
         scenario = session.scenarios[0]
         description = scene_description(scenario, duration=0.0)
         draw_objects(self.server, description)
         self.base = self.server.scene.add_frame("/robot", show_axes=False)
-        self.robot = ViserUrdf(
-            self.server,
-            Path(description["urdf"]),
-            root_node_name="/robot",
-            load_meshes=False,
-            load_collision_meshes=True,
-            collision_mesh_color_override=(0.95, 0.6, 0.1),
+        self.robot = add_robot(
+            self.server, description["urdf"], "/robot", (242, 153, 26)
         )
         self._joints = self.robot.get_actuated_joint_names()
         self._q_names = scenario.robot.coordinate_names("q")
