@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -641,61 +643,63 @@ def test_a_goal_that_arrives_while_the_loop_waits_is_planned_for_before_the_dead
         session.planner.close()
 
 
-def test_the_page_updates_on_a_goal_change_without_a_sampling_tick() -> None:
-    """With no idle updates at all, a goal set from a script still reaches the page."""
+@pytest.fixture
+def boards_page() -> Iterator[tuple[TeleopSession, Any]]:
+    """A CAT session on the boards and its page, not started; closed after."""
     pytest.importorskip("viser", reason="the viewer extra is not installed")
     from cbp.teleop.goal_page import TeleopPage
 
     session = TeleopSession(BOARDS, "cat")
     page = TeleopPage(session, port=free_port())
     try:
-        # Not one idle update in a day: only the session's changes wake it.
-        page.start(idle_rate=1.0 / 86400.0, while_running=False)
-        assert _wait(lambda: page.updates >= 1, 60.0), "no first update"
-        assert page.update_causes == ["idle"]  # the first, at the start
-        position, rotation = session.goal.pose()
-        moved = position + np.array([0.0, 0.03, 0.0])
-        session.set_goal(moved, rotation)
-        assert _wait(lambda: page.updates >= 2, 60.0), "the change was not shown"
-        assert page.update_causes[:2] == ["idle", "change"]
-        np.testing.assert_allclose(page.state().goal_position, moved)
+        yield session, page
     finally:
         page.close()
         session.parts.close()
         session.planner.close()
 
 
-def test_the_page_sends_a_path_again_only_when_it_looks_different() -> None:
+def test_the_page_updates_on_a_goal_change_without_a_sampling_tick(
+    boards_page: tuple[TeleopSession, Any],
+) -> None:
+    """With no idle updates at all, a goal set from a script still reaches the page."""
+    session, page = boards_page
+    # Not one idle update in a day: only the session's changes wake it.
+    page.start(idle_rate=1.0 / 86400.0, while_running=False)
+    assert _wait(lambda: page.updates >= 1, 60.0), "no first update"
+    assert page.update_causes == ["idle"]  # the first, at the start
+    position, rotation = session.goal.pose()
+    moved = position + np.array([0.0, 0.03, 0.0])
+    session.set_goal(moved, rotation)
+    assert _wait(lambda: page.updates >= 2, 60.0), "the change was not shown"
+    assert page.update_causes[:2] == ["idle", "change"]
+    np.testing.assert_allclose(page.state().goal_position, moved)
+
+
+def test_the_page_sends_a_path_again_only_when_it_looks_different(
+    boards_page: tuple[TeleopSession, Any],
+) -> None:
     """A new trajectory drawing the same hand path is not sent; a moved one is."""
-    pytest.importorskip("viser", reason="the viewer extra is not installed")
     import dataclasses
 
-    from cbp.teleop.goal_page import TeleopPage
-
-    session = TeleopSession(BOARDS, "cat")
-    page = TeleopPage(session, port=free_port())
-    try:
-        sim = session.parts.sim
-        q0 = np.array(sim.q, dtype=float)
-        moving = dataclasses.replace(
-            sim.trajectory,
-            times=np.array([0.0, 1.0]),
-            positions=np.stack([q0, q0 + 0.2]),
-            velocities=np.zeros((2, q0.size)),
-            accelerations=np.zeros((2, q0.size)),
-        )
-        sim.follow(moving)
-        page.update()
-        drawn = page._path_lines
-        assert drawn is not None
-        assert len(drawn) > 0
-        sim.follow(dataclasses.replace(moving))  # a new object, the same path
-        page.update()
-        assert page._path_lines is drawn  # not sent again
-        sim.follow(dataclasses.replace(moving, positions=np.stack([q0, q0 - 0.2])))
-        page.update()
-        assert page._path_lines is not drawn
-    finally:
-        page.close()
-        session.parts.close()
-        session.planner.close()
+    session, page = boards_page
+    sim = session.parts.sim
+    q0 = np.array(sim.q, dtype=float)
+    moving = dataclasses.replace(
+        sim.trajectory,
+        times=np.array([0.0, 1.0]),
+        positions=np.stack([q0, q0 + 0.2]),
+        velocities=np.zeros((2, q0.size)),
+        accelerations=np.zeros((2, q0.size)),
+    )
+    sim.follow(moving)
+    page.update()
+    drawn = page._path_lines
+    assert drawn is not None
+    assert len(drawn) > 0
+    sim.follow(dataclasses.replace(moving))  # a new object, the same path
+    page.update()
+    assert page._path_lines is drawn  # not sent again
+    sim.follow(dataclasses.replace(moving, positions=np.stack([q0, q0 - 0.2])))
+    page.update()
+    assert page._path_lines is not drawn
