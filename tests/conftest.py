@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import socket
 import subprocess
 import sys
+import time
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -40,6 +43,33 @@ def robots() -> dict[str, RobotModel]:
 def rng() -> np.random.Generator:
     """A generator with a fixed seed."""
     return np.random.default_rng(20261122)
+
+
+@contextlib.contextmanager
+def teleop_process(*args: str) -> Iterator[tuple[subprocess.Popen[str], str]]:
+    """``cbp teleop ARGS`` on a free port, in a subprocess, once its page is up.
+
+    Yields the process and what it printed up to the page's address (viser's
+    banner, a device's port, then ``teleoperation of``); a process still
+    running at the end is killed.
+    """
+    process = subprocess.Popen(
+        [sys.executable, "-m", "cbp", "teleop", *args, "--port", str(free_port())],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        assert process.stdout is not None
+        said = ""
+        for _ in range(100):
+            said += process.stdout.readline()
+            if "teleoperation of" in said:
+                break
+        yield process, said
+    finally:
+        if process.poll() is None:
+            process.kill()
 
 
 def run_cbp(*args: str) -> subprocess.CompletedProcess[str]:
@@ -84,3 +114,17 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def wait_until(condition: Callable[[], object], timeout: float) -> bool:
+    """Poll ``condition`` until it holds or ``timeout`` [s] passes (generous).
+
+    For what another thread or process does (a page, a device): the timeout
+    bounds a failing test, it is no budget of a passing one.
+    """
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return bool(condition())

@@ -26,20 +26,17 @@ from cbp.plugin import HoldsContacts
 from cbp.scenario import load_scenario
 from cbp.state import RobotState
 from cbp.teleop import GOAL_FILE, LiveGoal, TeleopSession
-from tests.conftest import free_port, headless_chromium, run_cbp
+from tests.conftest import (
+    free_port,
+    headless_chromium,
+    run_cbp,
+    teleop_process,
+    wait_until,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 BOARDS = ROOT / "scenarios" / "cat_boards.yaml"
 ARTIFACTS = ROOT / "out" / "test-artifacts"
-
-
-def _wait(condition, timeout: float) -> bool:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.02)
-    return bool(condition())
 
 
 def test_jogs_move_the_goal_in_world_or_hand_axes() -> None:
@@ -98,16 +95,16 @@ def test_a_scripted_session_is_recorded_and_replays(tmp_path: Path) -> None:
     session = TeleopSession(BOARDS, "cat")
     session.start()
     try:
-        assert _wait(lambda: session.snapshot().t > 0.5, 10)
+        assert wait_until(lambda: session.snapshot().t > 0.5, 10)
         start = session.snapshot().hand
         for _ in range(5):
             session.jog("x", 0.03)
             time.sleep(0.4)
-        assert _wait(lambda: session.snapshot().hand[0] - start[0] > 0.14, 5)
+        assert wait_until(lambda: session.snapshot().hand[0] - start[0] > 0.14, 5)
         session.set_goal(np.array([np.nan, 0.0, 0.0]), np.eye(3))
         time.sleep(0.3)
         session.switch("ik")
-        assert _wait(lambda: session.snapshot().method == "ik", 2)
+        assert wait_until(lambda: session.snapshot().method == "ik", 2)
         session.jog("z", 0.05)
         time.sleep(1.5)
     finally:
@@ -165,9 +162,9 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
             )
             return found[0] if found else None
 
-        assert _wait(lambda: button("+x") is not None, 60), "the panel never came"
-        assert _wait(lambda: browser.find_elements(By.TAG_NAME, "canvas"), 30)
-        assert _wait(lambda: "goal error" in browser.page_source, 10)
+        assert wait_until(lambda: button("+x") is not None, 60), "the panel never came"
+        assert wait_until(lambda: browser.find_elements(By.TAG_NAME, "canvas"), 30)
+        assert wait_until(lambda: "goal error" in browser.page_source, 10)
         time.sleep(1.0)  # let the robot be drawn
         ARTIFACTS.mkdir(parents=True, exist_ok=True)
         shot = ARTIFACTS / "teleop_page.png"
@@ -187,16 +184,16 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         before = session.snapshot().hand.copy()
         step = float(page.step.value)
         button("+x").click()
-        assert _wait(
+        assert wait_until(
             lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 1.0
         ), f"the hand moved {session.snapshot().hand - before} in 1 s"
-        assert _wait(lambda: not page.unreachable, 2.0)  # a goal within reach
+        assert wait_until(lambda: not page.unreachable, 2.0)  # a goal within reach
 
         # The keyboard: "w" presses +x (a shortcut in the page).
         assert "keys: w +x" in browser.page_source
         before = session.snapshot().hand.copy()
         browser.find_element(By.TAG_NAME, "body").send_keys("w")
-        assert _wait(
+        assert wait_until(
             lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 1.0
         ), "the w key did not move the hand"
 
@@ -205,12 +202,14 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
             By.XPATH, "//*[normalize-space()='method']/following::input[1]"
         )
         selector.click()
-        assert _wait(lambda: browser.find_elements(By.XPATH, "//*[@role='option']"), 5)
+        assert wait_until(
+            lambda: browser.find_elements(By.XPATH, "//*[@role='option']"), 5
+        )
         option = browser.find_element(
             By.XPATH, "//*[@role='option'][normalize-space()='ik']"
         )
         option.click()
-        assert _wait(lambda: session.snapshot().method == "ik", 3)
+        assert wait_until(lambda: session.snapshot().method == "ik", 3)
 
         # A goal inside a board, sent from elsewhere (a script): the gizmo
         # follows it; the arm stops short, and the page draws the goal as a
@@ -220,9 +219,9 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         _, rotation = session.goal.pose()
         inside = np.array([0.55, -0.24, 0.03])  # board_1's centre
         session.set_goal(inside, rotation)
-        assert _wait(lambda: np.allclose(page.gizmo.position, inside), 1.0)
+        assert wait_until(lambda: np.allclose(page.gizmo.position, inside), 1.0)
         assert page.ghost is not None
-        assert _wait(
+        assert wait_until(
             lambda: page.state().gripper_visible and page.state().ghost_visible, 8.0
         )
         snap = session.snapshot()
@@ -241,7 +240,9 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         def text() -> str:
             return str(browser.execute_script("return document.body.innerText"))
 
-        assert _wait(lambda: "holds: the goal lies inside an obstacle" in text(), 5)
+        assert wait_until(
+            lambda: "holds: the goal lies inside an obstacle" in text(), 5
+        )
         assert "legend" in text()
         assert "blocked direction at a contact" in text()
 
@@ -250,7 +251,7 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         count, goal = session.goal.count, session.goal.pose()[0]
         t = session.snapshot().t
         browser.quit()
-        assert _wait(lambda: not page.server.get_clients(), 5)
+        assert wait_until(lambda: not page.server.get_clients(), 5)
         time.sleep(1.0)
         assert session.goal.count == count
         np.testing.assert_array_equal(session.goal.pose()[0], goal)
@@ -280,16 +281,16 @@ def test_orbit_and_pan_are_driven_live_and_switched(tmp_path: Path) -> None:
     assert list(session.loops) == ["youbot_orbit_case1", "youbot_pan"]
     session.start()
     try:
-        assert _wait(lambda: session.t > 6.0, 15)  # past the start's transient
+        assert wait_until(lambda: session.t > 6.0, 15)  # past the start's transient
         session.set_input("distance", np.array([0.7]))
         session.set_input("user_velocity", np.array([0.1, 0.0]))
-        assert _wait(lambda: session.t > 12.0, 15)
+        assert wait_until(lambda: session.t > 12.0, 15)
         orbit = session.snapshot().signals
         assert orbit["distance"] == pytest.approx(0.7, abs=0.01)
         session.switch("youbot_pan")
         session.set_input("user_velocity", np.array([0.0, 0.0, 0.05]))
         start = session.t
-        assert _wait(lambda: session.t > start + 3.0, 10)
+        assert wait_until(lambda: session.t > start + 3.0, 10)
         assert session.snapshot().active == "youbot_pan"
     finally:
         traces = session.stop()
@@ -325,11 +326,11 @@ def test_the_orbit_page_sends_sliders_and_switches_configurations() -> None:
     try:
         assert page.server.get_host() == "127.0.0.1"
         page.sliders["youbot_orbit_case1"]["distance"][0].value = 0.7
-        assert _wait(
+        assert wait_until(
             lambda: session.inputs["youbot_orbit_case1"]["distance"][0] == 0.7, 1
         )
         page.config.value = "youbot_pan"
-        assert _wait(lambda: session.active == "youbot_pan", 1)
+        assert wait_until(lambda: session.active == "youbot_pan", 1)
         assert page.folders["youbot_pan"].visible
         assert not page.folders["youbot_orbit_case1"].visible
         page.update()
@@ -509,41 +510,14 @@ def test_a_signal_ends_a_session_that_saves_and_replays(
 ) -> None:
     """SIGTERM to `cbp teleop`: the outputs are written and replay."""
     import signal
-    import subprocess
-    import sys
 
     pytest.importorskip("viser", reason="the viewer extra is not installed")
     out = tmp_path / "session"
-    process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "cbp",
-            "teleop",
-            str(BOARDS),
-            "--port",
-            str(free_port()),
-            "--out",
-            str(out),
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    try:
-        assert process.stdout is not None
-        said = ""
-        for _ in range(100):  # viser's banner first, then the page's address
-            said += process.stdout.readline()
-            if "teleoperation of" in said:
-                break
+    with teleop_process(str(BOARDS), "--out", str(out)) as (process, said):
         assert "teleoperation of" in said, said
         time.sleep(2.0)  # the session runs
         process.send_signal(getattr(signal, signal_name))
         rest, _ = process.communicate(timeout=300)
-    finally:
-        if process.poll() is None:
-            process.kill()
     assert process.returncode == 0, rest
     assert f"{signal_name}: stopping and saving" in rest
     goal_file = out / GOAL_FILE
@@ -666,12 +640,12 @@ def test_the_page_updates_on_a_goal_change_without_a_sampling_tick(
     session, page = boards_page
     # Not one idle update in a day: only the session's changes wake it.
     page.start(idle_rate=1.0 / 86400.0, while_running=False)
-    assert _wait(lambda: page.updates >= 1, 60.0), "no first update"
+    assert wait_until(lambda: page.updates >= 1, 60.0), "no first update"
     assert page.update_causes == ["idle"]  # the first, at the start
     position, rotation = session.goal.pose()
     moved = position + np.array([0.0, 0.03, 0.0])
     session.set_goal(moved, rotation)
-    assert _wait(lambda: page.updates >= 2, 60.0), "the change was not shown"
+    assert wait_until(lambda: page.updates >= 2, 60.0), "the change was not shown"
     assert page.update_causes[:2] == ["idle", "change"]
     np.testing.assert_allclose(page.state().goal_position, moved)
 

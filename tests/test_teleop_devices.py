@@ -36,7 +36,7 @@ from cbp.teleop.profiles import (
     load_profile,
     shipped_profiles,
 )
-from tests.conftest import free_port, headless_chromium
+from tests.conftest import free_port, headless_chromium, teleop_process, wait_until
 
 ROOT = Path(__file__).resolve().parents[1]
 BOARDS = ROOT / "scenarios" / "cat_boards.yaml"
@@ -63,16 +63,6 @@ def _pad(axes: tuple[float, ...] = (0.0,) * 4, deadman: bool = True) -> DeviceSt
     buttons = [0.0] * 17
     buttons[4] = 1.0 if deadman else 0.0
     return DeviceState(axes=axes, buttons=tuple(buttons), device="test pad")
-
-
-def _wait(condition, timeout: float) -> bool:  # type: ignore[no-untyped-def]
-    """Poll ``condition`` until it holds or ``timeout`` [s] passes (generous)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.02)
-    return bool(condition())
 
 
 def _write(tmp_path: Path, text: str) -> Path:
@@ -418,7 +408,7 @@ def test_the_device_link_takes_states_from_the_page_s_origin_only() -> None:
             with connect(url, origin=origin) as socket:
                 socket.send(message)
                 socket.send("not json")
-        assert _wait(lambda: driver.received == 3 and link.rejected == 3, 30)
+        assert wait_until(lambda: driver.received == 3 and link.rejected == 3, 30)
     finally:
         link.close()
     latest = driver.latest
@@ -466,7 +456,7 @@ def _settle(driver: DeviceDriver) -> None:
     Three, and that one has ended too.
     """
     steps = driver.steps
-    assert _wait(lambda: driver.steps >= steps + 3, 30)
+    assert wait_until(lambda: driver.steps >= steps + 3, 30)
 
 
 #: The events a device's braking logs.
@@ -512,9 +502,9 @@ def test_a_gamepad_in_the_browser_drives_the_goal_while_its_deadman_is_held() ->
     browser = headless_chromium()
     try:
         browser.get(page.url)
-        assert _wait(lambda: browser.find_elements(By.ID, "cbp-device-status"), 60), (
-            "the device panel never came"
-        )
+        assert wait_until(
+            lambda: browser.find_elements(By.ID, "cbp-device-status"), 60
+        ), "the device panel never came"
         browser.execute_script(_INJECT_PAD)
         _set_pad(browser, [0.0, 0.0, 0.0, 0.0], deadman=False)
 
@@ -522,39 +512,43 @@ def test_a_gamepad_in_the_browser_drives_the_goal_while_its_deadman_is_held() ->
             found = browser.find_elements(By.ID, "cbp-device-status")
             return str(found[0].text) if found else ""
 
-        assert _wait(lambda: "injected pad" in status(), 30), status()
-        assert _wait(lambda: driver.received > 5, 30), "no state reached the session"
+        assert wait_until(lambda: "injected pad" in status(), 30), status()
+        assert wait_until(lambda: driver.received > 5, 30), (
+            "no state reached the session"
+        )
         start = session.goal.pose()[0]
 
         # The stick pushed without the deadman: nothing moves.
         _set_pad(browser, [0.0, -1.0, 0.0, 0.0], deadman=False)
-        assert _wait(lambda: _axes(driver)[1:2] == (-1.0,), 30)
+        assert wait_until(lambda: _axes(driver)[1:2] == (-1.0,), 30)
         seen = driver.received
-        assert _wait(lambda: driver.received > seen + 10, 30)
+        assert wait_until(lambda: driver.received > seen + 10, 30)
         np.testing.assert_array_equal(session.goal.pose()[0], start)
         assert not driver.engaged
 
         # Held: the goal moves forward (+x), the hand after it.
         hand = session.snapshot().hand.copy()
         _set_pad(browser, [0.0, -1.0, 0.0, 0.0], deadman=True)
-        assert _wait(lambda: "deadman HELD" in status(), 30), status()
-        assert _wait(lambda: session.goal.pose()[0][0] - start[0] > 0.03, 30)
+        assert wait_until(lambda: "deadman HELD" in status(), 30), status()
+        assert wait_until(lambda: session.goal.pose()[0][0] - start[0] > 0.03, 30)
         moved = session.goal.pose()[0] - start
         np.testing.assert_allclose(moved[1:], 0.0, atol=1e-9)  # along x only
-        assert _wait(lambda: session.snapshot().hand[0] - hand[0] > 0.02, 30)
+        assert wait_until(lambda: session.snapshot().hand[0] - hand[0] > 0.02, 30)
 
         # Released: the goal stops where it is, with an event (one saying the
         # stream fell silent, if the browser stalled for 100 ms just then).
         # Every state the page sends from now on has the deadman released.
         _set_pad(browser, [0.0, -1.0, 0.0, 0.0], deadman=False)
         events = session.parts.log.events
-        assert _wait(lambda: _button(driver, 4) == 0.0, 30)
+        assert wait_until(lambda: _button(driver, 4) == 0.0, 30)
         _settle(driver)
         assert not driver.engaged
         assert _last_device_event(events) in _BRAKES, _last_device_event(events)
         stopped = session.goal.pose()[0]
         seen, steps = driver.received, driver.steps
-        assert _wait(lambda: driver.received > seen + 10 and driver.steps > steps, 30)
+        assert wait_until(
+            lambda: driver.received > seen + 10 and driver.steps > steps, 30
+        )
         np.testing.assert_array_equal(session.goal.pose()[0], stopped)
         assert "deadman held: injected pad drives" in [m for _, m in events]
     finally:
@@ -623,35 +617,35 @@ def test_a_6dof_mouse_over_webhid_sets_the_orbit_velocity_while_shift_is_held() 
 
     try:
         browser.get(page.url)
-        assert _wait(lambda: "6-DOF mouse: none yet" in status(), 60), status()
+        assert wait_until(lambda: "6-DOF mouse: none yet" in status(), 60), status()
         browser.execute_script(_INJECT_SPACEMOUSE)
         browser.find_element(
             By.XPATH, "//button[normalize-space()='connect 6-DOF mouse']"
         ).click()
-        assert _wait(lambda: "injected SpaceMouse" in status(), 30), status()
+        assert wait_until(lambda: "injected SpaceMouse" in status(), 30), status()
         # The cap pushed right (x) and lifted (z, negative), both at full travel.
         browser.execute_script("window.cbpReport(1, [350, 0, -350]);")
         seen = driver.received
-        assert _wait(lambda: driver.received > seen + 5, 30)
+        assert wait_until(lambda: driver.received > seen + 5, 30)
         assert not driver.engaged  # Shift is not held
         ActionChains(browser).key_down(Keys.SHIFT).perform()
-        assert _wait(lambda: "deadman HELD" in status(), 30), status()
+        assert wait_until(lambda: "deadman HELD" in status(), 30), status()
         # Orbit commands the camera's y and z: push right -y, lift +z.
-        assert _wait(lambda: np.allclose(velocity["user_velocity"], [-0.1, 0.1]), 30), (
-            velocity["user_velocity"]
-        )
+        assert wait_until(
+            lambda: np.allclose(velocity["user_velocity"], [-0.1, 0.1]), 30
+        ), velocity["user_velocity"]
         # A rotation report (2) sets the rotation, leaving the translation; a
         # newer model's report 1 carries all six.
         browser.execute_script("window.cbpReport(2, [0, 0, 175]);")
-        assert _wait(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 0.0, 0.5), 30)
-        assert _wait(  # (after a brake, if the browser stalled for 100 ms)
+        assert wait_until(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 0.0, 0.5), 30)
+        assert wait_until(  # (after a brake, if the browser stalled for 100 ms)
             lambda: np.allclose(velocity["user_velocity"], [-0.1, 0.1]), 30
         ), velocity["user_velocity"]
         browser.execute_script("window.cbpReport(1, [350, 0, -350, 0, 700, 0]);")
-        assert _wait(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 1.0, 0.0), 30)
+        assert wait_until(lambda: _axes(driver) == (1.0, 0.0, -1.0, 0.0, 1.0, 0.0), 30)
         ActionChains(browser).key_up(Keys.SHIFT).perform()
         # Every state the page sends from now on has Shift up.
-        assert _wait(lambda: "Shift" not in _keys(driver), 30)
+        assert wait_until(lambda: "Shift" not in _keys(driver), 30)
         _settle(driver)
         assert not driver.engaged
         assert not velocity["user_velocity"].any(), velocity["user_velocity"]
@@ -660,10 +654,10 @@ def test_a_6dof_mouse_over_webhid_sets_the_orbit_velocity_while_shift_is_held() 
         # Held again; then the mouse is unplugged with Shift still held: the
         # page forgets it and sends nothing, and the session brakes.
         ActionChains(browser).key_down(Keys.SHIFT).perform()
-        assert _wait(lambda: velocity["user_velocity"].any(), 30)
+        assert wait_until(lambda: velocity["user_velocity"].any(), 30)
         browser.execute_script("window.cbpUnplug();")
-        assert _wait(lambda: "6-DOF mouse: none yet" in status(), 30), status()
-        assert _wait(lambda: not driver.engaged, 30)
+        assert wait_until(lambda: "6-DOF mouse: none yet" in status(), 30), status()
+        assert wait_until(lambda: not driver.engaged, 30)
         _settle(driver)
         assert _last_device_event(session.events) == "device silent"
         assert not velocity["user_velocity"].any()
@@ -682,27 +676,13 @@ def test_cbp_teleop_with_a_gamepad_records_what_the_device_did(tmp_path: Path) -
     """`cbp teleop --device gamepad`: its stream moves the goal; the log has the deadman."""
     import csv
     import signal
-    import subprocess
-    import sys
 
     pytest.importorskip("viser", reason="the viewer extra is not installed")
     from websockets.sync.client import connect
 
     out = tmp_path / "session"
-    command = ["teleop", str(BOARDS), "--device", "gamepad", "--out", str(out)]
-    process = subprocess.Popen(
-        [sys.executable, "-m", "cbp", *command, "--port", str(free_port())],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    try:
-        assert process.stdout is not None
-        said = ""
-        for _ in range(100):  # viser's banner, the device's port, the page's address
-            said += process.stdout.readline()
-            if "teleoperation of" in said:
-                break
+    command = [str(BOARDS), "--device", "gamepad", "--out", str(out)]
+    with teleop_process(*command) as (process, said):
         assert "gamepad: read by the page, streamed to port" in said, said
         port = int(said.split("streamed to port ")[1].split()[0])
         forward = {"axes": [0, -1, 0, 0], "device": "cli pad", "keys": []}
@@ -714,9 +694,6 @@ def test_cbp_teleop_with_a_gamepad_records_what_the_device_did(tmp_path: Path) -
                 time.sleep(0.02)  # the page's pace; the outcome does not hang on it
         process.send_signal(signal.SIGTERM)
         rest, _ = process.communicate(timeout=300)
-    finally:
-        if process.poll() is None:
-            process.kill()
     assert process.returncode == 0, rest
     metrics = json.loads((out / "metrics.json").read_text())
     messages = [e["message"] for e in metrics["cat"]["events"]]
