@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -240,89 +242,101 @@ def test_the_deadman_engages_only_on_a_fresh_held_state() -> None:
     assert not deadman_held(DeadmanSpec(key="Shift"), letter)
 
 
-def test_a_held_deadman_moves_the_goal_and_releasing_it_stops_it() -> None:
-    """The goal moves at the stick's speed while held; released: stops, logged."""
+class Gamepad(NamedTuple):
+    """A CAT session on the boards driven by the gamepad profile, on a virtual clock."""
+
+    session: TeleopSession
+    clock: VirtualClock
+    driver: DeviceDriver
+
+
+@pytest.fixture
+def gamepad() -> Iterator[Gamepad]:
+    """A :class:`Gamepad`, its session closed after."""
     session = TeleopSession(BOARDS, "cat")
     try:
         clock = VirtualClock()
-        driver = DeviceDriver(load_profile("gamepad"), GoalTarget(session), clock)
-        start, _ = session.goal.pose()
-        forward = (0.0, -1.0, 0.0, 0.0)  # left stick fully up: +x at 0.1 m/s
-        driver.receive(_pad(forward, deadman=False))
-        for _ in range(10):
-            clock.advance(0.02)
-            assert not driver.step()
-        np.testing.assert_array_equal(session.goal.pose()[0], start)  # not held
-        driver.receive(_pad(forward))
-        driver.step()  # engages
-        for _ in range(50):  # 1 s, a state every step
-            clock.advance(0.02)
-            driver.receive(_pad(forward))
-            assert driver.step()
-        moved = session.goal.pose()[0] - start
-        np.testing.assert_allclose(moved, [0.1, 0.0, 0.0], atol=1e-9)
-        driver.receive(_pad(forward, deadman=False))
+        yield Gamepad(
+            session,
+            clock,
+            DeviceDriver(load_profile("gamepad"), GoalTarget(session), clock),
+        )
+    finally:
+        session.parts.close()
+
+
+def test_a_held_deadman_moves_the_goal_and_releasing_it_stops_it(
+    gamepad: Gamepad,
+) -> None:
+    """The goal moves at the stick's speed while held; released: stops, logged."""
+    session, clock, driver = gamepad
+    start, _ = session.goal.pose()
+    forward = (0.0, -1.0, 0.0, 0.0)  # left stick fully up: +x at 0.1 m/s
+    driver.receive(_pad(forward, deadman=False))
+    for _ in range(10):
         clock.advance(0.02)
         assert not driver.step()
-        for _ in range(10):
-            clock.advance(0.02)
-            driver.receive(_pad(forward, deadman=False))
-            assert not driver.step()
-        np.testing.assert_allclose(session.goal.pose()[0] - start, moved)
-        events = [m for _, m in session.parts.log.events]
-        assert events[-2:] == [
-            "deadman held: test pad drives",
-            "deadman released: braking to a stop",
-        ]
-    finally:
-        session.parts.close()
-
-
-def test_a_device_that_falls_silent_brakes_the_goal() -> None:
-    """No state for more than 100 ms of the session's clock stops the goal."""
-    session = TeleopSession(BOARDS, "cat")
-    try:
-        clock = VirtualClock()
-        driver = DeviceDriver(load_profile("gamepad"), GoalTarget(session), clock)
-        driver.receive(_pad((0.0, 0.0, 0.0, 0.0)))
-        driver.step()
-        driver.receive(_pad((1.0, 0.0, 0.0, 0.0)))  # left stick right: -y
-        for _ in range(5):  # 100 ms without a new state: still fresh
-            clock.advance(0.02)
-            assert driver.step()
-        held_at = session.goal.pose()[0]
+    np.testing.assert_array_equal(session.goal.pose()[0], start)  # not held
+    driver.receive(_pad(forward))
+    driver.step()  # engages
+    for _ in range(50):  # 1 s, a state every step
         clock.advance(0.02)
-        assert not driver.step()  # 120 ms: silent
-        clock.advance(1.0)
-        driver.step()
-        np.testing.assert_array_equal(session.goal.pose()[0], held_at)
-        assert held_at[1] == pytest.approx(session.home[0][1] - 0.1 * 0.1)
-        last = session.parts.log.events[-1][1]
-        assert last.startswith("device silent for 120 ms (> 100 ms)")
-        driver.receive(_pad((1.0, 0.0, 0.0, 0.0)))  # the stream comes back
-        clock.advance(0.02)
-        driver.step()
-        assert driver.engaged
-    finally:
-        session.parts.close()
-
-
-def test_a_step_after_a_stall_moves_the_goal_by_at_most_a_tenth_of_a_second() -> None:
-    """A driver that ran late does not jump the goal."""
-    session = TeleopSession(BOARDS, "cat")
-    try:
-        clock = VirtualClock()
-        driver = DeviceDriver(load_profile("gamepad"), GoalTarget(session), clock)
-        driver.receive(_pad((0.0, -1.0, 0.0, 0.0)))
-        driver.step()
-        clock.advance(0.09)
-        driver.receive(_pad((0.0, -1.0, 0.0, 0.0)))
-        clock.advance(0.01)
+        driver.receive(_pad(forward))
         assert driver.step()
-        x = session.goal.pose()[0][0] - session.home[0][0]
-        assert x == pytest.approx(0.1 * 0.1)
-    finally:
-        session.parts.close()
+    moved = session.goal.pose()[0] - start
+    np.testing.assert_allclose(moved, [0.1, 0.0, 0.0], atol=1e-9)
+    driver.receive(_pad(forward, deadman=False))
+    clock.advance(0.02)
+    assert not driver.step()
+    for _ in range(10):
+        clock.advance(0.02)
+        driver.receive(_pad(forward, deadman=False))
+        assert not driver.step()
+    np.testing.assert_allclose(session.goal.pose()[0] - start, moved)
+    events = [m for _, m in session.parts.log.events]
+    assert events[-2:] == [
+        "deadman held: test pad drives",
+        "deadman released: braking to a stop",
+    ]
+
+
+def test_a_device_that_falls_silent_brakes_the_goal(gamepad: Gamepad) -> None:
+    """No state for more than 100 ms of the session's clock stops the goal."""
+    session, clock, driver = gamepad
+    driver.receive(_pad((0.0, 0.0, 0.0, 0.0)))
+    driver.step()
+    driver.receive(_pad((1.0, 0.0, 0.0, 0.0)))  # left stick right: -y
+    for _ in range(5):  # 100 ms without a new state: still fresh
+        clock.advance(0.02)
+        assert driver.step()
+    held_at = session.goal.pose()[0]
+    clock.advance(0.02)
+    assert not driver.step()  # 120 ms: silent
+    clock.advance(1.0)
+    driver.step()
+    np.testing.assert_array_equal(session.goal.pose()[0], held_at)
+    assert held_at[1] == pytest.approx(session.home[0][1] - 0.1 * 0.1)
+    last = session.parts.log.events[-1][1]
+    assert last.startswith("device silent for 120 ms (> 100 ms)")
+    driver.receive(_pad((1.0, 0.0, 0.0, 0.0)))  # the stream comes back
+    clock.advance(0.02)
+    driver.step()
+    assert driver.engaged
+
+
+def test_a_step_after_a_stall_moves_the_goal_by_at_most_a_tenth_of_a_second(
+    gamepad: Gamepad,
+) -> None:
+    """A driver that ran late does not jump the goal."""
+    session, clock, driver = gamepad
+    driver.receive(_pad((0.0, -1.0, 0.0, 0.0)))
+    driver.step()
+    clock.advance(0.09)
+    driver.receive(_pad((0.0, -1.0, 0.0, 0.0)))
+    clock.advance(0.01)
+    assert driver.step()
+    x = session.goal.pose()[0][0] - session.home[0][0]
+    assert x == pytest.approx(0.1 * 0.1)
 
 
 def test_the_device_sets_the_user_velocity_and_zeroes_it_on_release() -> None:
