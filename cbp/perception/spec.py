@@ -8,7 +8,7 @@ from typing import Literal
 
 import numpy as np
 
-from cbp.errors import ConfigError
+from cbp.errors import ConfigError, require_between
 from cbp.robot import FloatArray
 from cbp.spatial import Pose
 
@@ -344,22 +344,10 @@ class PerceptionSpec:
                 f"camera names must be unique; repeated: {', '.join(repeated)}",
                 "cameras",
             )
-        if not 0.0 <= self.moving_speed <= 10.0:
-            raise ConfigError(
-                f"must be in [0, 10] m/s, got {self.moving_speed}", "moving_speed"
-            )
-        if not 0.0 <= self.virtual_latency <= 10.0:
-            raise ConfigError(
-                f"must be in [0, 10] s, got {self.virtual_latency}", "virtual_latency"
-            )
-        if not 0.0 <= self.shadow_hold <= 60.0:
-            raise ConfigError(
-                f"must be in [0, 60] s, got {self.shadow_hold}", "shadow_hold"
-            )
-        if not 0.0 <= self.motion_window <= 10.0:
-            raise ConfigError(
-                f"must be in [0, 10] s, got {self.motion_window}", "motion_window"
-            )
+        require_between(self, 0.0, 10.0, "m/s", "moving_speed")
+        require_between(self, 0.0, 10.0, "s", "virtual_latency")
+        require_between(self, 0.0, 60.0, "s", "shadow_hold")
+        require_between(self, 0.0, 10.0, "s", "motion_window")
         for name in ("max_far_fraction", "see_through_fraction"):
             if not 0.0 < getattr(self, name) <= 1.0:
                 raise ConfigError(f"must be in (0, 1], got {getattr(self, name)}", name)
