@@ -171,8 +171,9 @@ class Engine:
                     raise self.solver.explained(failed) from None
         if v is not None and self._drift.refine(problem, state, x[: self._nv]):
             # The rows that hold the step, with the drift of the step found;
-            # if that cannot be solved, the first answer (third order off).
-            with contextlib.suppress(SolveError):
+            # if that cannot be solved, the first answer (third order off),
+            # and no diagnosis is spent on a failure that is not raised.
+            with contextlib.suppress(SolveError), self.solver.trials():
                 x = self.solver.solve(problem)
         dq, slowed = self.guard.check(q, x[: self._nv], dt, v)
         return StepResult(dq, problem, eased, slowed)
