@@ -210,7 +210,7 @@ def time_parameterize(
         return JointTrajectory.hold(t0, path[0])
     delta = np.diff(path, axis=0)  # (N, n)
     absd = np.abs(delta)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):  # a joint that does not move
         seg_vel = np.min(max_velocity / absd, axis=1)  # path-speed limit per segment
         seg_acc = np.min(max_acceleration / absd, axis=1)
     n_points = len(path)
@@ -222,7 +222,7 @@ def time_parameterize(
         # Corners: turning from one segment's direction to the next within about
         # one segment's time needs |d_i - d_(i-1)| s'^2 <= a_max (per joint).
         turn = np.abs(np.diff(delta, axis=0))
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", over="ignore"):
             corner = np.sqrt(np.min(max_acceleration / turn, axis=1))
         limit[1:-1] = np.minimum(limit[1:-1], corner)
     # Backward: able to stop at the end.
@@ -238,23 +238,21 @@ def time_parameterize(
     for i in range(n_points - 1):
         speed2[i + 1] = min(speed2[i + 1], speed2[i] + 2.0 * seg_acc[i])
     speed = np.sqrt(speed2)
-    # Segment durations: unit path length at the mean of the end speeds.
-    mean = 0.5 * (speed[:-1] + speed[1:])
-    durations = np.where(mean > 0, 1.0 / np.maximum(mean, 1e-12), np.inf)
-    if not np.all(np.isfinite(durations)):
-        # A zero-speed interior point (both neighbours at rest): accelerate from
-        # rest over the segment instead.
-        durations = np.where(
-            np.isfinite(durations), durations, np.sqrt(2.0 / np.maximum(seg_acc, 1e-12))
+    durations, velocities = _durations(
+        speed, delta, seg_vel, seg_acc, v0, max_acceleration
+    )
+    # The first segment, lengthened for the change from v0, covers more than
+    # its length at its end speeds, and the quintic swings out to make up for
+    # it: arrive slower, at the speed that covers the segment in that time.
+    covering = 2.0 / durations[0] - speed[0]
+    if n_points > 2 and covering < speed[1] * (1.0 - 1e-9):
+        speed2[1] = max(covering, 0.0) ** 2
+        for i in range(1, n_points - 1):
+            speed2[i + 1] = min(speed2[i + 1], speed2[i] + 2.0 * seg_acc[i])
+        speed = np.sqrt(speed2)
+        durations, velocities = _durations(
+            speed, delta, seg_vel, seg_acc, v0, max_acceleration
         )
-    velocities = np.empty_like(path)
-    velocities[0] = v0
-    velocities[-1] = 0.0
-    if n_points > 2:
-        direction = 0.5 * (delta[:-1] + delta[1:])
-        velocities[1:-1] = direction * speed[1:-1, None]
-    change = np.abs(velocities[1] - v0)
-    durations[0] = max(durations[0], float(np.max(change / max_acceleration)))
     times = t0 + np.concatenate([[0.0], np.cumsum(durations)])
     accelerations = np.zeros_like(path)
     accelerations[0] = a0
@@ -270,6 +268,48 @@ def time_parameterize(
         )
     return JointTrajectory(times, path, velocities, accelerations)
 
+
+def _durations(
+    speed: FloatArray,
+    delta: FloatArray,
+    seg_vel: FloatArray,
+    seg_acc: FloatArray,
+    v0: FloatArray,
+    max_acceleration: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Segment durations and point velocities for path speeds ``speed``.
+
+    Each segment takes its unit path length at the mean of its end speeds, but
+    never longer than a quintic from rest to rest within the limits takes: slow
+    ends (a start velocity nearly across the path, both ends near rest) made
+    the mean speed tiny and the segment seconds long, and the quintic kept the
+    starting velocity over all of it, off the path by radians. The first
+    segment is long enough for the change from ``v0`` within the limits.
+    """
+    mean = 0.5 * (speed[:-1] + speed[1:])
+    with np.errstate(divide="ignore"):
+        at_mean = 1.0 / mean
+        rest_to_rest = np.maximum(
+            np.sqrt(QUINTIC_PEAK_ACCELERATION / seg_acc),
+            QUINTIC_PEAK_VELOCITY / seg_vel,
+        )
+    durations = np.minimum(at_mean, rest_to_rest)
+    n_points = speed.size
+    velocities = np.empty((n_points, delta.shape[1]))
+    velocities[0] = v0
+    velocities[-1] = 0.0
+    if n_points > 2:
+        direction = 0.5 * (delta[:-1] + delta[1:])
+        velocities[1:-1] = direction * speed[1:-1, None]
+    change = np.abs(velocities[1] - v0)
+    durations[0] = max(durations[0], float(np.max(change / max_acceleration)))
+    return durations, velocities
+
+
+#: A quintic from rest to rest over a unit distance in a unit time peaks at this
+#: velocity (15/8, at mid-time) and this acceleration (10/sqrt(3)).
+QUINTIC_PEAK_VELOCITY = 15.0 / 8.0
+QUINTIC_PEAK_ACCELERATION = 10.0 / np.sqrt(3.0)
 
 #: Directions within this cosine of the path's keep their full speed at a splice.
 ALIGNED_COS = 0.7
