@@ -27,6 +27,7 @@ from cbp.scenario import load_scenario
 from cbp.scenario.scene import ObjectSpec
 from cbp.scenes import write_scenes
 from cbp.state import RobotState
+from tests.conftest import VIRTUAL_CLOCK
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
@@ -85,7 +86,7 @@ def test_a_wall_that_appears_ahead_of_the_arm_is_avoided(source) -> None:
     """It appears >= 15 cm ahead of the arm and is never touched."""
     scenario = load_scenario(
         SCENARIOS / "cat_appearing_obstacle.yaml",
-        overrides={"perception.source": source},
+        overrides={"perception.source": source, **VIRTUAL_CLOCK},
     )
     wall = _object(scenario, "wall")
     trace = run_cat(scenario)
@@ -110,7 +111,7 @@ def test_a_box_pushed_into_the_standing_hand_makes_the_arm_yield() -> None:
     first, as every method that plans per period does.
     """
     path = SCENARIOS / "cat_pushed_obstacle.yaml"
-    cat = load_scenario(path)
+    cat = load_scenario(path, overrides=VIRTUAL_CLOCK)
     trace = run_cat(cat)
     holding = run_metrics(run_with("jt", path))  # the goal held by JT
     ik = run_metrics(run_with("ik", path))
@@ -203,7 +204,7 @@ def run_with(method: str, path: Path):
     """Run ``path`` with another executor through the executor registry."""
     from cbp.executors import load_executor
 
-    scenario = load_scenario(path, overrides={"method.name": method})
+    scenario = load_scenario(path, overrides={"method.name": method, **VIRTUAL_CLOCK})
     return load_executor(method)(scenario, False)
 
 

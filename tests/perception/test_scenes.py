@@ -10,6 +10,7 @@ from cbp.executors.cat import run_cat
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
 from cbp.scenes import generate_moving_scene, generate_scene, write_scenes
+from tests.conftest import VIRTUAL_CLOCK
 
 
 def test_a_seed_gives_one_scene_and_seeds_differ() -> None:
@@ -35,7 +36,8 @@ def test_written_scenes_load_and_start_clear(tmp_path) -> None:
 @pytest.mark.parametrize("source", ["ground_truth", "depth_camera"])
 def test_generated_scenes_run_without_contact(tmp_path, source) -> None:
     for path in write_scenes(tmp_path, 2, seed=100):
-        scenario = load_scenario(path, overrides={"perception.source": source})
+        overrides = {"perception.source": source, **VIRTUAL_CLOCK}
+        scenario = load_scenario(path, overrides=overrides)
         m = run_metrics(run_cat(scenario))
         assert m["peak_contact_force_n"] == 0.0, (path.name, m)
 
