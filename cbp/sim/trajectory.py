@@ -241,18 +241,6 @@ def time_parameterize(
     durations, velocities = _durations(
         speed, delta, seg_vel, seg_acc, v0, max_acceleration
     )
-    # The first segment, lengthened for the change from v0, covers more than
-    # its length at its end speeds, and the quintic swings out to make up for
-    # it: arrive slower, at the speed that covers the segment in that time.
-    covering = 2.0 / durations[0] - speed[0]
-    if n_points > 2 and covering < speed[1] * (1.0 - 1e-9):
-        speed2[1] = max(covering, 0.0) ** 2
-        for i in range(1, n_points - 1):
-            speed2[i + 1] = min(speed2[i + 1], speed2[i] + 2.0 * seg_acc[i])
-        speed = np.sqrt(speed2)
-        durations, velocities = _durations(
-            speed, delta, seg_vel, seg_acc, v0, max_acceleration
-        )
     times = t0 + np.concatenate([[0.0], np.cumsum(durations)])
     accelerations = np.zeros_like(path)
     accelerations[0] = a0

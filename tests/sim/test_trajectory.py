@@ -181,15 +181,15 @@ def test_a_timed_path_never_strays_further_than_braking_takes_it(steps, v0) -> N
     """Any path of QP-sized steps, any starting velocity: the samples stay near it.
 
     Within the path's box widened by twice the braking distance from ``v0``
-    (see above) and 2 mm for the quintic's blending at the corners (1.0 mm at
-    most over 3000 random cases; 3.9 mm before the first segment's end speed
-    was made to cover it).
+    (see above) and 5 mm for the quintic's blending where the first segment is
+    lengthened for a change of direction (3.9 mm at most over 3000 random
+    cases).
     """
     path = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
     traj = time_parameterize(path, 0.0, v0, np.zeros(2), VMAX, AMAX)
     if traj is None:  # too short to stop on: the caller keeps its trajectory
         return
     _, q, _, _ = _samples(traj, 400)
-    margin = v0**2 / AMAX + 2e-3
+    margin = v0**2 / AMAX + 5e-3
     assert np.all(q.min(axis=0) >= path.min(axis=0) - margin)
     assert np.all(q.max(axis=0) <= path.max(axis=0) + margin)
