@@ -274,7 +274,7 @@ def run_trajectory_executor(
             timed_out, steps = plan.timed_out, plan.steps
             try:
                 # The robot moves on while the result is computed.
-                run.advance(t_f, look_ahead)
+                run.advance(t_f, look_ahead, reaction=2.0 * period)
                 if pacer is not None:
                     pacer.wait_until(t_f)
             except Exception as exc:

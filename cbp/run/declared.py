@@ -11,6 +11,9 @@ from __future__ import annotations
 
 from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.world import CollisionWorld
+from cbp.robot import FloatArray
+from cbp.run.events import RunLog
+from cbp.run.separation import DeclaredSeparationMonitor
 from cbp.scenario.runtime import Scenario
 from cbp.scenario.scene import ObjectSpec
 
@@ -42,19 +45,38 @@ class DeclaredObjects:
     Args:
         scenario: the scenario whose ``world.objects`` are followed.
         world: the collision world to update (the scenario's).
+        log: where :meth:`watch` says when a moving object comes nearer than
+            the arm can keep from (none: not watched).
 
     Moving objects are measured ``look_ahead`` seconds ahead along their
     velocity (:class:`~cbp.collision.objects.PrimitiveEnvironment`) unless the
     scenario sets ``collision.predict_motion: false``.
     """
 
-    def __init__(self, scenario: Scenario, world: CollisionWorld) -> None:
+    def __init__(
+        self, scenario: Scenario, world: CollisionWorld, log: RunLog | None = None
+    ) -> None:
         """Start from the objects as they are at time 0 (the world's now)."""
         self.scenario = scenario
         self.world = world
         self.dynamic = [o for o in scenario.spec.world.objects if o.dynamic]
         self._predict = scenario.spec.collision.predict_motion
         self._key = object_key(self.dynamic, 0.0)
+        moves = any(o.motion is not None for o in self.dynamic)
+        #: Speed and separation with the moving objects (None: not watched).
+        self.separation = (
+            DeclaredSeparationMonitor(world, log)
+            if log is not None and moves and self._predict
+            else None
+        )
+
+    def watch(self, t: float, q: FloatArray, reaction: float) -> None:
+        """Say when a moving object comes nearer than the arm at ``q`` can keep from.
+
+        ``reaction``: how long the robot takes to begin answering [s].
+        """
+        if self.separation is not None:
+            self.separation.check(t, q, reaction)
 
     def update(self, t: float, look_ahead: float = 0.0) -> list[str]:
         """Give the world the objects as they are at ``t`` [s], if any changed.

@@ -106,7 +106,7 @@ class RunParts:
         """Why the robot must hold at ``t`` (a camera without valid frames), or None."""
         return None if self.cameras is None else self.cameras.hold_reason(t)
 
-    def advance(self, t: float, look_ahead: float = 0.0) -> None:
+    def advance(self, t: float, look_ahead: float = 0.0, reaction: float = 0.0) -> None:
         """Simulate (and perceive) until ``t``.
 
         Args:
@@ -114,6 +114,9 @@ class RunParts:
             look_ahead: how long the plan being made runs on the robot [s]:
                 moving obstacles, declared (``collision.predict_motion``) or
                 mapped, are measured that far ahead.
+            reaction: how long the robot takes to begin answering what it
+                meets [s] (a trajectory executor: two command periods), for
+                the separation declared moving objects need.
         """
         report_time(t, self.duration)
         declared = self.declared
@@ -124,10 +127,10 @@ class RunParts:
             while sim.t + OBJECT_UPDATE < t:
                 self._perceive_until(sim.t + OBJECT_UPDATE, look_ahead)
                 sim.run_until(sim.t + OBJECT_UPDATE)
-                self._update_declared(sim.t, look_ahead)
+                self._update_declared(sim.t, look_ahead, reaction)
             self._perceive_until(t, look_ahead)
             sim.run_until(t)
-            self._update_declared(sim.t, look_ahead)
+            self._update_declared(sim.t, look_ahead, reaction)
         else:
             self._perceive_until(t, look_ahead)
             sim.run_until(t)
@@ -157,10 +160,11 @@ class RunParts:
         if self.cameras is not None:
             self.cameras.perceive_until(t, look_ahead)
 
-    def _update_declared(self, t: float, look_ahead: float) -> None:
+    def _update_declared(self, t: float, look_ahead: float, reaction: float) -> None:
         assert self.declared is not None
         for name in self.declared.update(t, look_ahead):
             self.log.event(t, f"object '{name}' appeared")
+        self.declared.watch(t, self.sim.q, reaction)
 
 
 def build_run(
@@ -222,7 +226,7 @@ def build_run(
         sim.close()
         raise
     declared = (
-        DeclaredObjects(scenario, world)
+        DeclaredObjects(scenario, world, log)
         if world is not None and cameras is None
         else None
     )
