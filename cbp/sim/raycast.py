@@ -36,7 +36,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -46,6 +46,9 @@ from cbp.robot import FloatArray
 from cbp.sim.bullet import pb
 
 __all__ = ["RayCaster"]
+
+#: A point or direction (x, y, z), as the compiled ray cast passes them.
+Point = tuple[float, float, float]
 
 #: Analytic shapes: kind codes in the shape table.
 _SPHERE, _CYLINDER, _CAPSULE = 0, 1, 2
@@ -59,6 +62,21 @@ _BOX_FACES = np.array(
     ],
     dtype=np.intp,
 )  # fmt: skip
+
+
+class _Canvas(NamedTuple):
+    """The depth buffer a compiled pass draws in, and the camera's terms."""
+
+    fx: float
+    """The projection's horizontal focal term (``projection[0, 0]``)."""
+    fy: float
+    """Its vertical one (``projection[1, 1]``)."""
+    near: float
+    """The clipping plane [m]: nearer surfaces are cut away."""
+    far: float
+    """The far plane [m]: surfaces at or beyond it are not seen."""
+    depth: FloatArray
+    """Each pixel's nearest depth so far (H, W) [m] (inf: none)."""
 
 
 @dataclass(frozen=True)
@@ -295,6 +313,7 @@ def _cast(
     """Fill ``out`` (H, W) with the depth buffer of the nearest surfaces."""
     h, w = out.shape
     depth = np.full((h, w), np.inf)
+    canvas = _Canvas(fx, fy, near, far, depth)
     poly = np.empty((4, 3))
     v = np.empty((3, 3))
     for t in range(len(triangles)):
@@ -325,9 +344,9 @@ def _cast(
         if n < 3:
             continue
         for k in range(1, n - 1):
-            _triangle(poly[0], poly[k], poly[k + 1], fx, fy, near, far, depth)
+            _triangle(poly[0], poly[k], poly[k + 1], canvas)
     for s in range(len(shapes)):
-        _analytic(shapes[s], to_camera[shape_part[s]], fx, fy, near, far, depth)
+        _analytic(shapes[s], to_camera[shape_part[s]], canvas)
     scale = far / (far - near)
     for r in range(h):
         for c in range(w):
@@ -349,13 +368,10 @@ def _triangle(
     a: FloatArray,
     b: FloatArray,
     c: FloatArray,
-    fx: float,
-    fy: float,
-    near: float,
-    far: float,
-    depth: FloatArray,
+    canvas: _Canvas,
 ) -> None:  # pragma: no cover - compiled
     """Keep, at each pixel whose ray crosses triangle abc, the nearer depth."""
+    fx, fy, near, far, depth = canvas
     h, w = depth.shape
     # The plane n . p = k; a pixel's ray p = t (X, Y, -1) meets it at
     # t = k / n . (X, Y, -1).
@@ -405,13 +421,10 @@ def _triangle(
 def _analytic(
     shape: FloatArray,
     M: FloatArray,
-    fx: float,
-    fy: float,
-    near: float,
-    far: float,
-    depth: FloatArray,
+    canvas: _Canvas,
 ) -> None:  # pragma: no cover - compiled
     """Ray cast a sphere, cylinder or capsule (axis z of ``M``) pixel by pixel."""
+    fx, fy, near, far, depth = canvas
     h, w = depth.shape
     kind, r, hl = int(shape[0]), shape[1], shape[2]
     reach = r if kind == _SPHERE else (hl + r if kind == _CAPSULE else hl)
@@ -440,6 +453,7 @@ def _analytic(
     ox = -(M[0, 0] * M[0, 3] + M[1, 0] * M[1, 3] + M[2, 0] * M[2, 3])
     oy = -(M[0, 1] * M[0, 3] + M[1, 1] * M[1, 3] + M[2, 1] * M[2, 3])
     oz = -(M[0, 2] * M[0, 3] + M[1, 2] * M[1, 3] + M[2, 2] * M[2, 3])
+    origin = (ox, oy, oz)
     for row in range(v0, v1 + 1):
         Y = (2.0 * (h - 1 - row) / h - 1.0) / fy
         for col in range(u0, u1 + 1):
@@ -447,23 +461,16 @@ def _analytic(
             dx = M[0, 0] * X + M[1, 0] * Y - M[2, 0]
             dy = M[0, 1] * X + M[1, 1] * Y - M[2, 1]
             dz = M[0, 2] * X + M[1, 2] * Y - M[2, 2]
-            t = _first_hit(kind, r, hl, ox, oy, oz, dx, dy, dz, near)
+            t = _first_hit(kind, r, hl, origin, (dx, dy, dz), near)
             if t < depth[row, col] and t < far:
                 depth[row, col] = t
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _sphere_hit(
-    r: float,
-    ox: float,
-    oy: float,
-    oz: float,
-    dx: float,
-    dy: float,
-    dz: float,
-    near: float,
-) -> float:  # pragma: no cover - compiled
+def _sphere_hit(r: float, o: Point, d: Point, near: float) -> float:  # pragma: no cover
     """First t >= near where o + t d lies on the sphere of radius r at 0 (inf)."""
+    ox, oy, oz = o
+    dx, dy, dz = d
     a = dx * dx + dy * dy + dz * dz
     b = ox * dx + oy * dy + oz * dz
     c = ox * ox + oy * oy + oz * oz - r * r
@@ -483,17 +490,15 @@ def _first_hit(
     kind: int,
     r: float,
     hl: float,
-    ox: float,
-    oy: float,
-    oz: float,
-    dx: float,
-    dy: float,
-    dz: float,
+    o: Point,
+    d: Point,
     near: float,
 ) -> float:  # pragma: no cover - compiled
-    """Nearest t >= near where the ray meets the shape's surface (inf if none)."""
+    """Nearest t >= near where o + t d meets the shape's surface (inf if none)."""
     if kind == _SPHERE:
-        return _sphere_hit(r, ox, oy, oz, dx, dy, dz, near)
+        return _sphere_hit(r, o, d, near)
+    ox, oy, oz = o
+    dx, dy, dz = d
     best = np.inf
     # The side: (ox + t dx)^2 + (oy + t dy)^2 = r^2, |oz + t dz| <= hl.
     a = dx * dx + dy * dy
@@ -517,7 +522,7 @@ def _first_hit(
                         best = t
         return best
     for zc in (-hl, hl):  # the capsule's two half spheres
-        t = _sphere_hit(r, ox, oy, oz - zc, dx, dy, dz, near)
+        t = _sphere_hit(r, (ox, oy, oz - zc), d, near)
         if t < best:
             best = t
     return best
