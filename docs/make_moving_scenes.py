@@ -8,7 +8,8 @@ so any run can be repeated with ``cbp run``). Each scene runs with CAT in each
 mode: the declared objects in wall-clock time, the cameras in wall-clock time
 with the map in its own process and in a thread, and the cameras in virtual
 time. The table (peak contact force and events per run) goes to stdout and to
-docs/moving_scenes.md, with the machine's load while it ran.
+docs/moving_scenes.md, with the machine's load while it ran; the page's own
+sections after the table (each beginning with a "## " heading) are kept.
 """
 
 from __future__ import annotations
@@ -144,6 +145,21 @@ def markdown(
     return "\n".join(lines) + "\n"
 
 
+def write_page(doc: Path, table: str) -> None:
+    """Write the generated ``table`` to ``doc``, keeping the page's own sections.
+
+    Those are everything from the page's first "## " heading on: analyses
+    written by hand beside the generated table.
+    """
+    kept = ""
+    if doc.exists():
+        text = doc.read_text()
+        at = text.find("\n## ")
+        if at >= 0:
+            kept = text[at:]
+    doc.write_text(table.rstrip("\n") + "\n" + kept)
+
+
 def main() -> None:
     """Generate, run and tabulate."""
     parser = argparse.ArgumentParser(description=__doc__)
@@ -175,7 +191,7 @@ def main() -> None:
             sum(1 for r in logged if (r["scene"], r["mode"]) == key)
             for key in {(r["scene"], r["mode"]) for r in logged}
         )
-        args.doc.write_text(markdown(logged, args.mode or found, runs, args.note))
+        write_page(args.doc, markdown(logged, args.mode or found, runs, args.note))
         print(args.doc.read_text())
         return
     modes = args.mode or list(MODES)
@@ -193,7 +209,7 @@ def main() -> None:
                 with log.open("a") as f:
                     f.write(json.dumps(r) + "\n")
                 print(json.dumps(r), flush=True)
-                args.doc.write_text(markdown(results, modes, args.runs, args.note))
+                write_page(args.doc, markdown(results, modes, args.runs, args.note))
     print(markdown(results, modes, args.runs, args.note))
 
 
