@@ -10,10 +10,10 @@ import pytest
 
 from cbp.errors import ConfigError, ScenarioError
 from cbp.executors import load_executor
-from cbp.executors.look import sees
+from cbp.executors.visibility import UNSEEN_DEPTH, visibility
 from cbp.methods.settings import LookSettings
 from cbp.metrics import run_metrics
-from cbp.perception.kernels import FREE, OCCUPIED
+from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.spec import CameraSpec
 from cbp.scenario import load_scenario
 from tests.conftest import VIRTUAL_CLOCK
@@ -44,8 +44,30 @@ def test_a_camera_sees_points_in_its_view_not_behind_an_occupied_cell() -> None:
             [0.5, 0.3, 0.0],  # the occupied cell itself is seen
         ]
     )
-    got = sees(camera, spec, points, state_at, cell)
-    np.testing.assert_array_equal(got, [True, False, False, False, False, True])
+    got = visibility(camera, spec, points, state_at, cell)
+    np.testing.assert_array_equal(got, [1.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+
+
+def test_unseen_space_on_the_line_makes_a_point_less_likely_seen() -> None:
+    """Each UNSEEN_DEPTH of unseen cells before a point: a factor e less; the robot hides."""
+    camera = pin.SE3(np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]]), np.zeros(3))
+    spec = CameraSpec(name="c", position=(0, 0, 0), target=(1, 0, 0), fov_deg=60.0)
+    cell = 0.01
+
+    def state_at(points: np.ndarray) -> np.ndarray:  # unseen beyond x = 0.5
+        return np.where(points[:, 0] > 0.5, UNKNOWN, FREE).astype(np.uint8)
+
+    points = np.array([[0.505, 0.0, 0.0], [0.6, 0.0, 0.0], [0.7, 0.0, 0.0]])
+    got = visibility(camera, spec, points, state_at, cell)
+    assert got[0] == 1.0  # on the frontier
+    depth = points[1:, 0] - 0.5 - 1.5 * cell  # the unseen length before each
+    np.testing.assert_allclose(got[1:], np.exp(-depth / UNSEEN_DEPTH), rtol=0.1)
+
+    def body(points: np.ndarray) -> np.ndarray:  # a link across the line at 0.3
+        return np.asarray(np.abs(points[:, 0] - 0.3) < 0.02)
+
+    hidden = visibility(camera, spec, points, state_at, cell, body)
+    np.testing.assert_array_equal(hidden, 0.0)
 
 
 def test_look_settings_are_checked() -> None:
