@@ -14,14 +14,23 @@ goal has tried every start and found nothing, :class:`Looker`:
    occupied cells alone);
 2. says so (an event, once per goal): where the goal is, or what its
    configurations pass through;
-3. samples configurations near the arm's (each joint moved by up to
-   ``look.spread``), free in the map as the planners check it and reached
-   from the arm's by a free straight joint motion, and takes the one whose
-   camera (mounted on the arm) sees the most of those points: within its
-   field of view and range, with no occupied cell between;
-4. hands the motion there to the trajectory loop, and holds ``look.dwell``
-   after it while the map takes the camera's frames in; the planner then
-   searches for the goal again.
+3. gathers views: configurations near the arm's (each joint moved by up to
+   ``look.spread``), and configurations that aim the camera (mounted on the
+   arm) at the centre of each set of points from about it, where the camera
+   can be carried through seen free space. Where unseen space keeps the arm
+   from every aimed view, the unseen cells keeping it from the one kept by
+   the fewest become points to see too, and that view is opened look by look
+   until it is free (behind a wall, the arm must first see the space its
+   upper links need to rise);
+4. takes, of the views free in the map as the planners check it and reached
+   by a free motion, the one whose camera would reveal the most of each set
+   (:func:`~cbp.executors.visibility.visibility`: within its field of view
+   and range, nothing occupied and no part of the arm between, less likely
+   the more unseen space lies between);
+5. hands the motion there to the trajectory loop, and holds ``look.dwell``
+   after it while the map takes the camera's frames in; the event then says
+   how many of the points looked for are seen now, and the planner searches
+   for the goal again.
 
 At most ``look.looks`` looks per goal. Without a camera on the arm, the event
 says that no camera can be turned there.
@@ -38,12 +47,13 @@ import pinocchio as pin
 
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
+from cbp.executors.aiming import clear_line, looking_at, solve_camera, unseen_held
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.visibility import visibility
 from cbp.methods.settings import LookSettings, PlannerSettings
 from cbp.perception.frame import camera_parent
-from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
+from cbp.perception.kernels import OCCUPIED, UNKNOWN
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray
@@ -73,9 +83,6 @@ AIM_NEAR, AIM_FAR = 0.25, 0.6
 AIM_SOLVED, AIM_TRIES = 12, 60
 #: The views kept from by the fewest unseen cells whose cells are looked for.
 AIM_OPEN = 2
-#: The solve's iterations, and how near the pose it must come [m], [rad].
-AIM_ITERATIONS = 100
-AIM_POSITION, AIM_ANGLE = 0.01, 0.05
 
 
 @dataclass(frozen=True)
@@ -344,7 +351,7 @@ class Looker:
             return np.zeros((0, 3))
         # Within a cell of the padded shapes (their world boxes would hold
         # several times as many cells, most of them free of the arm).
-        return _held(world, grid.cell, found, unknown)
+        return unseen_held(world, grid.cell, found, unknown)
 
     def _view(
         self,
@@ -461,9 +468,9 @@ class Looker:
             u /= np.linalg.norm(u, axis=1, keepdims=True)
             eyes = centre + u * rng.uniform(AIM_NEAR, AIM_FAR, (AIMS, 1))
             for eye in eyes:
-                if not _clear(here.translation, eye, grid):
+                if not clear_line(here.translation, eye, grid):
                     continue
-                pose = _looking_at(eye, centre, here.rotation)
+                pose = looking_at(eye, centre, here.rotation)
                 score = sum(
                     float(
                         np.mean(
@@ -476,7 +483,12 @@ class Looker:
                     candidates.append((score, pose))
         candidates.sort(key=lambda c: -c[0])
         # The view the last look began to open, first: it may be free now.
-        solves = (self._solve_camera(p, q, budget) for _, p in candidates[:AIM_TRIES])
+        assert self._frame is not None
+        frame = self._frame
+        solves = (
+            solve_camera(self.robot, frame, self._offset, p, q, budget)
+            for _, p in candidates[:AIM_TRIES]
+        )
         kept: list[tuple[FloatArray, FloatArray]] = []
         for solved in itertools.chain(self._opening, solves):
             if solved is None:
@@ -487,7 +499,7 @@ class Looker:
                 if len(found) == AIM_SOLVED:
                     break
             else:
-                kept.append((solved, _held(world, grid.cell, solved, unknown)))
+                kept.append((solved, unseen_held(world, grid.cell, solved, unknown)))
         # The views that the fewest unseen cells keep the arm from; the one
         # kept by the fewest is opened until it is free (else every look would
         # open a little of another).
@@ -496,35 +508,6 @@ class Looker:
         blocked = [k[1] for k in kept[:AIM_OPEN]]
         cells = np.unique(np.vstack([np.zeros((0, 3)), *blocked]), axis=0)
         return np.array(found).reshape(-1, q.size), cells
-
-    def _solve_camera(
-        self, pose: pin.SE3, q: FloatArray, budget: Budget
-    ) -> FloatArray | None:
-        """A configuration from ``q`` that puts the camera at ``pose``, or None.
-
-        Damped least squares on the camera's parent frame.
-        """
-        assert self._frame is not None
-        model, data = self.robot.model, self._data
-        goal = pose * self._offset.inverse()
-        lower, upper = self.robot.lower_limits, self.robot.upper_limits
-        q = q.copy()
-        for _ in range(AIM_ITERATIONS):
-            budget.charge("ik_iteration")
-            pin.framesForwardKinematics(model, data, q)
-            error = goal.actInv(data.oMf[self._frame])
-            err = pin.log6(error).vector
-            if (
-                np.linalg.norm(err[:3]) < AIM_POSITION
-                and np.linalg.norm(err[3:]) < AIM_ANGLE
-            ):
-                return q
-            J = pin.Jlog6(error) @ pin.computeFrameJacobian(
-                model, data, q, self._frame, pin.LOCAL
-            )
-            dq = -J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(6), err)
-            q = np.clip(pin.integrate(model, q, dq), lower, upper)
-        return None
 
     def _straight(
         self, q: FloatArray, view: FloatArray, world: CollisionWorld, budget: Budget
@@ -545,40 +528,6 @@ class Looker:
         assert self._frame is not None
         pin.framesForwardKinematics(self.robot.model, self._data, q)
         return self._data.oMf[self._frame] * self._offset
-
-
-def _held(
-    world: CollisionWorld, cell: float, q: FloatArray, unknown: FloatArray
-) -> FloatArray:
-    """The ``unknown`` cell centres within a cell of the padded arm at ``q``."""
-    state = RobotState(world.geometry.robot)
-    state.update(q)
-    geometry = world.geometry
-    held = geometry.contains(
-        state, unknown, margin=world.padding - geometry.padding + cell
-    )
-    return np.asarray(unknown[held], dtype=float)
-
-
-def _clear(a: FloatArray, b: FloatArray, grid: OccupancyGrid) -> bool:
-    """Whether the line from ``a`` to ``b`` lies in seen free cells all along."""
-    n = max(2, int(np.linalg.norm(b - a) / (0.5 * grid.cell)) + 1)
-    line = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-    return bool(np.all(grid.state_at(line) == FREE))
-
-
-def _looking_at(eye: FloatArray, centre: FloatArray, rotation: FloatArray) -> pin.SE3:
-    """The optical pose at ``eye`` looking at ``centre``, rolled as near ``rotation``.
-
-    Its image's x axis is ``rotation``'s, made square to the new axis.
-    """
-    z = centre - eye
-    z = z / np.linalg.norm(z)
-    x = rotation[:, 0] - np.dot(rotation[:, 0], z) * z
-    if np.linalg.norm(x) < 1e-6:  # looking along the old x axis: keep its y
-        x = np.cross(rotation[:, 1], z)
-    x = x / np.linalg.norm(x)
-    return pin.SE3(np.column_stack([x, np.cross(z, x), z]), eye)
 
 
 def _mounted_camera(cameras: list[CameraSpec], name: str | None) -> CameraSpec | None:
