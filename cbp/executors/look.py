@@ -14,14 +14,23 @@ goal has tried every start and found nothing, :class:`Looker`:
    occupied cells alone);
 2. says so (an event, once per goal): where the goal is, or what its
    configurations pass through;
-3. samples configurations near the arm's (each joint moved by up to
-   ``look.spread``), free in the map as the planners check it and reached
-   from the arm's by a free straight joint motion, and takes the one whose
-   camera (mounted on the arm) sees the most of those points: within its
-   field of view and range, with no occupied cell between;
-4. hands the motion there to the trajectory loop, and holds ``look.dwell``
-   after it while the map takes the camera's frames in; the planner then
-   searches for the goal again.
+3. gathers views: configurations near the arm's (each joint moved by up to
+   ``look.spread``), and configurations that aim the camera (mounted on the
+   arm) at the centre of each set of points from about it, where the camera
+   can be carried through seen free space. Where unseen space keeps the arm
+   from every aimed view, the unseen cells keeping it from the one kept by
+   the fewest become points to see too, and that view is opened look by look
+   until it is free (behind a wall, the arm must first see the space its
+   upper links need to rise);
+4. takes, of the views free in the map as the planners check it and reached
+   by a free motion, the one whose camera would reveal the most of each set
+   (:func:`~cbp.executors.visibility.visibility`: within its field of view
+   and range, nothing occupied and no part of the arm between, less likely
+   the more unseen space lies between);
+5. hands the motion there to the trajectory loop, and holds ``look.dwell``
+   after it while the map takes the camera's frames in; the event then says
+   how many of the points looked for are seen now, and the planner searches
+   for the goal again.
 
 At most ``look.looks`` looks per goal. Without a camera on the arm, the event
 says that no camera can be turned there.
@@ -38,18 +47,21 @@ import pinocchio as pin
 
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
+from cbp.executors.aiming import clear_line, looking_at, solve_camera, unseen_held
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch
+from cbp.executors.visibility import visibility
 from cbp.methods.settings import LookSettings, PlannerSettings
 from cbp.perception.frame import camera_parent
 from cbp.perception.kernels import OCCUPIED, UNKNOWN
+from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray
 from cbp.run.parts import RunParts
 from cbp.scenario.runtime import Scenario
 from cbp.state import RobotState
 
-__all__ = ["LookPlan", "Looker", "sees"]
+__all__ = ["LookPlan", "Looker"]
 
 #: Plans a checked path from a configuration to another within a budget, or None.
 GrowPlan = Callable[[FloatArray, FloatArray, Budget], "FloatArray | None"]
@@ -62,6 +74,15 @@ SAMPLES = 600
 MAX_TARGETS = 400
 #: The look's motion is cut into steps of at most this per joint [rad].
 STEP = 0.05
+#: Camera poses drawn about each set of targets, looking at its centre.
+AIMS = 150
+#: How far from the centre they are drawn [m].
+AIM_NEAR, AIM_FAR = 0.25, 0.6
+#: Free configurations found for them at most, and poses tried at most (those
+#: that would see the most first).
+AIM_SOLVED, AIM_TRIES = 12, 60
+#: The views kept from by the fewest unseen cells whose cells are looked for.
+AIM_OPEN = 2
 
 
 @dataclass(frozen=True)
@@ -71,54 +92,14 @@ class LookPlan:
     Attributes:
         path: the configurations, the first the start.
         view: the configuration the camera looks from.
-        seen: how many of the target points it sees.
-        targets: how many target points there were.
+        seen: how many of the target points it is expected to see.
+        targets: the target points (n, 3).
     """
 
     path: FloatArray
     view: FloatArray
     seen: int
-    targets: int
-
-
-def sees(
-    camera: pin.SE3,
-    spec: CameraSpec,
-    points: FloatArray,
-    state_at: Callable[[FloatArray], np.ndarray],
-    cell: float,
-) -> np.ndarray:
-    """Which ``points`` (n, 3) a camera at ``camera`` (optical frame) sees.
-
-    Within its field of view (the spec's vertical angle, its image's aspect)
-    and range, with no occupied cell on the line to it (``state_at`` gives a
-    map's cell states of points; the point's own cell and the one before do
-    not count).
-    """
-    local = (points - camera.translation) @ camera.rotation  # into the camera
-    z = local[:, 2]
-    half = np.tan(np.deg2rad(spec.fov_deg) / 2.0)
-    aspect = spec.width / spec.height
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inside = (
-            (z > spec.near)
-            & (z < spec.far)
-            & (np.abs(local[:, 1] / z) < half)
-            & (np.abs(local[:, 0] / z) < half * aspect)
-        )
-    out = np.zeros(len(points), dtype=bool)
-    if not inside.any():
-        return out
-    eye = camera.translation
-    d = points[inside] - eye
-    length = np.linalg.norm(d, axis=1)
-    k = max(2, int(np.max(length) / (0.5 * cell)))
-    ts = np.linspace(0.0, 1.0, k)
-    along = eye + ts[None, :, None] * d[:, None, :]
-    before = ts[None, :] * length[:, None] < length[:, None] - 1.5 * cell
-    state = state_at(along.reshape(-1, 3)).reshape(len(d), k)
-    out[inside] = ~np.any((state == OCCUPIED) & before, axis=1)
-    return out
+    targets: FloatArray
 
 
 class Looker:
@@ -171,6 +152,8 @@ class Looker:
         # stopped them), and a look found after the period's budget ran out.
         self._seen: IkSearch | None = None
         self._ready: LookPlan | None = None
+        self._watched: FloatArray = np.zeros((0, 3))  # what the look is for
+        self._opening: list[FloatArray] = []  # a view unseen space keeps from
 
     @property
     def pending(self) -> bool:
@@ -189,6 +172,7 @@ class Looker:
         self._looking = False
         self._seen = None
         self._ready = None
+        self._opening = []
 
     def stop(self) -> None:
         """End the look under way (the planner found the goal meanwhile)."""
@@ -206,9 +190,12 @@ class Looker:
         if t < run.sim.trajectory.end_time + self.settings.dwell - 1e-9:
             return True
         self._looking = False
+        watched = self._watched
+        seen = len(watched) - int(np.count_nonzero(run.unseen(watched)))
         run.event(
             t,
-            f"{self.method}: looked (held the view {self.settings.dwell:g} s); "
+            f"{self.method}: looked (held the view {self.settings.dwell:g} s; "
+            f"{seen} of the {len(watched)} unseen points looked for are seen now); "
             "searching for the goal again",
         )
         return False
@@ -294,10 +281,11 @@ class Looker:
         """Say that ``look`` is made; hold after it."""
         assert self.camera is not None
         self._looking = True
+        self._watched = look.targets
         run.event(
             run.sim.t,
-            f"{self.method}: camera '{self.camera.name}' sees {look.seen} of "
-            f"{look.targets} unseen points from a configuration "
+            f"{self.method}: camera '{self.camera.name}' sees about {look.seen} of "
+            f"{len(look.targets)} unseen points from a configuration "
             f"{float(np.max(np.abs(look.view - q))):.2f} rad away; moving there "
             "to look",
         )
@@ -361,15 +349,9 @@ class Looker:
         unknown = grid.centres(UNKNOWN)
         if not len(unknown):
             return np.zeros((0, 3))
-        state = RobotState(self.robot)
-        state.update(found)
-        placed = world.placed(state)
-        # Within each shape's world box grown by the padding and a cell.
-        reach = world.padding + grid.cell
-        near = np.zeros(len(unknown), dtype=bool)
-        for centre, half in zip(placed.centres, placed.halves, strict=True):
-            near |= np.all(np.abs(unknown - centre) < half + reach, axis=1)
-        return np.asarray(unknown[near], dtype=float)
+        # Within a cell of the padded shapes (their world boxes would hold
+        # several times as many cells, most of them free of the arm).
+        return unseen_held(world, grid.cell, found, unknown)
 
     def _view(
         self,
@@ -407,23 +389,42 @@ class Looker:
         )
         assert run.cameras is not None
         grid = run.cameras.grid
-        state = (grid.state_at, grid.cell)
+        aimed, blocking = self._aimed(q, targets, grid, world, budget)
+        samples = np.vstack([samples, aimed])
+        if len(blocking) > MAX_TARGETS:
+            pick = self._rng.choice(len(blocking), MAX_TARGETS, replace=False)
+            blocking = blocking[pick]
+        targets = [*targets, blocking]
+        geometry = world.geometry
+        body = RobotState(robot)
+        bare = -geometry.padding  # the shapes themselves hide what is behind
+
+        def inside(points: FloatArray) -> np.ndarray:
+            return geometry.contains(body, points, margin=bare)
+
         scored = []
         for sample in samples:
             budget.charge("collision_check")
             if not world.is_free(sample):
                 continue
+            body.update(sample)
             pose = self._pose(sample)
             seen = [
-                int(np.count_nonzero(sees(pose, self.camera, t, *state)))
+                float(
+                    np.sum(
+                        visibility(
+                            pose, self.camera, t, grid.state_at, grid.cell, inside
+                        )
+                    )
+                )
                 for t in targets
             ]
             score = sum(s / len(t) for s, t in zip(seen, targets, strict=True) if s)
             if score > 0:
                 move = float(np.max(np.abs(sample - q)))
-                scored.append((score, move, sum(seen), sample))
+                scored.append((score, move, round(sum(seen)), sample))
         scored.sort(key=lambda s: (-s[0], s[1]))
-        total = sum(len(t) for t in targets)
+        total = np.vstack(targets)
         for _, _, n, view in scored[:8]:
             path = self._straight(q, view, world, budget)
             if path is None and grow is not None:
@@ -431,6 +432,82 @@ class Looker:
             if path is not None:
                 return LookPlan(path, view, n, total)
         return None
+
+    def _aimed(
+        self,
+        q: FloatArray,
+        targets: list[FloatArray],
+        grid: OccupancyGrid,
+        world: CollisionWorld,
+        budget: Budget,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Configurations whose camera looks straight at the targets, from about them.
+
+        Views near the arm's configuration see little where the unseen space
+        lies behind an obstacle (the arm would have to rise over it and look
+        down). So camera poses are drawn about the centre of each set of
+        targets, looking at it from :data:`AIM_NEAR` to :data:`AIM_FAR` away,
+        where the camera can be carried from where it is through seen free
+        space (a straight line); those that would see the most are solved for
+        (the camera's roll left as near the arm's as it turns).
+
+        Returns:
+            The free configurations found (m, n), and the unseen cells that
+            keep the arm from the :data:`AIM_OPEN` others kept by the fewest
+            (k, 3): a look there first opens the way to them.
+        """
+        sets = [t for t in targets if len(t)]
+        rng = self._rng
+        found: list[FloatArray] = []
+        candidates: list[tuple[float, pin.SE3]] = []
+        here = self._pose(q)
+        unknown = grid.centres(UNKNOWN)
+        assert self.camera is not None
+        for centre in (np.mean(t, axis=0) for t in sets):
+            u = rng.normal(size=(AIMS, 3))
+            u /= np.linalg.norm(u, axis=1, keepdims=True)
+            eyes = centre + u * rng.uniform(AIM_NEAR, AIM_FAR, (AIMS, 1))
+            for eye in eyes:
+                if not clear_line(here.translation, eye, grid):
+                    continue
+                pose = looking_at(eye, centre, here.rotation)
+                score = sum(
+                    float(
+                        np.mean(
+                            visibility(pose, self.camera, t, grid.state_at, grid.cell)
+                        )
+                    )
+                    for t in sets
+                )
+                if score > 0:
+                    candidates.append((score, pose))
+        candidates.sort(key=lambda c: -c[0])
+        # The view the last look began to open, first: it may be free now.
+        assert self._frame is not None
+        frame = self._frame
+        solves = (
+            solve_camera(self.robot, frame, self._offset, p, q, budget)
+            for _, p in candidates[:AIM_TRIES]
+        )
+        kept: list[tuple[FloatArray, FloatArray]] = []
+        for solved in itertools.chain(self._opening, solves):
+            if solved is None:
+                continue
+            budget.charge("collision_check")
+            if world.is_free(solved):
+                found.append(solved)
+                if len(found) == AIM_SOLVED:
+                    break
+            else:
+                kept.append((solved, unseen_held(world, grid.cell, solved, unknown)))
+        # The views that the fewest unseen cells keep the arm from; the one
+        # kept by the fewest is opened until it is free (else every look would
+        # open a little of another).
+        kept.sort(key=lambda k: len(k[1]))
+        self._opening = [k[0] for k in kept[:1]]
+        blocked = [k[1] for k in kept[:AIM_OPEN]]
+        cells = np.unique(np.vstack([np.zeros((0, 3)), *blocked]), axis=0)
+        return np.array(found).reshape(-1, q.size), cells
 
     def _straight(
         self, q: FloatArray, view: FloatArray, world: CollisionWorld, budget: Budget

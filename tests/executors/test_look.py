@@ -10,11 +10,14 @@ import pytest
 
 from cbp.errors import ConfigError, ScenarioError
 from cbp.executors import load_executor
-from cbp.executors.look import sees
+from cbp.executors.aiming import looking_at, solve_camera
+from cbp.executors.clock import VirtualBudget, VirtualCosts
+from cbp.executors.visibility import UNSEEN_DEPTH, visibility
 from cbp.methods.settings import LookSettings
 from cbp.metrics import run_metrics
-from cbp.perception.kernels import FREE, OCCUPIED
+from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.spec import CameraSpec
+from cbp.robot import RobotModel
 from cbp.scenario import load_scenario
 from tests.conftest import VIRTUAL_CLOCK
 
@@ -44,8 +47,64 @@ def test_a_camera_sees_points_in_its_view_not_behind_an_occupied_cell() -> None:
             [0.5, 0.3, 0.0],  # the occupied cell itself is seen
         ]
     )
-    got = sees(camera, spec, points, state_at, cell)
-    np.testing.assert_array_equal(got, [True, False, False, False, False, True])
+    got = visibility(camera, spec, points, state_at, cell)
+    np.testing.assert_array_equal(got, [1.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+
+
+def test_unseen_space_on_the_line_makes_a_point_less_likely_seen() -> None:
+    """Each UNSEEN_DEPTH of unseen cells before a point: a factor e less; the robot hides."""
+    camera = pin.SE3(np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]]), np.zeros(3))
+    spec = CameraSpec(name="c", position=(0, 0, 0), target=(1, 0, 0), fov_deg=60.0)
+    cell = 0.01
+
+    def state_at(points: np.ndarray) -> np.ndarray:  # unseen beyond x = 0.5
+        return np.where(points[:, 0] > 0.5, UNKNOWN, FREE).astype(np.uint8)
+
+    points = np.array([[0.505, 0.0, 0.0], [0.6, 0.0, 0.0], [0.7, 0.0, 0.0]])
+    got = visibility(camera, spec, points, state_at, cell)
+    assert got[0] == 1.0  # on the frontier
+    depth = points[1:, 0] - 0.5 - 1.5 * cell  # the unseen length before each
+    np.testing.assert_allclose(got[1:], np.exp(-depth / UNSEEN_DEPTH), rtol=0.1)
+
+    def body(points: np.ndarray) -> np.ndarray:  # a link across the line at 0.3
+        return np.asarray(np.abs(points[:, 0] - 0.3) < 0.02)
+
+    hidden = visibility(camera, spec, points, state_at, cell, body)
+    np.testing.assert_array_equal(hidden, 0.0)
+
+
+def test_the_arm_is_solved_for_a_camera_pose_aimed_at_a_point(
+    robots: dict[str, RobotModel],
+) -> None:
+    """A pose looking at a point from a reachable eye: the camera's axis meets the point."""
+    robot = robots["panda"]
+    frame = robot.frame_id("panda_hand")
+    offset = pin.SE3(
+        pin.rpy.rpyToMatrix(0.0, np.deg2rad(25.0), 0.0), np.array([0.06, 0, 0.03])
+    )
+    q = np.array([-0.32, 0.09, -0.19, -2.33, 0.03, 2.42, -1.31])
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    here = data.oMf[frame] * offset
+    centre = np.array([0.45, 0.25, 0.3])
+    pose = looking_at(
+        here.translation + np.array([0.0, 0.05, 0.1]), centre, here.rotation
+    )
+    axis = (centre - pose.translation) / np.linalg.norm(centre - pose.translation)
+    np.testing.assert_allclose(pose.rotation[:, 2], axis, atol=1e-12)
+    # Rolled as near the old pose as the new axis allows: x in the plane of
+    # the old x and the new axis, on the old x's side.
+    x, old_x = pose.rotation[:, 0], here.rotation[:, 0]
+    assert abs(np.linalg.det(np.column_stack([x, old_x, axis]))) < 1e-12
+    assert np.dot(x, old_x) > 0.0
+    budget = VirtualBudget(10.0, VirtualCosts())
+    solved = solve_camera(robot, frame, offset, pose, q, budget)
+    assert solved is not None
+    pin.framesForwardKinematics(robot.model, data, solved)
+    there = data.oMf[frame] * offset
+    assert np.linalg.norm(there.translation - pose.translation) < 0.01
+    assert np.dot(there.rotation[:, 2], axis) > np.cos(0.05)
+    assert budget.elapsed() > 0.0
 
 
 def test_look_settings_are_checked() -> None:

@@ -1,0 +1,97 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Aiming the arm's camera: poses that look at a point, and the arm that puts it there.
+
+A look (:mod:`cbp.executors.look`) aims the camera mounted on the arm at what
+is unseen: a pose at a point that looks at another (:func:`looking_at`), that
+the camera can be carried to through seen free space (:func:`clear_line`),
+solved for (:func:`solve_camera`); and the unseen cells that keep a
+configuration from being free (:func:`unseen_held`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from cbp.collision.world import CollisionWorld
+from cbp.executors.clock import Budget
+from cbp.perception.kernels import FREE
+from cbp.perception.occupancy import OccupancyGrid
+from cbp.robot import FloatArray, RobotModel
+from cbp.state import RobotState
+
+__all__ = ["clear_line", "looking_at", "solve_camera", "unseen_held"]
+
+#: The solve's iterations, and how near the pose it must come [m], [rad].
+AIM_ITERATIONS = 100
+AIM_POSITION, AIM_ANGLE = 0.01, 0.05
+
+
+def solve_camera(
+    robot: RobotModel,
+    frame: int,
+    offset: pin.SE3,
+    pose: pin.SE3,
+    q: FloatArray,
+    budget: Budget,
+) -> FloatArray | None:
+    """A configuration from ``q`` that puts the camera at ``pose``, or None.
+
+    Damped least squares on the camera's parent ``frame`` (the camera is
+    ``offset`` from it); each iteration is charged to ``budget``.
+    """
+    model = robot.model
+    data = model.createData()
+    goal = pose * offset.inverse()
+    lower, upper = robot.lower_limits, robot.upper_limits
+    q = q.copy()
+    for _ in range(AIM_ITERATIONS):
+        budget.charge("ik_iteration")
+        pin.framesForwardKinematics(model, data, q)
+        error = goal.actInv(data.oMf[frame])
+        err = pin.log6(error).vector
+        if (
+            np.linalg.norm(err[:3]) < AIM_POSITION
+            and np.linalg.norm(err[3:]) < AIM_ANGLE
+        ):
+            return q
+        J = pin.Jlog6(error) @ pin.computeFrameJacobian(
+            model, data, q, frame, pin.LOCAL
+        )
+        dq = -J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(6), err)
+        q = np.clip(pin.integrate(model, q, dq), lower, upper)
+    return None
+
+
+def unseen_held(
+    world: CollisionWorld, cell: float, q: FloatArray, unknown: FloatArray
+) -> FloatArray:
+    """The ``unknown`` cell centres within a cell of the padded arm at ``q``."""
+    state = RobotState(world.geometry.robot)
+    state.update(q)
+    geometry = world.geometry
+    held = geometry.contains(
+        state, unknown, margin=world.padding - geometry.padding + cell
+    )
+    return np.asarray(unknown[held], dtype=float)
+
+
+def clear_line(a: FloatArray, b: FloatArray, grid: OccupancyGrid) -> bool:
+    """Whether the line from ``a`` to ``b`` lies in seen free cells all along."""
+    n = max(2, int(np.linalg.norm(b - a) / (0.5 * grid.cell)) + 1)
+    line = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+    return bool(np.all(grid.state_at(line) == FREE))
+
+
+def looking_at(eye: FloatArray, centre: FloatArray, rotation: FloatArray) -> pin.SE3:
+    """The optical pose at ``eye`` looking at ``centre``, rolled as near ``rotation``.
+
+    Its image's x axis is ``rotation``'s, made square to the new axis.
+    """
+    z = centre - eye
+    z = z / np.linalg.norm(z)
+    x = rotation[:, 0] - np.dot(rotation[:, 0], z) * z
+    if np.linalg.norm(x) < 1e-6:  # looking along the old x axis: keep its y
+        x = np.cross(rotation[:, 1], z)
+    x = x / np.linalg.norm(x)
+    return pin.SE3(np.column_stack([x, np.cross(z, x), z]), eye)
