@@ -83,7 +83,12 @@ def test_objects_are_where_their_timeline_puts_them() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("source", ["ground_truth", "depth_camera"])
 def test_a_wall_that_appears_ahead_of_the_arm_is_avoided(source) -> None:
-    """It appears >= 15 cm ahead of the arm and is never touched."""
+    """It appears >= 15 cm ahead of the arm and is never touched.
+
+    On the virtual clock: how far the arm has come when the wall appears, and
+    when the cameras see it, depend on the machine's load on the wall clock
+    (wall-clock runs are measured in docs/moving_scenes.md).
+    """
     scenario = load_scenario(
         SCENARIOS / "cat_appearing_obstacle.yaml",
         overrides={"perception.source": source, **VIRTUAL_CLOCK},
@@ -108,7 +113,8 @@ def test_a_box_pushed_into_the_standing_hand_makes_the_arm_yield() -> None:
     The arm must move out of its way (clear of the box at the end) and press on
     it with a small fraction of the force of an arm that holds its pose (JT's
     joint impedance). IK, which holds its goal too, backs out of the contact
-    first, as every method that plans per period does.
+    first, as every method that plans per period does. On the virtual clock:
+    the force ratio must not depend on the machine's load.
     """
     path = SCENARIOS / "cat_pushed_obstacle.yaml"
     cat = load_scenario(path, overrides=VIRTUAL_CLOCK)

@@ -35,6 +35,7 @@ def test_written_scenes_load_and_start_clear(tmp_path) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("source", ["ground_truth", "depth_camera"])
 def test_generated_scenes_run_without_contact(tmp_path, source) -> None:
+    """Two generated clutter scenes at 0 N (virtual clock: load-independent)."""
     for path in write_scenes(tmp_path, 2, seed=100):
         overrides = {"perception.source": source, **VIRTUAL_CLOCK}
         scenario = load_scenario(path, overrides=overrides)
