@@ -18,8 +18,9 @@ contact forces come from.
 Declared objects that move are measured where they will be after the
 look-ahead, along their declared velocity
 (:class:`~cbp.collision.objects.PrimitiveEnvironment`);
-:class:`DeclaredSeparationMonitor` says when one of them will be inside the
-padded arm by then: it comes faster than the arm retreats.
+:class:`DeclaredSeparationMonitor` says when one of them is nearer than the
+arm can get away from, given its speed and how fast the arm can retreat
+along the contact normal.
 """
 
 from __future__ import annotations

@@ -238,9 +238,27 @@ def time_parameterize(
     for i in range(n_points - 1):
         speed2[i + 1] = min(speed2[i + 1], speed2[i] + 2.0 * seg_acc[i])
     speed = np.sqrt(speed2)
-    durations, velocities = _durations(
-        speed, delta, seg_vel, seg_acc, v0, max_acceleration
-    )
+    # Segment durations: unit path length at the mean of the end speeds, but
+    # never longer than a quintic from rest to rest within the limits takes.
+    # Slow ends (a start velocity nearly across the path, both ends near rest)
+    # made the mean speed tiny and the segment seconds long, and the quintic
+    # kept the starting velocity over all of it: off the path by radians.
+    mean = 0.5 * (speed[:-1] + speed[1:])
+    with np.errstate(divide="ignore"):
+        at_mean = 1.0 / mean
+        rest_to_rest = np.maximum(
+            np.sqrt(QUINTIC_PEAK_ACCELERATION / seg_acc),
+            QUINTIC_PEAK_VELOCITY / seg_vel,
+        )
+    durations = np.minimum(at_mean, rest_to_rest)
+    velocities = np.empty_like(path)
+    velocities[0] = v0
+    velocities[-1] = 0.0
+    if n_points > 2:
+        direction = 0.5 * (delta[:-1] + delta[1:])
+        velocities[1:-1] = direction * speed[1:-1, None]
+    change = np.abs(velocities[1] - v0)
+    durations[0] = max(durations[0], float(np.max(change / max_acceleration)))
     times = t0 + np.concatenate([[0.0], np.cumsum(durations)])
     accelerations = np.zeros_like(path)
     accelerations[0] = a0
@@ -255,43 +273,6 @@ def time_parameterize(
             out=accelerations[1:-1],
         )
     return JointTrajectory(times, path, velocities, accelerations)
-
-
-def _durations(
-    speed: FloatArray,
-    delta: FloatArray,
-    seg_vel: FloatArray,
-    seg_acc: FloatArray,
-    v0: FloatArray,
-    max_acceleration: FloatArray,
-) -> tuple[FloatArray, FloatArray]:
-    """Segment durations and point velocities for path speeds ``speed``.
-
-    Each segment takes its unit path length at the mean of its end speeds, but
-    never longer than a quintic from rest to rest within the limits takes: slow
-    ends (a start velocity nearly across the path, both ends near rest) made
-    the mean speed tiny and the segment seconds long, and the quintic kept the
-    starting velocity over all of it, off the path by radians. The first
-    segment is long enough for the change from ``v0`` within the limits.
-    """
-    mean = 0.5 * (speed[:-1] + speed[1:])
-    with np.errstate(divide="ignore"):
-        at_mean = 1.0 / mean
-        rest_to_rest = np.maximum(
-            np.sqrt(QUINTIC_PEAK_ACCELERATION / seg_acc),
-            QUINTIC_PEAK_VELOCITY / seg_vel,
-        )
-    durations = np.minimum(at_mean, rest_to_rest)
-    n_points = speed.size
-    velocities = np.empty((n_points, delta.shape[1]))
-    velocities[0] = v0
-    velocities[-1] = 0.0
-    if n_points > 2:
-        direction = 0.5 * (delta[:-1] + delta[1:])
-        velocities[1:-1] = direction * speed[1:-1, None]
-    change = np.abs(velocities[1] - v0)
-    durations[0] = max(durations[0], float(np.max(change / max_acceleration)))
-    return durations, velocities
 
 
 #: A quintic from rest to rest over a unit distance in a unit time peaks at this
