@@ -27,10 +27,11 @@ goal has tried every start and found nothing, :class:`Looker`:
    (:func:`~cbp.executors.visibility.visibility`: within its field of view
    and range, nothing occupied and no part of the arm between, less likely
    the more unseen space lies between);
-5. hands the motion there to the trajectory loop, and holds ``look.dwell``
-   after it while the map takes the camera's frames in; the event then says
-   how many of the points looked for are seen now, and the planner searches
-   for the goal again.
+5. hands the motion there to the trajectory loop, and holds at the view
+   until the map has taken ``look.frames`` of the camera's frames captured
+   there (``look.dwell`` at the most); the event then says how many of the
+   points looked for are seen now, and the planner searches for the goal
+   again.
 
 At most ``look.looks`` looks per goal. Without a camera on the arm, the event
 says that no camera can be turned there.
@@ -181,20 +182,27 @@ class Looker:
     def holding(self, run: RunParts) -> bool:
         """Whether the arm should still move to, or hold at, the view.
 
-        The hold ends ``look.dwell`` after the trajectory being followed (the
-        look's) ends; then the planner searches for the goal again.
+        The hold ends once the map has taken ``look.frames`` frames of the
+        camera captured after the look's trajectory ended (``look.dwell``
+        after it at the latest); then the planner searches for the goal again.
         """
         if not self._looking:
             return False
+        assert self.camera is not None
         t = run.sim.t
-        if t < run.sim.trajectory.end_time + self.settings.dwell - 1e-9:
+        arrived = run.sim.trajectory.end_time
+        mapped = run.mapped_since(self.camera.name, arrived)
+        if t < arrived + self.settings.dwell - 1e-9 and (
+            t < arrived - 1e-9 or mapped < self.settings.frames
+        ):
             return True
         self._looking = False
         watched = self._watched
         seen = len(watched) - int(np.count_nonzero(run.unseen(watched)))
         run.event(
             t,
-            f"{self.method}: looked (held the view {self.settings.dwell:g} s; "
+            f"{self.method}: looked (held the view {max(t - arrived, 0.0):.2f} s; "
+            f"{min(mapped, self.settings.frames)} of its frames mapped; "
             f"{seen} of the {len(watched)} unseen points looked for are seen now); "
             "searching for the goal again",
         )

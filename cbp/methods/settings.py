@@ -220,7 +220,8 @@ class LookSettings:
     search finds none and at least ``unseen_share`` of the cube of ``radius``
     about the goal is unseen, the planner says so and (with a camera mounted
     on the arm) plans to a configuration from which that camera sees the
-    goal, holds there ``dwell`` while the map takes it in, and searches again
+    goal, holds there until the map has taken ``frames`` of that camera's frames
+    captured at the view (``dwell`` at the most), and searches again
     (:mod:`cbp.executors.look`).
     """
 
@@ -235,8 +236,12 @@ class LookSettings:
     """Half the side of the cube about the goal's position measured [m]."""
     unseen_share: float = 0.25
     """Look when at least this share of the cube is unseen."""
+    frames: int = 2
+    """Frames of the camera, captured at the view, that the map takes in
+    before the search goes on (more fill the holes of depth dropouts)."""
     dwell: float = 0.4
-    """How long the arm holds at the view while the map takes it in [s]."""
+    """The longest the arm holds at the view waiting for them [s] (a camera
+    whose frames are dropped, or a map that lags, ends the hold then)."""
     looks: int = 16
     """Looks per goal at most (tries that find no view count). Behind the
     wall of ``cat_local_minimum`` the hybrid needed 11 (about a second each)
@@ -249,6 +254,7 @@ class LookSettings:
         require_between(self, 0.005, 0.5, "m", "radius")
         require_between(self, 0.0, 10.0, "s", "dwell")
         require_between(self, 1, 100, "looks", "looks")
+        require_between(self, 1, 100, "frames", "frames")
 
 
 @dataclass(frozen=True, kw_only=True)

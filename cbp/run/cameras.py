@@ -15,6 +15,8 @@ through the robot).
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 from cbp.collision.objects import PrimitiveEnvironment
@@ -36,7 +38,10 @@ from cbp.sim.raycast import RayCaster
 from cbp.sim.simulation import Simulation
 from cbp.state import RobotState
 
-__all__ = ["Cameras"]
+__all__ = ["KEPT_CAPTURES", "Cameras"]
+
+#: Capture times kept per camera (:meth:`Cameras.mapped_since` counts up to it).
+KEPT_CAPTURES = 16
 
 
 class Cameras:
@@ -123,6 +128,10 @@ class Cameras:
             else updater(grid, world, estimator=estimator)
         )
         self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
+        #: Per camera: capture times of its latest frames handed to the map.
+        self._submitted: list[deque[float]] = [
+            deque(maxlen=KEPT_CAPTURES) for _ in self.cameras
+        ]
         #: Says when a moving obstacle comes nearer than the arm can afford.
         self.separation = SeparationMonitor(world, log, spec.moving_speed)
 
@@ -161,12 +170,25 @@ class Cameras:
             frame = self._checked_frame(i, due[i])
             if frame is not None:
                 self.mapper.submit(frame, sim.q.copy(), due[i])
+                self._submitted[i].append(due[i])
             if self.mapper.error is not None:
                 error, self.mapper.error = self.mapper.error, None
                 self._log.event(sim.t, f"map update: {error}")
             due[i] += 1.0 / self.cameras[i].spec.rate_hz
         self.mapper.release(t)
         self.separation.check(sim.t, sim.q)
+
+    def mapped_since(self, name: str, t: float) -> int:
+        """How many frames of camera ``name`` captured at or after ``t`` are mapped.
+
+        A frame counts once the map has published a snapshot as new as its
+        capture (a frame the map skipped for a newer one of the same camera
+        counts too: the newer one carries what it saw). Counts up to
+        :data:`KEPT_CAPTURES`.
+        """
+        i = next(k for k, c in enumerate(self.cameras) if c.name == name)
+        stamp = self.mapper.stamp
+        return sum(1 for c in self._submitted[i] if t - 1e-9 <= c <= stamp + 1e-9)
 
     def hold_reason(self, t: float) -> str | None:
         """Why the robot must hold at ``t``, or None.

@@ -102,6 +102,13 @@ class RunParts:
             return np.zeros(len(np.asarray(points).reshape(-1, 3)), dtype=bool)
         return self.cameras.unseen(points)
 
+    def mapped_since(self, camera: str, t: float) -> int:
+        """How many frames of ``camera`` captured at or after ``t`` the map holds.
+
+        0 without cameras.
+        """
+        return 0 if self.cameras is None else self.cameras.mapped_since(camera, t)
+
     def hold_reason(self, t: float) -> str | None:
         """Why the robot must hold at ``t`` (a camera without valid frames), or None."""
         return None if self.cameras is None else self.cameras.hold_reason(t)
