@@ -118,14 +118,13 @@ class CameraSpec:
     """Far clipping distance [m]; farther surfaces are not seen."""
     rate_hz: float = 15.0
     """Frames per second."""
-    renderer: Literal["tiny", "raycast"] = "tiny"
-    """How a simulated camera renders: ``tiny``, PyBullet's tiny renderer (tens
-    of ms a frame), or ``raycast``, a compiled ray cast against the scene's
-    shapes (:mod:`cbp.sim.raycast`: 1-2 ms a frame; the pixels agree within
-    1 mm but on silhouette edges). Not yet the default: with it, the box
-    lowered onto the arm of ``cat_pushed_obstacle`` (virtual clock, noise seed
-    0) pressed the arm with 38 N, against 0 N with the tiny renderer (0 N with
-    both at seeds 1 and 2). A real camera ignores it."""
+    renderer: Literal["tiny", "raycast"] = "raycast"
+    """How a simulated camera renders: ``raycast``, a compiled ray cast against
+    the scene's shapes (:mod:`cbp.sim.raycast`: 1-2 ms a frame), or ``tiny``,
+    PyBullet's tiny renderer (10-35 ms a frame, in the control loop's process);
+    the pixels agree within 1 mm but on silhouette edges, and the ray cast
+    sees spheres and cylinders as they are, not as coarse hulls. A real
+    camera ignores it."""
     body: Vec3 | None = (0.04, 0.04, 0.025)
     """A mounted camera's housing [m]: a box (width, height, depth) along the
     optical frame's x, y and z, its front face at the optical centre. It joins
