@@ -62,16 +62,19 @@ def near_objects(
     upper: FloatArray,
     candidates: IntArray,
     margin: float,
-    out_shape: IntArray,
-    out_object: IntArray,
-) -> int:
+) -> tuple[IntArray, IntArray]:
     """The (shape, object) pairs whose bounds are within ``margin``.
 
     Objects are world-aligned boxes (``lower``, ``upper``); only those listed in
     ``candidates`` are tested, and first against the box around all the shapes'
-    spheres, so that objects far from the robot cost one test each. Writes the
-    pairs, shape-major, to the outputs and returns their number.
+    spheres, so that objects far from the robot cost one test each.
+
+    Returns:
+        The pairs' shapes and objects, shape-major.
     """
+    capacity = len(centres) * len(candidates)
+    out_shape = np.empty(capacity, dtype=np.intp)
+    out_object = np.empty(capacity, dtype=np.intp)
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for s in range(len(centres)):
@@ -108,7 +111,7 @@ def near_objects(
                 out_shape[n] = s
                 out_object[n] = k
                 n += 1
-    return n
+    return out_shape[:n], out_object[:n]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -151,7 +154,5 @@ def compile_broad_phase() -> None:
     radii = np.ones(2)
     pairs = np.zeros(1, dtype=np.intp)
     out = np.empty(2, dtype=np.intp)
-    near_objects(
-        centres, halves, radii, centres, centres + 1.0, pairs, 0.1, out, out.copy()
-    )
+    near_objects(centres, halves, radii, centres, centres + 1.0, pairs, 0.1)
     near_pairs(centres, halves, radii, pairs, pairs + 1, 0.1, out)

@@ -38,11 +38,13 @@ tolerance), so two threads that query the same environment at once (each
 writing its guesses) change how many iterations a pair takes, not the
 contacts.
 
-Shapes are packed in flat arrays (:class:`ConvexShapes`): numba dispatches
-flat arrays faster than tuples of them, so the kernels called from Python take
-each array on its own and pass them on as a :data:`Table`. Inside the kernels,
-one shape where it stands is a :class:`PlacedConvex`, and one function gives
-the support point of A - B for GJK and EPA alike.
+Shapes are packed in flat arrays (:class:`ConvexShapes`), which the kernels
+take grouped in plain tuples (:data:`Table`, :data:`Placed`, :data:`Obstacles`,
+:data:`SelfPairs`): numba types a plain tuple of arrays in its compiled
+dispatcher (about 0.1 us for a whole query's arguments, as for the arrays one
+by one), a named tuple in Python (about 0.5 us for each of them). Inside the
+kernels, one shape where it stands is a :class:`PlacedConvex`, and one
+function gives the support point of A - B for GJK and EPA alike.
 """
 
 from __future__ import annotations
@@ -50,7 +52,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import coal
 import numba
@@ -74,8 +76,12 @@ __all__ = [
     "SPHERE",
     "UNSUPPORTED",
     "ConvexShapes",
+    "LocalBounds",
+    "Obstacles",
+    "Placed",
     "PlacedConvex",
     "RobotTable",
+    "SelfPairs",
     "Table",
     "compile_convex_kernels",
     "declared_contacts",
@@ -161,9 +167,13 @@ class RobotTable:
     self_guess: FloatArray
 
     @property
-    def arrays(self) -> tuple[Any, ...]:
-        """Bounds and packed shapes in :func:`declared_contacts`' order."""
-        return (self.centres, self.halves, self.radii, *fields(self.shapes))
+    def bounds(self) -> LocalBounds:
+        """Bounds and packed shapes as :func:`declared_contacts` takes them."""
+        return (self.centres, self.halves, self.radii, fields(self.shapes))
+
+    def pairs(self, margin: float, padding: float) -> SelfPairs:
+        """The self pairs as :func:`declared_contacts` takes them."""
+        return (self.first, self.second, self.self_guess, margin, padding)
 
 
 class PlacedConvex(NamedTuple):
@@ -193,10 +203,42 @@ class PlacedConvex(NamedTuple):
     frame: FloatArray
 
 
-#: A packed table's arrays, in :func:`fields`' order, as they pass inside the kernels.
+#: A packed table's arrays, in :func:`fields`' order, as the kernels take them.
 Table = tuple[
     IntArray, FloatArray, FloatArray, IntArray, FloatArray, IntArray, IntArray
 ]
+#: A placed robot as the kernels take it (:func:`placed_robot`): its shapes'
+#: bounds in the world (centres (n, 3), box half extents (n, 3), sphere radii
+#: (n,), :mod:`cbp.collision.broad`'s), their placements (n, 4, 4) and their
+#: packed :data:`Table`.
+Placed = tuple[FloatArray, FloatArray, FloatArray, FloatArray, Table]
+#: A robot's shapes as :func:`declared_contacts` takes them
+#: (:attr:`RobotTable.bounds`): the bounds in the shapes' own frames (centres,
+#: halves, radii) and the packed :data:`Table`.
+LocalBounds = tuple[FloatArray, FloatArray, FloatArray, Table]
+#: Declared objects as the kernels take them (a
+#: :class:`~cbp.collision.objects.PrimitiveEnvironment` builds them): their
+#: swept boxes ``lower``, ``upper`` (m, 3), the ``candidates`` to test (indices),
+#: their placements (m, 4, 4) and packed :data:`Table`, ``skip`` (n, m) (the
+#: wanted contacts, not measured), each pair's GJK start ``guess`` (n, m, 5)
+#: (:func:`pair_distance`'s), ``ahead`` (m, 3) (each object's displacement over
+#: the look-ahead), whether any object moves, and the margin [m].
+Obstacles = tuple[
+    FloatArray,
+    FloatArray,
+    IntArray,
+    FloatArray,
+    Table,
+    npt.NDArray[np.bool_],
+    FloatArray,
+    FloatArray,
+    bool,
+    float,
+]
+#: A robot's self pairs as the kernels take them: ``first``, ``second`` (P,),
+#: each pair's GJK start ``self_guess`` (P, 5), the margin and the padding
+#: taken off the distances [m].
+SelfPairs = tuple[IntArray, IntArray, FloatArray, float, float]
 
 
 def pack_shapes(shapes: list[coal.CollisionGeometry]) -> ConvexShapes:
@@ -836,61 +878,54 @@ def _write(floats: FloatArray, row: int, out: FloatArray, distance: float) -> No
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _obstacle_pairs(
-    centres: FloatArray,
-    halves: FloatArray,
-    radii: FloatArray,
-    frames: FloatArray,
-    robot: Table,
-    lower: FloatArray,
-    upper: FloatArray,
-    candidates: IntArray,
-    object_frames: FloatArray,
-    objects: Table,
-    skip: npt.NDArray[np.bool_],
-    guess: FloatArray,
-    ahead: FloatArray,
-    moving: bool,
-    margin: float,
-    shape_out: IntArray,
-    object_out: IntArray,
+def obstacle_contacts(
+    robot: Placed,
+    objects: Obstacles,
+    index: IntArray,
     floats: FloatArray,
-    left_shape: IntArray,
-    left_object: IntArray,
+    left: IntArray,
 ) -> tuple[int, int]:
-    """:func:`obstacle_contacts` of the tables ``robot`` and ``objects``."""
-    capacity = len(centres) * len(candidates)
-    near_shape = np.empty(capacity, dtype=np.intp)
-    near_object = np.empty(capacity, dtype=np.intp)
-    pairs = near_objects(
-        centres,
-        halves,
-        radii,
-        lower,
-        upper,
-        candidates,
-        margin,
-        near_shape,
-        near_object,
+    """The robot shapes' contacts with declared objects, broad and narrow phase.
+
+    The pairs :func:`~cbp.collision.broad.near_objects` keeps, except those
+    the objects skip (wanted contacts), are measured (each from its
+    ``guess``, :func:`pair_distance`'s); those nearer than the margin are
+    written: ``index`` (2, K) the shape and the object, ``floats`` (4, K, 3)
+    the point on the shape, the point on the object, the unit normal from the
+    object toward the shape and (``[3, :, 0]``) the distance. A moving
+    object's distance is less its approach along the normal (its displacement
+    over the look-ahead, ``ahead``).
+
+    Pairs with a shape the kernels do not measure, or that EPA could not start
+    on, are written to ``left`` (2, L), (shape, object), for coal.
+
+    Returns:
+        (contacts written, pairs left for coal).
+    """
+    centres, halves, radii, frames, table = robot
+    lower, upper, candidates, object_frames, object_table = objects[:5]
+    skip, guess, ahead, moving, margin = objects[5:]
+    near_shape, near_object = near_objects(
+        centres, halves, radii, lower, upper, candidates, margin
     )
     work = np.empty((16, 3))
     out = np.empty(10)
     count = 0
-    left = 0
-    for p in range(pairs):
+    missed = 0
+    for p in range(len(near_shape)):
         s, k = near_shape[p], near_object[p]
         if skip[s, k]:
             continue
         status = _measure(
-            _placed(robot, frames, s),
-            _placed(objects, object_frames, k),
+            _placed(table, frames, s),
+            _placed(object_table, object_frames, k),
             guess[s, k],
             work,
             out,
         )
         if status != 0:
-            left_shape[left], left_object[left] = s, k
-            left += 1
+            left[0, missed], left[1, missed] = s, k
+            missed += 1
             continue
         d = out[0]
         if moving:
@@ -899,235 +934,66 @@ def _obstacle_pairs(
                 0.0,
             )
         if d < margin:
-            shape_out[count], object_out[count] = s, k
+            index[0, count], index[1, count] = s, k
             _write(floats, count, out, d)
-            count += 1
-    return count, left
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _self_pairs(
-    centres: FloatArray,
-    halves: FloatArray,
-    radii: FloatArray,
-    frames: FloatArray,
-    robot: Table,
-    first: IntArray,
-    second: IntArray,
-    self_guess: FloatArray,
-    margin: float,
-    padding: float,
-    first_out: IntArray,
-    second_out: IntArray,
-    floats: FloatArray,
-    left: IntArray,
-) -> tuple[int, int]:
-    """:func:`self_contacts` of the table ``robot``."""
-    near = np.empty(len(first), dtype=np.intp)
-    pairs = near_pairs(centres, halves, radii, first, second, margin, near)
-    work = np.empty((16, 3))
-    out = np.empty(10)
-    count = 0
-    missed = 0
-    for p in range(pairs):
-        i, j = first[near[p]], second[near[p]]
-        status = _measure(
-            _placed(robot, frames, i),
-            _placed(robot, frames, j),
-            self_guess[near[p]],
-            work,
-            out,
-        )
-        if status != 0:
-            left[missed] = near[p]
-            missed += 1
-        elif out[0] < margin:
-            first_out[count], second_out[count] = i, j
-            _write(floats, count, out, out[0] - padding)
             count += 1
     return count, missed
 
 
-# The kernels called from Python take each table's arrays one by one: numba
-# dispatches them faster than tuples of them (measured: tuples added about
-# 1 us to declared_contacts' 6.4 us on the boards).
-
-
-@numba.njit(cache=True, nogil=True)
-def obstacle_contacts(
-    centres: FloatArray,
-    halves: FloatArray,
-    radii: FloatArray,
-    frames: FloatArray,
-    kind: IntArray,
-    size: FloatArray,
-    radius: FloatArray,
-    vertex_start: IntArray,
-    vertices: FloatArray,
-    neighbor_start: IntArray,
-    neighbors: IntArray,
-    lower: FloatArray,
-    upper: FloatArray,
-    candidates: IntArray,
-    object_frames: FloatArray,
-    object_kind: IntArray,
-    object_size: FloatArray,
-    object_radius: FloatArray,
-    object_start: IntArray,
-    object_vertices: FloatArray,
-    object_neighbor_start: IntArray,
-    object_neighbors: IntArray,
-    skip: npt.NDArray[np.bool_],
-    guess: FloatArray,
-    ahead: FloatArray,
-    moving: bool,
-    margin: float,
-    shape_out: IntArray,
-    object_out: IntArray,
-    floats: FloatArray,
-    left_shape: IntArray,
-    left_object: IntArray,
-) -> tuple[int, int]:
-    """The robot shapes' contacts with declared objects, broad and narrow phase.
-
-    The pairs :func:`~cbp.collision.broad.near_objects` keeps, except those in
-    ``skip`` (shape, object) (wanted contacts), are measured (starting from
-    ``guess`` (n, m, 5), :func:`pair_distance`'s); those nearer
-    than ``margin`` are written: the shape and object indices, and in
-    ``floats`` (4, K, 3) the point on the shape, the point on the object, the
-    unit normal from the object toward the shape and (``[3, :, 0]``) the
-    distance. A moving object's distance is less its approach along the
-    normal (``ahead`` (m, 3), its displacement over the look-ahead).
-
-    Pairs with a shape the kernels do not measure, or that EPA could not start
-    on, are written to ``left_shape`` and ``left_object`` for coal.
-
-    Returns:
-        (contacts written, pairs left for coal).
-    """
-    robot = (kind, size, radius, vertex_start, vertices, neighbor_start, neighbors)
-    objects = (
-        object_kind,
-        object_size,
-        object_radius,
-        object_start,
-        object_vertices,
-        object_neighbor_start,
-        object_neighbors,
-    )
-    return _obstacle_pairs(
-        centres,
-        halves,
-        radii,
-        frames,
-        robot,
-        lower,
-        upper,
-        candidates,
-        object_frames,
-        objects,
-        skip,
-        guess,
-        ahead,
-        moving,
-        margin,
-        shape_out,
-        object_out,
-        floats,
-        left_shape,
-        left_object,
-    )
-
-
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def self_contacts(
-    centres: FloatArray,
-    halves: FloatArray,
-    radii: FloatArray,
-    frames: FloatArray,
-    kind: IntArray,
-    size: FloatArray,
-    radius: FloatArray,
-    vertex_start: IntArray,
-    vertices: FloatArray,
-    neighbor_start: IntArray,
-    neighbors: IntArray,
-    first: IntArray,
-    second: IntArray,
-    self_guess: FloatArray,
-    margin: float,
-    padding: float,
-    first_out: IntArray,
-    second_out: IntArray,
+    robot: Placed,
+    pairs: SelfPairs,
+    index: IntArray,
     floats: FloatArray,
     left: IntArray,
 ) -> tuple[int, int]:
     """The contacts between the robot's own shape pairs (``first``, ``second``).
 
-    The pairs :func:`~cbp.collision.broad.near_pairs` keeps within ``margin``
-    are measured (from ``self_guess`` (P, 5)), shape ``second`` as B (the
-    normal points from it toward
-    ``first``); those nearer than ``margin`` are written as
-    :func:`obstacle_contacts` writes them, their distance less ``padding``.
-    Pairs the kernels cannot measure go to ``left`` (indices into the pairs).
+    The pairs :func:`~cbp.collision.broad.near_pairs` keeps within the
+    pairs' margin are measured (each from its ``self_guess``), shape
+    ``second`` as B (the normal points from it toward ``first``); those nearer
+    than the margin are written as :func:`obstacle_contacts` writes them,
+    their distance less the pairs' padding. Pairs the kernels cannot measure
+    go to ``left`` (2, L): -1, then the index into the pairs.
 
     Returns:
         (contacts written, pairs left for coal).
     """
-    robot = (kind, size, radius, vertex_start, vertices, neighbor_start, neighbors)
-    return _self_pairs(
-        centres,
-        halves,
-        radii,
-        frames,
-        robot,
-        first,
-        second,
-        self_guess,
-        margin,
-        padding,
-        first_out,
-        second_out,
-        floats,
-        left,
-    )
+    centres, halves, radii, frames, table = robot
+    first, second, self_guess, margin, padding = pairs
+    near = np.empty(len(first), dtype=np.intp)
+    found = near_pairs(centres, halves, radii, first, second, margin, near)
+    work = np.empty((16, 3))
+    out = np.empty(10)
+    count = 0
+    missed = 0
+    for p in range(found):
+        i, j = first[near[p]], second[near[p]]
+        status = _measure(
+            _placed(table, frames, i),
+            _placed(table, frames, j),
+            self_guess[near[p]],
+            work,
+            out,
+        )
+        if status != 0:
+            left[0, missed], left[1, missed] = -1, near[p]
+            missed += 1
+        elif out[0] < margin:
+            index[0, count], index[1, count] = i, j
+            _write(floats, count, out, out[0] - padding)
+            count += 1
+    return count, missed
 
 
 @numba.njit(cache=True, nogil=True)
 def declared_contacts(
     frames: FloatArray,
-    centres_local: FloatArray,
-    halves_local: FloatArray,
-    radii: FloatArray,
-    kind: IntArray,
-    size: FloatArray,
-    radius: FloatArray,
-    vertex_start: IntArray,
-    vertices: FloatArray,
-    neighbor_start: IntArray,
-    neighbors: IntArray,
-    lower: FloatArray,
-    upper: FloatArray,
-    candidates: IntArray,
-    object_frames: FloatArray,
-    object_kind: IntArray,
-    object_size: FloatArray,
-    object_radius: FloatArray,
-    object_start: IntArray,
-    object_vertices: FloatArray,
-    object_neighbor_start: IntArray,
-    object_neighbors: IntArray,
-    skip: npt.NDArray[np.bool_],
-    guess: FloatArray,
-    ahead: FloatArray,
-    moving: bool,
-    margin: float,
+    bounds: LocalBounds,
+    objects: Obstacles,
     padding: float,
-    first: IntArray,
-    second: IntArray,
-    self_guess: FloatArray,
-    self_margin: float,
-    self_padding: float,
+    pairs: SelfPairs,
     index: IntArray,
     floats: FloatArray,
     left: IntArray,
@@ -1135,12 +1001,9 @@ def declared_contacts(
     """A whole contact query against declared objects, in one call.
 
     The shapes' bounds from their world placements ``frames`` (n, 4, 4) and
-    their bounding boxes and spheres in their own frames
-    (:func:`~cbp.collision.broad.shape_bounds`), then :func:`obstacle_contacts`
-    with distances less ``padding``, then :func:`self_contacts` of the pairs
-    (``first``, ``second``) (none when empty) within ``self_margin``, less
-    ``self_padding``; each pair starts from its ``guess`` (n, m, 5) or
-    ``self_guess`` (P, 5) (:func:`pair_distance`).
+    ``bounds`` in their own frames (:func:`~cbp.collision.broad.shape_bounds`),
+    then :func:`obstacle_contacts` with distances less ``padding``, then
+    :func:`self_contacts` of the ``pairs`` (none when empty).
 
     The contacts are written in order, obstacles first: ``index`` (2, K) holds
     the shape and the other shape (-1 for objects), ``floats`` (4, K, 3) the
@@ -1151,65 +1014,25 @@ def declared_contacts(
     Returns:
         (obstacle contacts, self contacts, obstacle pairs left, self pairs left).
     """
+    centres_local, halves_local, radii, table = bounds
     n = len(frames)
     centres = np.empty((n, 3))
     halves = np.empty((n, 3))
     shape_bounds(frames, centres_local, halves_local, centres, halves)
-    robot = (kind, size, radius, vertex_start, vertices, neighbor_start, neighbors)
-    objects = (
-        object_kind,
-        object_size,
-        object_radius,
-        object_start,
-        object_vertices,
-        object_neighbor_start,
-        object_neighbors,
-    )
-    obstacles, obstacles_missed = _obstacle_pairs(
-        centres,
-        halves,
-        radii,
-        frames,
-        robot,
-        lower,
-        upper,
-        candidates,
-        object_frames,
-        objects,
-        skip,
-        guess,
-        ahead,
-        moving,
-        margin,
-        index[0],
-        index[1],
-        floats,
-        left[0],
-        left[1],
-    )
+    robot = (centres, halves, radii, frames, table)
+    obstacles, obstacles_missed = obstacle_contacts(robot, objects, index, floats, left)
     for c in range(obstacles):
         index[1, c] = -1
         floats[3, c, 0] -= padding
     own = own_missed = 0
-    if len(first):
-        own, own_missed = _self_pairs(
-            centres,
-            halves,
-            radii,
-            frames,
+    if len(pairs[0]):
+        own, own_missed = self_contacts(
             robot,
-            first,
-            second,
-            self_guess,
-            self_margin,
-            self_padding,
-            index[0, obstacles:],
-            index[1, obstacles:],
+            pairs,
+            index[:, obstacles:],
             floats[:, obstacles:],
-            left[1, obstacles_missed:],
+            left[:, obstacles_missed:],
         )
-        for c in range(obstacles_missed, obstacles_missed + own_missed):
-            left[0, c] = -1
     return obstacles, own, obstacles_missed, own_missed
 
 
@@ -1236,105 +1059,64 @@ def packed_robot(shapes: list[LinkShape]) -> ConvexShapes:
     return found[1]
 
 
-def placed_robot(
-    robot: PlacedShapes,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, *Table]:
-    """A placed robot's arrays in the order the kernels take them.
-
-    As :func:`obstacle_contacts` and :func:`self_contacts` take them: its
-    bounds (centres, halves, radii), world placements (n, 4, 4) and packed
-    shapes (:func:`packed_robot`).
-    """
+def placed_robot(robot: PlacedShapes) -> Placed:
+    """A placed robot as the kernels take it (:data:`Placed`)."""
     return (
         robot.centres,
         robot.halves,
         robot.radii,
         robot.placements.homogeneous,
-        *fields(packed_robot(robot.shapes)),
+        fields(packed_robot(robot.shapes)),
     )
 
 
 def compile_convex_kernels() -> None:
     """Compile the kernels (or load them from numba's cache) on tiny inputs."""
-    shapes = pack_shapes(
-        [
-            coal.Box(0.1, 0.1, 0.1),
-            coal.Sphere(0.05),
-            coal.Capsule(0.05, 0.1),
-            coal.Cylinder(0.05, 0.1),
-        ]
+    shapes = fields(
+        pack_shapes(
+            [
+                coal.Box(0.1, 0.1, 0.1),
+                coal.Sphere(0.05),
+                coal.Capsule(0.05, 0.1),
+                coal.Cylinder(0.05, 0.1),
+            ]
+        )
     )
     frames = np.tile(np.eye(4), (4, 1, 1))
     frames[:, 0, 3] = 0.0, 0.2, 0.4, 0.6
     centres = np.ascontiguousarray(frames[:, :3, 3])
     halves = np.full((4, 3), 0.1)
     radii = np.full(4, 0.2)
-    out = np.empty((4, 16, 3))
-    index = np.empty(16, dtype=np.intp)
+    robot = (centres, halves, radii, frames, shapes)
     first = np.array([0, 1], dtype=np.intp)
-    # The same shapes as objects: boxes, candidates, frames, tables, skip, guess.
-    objects: tuple[Any, ...] = (
-        centres - 0.1,
-        centres + 0.1,
-        np.arange(4, dtype=np.intp),
-        frames,
-        *fields(shapes),
-        np.zeros((4, 4), dtype=np.bool_),
-        np.zeros((4, 4, 5)),
-    )
-    for ahead in (False, True):
-        obstacle_contacts(  # type: ignore[call-arg]  # *objects: a tuple
-            centres,
-            halves,
-            radii,
-            frames,
-            *fields(shapes),
-            *objects,
-            np.zeros((4, 3)),
-            ahead,
-            0.1,
-            index,
-            index.copy(),
-            out,
-            index.copy(),
-            index.copy(),
-        )
-        declared_contacts(  # type: ignore[call-arg]  # *objects: a tuple
-            frames,
-            centres,
-            halves,
-            radii,
-            *fields(shapes),
-            *objects,
-            np.zeros((4, 3)),
-            ahead,
-            0.1,
-            0.01,
-            first,
-            first + 2,
-            np.zeros((2, 5)),
-            0.1,
-            0.02,
+    pairs = (first, first + 2, np.zeros((2, 5)), 0.1, 0.01)
+
+    def out() -> tuple[IntArray, FloatArray, IntArray]:
+        return (
             np.empty((2, 32), dtype=np.intp),
             np.empty((4, 32, 3)),
             np.empty((2, 32), dtype=np.intp),
         )
-    self_contacts(
-        centres,
-        halves,
-        radii,
-        frames,
-        *fields(shapes),
-        first,
-        first + 2,
-        np.zeros((2, 5)),
-        0.1,
-        0.01,
-        index,
-        index.copy(),
-        out,
-        index.copy(),
-    )
+
+    for moving in (False, True):
+        # The same shapes as objects, every one a candidate.
+        objects = (
+            centres - 0.1,
+            centres + 0.1,
+            np.arange(4, dtype=np.intp),
+            frames,
+            shapes,
+            np.zeros((4, 4), dtype=np.bool_),
+            np.zeros((4, 4, 5)),
+            np.zeros((4, 3)),
+            moving,
+            0.1,
+        )
+        obstacle_contacts(robot, objects, *out())
+        declared_contacts(
+            frames, (centres, halves, radii, shapes), objects, 0.01, pairs, *out()
+        )
+    self_contacts(robot, pairs, *out())
 
 
 def fields(shapes: ConvexShapes) -> Table:

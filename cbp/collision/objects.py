@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import coal
 import numpy as np
@@ -23,6 +22,7 @@ from scipy.spatial import cKDTree
 from cbp.collision.broad import near_objects
 from cbp.collision.contacts import ContactRow, ContactSet
 from cbp.collision.convex_kernels import (
+    Obstacles,
     RobotTable,
     compile_convex_kernels,
     declared_contacts,
@@ -240,20 +240,19 @@ class PrimitiveEnvironment(Environment):
 
     def _kernel_objects(
         self, candidates: IntArray, shapes: list[LinkShape], margin: float
-    ) -> tuple[Any, ...]:
-        """The objects' arguments of the compiled queries, in their order.
+    ) -> Obstacles:
+        """These objects as the compiled queries take them (:data:`Obstacles`).
 
-        As :func:`obstacle_contacts` and :func:`declared_contacts` take them
-        after the robot's: the objects' swept bounds, the ``candidates``, their
-        placements and packed shapes, the wanted contacts and GJK starts of
-        ``shapes``, their displacements and whether any moves, and ``margin``.
+        Their swept bounds, the ``candidates``, their placements and packed
+        shapes, the wanted contacts and GJK starts of ``shapes``, their
+        displacements, whether any moves, and ``margin``.
         """
         return (
             self._lower,
             self._upper,
             candidates,
             self._frames,
-            *self._fields,
+            self._fields,
             *self._skip(shapes),
             self._ahead,
             self._moving,
@@ -337,16 +336,12 @@ class PrimitiveEnvironment(Environment):
         index = np.empty((2, capacity), dtype=np.intp)
         floats = np.empty((4, capacity, 3))
         left = np.empty((2, capacity), dtype=np.intp)
-        obstacles, own, missed, missed_own = declared_contacts(  # type: ignore[call-arg]  # tuples of known length
+        obstacles, own, missed, missed_own = declared_contacts(
             frames,
-            *table.arrays,
-            *self._kernel_objects(candidates, shapes, margin),
+            table.bounds,
+            self._kernel_objects(candidates, shapes, margin),
             float(padding),
-            table.first,
-            table.second,
-            table.self_guess,
-            float(self_margin),
-            float(self_padding),
+            table.pairs(float(self_margin), float(self_padding)),
             index,
             floats,
             left,
@@ -395,22 +390,18 @@ class PrimitiveEnvironment(Environment):
     ) -> ContactSet:
         """The candidates' contacts in one compiled pass (coal for meshes)."""
         capacity = len(robot.centres) * len(candidates)
-        shape = np.empty(capacity, dtype=np.intp)
-        obstacle = np.empty(capacity, dtype=np.intp)
+        index = np.empty((2, capacity), dtype=np.intp)
         floats = np.empty((4, capacity, 3))
-        left_shape = np.empty(capacity, dtype=np.intp)
-        left_object = np.empty(capacity, dtype=np.intp)
-        count, left = obstacle_contacts(  # type: ignore[call-arg]  # tuples of known length
-            *placed_robot(robot),
-            *self._kernel_objects(candidates, robot.shapes, margin),
-            shape,
-            obstacle,
+        missed = np.empty((2, capacity), dtype=np.intp)
+        count, left = obstacle_contacts(
+            placed_robot(robot),
+            self._kernel_objects(candidates, robot.shapes, margin),
+            index,
             floats,
-            left_shape,
-            left_object,
+            missed,
         )
         contacts = ContactSet.obstacles(
-            shape[:count],
+            index[0, :count],
             floats[0, :count],
             floats[1, :count],
             floats[2, :count],
@@ -419,7 +410,7 @@ class PrimitiveEnvironment(Environment):
         if not left:
             return contacts
         rows = self._measure(
-            robot, left_shape[:left].tolist(), left_object[:left].tolist(), margin
+            robot, missed[0, :left].tolist(), missed[1, :left].tolist(), margin
         )
         return ContactSet.concatenate([contacts, ContactSet.from_rows(rows)])
 
@@ -428,25 +419,12 @@ class PrimitiveEnvironment(Environment):
     ) -> ContactSet:
         """The candidates' contacts, coal called from Python per pair."""
         centres, radii, halves = robot.centres, robot.radii, robot.halves
-        capacity = len(centres) * len(candidates)
-        shape_index = np.empty(capacity, dtype=np.intp)
-        object_index = np.empty(capacity, dtype=np.intp)
-        count = near_objects(
-            centres,
-            halves,
-            radii,
-            self._lower,
-            self._upper,
-            candidates,
-            margin,
-            shape_index,
-            object_index,
+        shape_index, object_index = near_objects(
+            centres, halves, radii, self._lower, self._upper, candidates, margin
         )
         pairs = [
             (i, k)
-            for i, k in zip(
-                shape_index[:count].tolist(), object_index[:count].tolist(), strict=True
-            )
+            for i, k in zip(shape_index.tolist(), object_index.tolist(), strict=True)
             if not (
                 self.objects[k].allow_contact
                 and robot.shapes[i].link in self.objects[k].allow_contact

@@ -478,16 +478,11 @@ class CollisionWorld:
         pad2 = 2.0 * self.padding
         index = np.empty((2, n), dtype=np.intp)
         floats = np.empty((4, n, 3))
-        left = np.empty(n, dtype=np.intp)
+        left = np.empty((2, n), dtype=np.intp)
         count, missed = self_contacts(
-            *placed_robot(robot),
-            first,
-            second,
-            guess,
-            self.settings.activation_distance + pad2,
-            pad2,
-            index[0],
-            index[1],
+            placed_robot(robot),
+            (first, second, guess, self.settings.activation_distance + pad2, pad2),
+            index,
             floats,
             left,
         )
@@ -495,7 +490,7 @@ class CollisionWorld:
         if not missed:
             return found
         return ContactSet.concatenate(
-            [found, ContactSet.from_rows(self.self_rows(robot, left[:missed]))]
+            [found, ContactSet.from_rows(self.self_rows(robot, left[1, :missed]))]
         )
 
     def self_rows(

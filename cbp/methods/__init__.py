@@ -8,25 +8,28 @@ Each row of :data:`METHODS` says what a method is (its name, as in
 what it can do. The scenario schema, the command line, ``cbp compare``, the
 sweeps, the figures and the pages all read this table.
 
+The scenario's ``method:`` section (:class:`MethodSpec`, one settings section
+per row) is declared here too, beside the rows.
+
 This package is plain data: it imports no executor, simulator or planner, so
-the scenario package can build its ``method:`` section from it while the
+the scenario package takes its ``method:`` section from it while the
 executors (above it) run what it names (:func:`cbp.executors.load_executor`).
 
 To add a method: write ``cbp/executors/<name>.py`` with ``run_<name>(scenario,
 gui=False)`` returning a :class:`~cbp.trace.Trace` (and ``make_planner(scenario,
 parts)`` if it plans per command period), put its settings dataclass in
-:mod:`cbp.methods.settings`, a field for it in
-:class:`cbp.scenario.spec.MethodSpec`, and a row here.
+:mod:`cbp.methods.settings`, and here a row and a field of :class:`MethodSpec`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
 from cbp.errors import ConfigError, require_choice
 from cbp.methods.settings import (
     CatSettings,
+    ExecutorTiming,
     HybridSettings,
     IkSettings,
     JtSettings,
@@ -40,9 +43,12 @@ __all__ = [
     "METHODS",
     "PERIODIC",
     "Method",
+    "MethodSpec",
     "method_colour",
     "method_info",
 ]
+
+T = TypeVar("T")
 
 #: The colour of a run whose method is not in the table (RGB 0-255).
 OTHER_COLOUR = (127, 127, 127)
@@ -227,3 +233,53 @@ def method_info(name: str, choices: tuple[str, ...] | None = None) -> Method:
     """
     require_choice(name, METHODS if choices is None else choices, "method", "")
     return METHODS[name]
+
+
+@dataclass(frozen=True, kw_only=True)
+class MethodSpec:
+    """The ``method:`` section: which method runs the scenario, and its settings.
+
+    One settings section per row of the method table (:data:`cbp.methods.METHODS`,
+    which says what each method does); only the named method's is used.
+    """
+
+    name: str = "kinematic"
+    """The method: one of :data:`cbp.methods.METHODS`."""
+    kinematic: KinematicSettings = field(default_factory=KinematicSettings)
+    """Settings of the kinematic executor."""
+    cat: CatSettings = field(default_factory=CatSettings)
+    """Settings of constraint-aware teleoperation."""
+    ik: IkSettings = field(default_factory=IkSettings)
+    """Settings of the IK executor."""
+    mp: MpSettings = field(default_factory=MpSettings)
+    """Settings of the motion planner (OMPL)."""
+    hybrid: HybridSettings = field(default_factory=HybridSettings)
+    """Settings of CAT with planning where it stalls."""
+    jt: JtSettings = field(default_factory=JtSettings)
+    """Settings of Jacobian-transpose control."""
+    velocity: VelocitySettings = field(default_factory=VelocitySettings)
+    """Settings of the velocity executor (mobile manipulator)."""
+
+    def __post_init__(self) -> None:
+        """A known method."""
+        require_choice(self.name, METHODS, "method", "name")
+
+    def settings(self, cls: type[T]) -> T:
+        """The settings section of type ``cls`` (``method.settings(CatSettings)``)."""
+        for row in METHODS.values():
+            if row.settings is cls:
+                value: T = getattr(self, row.name)
+                return value
+        raise KeyError(f"no method has settings of type {cls.__name__}")
+
+    def timing(self, name: str) -> ExecutorTiming:
+        """The loop timing of periodic method ``name`` (the hybrid runs CAT's).
+
+        Raises:
+            ValueError: ``name`` does not plan per command period.
+        """
+        row = method_info(name)
+        if row.timing is None:
+            raise ValueError(f"the {name} executor has no per-period planner")
+        timing: ExecutorTiming = getattr(self, row.timing).timing
+        return timing

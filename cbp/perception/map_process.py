@@ -162,13 +162,13 @@ class ProcessMapUpdater(SnapshotPublisher):
             child takes it over; from now on this process only reads its
             cells, which move to shared memory).
         world: the collision world whose environment is replaced.
-        synchronous: must be False (a map that takes each frame at once is
-            :class:`~cbp.perception.mapper.MapUpdater`'s).
         estimator: the approach estimate to run in the child (its window), or
             None: snapshots as mapped.
 
+    A map that takes each frame at once (for tests and virtual time) is
+    :class:`~cbp.perception.mapper.MapUpdater`'s (``synchronous``).
+
     Raises:
-        ValueError: ``synchronous`` is True.
         RuntimeError: the child did not start (its reason).
     """
 
@@ -176,18 +176,12 @@ class ProcessMapUpdater(SnapshotPublisher):
         self,
         grid: OccupancyGrid,
         world: CollisionWorld,
-        synchronous: bool = False,
         estimator: ApproachEstimator | None = None,
     ) -> None:
         """Create the shared memory, start the child and wait until it is ready."""
-        if synchronous:
-            raise ValueError(
-                "a map process cannot take each frame at once: use MapUpdater"
-            )
         super().__init__()
         self.grid = grid
         self.world = world
-        self.synchronous = False
         self.estimator = estimator
         self.stamp = self.submitted_t = 0.0
         self._segments: list[SharedMemory] = []

@@ -3,30 +3,21 @@
 
 :func:`cbp.scenario.load_scenario` builds these from YAML with located errors
 (:mod:`cbp.schema`); tasks and constraints are bound to plugins there. The
-``method:`` section has one settings section per row of the method table
-(:data:`cbp.methods.METHODS`); the scenario package imports no executor.
+``method:`` section (:class:`cbp.methods.MethodSpec`) is declared beside the
+method table, one settings section per row; the scenario package imports no
+executor.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import Any
 
 from cbp.collision.settings import CollisionSettings
 from cbp.errors import ConfigError, require_choice
 from cbp.files import check_folder_name
 from cbp.goals import GoalSpec
-from cbp.methods import METHODS, method_info
-from cbp.methods.settings import (
-    CatSettings,
-    ExecutorTiming,
-    HybridSettings,
-    IkSettings,
-    JtSettings,
-    KinematicSettings,
-    MpSettings,
-    VelocitySettings,
-)
+from cbp.methods import MethodSpec
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import BaseType
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
@@ -41,8 +32,6 @@ __all__ = [
     "SolverSpec",
     "WorldSpec",
 ]
-
-T = TypeVar("T")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -78,56 +67,6 @@ class SolverSpec:
             raise ConfigError(
                 f"must be > 0, got {self.regularization}", "regularization"
             )
-
-
-@dataclass(frozen=True, kw_only=True)
-class MethodSpec:
-    """The ``method:`` section: which method runs the scenario, and its settings.
-
-    One settings section per row of the method table (:data:`cbp.methods.METHODS`,
-    which says what each method does); only the named method's is used.
-    """
-
-    name: str = "kinematic"
-    """The method: one of :data:`cbp.methods.METHODS`."""
-    kinematic: KinematicSettings = field(default_factory=KinematicSettings)
-    """Settings of the kinematic executor."""
-    cat: CatSettings = field(default_factory=CatSettings)
-    """Settings of constraint-aware teleoperation."""
-    ik: IkSettings = field(default_factory=IkSettings)
-    """Settings of the IK executor."""
-    mp: MpSettings = field(default_factory=MpSettings)
-    """Settings of the motion planner (OMPL)."""
-    hybrid: HybridSettings = field(default_factory=HybridSettings)
-    """Settings of CAT with planning where it stalls."""
-    jt: JtSettings = field(default_factory=JtSettings)
-    """Settings of Jacobian-transpose control."""
-    velocity: VelocitySettings = field(default_factory=VelocitySettings)
-    """Settings of the velocity executor (mobile manipulator)."""
-
-    def __post_init__(self) -> None:
-        """A known method."""
-        require_choice(self.name, METHODS, "method", "name")
-
-    def settings(self, cls: type[T]) -> T:
-        """The settings section of type ``cls`` (``method.settings(CatSettings)``)."""
-        for row in METHODS.values():
-            if row.settings is cls:
-                value: T = getattr(self, row.name)
-                return value
-        raise KeyError(f"no method has settings of type {cls.__name__}")
-
-    def timing(self, name: str) -> ExecutorTiming:
-        """The loop timing of periodic method ``name`` (the hybrid runs CAT's).
-
-        Raises:
-            ValueError: ``name`` does not plan per command period.
-        """
-        row = method_info(name)
-        if row.timing is None:
-            raise ValueError(f"the {name} executor has no per-period planner")
-        timing: ExecutorTiming = getattr(self, row.timing).timing
-        return timing
 
 
 @dataclass(frozen=True, kw_only=True)

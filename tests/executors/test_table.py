@@ -8,10 +8,9 @@ import pytest
 
 from cbp.executors import make_planner
 from cbp.executors.trajectory import run_trajectory_executor
-from cbp.methods import METHODS, PERIODIC
+from cbp.methods import METHODS, PERIODIC, MethodSpec
 from cbp.run import build_run
 from cbp.scenario import load_scenario
-from cbp.scenario.spec import MethodSpec
 from tests.executors.test_cat import SCENARIOS
 
 

@@ -179,16 +179,6 @@ def test_close_frees_every_segment_and_the_process(robots) -> None:
     assert process.grid.cells.size > 0  # a copy of the last cells is kept
 
 
-def test_the_process_does_not_take_frames_at_once(robots) -> None:
-    """``synchronous=True`` is the thread's: the process refuses it."""
-    geometry = RobotGeometry(robots["panda"])
-    grid = OccupancyGrid(SPEC, geometry)
-    world = CollisionWorld(geometry, grid.environment())
-    with pytest.raises(ValueError, match="MapUpdater"):
-        ProcessMapUpdater(grid, world, synchronous=True)
-    assert _segments() == []
-
-
 def test_a_map_behind_the_cameras_holds_the_robot() -> None:
     """Frames submitted more than the timeout after the last snapshot's stamp hold."""
     publisher = SnapshotPublisher()
