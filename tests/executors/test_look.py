@@ -153,8 +153,9 @@ def test_mp_with_the_cameras_reaches_the_wrist_limit_goal() -> None:
 def test_the_hybrid_escapes_the_local_minimum_with_the_cameras() -> None:
     """CAT stalls before the wall; the hybrid looks until it sees a way, plans, reaches.
 
-    The looks take about a second each, so the run is 20 s long (the
-    scene's own 8 s ends while the hybrid is still looking).
+    The run is 20 s long: the stall takes 2.2 s, six looks about a second
+    each and the plan over the wall 3.4 s (it reaches at 12.6 s); the
+    scene's own 8 s ends while the hybrid is still looking.
     """
     scenario = load_scenario(
         SCENARIOS / "cat_local_minimum.yaml",
@@ -169,3 +170,5 @@ def test_the_hybrid_escapes_the_local_minimum_with_the_cameras() -> None:
     assert m["plans"] == 1
     assert m["reached"], m["final_position_error_m"]
     assert m["peak_contact_force_n"] == 0.0
+    # Holding each view a fixed 0.4 s, it took 11 looks and reached at 18.8 s.
+    assert m["total_time_s"] < 15.0, m["looks"]
