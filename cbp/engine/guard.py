@@ -66,6 +66,7 @@ class StepGuard:
             or np.isfinite(robot.upper_limits).any()
         )
         self._joint_name = joint_name
+        self._shape = (robot.nv,)
         self._euclidean = bool(robot.is_euclidean)
         # The four bounds of a Euclidean robot in one array: the compiled check
         # takes it as one argument (each array costs numba's dispatch ~50 ns).
@@ -111,8 +112,10 @@ class StepGuard:
         robot = self.robot
         slowed = 1.0
         dq = np.ascontiguousarray(dq, dtype=float)
-        if dq.shape != (robot.nv,):
-            raise UnsafeStepError(f"step rejected: {dq.shape} values, not {robot.nv}")
+        if dq.shape != self._shape:
+            raise UnsafeStepError(
+                f"step rejected: {dq.shape} values, not {self._shape[0]}"
+            )
         if self._euclidean and q.shape == dq.shape:
             # Every check in one compiled call; the messages below only when
             # one fails (the same checks, in the same order).
