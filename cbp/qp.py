@@ -413,6 +413,15 @@ def _is_soft_task(entry: Entry) -> bool:
     return isinstance(entry.plugin, Task) and entry.priority == "soft"
 
 
+def _limits_step(task: Task[Any]) -> bool:
+    """Whether a task limits its step (overrides either of Task's two calls)."""
+    kind = type(task)
+    return (
+        kind.limit_step is not Task.limit_step
+        or kind.limit_step_into is not Task.limit_step_into
+    )
+
+
 class _Block:
     """Preallocated rows of a group of entries: stacked values, Jacobians, weights.
 
@@ -455,9 +464,7 @@ class _Block:
         np.negative(self.gains, out=self.negative_gains)
         self.desired = arena.take((m,))
         self.limiting: list[tuple[slice, Task[Any]]] = [
-            (sl, p)
-            for sl, p in self.items
-            if isinstance(p, Task) and type(p).limit_step is not Task.limit_step
+            (sl, p) for sl, p in self.items if isinstance(p, Task) and _limits_step(p)
         ]
         # The limiting tasks with their rows of ``desired`` (views, made once).
         self._limited = [(task, self.desired[sl]) for sl, task in self.limiting]
@@ -512,9 +519,7 @@ class _Block:
         """Write -k f of every row, after the tasks' step limits, into ``desired``."""
         np.multiply(self.f, self.negative_gains, out=self.desired)
         for task, rows in self._limited:
-            limited = task.limit_step(rows)
-            if limited is not rows:
-                rows[:] = limited
+            task.limit_step_into(rows)
 
     def collect_bounds(self, state: RobotState) -> None:
         """Write every constraint's (lower, upper) on f into ``lower`` and ``upper``."""
