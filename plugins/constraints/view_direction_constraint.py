@@ -80,7 +80,7 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
     def compute_value(self, state: RobotState) -> FloatArray:
         """Image-plane direction, or eq. 8."""
         value = np.empty(self.dim)
-        self._rows(state, value, _NO_JACOBIAN, _NO_JACOBIAN)
+        self._rows(state, value, _NO_JACOBIAN, _NO_ROWS)
         return value
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
@@ -134,8 +134,12 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
         return {"view_error_deg": math.degrees(self.angle(state))}
 
 
-#: The Jacobian passed when only the value is wanted (no columns: not read).
+#: The frame Jacobian and the rows' Jacobian passed when only the value is
+#: wanted (no columns: neither is read). Read-only and writeable as a state's
+#: frame Jacobian and the engine's rows are: the kernel compiles once.
 _NO_JACOBIAN = np.zeros((0, 0))
+_NO_JACOBIAN.flags.writeable = False
+_NO_ROWS = np.zeros((0, 0))
 
 
 @numba.njit(cache=True, nogil=True)
