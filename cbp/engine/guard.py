@@ -82,6 +82,21 @@ class StepGuard:
             if self._euclidean
             else np.zeros((4, 0))
         )
+        self._compile(robot)
+
+    def _compile(self, robot: RobotModel) -> None:
+        """Compile the checks (or load them from numba's cache) on a zero step.
+
+        Here, when the engine is made, rather than in its first control step;
+        on arrays of the kinds a step passes (writeable q, step and velocity;
+        the robot's read-only limits).
+        """
+        q, dq = np.zeros(robot.nq), np.zeros(robot.nv)
+        if self._euclidean:
+            _euclidean_check(q, dq, self._bounds, 0.01, dq, True, 1e-4, True)
+        _speed_ratio(dq, self.speed_bound, 0.01)
+        _acceleration_ratio(dq, dq, self.acceleration_bound, 0.01)
+        _past_limits(q, q, robot.lower_limits, robot.upper_limits, 1e-4)
 
     def check(
         self, q: FloatArray, dq: FloatArray, dt: float, v: FloatArray | None = None

@@ -20,7 +20,7 @@ def test_steps_compile_nothing_after_the_engine_is_built() -> None:
     script = """
 import numpy as np
 from benchmarks.bench import GOALS, _engine
-from cbp.engine import ahead
+from cbp.engine import ahead, engine as engine_module, guard
 from cbp.plugins.constraints import joint_acceleration_constraint as acceleration
 from cbp.plugins.constraints import view_direction_constraint as view
 from cbp.plugins.tasks import goal_pose_task as goal_pose
@@ -34,6 +34,11 @@ kernels = {
     "refine_rows": ahead._refine_rows,
     "step_bounds": acceleration._step_bounds,
     "limit_step": goal_pose._limit_step,
+    "all_finite": engine_module._all_finite,
+    "euclidean_check": guard._euclidean_check,
+    "speed_ratio": guard._speed_ratio,
+    "acceleration_ratio": guard._acceleration_ratio,
+    "past_limits": guard._past_limits,
 }
 orbit = load_scenario("scenarios/youbot_orbit_case1.yaml")
 engine, inputs, robot = orbit.make_engine(), orbit.inputs(), orbit.robot
