@@ -483,6 +483,10 @@ class _Block:
         self._bounded = [
             (p, self.lower[sl], self.upper[sl]) for sl, p in self.constraints
         ]
+        # Per constraint: the fixed bounds it returned last (see collect_bounds).
+        self._kept_bounds: list[tuple[object, object]] = [(None, None)] * len(
+            self._bounded
+        )
 
     @staticmethod
     def floats(entries: Sequence[tuple[int, Entry]], nv: int) -> int:
@@ -522,9 +526,18 @@ class _Block:
             task.limit_step_into(rows)
 
     def collect_bounds(self, state: RobotState) -> None:
-        """Write every constraint's (lower, upper) on f into ``lower`` and ``upper``."""
-        for plugin, given_lower, given_upper in self._bounded:
+        """Write every constraint's (lower, upper) on f into ``lower`` and ``upper``.
+
+        Bounds returned as the same read-only arrays that own their data as
+        at the last call (a constraint's fixed limits) are in place already
+        and not copied again.
+        """
+        kept = self._kept_bounds
+        for k, (plugin, given_lower, given_upper) in enumerate(self._bounded):
             lo, up = plugin.compute_bounds(state)
+            last_lo, last_up = kept[k]
+            if lo is last_lo and up is last_up:
+                continue
             try:
                 given_lower[:] = lo
                 given_upper[:] = up
@@ -533,6 +546,7 @@ class _Block:
                     f"{plugin.name} ({plugin.type_name}): bounds have shapes "
                     f"{np.shape(lo)} and {np.shape(up)}, expected ({plugin.dim},)"
                 ) from None
+            kept[k] = (lo, up) if _fixed(lo) and _fixed(up) else (None, None)
 
     def raise_bad_bounds(self) -> None:
         """Raise PluginOutputError naming the first entry with NaN or crossed bounds."""
@@ -543,6 +557,15 @@ class _Block:
                     f"{plugin.name} ({plugin.type_name}): bounds must satisfy "
                     f"lower <= upper and not be NaN; got lower={lo}, upper={up}"
                 )
+
+
+def _fixed(bounds: object) -> bool:
+    """Whether ``bounds`` is a read-only array that owns its data (cannot change)."""
+    return (
+        type(bounds) is np.ndarray
+        and bounds.base is None
+        and not bounds.flags.writeable
+    )
 
 
 # The layout read by fill_qp: 6 sizes, then 18 offsets, then the rows' kinds.
