@@ -1581,6 +1581,7 @@ def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
         ),
         float("nan"),
     )
+    orbit = next((r["median_us"] for r in rows if r["group"] == "orbit"), float("nan"))
     listed = us("kinematics") + us("prepare") + assembly + us("daqp")
     return [
         "## Where the time goes",
@@ -1590,9 +1591,13 @@ def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
         f"{us('prepare'):.1f}, assembly {assembly:.1f} (the goal's linearization "
         f"{us('of which'):.1f} of it, one compiled call for the pose error and "
         "its Jacobian; the rest is one call per entry writing into the stacked "
-        "buffers, the goal's step clipping, the bounds, and one compiled pass "
-        "that forms H, g and the bounds and checks them for NaN), daqp "
-        f"{us('daqp'):.1f}; {total - listed:.1f} between them. The reaching row "
+        "buffers, the goal's step limit (one compiled call, in place), the "
+        "bounds, and one compiled pass that forms H, g and the bounds and "
+        "checks them for NaN), daqp "
+        f"{us('daqp'):.1f}; {total - listed:.1f} between them (the checks of q "
+        "and dt, the solver's trial context, made once, the step guard's one "
+        "compiled call, the result; 7.9 us when the trial context was a "
+        "generator made every step). The reaching row "
         f"also checks each new goal ({us('goal_pose.set_target'):.1f} us) and "
         f"integrates. The hand-written step ({hand['median_us']:.0f} us) does the "
         "same kinematics, linearization and daqp call in plain numpy, with the "
@@ -1609,6 +1614,19 @@ def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
         "step is the two contact constraints (latching their contacts, their "
         "rows in one compiled pass from the joints' world Jacobians) and a QP "
         "with their rows.",
+        f"- Orbit tick (youBot, `youbot_orbit_case1`, 20 ms ticks): {orbit:.0f} "
+        "us. By parts (medians of 3000 ticks, measured once at load 7): the "
+        "assembly about 50 us (eight entries' linearizations: the view "
+        "direction's rows one compiled call, the other orbit rows a few numpy "
+        "calls each, the planar base's joint-space rows through pinocchio), "
+        "the coasting drift and its refinement about 35 us (kinematics a step "
+        "ahead and the five drifting rows' values there; their arithmetic is "
+        "three compiled passes), daqp about 12 us, prepare about 9 us "
+        "(joint_acceleration's bounds one compiled pass), the operator's "
+        "inputs about 10 us, the checks, kinematics and step guard about "
+        "11 us. Before these passes the same measurement gave 297 us: assembly "
+        "112, drift and refinement 102 (a dozen numpy calls per drifting "
+        "plugin on fancy-indexed rows), prepare 26.",
         f"- Octree query inside the shelf: {us('octree: contact'):.0f} us in all. "
         f"The environment query {us('octree: environment'):.0f} us, of which the "
         f"compiled pass over the cells in each shape's box "

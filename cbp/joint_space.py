@@ -45,6 +45,7 @@ class JointDifference(Plugin[ParamsT]):
         """Keep every tangent row; subclasses narrow ``rows``."""
         super().__init__(params, robot, name)
         self.rows: IndexRows = slice(0, robot.nv)
+        self._every_row = self.rows
         # q ⊖ q_ref has the identity as its Jacobian when nq == nv.
         self.constant_jacobian = robot.is_euclidean
 
@@ -67,7 +68,11 @@ class JointDifference(Plugin[ParamsT]):
 
     def value_into(self, state: RobotState, value: FloatArray) -> None:
         """Selected rows of q ⊖ q_ref, written in place."""
-        self.robot.difference_into(self.reference(), state.q, value, self.rows)
+        rows = self.rows
+        if type(rows) is slice and rows == self._every_row and self.robot.is_euclidean:
+            np.subtract(state.q, self.reference(), out=value)  # every row: q - q_ref
+            return
+        self.robot.difference_into(self.reference(), state.q, value, rows)
 
 
 class StepDisplacement(JointDifference[ParamsT]):

@@ -437,6 +437,17 @@ class Task(Plugin[ParamsT]):
         """
         return desired
 
+    def limit_step_into(self, desired: FloatArray) -> None:
+        """Limit the desired change in place; the engine's call every step.
+
+        Optional speed-up, as :meth:`linearize_into`: the default writes
+        :meth:`limit_step`'s answer over ``desired``. An override must agree
+        with :meth:`limit_step`.
+        """
+        limited = self.limit_step(desired)
+        if limited is not desired:
+            desired[:] = limited
+
 
 class Constraint(Plugin[ParamsT]):
     """A value f(q) kept within bounds: lower <= f(q) <= upper."""

@@ -413,6 +413,15 @@ def _is_soft_task(entry: Entry) -> bool:
     return isinstance(entry.plugin, Task) and entry.priority == "soft"
 
 
+def _limits_step(task: Task[Any]) -> bool:
+    """Whether a task limits its step (overrides either of Task's two calls)."""
+    kind = type(task)
+    return (
+        kind.limit_step is not Task.limit_step
+        or kind.limit_step_into is not Task.limit_step_into
+    )
+
+
 class _Block:
     """Preallocated rows of a group of entries: stacked values, Jacobians, weights.
 
@@ -455,9 +464,7 @@ class _Block:
         np.negative(self.gains, out=self.negative_gains)
         self.desired = arena.take((m,))
         self.limiting: list[tuple[slice, Task[Any]]] = [
-            (sl, p)
-            for sl, p in self.items
-            if isinstance(p, Task) and type(p).limit_step is not Task.limit_step
+            (sl, p) for sl, p in self.items if isinstance(p, Task) and _limits_step(p)
         ]
         # The limiting tasks with their rows of ``desired`` (views, made once).
         self._limited = [(task, self.desired[sl]) for sl, task in self.limiting]
@@ -476,6 +483,10 @@ class _Block:
         self._bounded = [
             (p, self.lower[sl], self.upper[sl]) for sl, p in self.constraints
         ]
+        # Per constraint: the fixed bounds it returned last (see collect_bounds).
+        self._kept_bounds: list[tuple[object, object]] = [(None, None)] * len(
+            self._bounded
+        )
 
     @staticmethod
     def floats(entries: Sequence[tuple[int, Entry]], nv: int) -> int:
@@ -512,14 +523,21 @@ class _Block:
         """Write -k f of every row, after the tasks' step limits, into ``desired``."""
         np.multiply(self.f, self.negative_gains, out=self.desired)
         for task, rows in self._limited:
-            limited = task.limit_step(rows)
-            if limited is not rows:
-                rows[:] = limited
+            task.limit_step_into(rows)
 
     def collect_bounds(self, state: RobotState) -> None:
-        """Write every constraint's (lower, upper) on f into ``lower`` and ``upper``."""
-        for plugin, given_lower, given_upper in self._bounded:
+        """Write every constraint's (lower, upper) on f into ``lower`` and ``upper``.
+
+        Bounds returned as the same read-only arrays that own their data as
+        at the last call (a constraint's fixed limits) are in place already
+        and not copied again.
+        """
+        kept = self._kept_bounds
+        for k, (plugin, given_lower, given_upper) in enumerate(self._bounded):
             lo, up = plugin.compute_bounds(state)
+            last_lo, last_up = kept[k]
+            if lo is last_lo and up is last_up:
+                continue
             try:
                 given_lower[:] = lo
                 given_upper[:] = up
@@ -528,6 +546,7 @@ class _Block:
                     f"{plugin.name} ({plugin.type_name}): bounds have shapes "
                     f"{np.shape(lo)} and {np.shape(up)}, expected ({plugin.dim},)"
                 ) from None
+            kept[k] = (lo, up) if _fixed(lo) and _fixed(up) else (None, None)
 
     def raise_bad_bounds(self) -> None:
         """Raise PluginOutputError naming the first entry with NaN or crossed bounds."""
@@ -538,6 +557,15 @@ class _Block:
                     f"{plugin.name} ({plugin.type_name}): bounds must satisfy "
                     f"lower <= upper and not be NaN; got lower={lo}, upper={up}"
                 )
+
+
+def _fixed(bounds: object) -> bool:
+    """Whether ``bounds`` is a read-only array that owns its data (cannot change)."""
+    return (
+        type(bounds) is np.ndarray
+        and bounds.base is None
+        and not bounds.flags.writeable
+    )
 
 
 # The layout read by fill_qp: 6 sizes, then 18 offsets, then the rows' kinds.

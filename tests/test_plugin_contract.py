@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from cbp.errors import ScenarioError
-from cbp.plugin import Constraint
+from cbp.plugin import Constraint, Task
+from cbp.plugins.tasks import TASKS
 from cbp.schema import from_plain, to_plain
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
@@ -64,3 +65,32 @@ def test_params_round_trip_and_reject_unknown_keys(case: PluginCase, robots) -> 
             reduced = {k: v for k, v in plain.items() if k != f.name}
             with pytest.raises(ScenarioError, match=f"missing required key '{f.name}'"):
                 from_plain(params_cls, reduced)
+
+
+#: The task cases (every registered task), on each of their robots.
+TASK_CASES = [(c, r) for c, r in CASES if c.type_name in TASKS.names()]
+
+
+@pytest.mark.parametrize(
+    ("case", "robot_name"),
+    TASK_CASES,
+    ids=[f"{c.type_name}-{r}" for c, r in TASK_CASES],
+)
+def test_a_step_limited_in_place_is_the_step_limit_step_returns(
+    case: PluginCase, robot_name: str, robots, rng
+) -> None:
+    """A task's limit_step_into writes what limit_step returns, bit for bit."""
+    robot = robots[robot_name]
+    plugin = case.build(robot)
+    assert isinstance(plugin, Task)
+    for q in sample_configurations(robot, rng, n=2):
+        state = RobotState(robot, q)
+        plugin.prepare(state, 0.01)
+        value = plugin.compute_value(state)
+        for scale in (1e-3, 1.0, 100.0):  # within the limits, and beyond them
+            desired = -scale * value
+            kept = desired.copy()
+            limited = np.array(plugin.limit_step(desired))
+            np.testing.assert_array_equal(desired, kept)  # limit_step copies
+            plugin.limit_step_into(desired)
+            np.testing.assert_array_equal(desired, limited)

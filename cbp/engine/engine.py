@@ -96,6 +96,7 @@ class Engine:
         self._levels = give_way_levels(plugins)
         # The second-order drift of the rows over a step of a moving robot.
         self._drift = CoastingDrift(robot, self.entries)
+        _all_finite(np.zeros(robot.nq))  # compiled now, not in the first step
 
     def plugin(self, name: str) -> AnyPlugin:
         """Return the plugin of the entry called ``name``."""

@@ -66,6 +66,7 @@ class StepGuard:
             or np.isfinite(robot.upper_limits).any()
         )
         self._joint_name = joint_name
+        self._shape = (robot.nv,)
         self._euclidean = bool(robot.is_euclidean)
         # The four bounds of a Euclidean robot in one array: the compiled check
         # takes it as one argument (each array costs numba's dispatch ~50 ns).
@@ -81,6 +82,21 @@ class StepGuard:
             if self._euclidean
             else np.zeros((4, 0))
         )
+        self._compile(robot)
+
+    def _compile(self, robot: RobotModel) -> None:
+        """Compile the checks (or load them from numba's cache) on a zero step.
+
+        Here, when the engine is made, rather than in its first control step;
+        on arrays of the kinds a step passes (writeable q, step and velocity;
+        the robot's read-only limits).
+        """
+        q, dq = np.zeros(robot.nq), np.zeros(robot.nv)
+        if self._euclidean:
+            _euclidean_check(q, dq, self._bounds, 0.01, dq, True, 1e-4, True)
+        _speed_ratio(dq, self.speed_bound, 0.01)
+        _acceleration_ratio(dq, dq, self.acceleration_bound, 0.01)
+        _past_limits(q, q, robot.lower_limits, robot.upper_limits, 1e-4)
 
     def check(
         self, q: FloatArray, dq: FloatArray, dt: float, v: FloatArray | None = None
@@ -111,8 +127,10 @@ class StepGuard:
         robot = self.robot
         slowed = 1.0
         dq = np.ascontiguousarray(dq, dtype=float)
-        if dq.shape != (robot.nv,):
-            raise UnsafeStepError(f"step rejected: {dq.shape} values, not {robot.nv}")
+        if dq.shape != self._shape:
+            raise UnsafeStepError(
+                f"step rejected: {dq.shape} values, not {self._shape[0]}"
+            )
         if self._euclidean and q.shape == dq.shape:
             # Every check in one compiled call; the messages below only when
             # one fails (the same checks, in the same order).

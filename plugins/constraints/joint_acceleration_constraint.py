@@ -3,15 +3,17 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import ClassVar, Literal
 
+import numba
 import numpy as np
 
 from cbp.errors import ConfigError
 from cbp.joint_space import StepDisplacement, check_scaled_limits, limits_by_joint
 from cbp.plugin import Constraint, FloatArray, PluginParams, RobotLimit
-from cbp.robot import RobotModel, compact_rows
+from cbp.robot import IntArray, RobotModel, compact_rows
 from cbp.state import RobotState
 
 
@@ -115,24 +117,34 @@ class JointAccelerationConstraint(
         self._high_limit = robot.upper_limits[self._ranged_q] - params.margin
         self._lower = np.zeros(finite.size)
         self._upper = np.zeros(finite.size)
+        # Compile the bounds' pass (or load it from numba's cache) now, on
+        # arrays of the kinds a step passes (a state's are read-only).
+        rest, neutral = np.zeros(robot.nv), robot.neutral()
+        rest.flags.writeable = neutral.flags.writeable = False
+        self._bounds_at(rest, neutral, 0.01)
+        self._lower[:] = self._upper[:] = 0.0  # no bounds until the first step
+
+    def _bounds_at(self, v: FloatArray, q: FloatArray, dt: float) -> None:
+        """The rows' bounds at velocity ``v`` and configuration ``q``, in place."""
+        _step_bounds(
+            v,
+            q,
+            float(dt),
+            self._finite,
+            self._acceleration,
+            self._ranged,
+            self._ranged_q,
+            self._braking,
+            self._low_limit,
+            self._high_limit,
+            self._lower,
+            self._upper,
+        )
 
     def prepare(self, state: RobotState, dt: float) -> None:
         """Latch the start configuration, its velocity and the step duration."""
         super().prepare(state, dt)
-        v = state.v[self._finite]
-        reach = self._acceleration * dt
-        lower, upper = v - reach, v + reach  # velocities
-        if self._ranged.size:
-            r = self._ranged
-            a = self._braking
-            q = state.q[self._ranged_q]
-            up = _braking_speed(a, dt, self._high_limit - q)
-            down = _braking_speed(a, dt, q - self._low_limit)
-            # A joint too fast to stop in time brakes as hard as it can.
-            upper[r] = np.maximum(np.minimum(upper[r], up), lower[r])
-            lower[r] = np.minimum(np.maximum(lower[r], -down), upper[r])
-        np.multiply(lower, dt, out=self._lower)
-        np.multiply(upper, dt, out=self._upper)
+        self._bounds_at(state.v, state.q, dt)
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """(v_0 ∓ scaled acceleration limit x dt) x dt."""
@@ -147,7 +159,46 @@ class JointAccelerationConstraint(
         )
 
 
-def _braking_speed(a: FloatArray, dt: float, distance: FloatArray) -> FloatArray:
+@numba.njit(cache=True, nogil=True)
+def _step_bounds(
+    v: FloatArray,
+    q: FloatArray,
+    dt: float,
+    finite: IntArray,
+    acceleration: FloatArray,
+    ranged: IntArray,
+    ranged_q: IntArray,
+    braking: FloatArray,
+    low_limit: FloatArray,
+    high_limit: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+) -> None:
+    """The rows' bounds of one step, into ``lower`` and ``upper`` (one pass).
+
+    The velocities within reach of ``v`` over ``dt``; for a joint with a
+    position range (``ranged``: its row; ``ranged_q``: its coordinate) no
+    faster toward a limit than it can brake at ``braking`` before it; a joint
+    too fast to stop in time brakes as hard as it can. Times ``dt``.
+    """
+    for i in range(finite.size):
+        reach = acceleration[i] * dt
+        lower[i] = v[finite[i]] - reach
+        upper[i] = v[finite[i]] + reach
+    for j in range(ranged.size):
+        r = ranged[j]
+        position = q[ranged_q[j]]
+        up = _braking_speed(braking[j], dt, high_limit[j] - position)
+        down = _braking_speed(braking[j], dt, position - low_limit[j])
+        upper[r] = max(min(upper[r], up), lower[r])
+        lower[r] = min(max(lower[r], -down), upper[r])
+    for i in range(finite.size):
+        lower[i] *= dt
+        upper[i] *= dt
+
+
+@numba.njit(cache=True, nogil=True)
+def _braking_speed(a: float, dt: float, distance: float) -> float:
     """The speed from which a joint moving one tick more stops within ``distance``.
 
     Solves v dt + v dt / 2 + v^2 / (2 a) = d for v >= 0 (one tick at v, then
@@ -155,4 +206,4 @@ def _braking_speed(a: FloatArray, dt: float, distance: FloatArray) -> FloatArray
     v^2 / (2 a) + v dt / 2); 0 when the distance is not positive.
     """
     b = 1.5 * a * dt
-    return np.asarray(-b + np.sqrt(b * b + 2.0 * a * np.maximum(distance, 0.0)))
+    return -b + math.sqrt(b * b + 2.0 * a * max(distance, 0.0))

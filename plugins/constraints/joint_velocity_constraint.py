@@ -64,6 +64,9 @@ class JointVelocityConstraint(
         if dt != self._dt:  # the same every step, usually
             self._reach = self._velocity * dt
             self._negative_reach = -self._reach
+            # Fixed until dt changes: the engine copies them once.
+            self._reach.flags.writeable = False
+            self._negative_reach.flags.writeable = False
             self._dt = dt
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:

@@ -73,6 +73,19 @@ class MinAltitudeConstraint(Constraint[MinAltitudeParams]):
         row = z_b.dot(Je[:3] - Jb[:3]) + cross3(z_b, offset).dot(Jb[3:])
         return np.asarray(row[None, :])
 
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Value and Jacobian from the same offset."""
+        z_b = state.frame_rotation(self.base_id)[:, 2]
+        offset = state.frame_position(self.frame_id) - state.frame_position(
+            self.base_id
+        )
+        value[0] = z_b.dot(offset)
+        Je = state.frame_jacobian(self.frame_id)
+        Jb = state.frame_jacobian(self.base_id)
+        jacobian[0] = z_b.dot(Je[:3] - Jb[:3]) + cross3(z_b, offset).dot(Jb[3:])
+
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """z_min <= f."""
         return np.array([self.params.min_height]), np.array([np.inf])

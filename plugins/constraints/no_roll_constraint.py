@@ -66,6 +66,17 @@ class NoRollConstraint(Constraint[NoRollParams]):
         Je = state.frame_jacobian(self.frame_id)[3:]
         return np.asarray(cross3(z_b, y_e).dot(Jb - Je)[None, :])
 
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Value and Jacobian from the same two axes."""
+        z_b = state.frame_rotation(self.base_id)[:, 2]
+        y_e = state.frame_rotation(self.frame_id)[:, 1]
+        value[0] = z_b.dot(y_e)
+        Jb = state.frame_jacobian(self.base_id)[3:]
+        Je = state.frame_jacobian(self.frame_id)[3:]
+        jacobian[0] = cross3(z_b, y_e).dot(Jb - Je)
+
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """Zero: an equality when hard."""
         return np.zeros(1), np.zeros(1)

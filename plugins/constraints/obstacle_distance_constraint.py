@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -72,13 +73,23 @@ class ObstacleDistanceConstraint(Constraint[ObstacleDistanceParams]):
 
     def compute_value(self, state: RobotState) -> FloatArray:
         """||P (p_b - p_obs)||."""
-        return np.array([np.linalg.norm(self._gap(state))])
+        gap = self._gap(state)
+        return np.array([math.sqrt(gap.dot(gap))])
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """ĝ^T P J_t,b."""
         direction, _ = unit(self._gap(state))
         J = state.frame_jacobian(self.frame_id)[:3]
         return np.asarray(direction.dot(self._project).dot(J)[None, :])
+
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Value and Jacobian from one gap."""
+        direction, norm = unit(self._gap(state))
+        value[0] = norm
+        J = state.frame_jacobian(self.frame_id)[:3]
+        jacobian[0] = direction.dot(self._project).dot(J)
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """r_r <= f."""

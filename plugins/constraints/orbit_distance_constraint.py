@@ -100,7 +100,7 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
     def compute_value(self, state: RobotState) -> FloatArray:
         """||p_o - p_e||."""
         d = self.object.position - state.frame_position(self.frame_id)
-        return np.array([np.linalg.norm(d)])
+        return np.array([math.sqrt(d.dot(d))])
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """-d̂^T J_t."""
@@ -109,6 +109,15 @@ class OrbitDistanceConstraint(Constraint[OrbitDistanceParams]):
         return np.asarray(
             -direction.dot(state.frame_jacobian(self.frame_id)[:3])[None, :]
         )
+
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Value and Jacobian from one difference d."""
+        d = self.object.position - state.frame_position(self.frame_id)
+        direction, norm = unit(d)
+        value[0] = norm
+        jacobian[0] = -direction.dot(state.frame_jacobian(self.frame_id)[:3])
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """r_d <= f <= r_d (an equality when hard)."""

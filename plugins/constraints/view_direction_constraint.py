@@ -3,17 +3,17 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
+import numba
 import numpy as np
-import pinocchio as pin
 
 from cbp.orbit import CameraObjectParams, ObjectTarget, frame_of, unit
 from cbp.plugin import Constraint, FloatArray
 from cbp.robot import RobotModel
-from cbp.spatial import cross3
 from cbp.state import RobotState
 
 
@@ -67,6 +67,10 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
         super().__init__(params, robot, name)
         self.frame_id = frame_of(robot, params.frame)
         self.object = ObjectTarget(params.object)
+        # Compile the rows (or load them from numba's cache) now, on arrays of
+        # the kinds a step passes, rather than in the first control step.
+        with contextlib.suppress(ZeroDivisionError):
+            self.linearize(RobotState(robot))
 
     @property
     def dim(self) -> int:
@@ -75,39 +79,43 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
 
     def compute_value(self, state: RobotState) -> FloatArray:
         """Image-plane direction, or eq. 8."""
-        R = state.frame_rotation(self.frame_id)
-        d = self.object.position - state.frame_position(self.frame_id)
-        direction, norm = unit(d)
-        if self.params.form == "paper":
-            return np.array([d.dot(R[:, 0]) - norm])
-        sine = np.array([R[:, 1].dot(direction), R[:, 2].dot(direction)])
-        return _angle_scale(float(np.hypot(*sine)), R[:, 0].dot(direction))[0] * sine
+        value = np.empty(self.dim)
+        self._rows(state, value, _NO_JACOBIAN, _NO_ROWS)
+        return value
 
     def compute_jacobian(self, state: RobotState) -> FloatArray:
         """Exact derivative along tangent directions (see the class docstring)."""
-        R = state.frame_rotation(self.frame_id)
+        jacobian = np.empty((self.dim, self.robot.nv))
         J = state.frame_jacobian(self.frame_id)
-        Jt, Jw = J[:3], J[3:]
-        d = self.object.position - state.frame_position(self.frame_id)
-        direction, norm = unit(d)
-        if self.params.form == "paper":
-            x = R[:, 0]
-            row = -x.dot(Jt) + cross3(x, d).dot(Jw) + direction.dot(Jt)
-            return np.asarray(row[None, :])
-        projector = (np.eye(3) - np.outer(direction, direction)) / norm
-        axes = np.empty((3, J.shape[1]))  # d(a^T d̂)/dq for a = x, y, z
-        for i in range(3):
-            axis = R[:, i]
-            axes[i] = pin.skew(axis).dot(direction).dot(Jw) - axis.dot(projector).dot(
-                Jt
-            )
-        sine = R[:, 1:].T.dot(direction)
-        cosine = R[:, 0].dot(direction)
-        g, h = _angle_scale(float(np.hypot(*sine)), cosine)
-        # d(g s) = g ds + s g'(θ) dθ, dθ = (cos θ s^T ds / |s| - |s| dc), and
-        # g'(θ) / |s| = h.
-        d_theta_scaled = cosine * sine.dot(axes[1:]) - sine.dot(sine) * axes[0]
-        return np.asarray(g * axes[1:] + h * np.outer(sine, d_theta_scaled))
+        self._rows(state, np.empty(self.dim), J, jacobian)
+        return jacobian
+
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Value and Jacobian in one compiled call, sharing the geometry."""
+        J = state.frame_jacobian(self.frame_id)
+        self._rows(state, value, J, jacobian)
+
+    def _rows(
+        self,
+        state: RobotState,
+        value: FloatArray,
+        J: FloatArray,
+        jacobian: FloatArray,
+    ) -> None:
+        """:func:`_view_rows` at ``state``; the Jacobian only if ``J`` has columns."""
+        frame = self.frame_id
+        if not _view_rows(
+            state.frame_rotation(frame),
+            state.frame_position(frame),
+            self.object.position,
+            J,
+            self.params.form == "image",
+            value,
+            jacobian,
+        ):
+            raise ZeroDivisionError("the camera is at the object's centre")
 
     def compute_bounds(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
         """Zero: an equality when hard."""
@@ -126,6 +134,87 @@ class ViewDirectionConstraint(Constraint[ViewDirectionParams]):
         return {"view_error_deg": math.degrees(self.angle(state))}
 
 
+#: The frame Jacobian and the rows' Jacobian passed when only the value is
+#: wanted (no columns: neither is read). Read-only and writeable as a state's
+#: frame Jacobian and the engine's rows are: the kernel compiles once.
+_NO_JACOBIAN = np.zeros((0, 0))
+_NO_JACOBIAN.flags.writeable = False
+_NO_ROWS = np.zeros((0, 0))
+
+
+@numba.njit(cache=True, nogil=True)
+def _view_rows(
+    R: FloatArray,
+    p: FloatArray,
+    centre: FloatArray,
+    J: FloatArray,
+    image: bool,
+    value: FloatArray,
+    jacobian: FloatArray,
+) -> bool:
+    """The rows' value and, if ``J`` has columns, Jacobian (class docstring).
+
+    ``R``, ``p``: the camera's rotation and position; ``J`` its world-aligned
+    Jacobian (6, nv). False (nothing written) when the camera is at the
+    centre.
+    """
+    d0, d1, d2 = centre[0] - p[0], centre[1] - p[1], centre[2] - p[2]
+    norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if norm < 1e-12:
+        return False
+    u0, u1, u2 = d0 / norm, d1 / norm, d2 / norm
+    nv = J.shape[1]
+    if not image:
+        value[0] = d0 * R[0, 0] + d1 * R[1, 0] + d2 * R[2, 0] - norm
+        x0, x1, x2 = R[0, 0], R[1, 0], R[2, 0]
+        c0, c1, c2 = x1 * d2 - x2 * d1, x2 * d0 - x0 * d2, x0 * d1 - x1 * d0
+        for c in range(nv):
+            jacobian[0, c] = (
+                (u0 - x0) * J[0, c]
+                + (u1 - x1) * J[1, c]
+                + (u2 - x2) * J[2, c]
+                + c0 * J[3, c]
+                + c1 * J[4, c]
+                + c2 * J[5, c]
+            )
+        return True
+    # The direction's cosines with the camera's axes x, y, z.
+    cosines = np.empty(3)
+    for i in range(3):
+        cosines[i] = R[0, i] * u0 + R[1, i] * u1 + R[2, i] * u2
+    cosine, s0, s1 = cosines[0], cosines[1], cosines[2]
+    g, h = _angle_scale(math.hypot(s0, s1), cosine)
+    value[0], value[1] = g * s0, g * s1
+    if nv == 0:
+        return True
+    # d(a^T d̂)/dq = (a x d̂)^T J_w - a^T (I - d̂ d̂^T) / |d| J_t, a = x, y, z.
+    axes = np.empty((3, nv))
+    for i in range(3):
+        a0, a1, a2 = R[0, i], R[1, i], R[2, i]
+        w0, w1, w2 = a1 * u2 - a2 * u1, a2 * u0 - a0 * u2, a0 * u1 - a1 * u0
+        t0 = (a0 - cosines[i] * u0) / norm
+        t1 = (a1 - cosines[i] * u1) / norm
+        t2 = (a2 - cosines[i] * u2) / norm
+        for c in range(nv):
+            axes[i, c] = (
+                w0 * J[3, c]
+                + w1 * J[4, c]
+                + w2 * J[5, c]
+                - t0 * J[0, c]
+                - t1 * J[1, c]
+                - t2 * J[2, c]
+            )
+    # d(g s) = g ds + s g'(θ) dθ, dθ = (cos θ s^T ds / |s| - |s| dc), and
+    # g'(θ) / |s| = h.
+    s2 = s0 * s0 + s1 * s1
+    for c in range(nv):
+        d_theta = cosine * (s0 * axes[1, c] + s1 * axes[2, c]) - s2 * axes[0, c]
+        jacobian[0, c] = g * axes[1, c] + h * s0 * d_theta
+        jacobian[1, c] = g * axes[2, c] + h * s1 * d_theta
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
 def _angle_scale(sine: float, cosine: float) -> tuple[float, float]:
     """(θ / sin θ, (θ / sin θ)' / sin θ) for θ = atan2(sine, cosine), sine >= 0.
 

@@ -104,3 +104,12 @@ class CameraVelocityTask(Task[CameraVelocityParams]):
         """S R_a^T J_t."""
         _, axes, _ = self.latched(self._anchor)
         return np.asarray(axes.dot(state.frame_jacobian(self.frame_id)[:3]))
+
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """Value and Jacobian with the anchor read once."""
+        p_a, axes, dt = self.latched(self._anchor)
+        value[:] = axes.dot(state.frame_position(self.frame_id) - p_a)
+        value -= self.velocity * dt
+        jacobian[:] = axes.dot(state.frame_jacobian(self.frame_id)[:3])

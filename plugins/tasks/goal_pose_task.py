@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
+import numba
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
@@ -86,6 +87,11 @@ class GoalPoseTask(Task[GoalPoseParams]):
         # Compile the pose error (or load it from numba's cache) now, on arrays
         # of the kinds a step passes, rather than in the first control step.
         state = RobotState(robot)
+        self._views = (
+            state,
+            state.frame_rotation(self.frame_id),
+            state.frame_position(self.frame_id),
+        )
         pose_error_into(
             state.frame_rotation(self.frame_id),
             state.frame_position(self.frame_id),
@@ -95,6 +101,7 @@ class GoalPoseTask(Task[GoalPoseParams]):
             np.empty(6),
             np.empty((6, robot.nv)),
         )
+        _limit_step(np.zeros(6), 1.0, 1.0, True)
         if params.target is not None:
             target = params.target.to_se3()
             self._set(np.array(target.translation), np.array(target.rotation))
@@ -165,9 +172,18 @@ class GoalPoseTask(Task[GoalPoseParams]):
         if not self._has_target:
             raise TargetNotSetError(f"{self.name} ({self.type_name}): no target set")
         frame = self.frame_id
+        views = self._views
+        if views[0] is not state:
+            # The frame's rotation and position in ``state`` (views that its
+            # updates rewrite in place), asked for once per state.
+            views = self._views = (
+                state,
+                state.frame_rotation(frame),
+                state.frame_position(frame),
+            )
         pose_error_into(
-            state.frame_rotation(frame),
-            state.frame_position(frame),
+            views[1],
+            views[2],
             self._goal_rotation_t,
             self._goal_translation,
             state.frame_jacobian(frame),
@@ -177,23 +193,19 @@ class GoalPoseTask(Task[GoalPoseParams]):
 
     def limit_step(self, desired: FloatArray) -> FloatArray:
         """Bound the translation and rotation asked for in one step."""
+        limited = np.array(desired, dtype=float)
+        self.limit_step_into(limited)
+        return limited
+
+    def limit_step_into(self, desired: FloatArray) -> None:
+        """:meth:`limit_step` in place, in one compiled call."""
         params = self.params
-        # Plain floats: six numbers, where numpy's per-call cost would dominate.
-        x, y, z, rx, ry, rz = desired.tolist()
-        translation = math.sqrt(x * x + y * y + z * z)
-        rotation = math.sqrt(rx * rx + ry * ry + rz * rz)
-        st = sr = 1.0
-        if translation > params.max_step_translation:
-            st = params.max_step_translation / translation
-        if params.clip == "uniform":
-            if rotation * st > params.max_step_rotation:
-                st = params.max_step_rotation / rotation
-            sr = st
-        elif rotation > params.max_step_rotation:
-            sr = params.max_step_rotation / rotation
-        if st == 1.0 and sr == 1.0:
-            return desired
-        return np.array([x * st, y * st, z * st, rx * sr, ry * sr, rz * sr])
+        _limit_step(
+            desired,
+            params.max_step_translation,
+            params.max_step_rotation,
+            params.clip == "uniform",
+        )
 
     def __repr__(self) -> str:
         """Type, name, frame and step limits."""
@@ -203,3 +215,32 @@ class GoalPoseTask(Task[GoalPoseParams]):
             f"max_step_translation={p.max_step_translation}, "
             f"max_step_rotation={p.max_step_rotation})"
         )
+
+
+@numba.njit(cache=True, nogil=True)
+def _limit_step(
+    desired: FloatArray, max_translation: float, max_rotation: float, uniform: bool
+) -> None:
+    """Scale the translation and rotation of ``desired`` (6,) to their limits.
+
+    By one factor (``uniform``) or each by its own.
+    """
+    x, y, z = desired[0], desired[1], desired[2]
+    rx, ry, rz = desired[3], desired[4], desired[5]
+    translation = math.sqrt(x * x + y * y + z * z)
+    rotation = math.sqrt(rx * rx + ry * ry + rz * rz)
+    st = sr = 1.0
+    if translation > max_translation:
+        st = max_translation / translation
+    if uniform:
+        if rotation * st > max_rotation:
+            st = max_rotation / rotation
+        sr = st
+    elif rotation > max_rotation:
+        sr = max_rotation / rotation
+    if st != 1.0:
+        for i in range(3):
+            desired[i] *= st
+    if sr != 1.0:
+        for i in range(3, 6):
+            desired[i] *= sr

@@ -427,3 +427,42 @@ def test_an_eased_step_does_not_name_conflicts(robots, monkeypatch) -> None:
     assert engine.step(q, 0.01).eased is not None
     assert calls == []
     assert engine.solver.diagnose  # as it was before the step
+
+
+def test_rows_follow_the_bounds_however_a_constraint_returns_them(robots) -> None:
+    """Fixed arrays, the same arrays changed in place, new arrays: rows follow."""
+    robot = robots["panda"]
+
+    class Settable(JointLimitsConstraint):
+        bounds: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
+
+        def compute_bounds(self, state):  # type: ignore[no-untyped-def]
+            return self.bounds
+
+    def fixed(values: np.ndarray) -> np.ndarray:
+        values = np.array(values, dtype=float)
+        values.flags.writeable = False
+        return values
+
+    plugin = Settable(JointLimitsParams(), robot)
+    assembler = Engine(robot, [Entry.make(plugin)]).assembler
+    q = robot.home()
+    state = RobotState(robot, q)
+    n = plugin.dim
+    writeable = np.full(n, 0.5)
+    steps = [
+        (fixed(robot.lower_limits), fixed(robot.upper_limits)),
+        None,  # the same fixed arrays again
+        (fixed(robot.lower_limits + 0.1), fixed(robot.upper_limits - 0.1)),
+        (-writeable, writeable),
+        "in place",  # the same writeable arrays, changed
+    ]
+    for bounds in steps:
+        if bounds == "in place":
+            plugin.bounds[1][:] = 0.25
+        elif bounds is not None:
+            plugin.bounds = bounds
+        problem = assembler.assemble(state)
+        lower, upper = plugin.bounds
+        np.testing.assert_allclose(problem.lower[:n], lower - q, atol=1e-12)
+        np.testing.assert_allclose(problem.upper[:n], upper - q, atol=1e-12)
