@@ -41,7 +41,7 @@ from cbp.compilation import CompileCounter
 from cbp.engine import Engine
 from cbp.executors.backout import back_out
 from cbp.executors.clock import Budget, make_budget
-from cbp.executors.periods import DeadlineMisses, PeriodAdapter
+from cbp.executors.periods import DeadlineMisses, LeadAdapter, PeriodAdapter
 from cbp.methods.settings import ExecutorTiming
 from cbp.robot import FloatArray
 from cbp.run.pacing import Pacer
@@ -225,6 +225,9 @@ def run_trajectory_executor(
     sim = run.sim
     faults = run.faults
     adapter = PeriodAdapter(lo, hi, timing.growth, timing.shrink)
+    leads = LeadAdapter(
+        COMMAND_LEAD * lo, COMMAND_LEAD * hi, timing.growth, timing.shrink
+    )
     leaving = _LeavingContact(run, vmax * BACK_OUT_DT)
     misses = DeadlineMisses(run.event)
     compiles = CompileCounter.install()
@@ -286,7 +289,7 @@ def run_trajectory_executor(
             timed_out, steps = plan.timed_out, plan.steps
             # A live goal taken at the period's start or by the planner between
             # its steps (CAT) is commanded by this plan only after t_f.
-            moved = bool(accepted) and accepted[-1][1] is not taken
+            moved = taken is not None and accepted[-1][1] is not taken
             if pacer is None:
                 try:
                     # The robot moves on while the result is computed.
@@ -318,7 +321,7 @@ def run_trajectory_executor(
                 # simulated by then.
                 answer = _wait_out(
                     pacer,
-                    Waiting(t, t_f, period, adapter.floor, pending=moved),
+                    Waiting(t, t_f, period, lo, leads, pending=moved),
                     planner,
                     run,
                     timing,
@@ -358,12 +361,14 @@ def run_trajectory_executor(
 
 
 #: A goal that arrives while the loop waits for its period's end is planned
-#: for within this share of the period the machine sustains (the lead: the
-#: adaptive period's floor, :class:`PeriodAdapter`) and commanded at the
-#: lead's end, from the state the robot is commanded to be in then.
+#: for within a lead and commanded at the lead's end, from the state the
+#: robot is commanded to be in then. The lead is this share of the shortest
+#: period to start with, longer after plans made too late
+#: (:class:`~cbp.executors.periods.LeadAdapter`, up to this share of the
+#: longest period).
 COMMAND_LEAD = 0.4
-#: ... when at least this share of that period is left before the period's
-#: end (else it waits for the next period, which starts by then).
+#: ... when at least this share of the shortest period is left before the
+#: period's end (else it waits for the next period, which starts by then).
 REPLAN_SHARE = 0.2
 
 
@@ -374,8 +379,8 @@ class Waiting(NamedTuple):
         t: the period's start.
         t_f: its end (the deadline).
         period: its length.
-        floor: the shortest period the machine sustains now
-            (:attr:`PeriodAdapter.floor`).
+        shortest: the shortest period.
+        leads: the lead of a plan for a goal that arrives meanwhile.
         pending: a goal newer than the period's arrived while its plan was
             made (and was taken by the planner): plan for it at once.
     """
@@ -383,7 +388,8 @@ class Waiting(NamedTuple):
     t: float
     t_f: float
     period: float
-    floor: float
+    shortest: float
+    leads: LeadAdapter
     pending: bool = False
 
 
@@ -428,7 +434,7 @@ def _wait_out(
     now = t_f - pacer.left(t_f)
     try:
         run.advance(
-            min(t_f, now + COMMAND_LEAD * waiting.floor),
+            min(t_f, now + waiting.leads.lead),
             look_ahead,
             reaction=2.0 * period,
         )
@@ -471,7 +477,7 @@ def _command_while_waiting(
 
     A live goal sets the pacer's wake event: the wait ends at the loop's time
     ``now``. The splice time is ``t_c = now + lead``, the lead being
-    :data:`COMMAND_LEAD` of the period's floor (or the time left, if less); the
+    :class:`~cbp.executors.periods.LeadAdapter`'s (or the time left, if less); the
     planner plans from the state the current trajectory commands at ``t_c``
     (position, velocity, acceleration) toward the new goal, within
     ``timing.time_budget`` of the lead, and a result made within the lead is
@@ -479,17 +485,18 @@ def _command_while_waiting(
     as soon as it is planned for, not at the period's end. The simulation
     has not run past the period's start (the loop simulates a period after
     waiting it out), so the robot has not yet passed ``t_c``. A result made
-    too late, or too short to stop on, is dropped (the current trajectory
-    goes on; the next period takes the goal); a plan that says stop brakes
-    along the current trajectory from ``t_c`` on. With less than
-    :data:`REPLAN_SHARE` of the floor left, the goal waits for the
+    after ``t_c`` is made again from a later start with a longer lead, while
+    the time left allows (then the next period takes the goal); one too short
+    to stop on is dropped (the current trajectory goes on); a plan that says
+    stop brakes along the current trajectory from ``t_c`` on. With less than
+    :data:`REPLAN_SHARE` of the shortest period left, the goal waits for the
     next period. The wait goes on until ``t_f``. A goal that the period's
     planner took between its steps (``waiting.pending``) is planned for so
     at once, without waiting: the period's plan commands it only after
     ``t_f``.
     """
     t_f = waiting.t_f
-    steps, note, spliced = 0, None, False
+    steps, note, spliced, late = 0, None, False, 0
     sim = run.sim
     fresh = waiting.pending
     while True:
@@ -497,15 +504,17 @@ def _command_while_waiting(
             pacer.wait_until(t_f)
             fresh = run.goal.changed()
         left = pacer.left(t_f)
-        if left <= 0:
-            return WaitAnswer(steps, note, spliced)
-        if not fresh or left < REPLAN_SHARE * waiting.floor:
+        if left > 0 and (not fresh or left < REPLAN_SHARE * waiting.shortest):
             pacer.wait_until(t_f, wakeable=False)
+            left = 0.0
+        if left <= 0:
+            if late:
+                note = f"{note}; {late} plan(s) made after their lead".lstrip("; ")
             return WaitAnswer(steps, note, spliced)
         fresh = False
         now = t_f - left
         # Not before the simulated robot's time (it is at most a lead ahead).
-        t_c = max(now + min(COMMAND_LEAD * waiting.floor, left), sim.t)
+        t_c = max(now + min(waiting.leads.lead, left), sim.t)
         lead = t_c - now
         current = sim.trajectory
         q_c, v_c, a_c = current.sample(t_c)
@@ -529,8 +538,14 @@ def _command_while_waiting(
                 note = "path too short to stop on; current trajectory kept"
         elif plan.stop:  # brake (an operator's pause): at once, whenever planned
             _brake_after(run, t_c, vmax, amax)
-        if plan.timed_out or budget.elapsed() > lead:
-            note = f"{note}; planned too late to start at {t_c:.3f} s".lstrip("; ")
+        in_time = not plan.timed_out and budget.elapsed() <= lead
+        before = waiting.leads.lead
+        waiting.leads.planned(in_time)
+        if not in_time:
+            # Made again from a later start, with a longer lead (if it could
+            # grow, and time is left).
+            late += 1
+            fresh = not plan.stop and waiting.leads.lead > before
             continue
         if new is not None:
             sim.follow(current.splice(new))

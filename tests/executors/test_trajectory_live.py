@@ -61,7 +61,7 @@ class VirtualPacer:
         return t - self.now
 
 
-def _fixed_period_session() -> TeleopSession:
+def _fixed_period_session(**more: str) -> TeleopSession:
     period = str(PERIOD)
     return TeleopSession(
         BOARDS,
@@ -72,12 +72,13 @@ def _fixed_period_session() -> TeleopSession:
             "method.cat.timing.period": period,
             "method.cat.timing.min_period": period,
             "method.cat.timing.max_period": period,
+            **more,
         },
     )
 
 
 def _run_with_arrival(
-    at: float,
+    at: float, **more: str
 ) -> tuple[
     TeleopSession,
     list[tuple[float, float]],
@@ -89,7 +90,7 @@ def _run_with_arrival(
     made, its start time), and each trajectory change as (simulated time,
     the trajectory before, the one after).
     """
-    session = _fixed_period_session()
+    session = _fixed_period_session(**more)
     sim = session.parts.sim
     follow = sim.follow
     changes: list[tuple[float, JointTrajectory, JointTrajectory]] = []
@@ -143,6 +144,27 @@ def test_a_goal_that_arrives_mid_period_is_commanded_a_lead_later_not_at_its_end
     start = RobotState(robot, after.positions[k]).frame_position(hand)
     end = RobotState(robot, after.positions[-1]).frame_position(hand)
     assert end[0] - start[0] > 0.002
+
+
+def test_a_plan_made_after_its_lead_is_made_again_with_a_longer_lead() -> None:
+    """A QP step longer than the lead: late, then made again from 1.5 leads on."""
+    at = 10 * PERIOD + 0.25 * PERIOD
+    lead = COMMAND_LEAD * PERIOD
+    # One step (virtual time) costs more than a lead and fits in 1.5 leads;
+    # half the period is the budget, so one step ends each period's plan.
+    session, starts, _ = _run_with_arrival(
+        at,
+        **{
+            "method.cat.timing.virtual_costs.qp_step": str(1.3 * lead),
+            "method.cat.timing.time_budget": "0.5",
+            # Room for the lead to grow (it is a share of the longest period).
+            "method.cat.timing.max_period": str(2 * PERIOD),
+        },
+    )
+    first = next(start for now, start in starts if now >= at)
+    assert abs(first - (at + 1.5 * lead)) < 1e-9, starts
+    notes = [p.note for p in session.parts.log.periods if p.t < at < p.t + p.period]
+    assert notes[0].endswith("; 1 plan(s) made after their lead")
 
 
 def test_a_goal_too_near_the_period_s_end_is_taken_by_the_next_period() -> None:
