@@ -459,7 +459,7 @@ def _wait_out(
         run.advance(t_f, look_ahead, reaction=2.0 * period)
     except Exception as exc:
         note = faults.fault(t, "simulation", exc)
-        return result._replace(note=note, failed=True)
+        return WaitAnswer(result.steps, note, result.spliced, failed=True)
     return result
 
 

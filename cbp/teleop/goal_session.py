@@ -243,7 +243,9 @@ class TeleopSession:
                 and last.number == self.goal.sampled_number
                 and starts < last.commanded
             ):
-                self._commands[-1] = last._replace(planned=planned, commanded=starts)
+                self._commands[-1] = Commanded(
+                    last.number, last.arrival, last.sampled, planned, starts
+                )
                 self._latencies[-1] = starts - last.arrival
             return
         number, arrival, sampled = taken
