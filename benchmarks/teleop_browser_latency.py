@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from results_file import publish  # this folder: scripts run from it
+from teleop_latency import publish_table  # this folder: scripts run from it
 
 from cbp.teleop import TeleopSession
 from cbp.teleop.goal_page import TeleopPage
@@ -338,6 +338,9 @@ def measure(keys: int, burners: int, dpr: float | None = None) -> dict[str, Any]
         "cpu": cpu,
         "load": (min(load), max(load)),
         "misses": sum(1 for p in session.parts.log.periods if p.missed),
+        "late": sum(
+            "made after their lead" in p.note for p in session.parts.log.periods
+        ),
         "periods": len(session.parts.log.periods),
     }
 
@@ -363,6 +366,7 @@ def main() -> None:
             f"{r['burners']} CPU-bound: goal arrival -> taken by the loop -> "
             "planned -> commanded, median / p95 [ms]: "
             + ", ".join(f"{a:.1f} / {b:.1f}" for a, b in r["stages"].values())
+            + f"; periods with a plan made after its lead: {r['late']}"
         )
         print(
             f"{r['burners']} CPU-bound: moved hand sent -> batch on the page's main "
@@ -403,28 +407,30 @@ def main() -> None:
         "| CPU-bound processes | load average | keys / goals | to server median / p95 [ms] | to command median / p95 [ms] | taken / planned / commanded, medians [ms] | hand drawn median / p95 [ms] | next frame median / p95 [ms] | sent / on page / frame begun / drawn, medians [ms] | frame interval median [ms] | deadline misses | CPU: Chromium / session (page updates) [cores] | browser clock - server clock [ms] |",
         "|---:|---|---:|---:|---:|---|---:|---:|---|---:|---:|---|---:|",
     ]
-    for r in rows:
-        st, br = r["stages"], r["browser"]
-        sent = r["to_sent"][0]
-        on_page = sent + br["received"][0]
-        begun = on_page + br["begun"][0]
-        lines.append(
-            f"| {r['burners']} | {r['load'][0]:.1f}-{r['load'][1]:.1f} | "
-            f"{r['keys']} / {r['goals']} | "
-            f"{r['to_server'][0]:.1f} / {r['to_server'][1]:.1f} | "
-            f"{r['to_command'][0]:.1f} / {r['to_command'][1]:.1f} | "
-            f"{st['taken'][0]:.1f} / {st['planned'][0]:.1f} / "
-            f"{st['commanded'][0]:.1f} | "
-            f"{r['drawn'][0]:.0f} / {r['drawn'][1]:.0f} | "
-            f"{r['next_frame'][0]:.0f} / {r['next_frame'][1]:.0f} | "
-            f"{sent:.0f} / {on_page:.0f} / {begun:.0f} / "
-            f"{begun + br['drawn'][0]:.0f} | {r['frame_ms'][0]:.0f} | "
-            f"{r['misses']} of {r['periods']} | {r['cpu'][0]:.2f} / {r['cpu'][1]:.2f} "
-            f"({r['cpu'][2]:.2f}) | {r['clock_ms']:.1f} "
-            f"(+-{r['trip_ms'] / 2:.1f}) |"
-        )
-    text = "\n".join(lines) + "\n"
-    publish(text, args.append)
+    publish_table(lines, [_row(r) for r in rows], args.append)
+
+
+def _row(r: dict[str, Any]) -> str:
+    """One row of the table: a session's figures."""
+    st, br = r["stages"], r["browser"]
+    sent = r["to_sent"][0]
+    on_page = sent + br["received"][0]
+    begun = on_page + br["begun"][0]
+    return (
+        f"| {r['burners']} | {r['load'][0]:.1f}-{r['load'][1]:.1f} | "
+        f"{r['keys']} / {r['goals']} | "
+        f"{r['to_server'][0]:.1f} / {r['to_server'][1]:.1f} | "
+        f"{r['to_command'][0]:.1f} / {r['to_command'][1]:.1f} | "
+        f"{st['taken'][0]:.1f} / {st['planned'][0]:.1f} / "
+        f"{st['commanded'][0]:.1f} | "
+        f"{r['drawn'][0]:.0f} / {r['drawn'][1]:.0f} | "
+        f"{r['next_frame'][0]:.0f} / {r['next_frame'][1]:.0f} | "
+        f"{sent:.0f} / {on_page:.0f} / {begun:.0f} / "
+        f"{begun + br['drawn'][0]:.0f} | {r['frame_ms'][0]:.0f} | "
+        f"{r['misses']} of {r['periods']} | {r['cpu'][0]:.2f} / {r['cpu'][1]:.2f} "
+        f"({r['cpu'][2]:.2f}) | {r['clock_ms']:.1f} "
+        f"(+-{r['trip_ms'] / 2:.1f}) |"
+    )
 
 
 if __name__ == "__main__":

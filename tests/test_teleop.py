@@ -24,7 +24,6 @@ from cbp.goals import recorded_goal_overrides
 from cbp.metrics import run_metrics
 from cbp.plugin import HoldsContacts
 from cbp.scenario import load_scenario
-from cbp.state import RobotState
 from cbp.teleop import GOAL_FILE, LiveGoal, TeleopSession
 from tests.conftest import (
     free_port,
@@ -554,67 +553,6 @@ def test_a_goal_set_tells_the_listeners_and_wakes_the_loop_at_once() -> None:
     session.set_goal(*session.goal.pose())
     session.reset()
     assert told == [1, 2, 3]
-
-
-def test_the_session_pacer_tells_the_listeners_when_a_period_s_end_is_now() -> None:
-    """A wait that reaches its time tells; one a new goal ends early does not."""
-    import threading
-
-    from cbp.teleop.changes import Changes
-    from cbp.teleop.goal_session import _TellingPacer
-
-    changes, wake = Changes(), threading.Event()
-    told: list[bool] = []
-    changes.listen(lambda: told.append(True))
-    pacer = _TellingPacer(changes, wake)
-    pacer.start(0.0)
-    pacer.wait_until(-1.0)  # behind: the time is now at once
-    assert told == [True]
-    wake.set()
-    assert pacer.wait_until(3600.0) == 0.0  # woken early
-    assert pacer.left(3600.0) > 0
-    assert told == [True]
-
-
-def test_a_goal_that_arrives_while_the_loop_waits_is_planned_for_before_the_deadline() -> (
-    None
-):
-    """The wait ends on the new goal; the plan is made toward it for the same splice."""
-    from cbp.executors.trajectory import _plan_while_waiting
-    from cbp.run import WallClockPacer
-
-    session = TeleopSession(BOARDS, "cat")
-    try:
-        run, goal = session.parts, session.goal
-        pacer = WallClockPacer(wake=goal.arrived)
-        pacer.start(0.0)
-        q = np.array(run.sim.q, dtype=float)
-        t_f = 0.5  # the period's end, half a second from now
-        plan = _plan_while_waiting(
-            pacer, 0.0, t_f, q, session.planner, run, session.timing, 0.015, 0.015
-        )
-        assert plan is None  # no goal came: the wait ran out
-        assert pacer.left(t_f) <= 0
-        pacer.start(0.0)
-        number = session.jog("x", 0.05)
-        plan = _plan_while_waiting(
-            pacer, 0.0, t_f, q, session.planner, run, session.timing, 0.015, 0.015
-        )
-        assert plan is not None
-        assert plan.path is not None
-        assert not goal.changed()  # the new goal was taken
-        taken = goal.take_sampled()
-        assert taken is not None
-        assert taken[0] == number
-        assert pacer.left(t_f) <= 0  # and the deadline kept
-        hand = session.scenario.robot.frame_id(session.scenario.ee_frame)
-        state = RobotState(session.scenario.robot, plan.path[-1])
-        start = RobotState(session.scenario.robot, q)
-        moved = state.frame_position(hand) - start.frame_position(hand)
-        assert moved[0] > 0.005  # toward the goal jogged along +x
-    finally:
-        session.parts.close()
-        session.planner.close()
 
 
 @pytest.fixture

@@ -19,7 +19,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-__all__ = ["FLOOR_HOLD", "MISS_REPORT", "DeadlineMisses", "PeriodAdapter"]
+__all__ = [
+    "FLOOR_HOLD",
+    "MISS_REPORT",
+    "DeadlineMisses",
+    "LeadAdapter",
+    "PeriodAdapter",
+]
 
 #: How long a missed period holds the period's floor [s of the loop's time].
 FLOOR_HOLD = 2.0
@@ -63,6 +69,40 @@ class PeriodAdapter:
         if compute < 0.5 * period:
             return max(period * self.shrink, self._floor)
         return period
+
+
+class LeadAdapter:
+    """How long before its first command a goal that arrives mid-period is planned.
+
+    A live loop plans for such a goal within a lead and commands it at the
+    lead's end (:func:`cbp.executors.trajectory._command_while_waiting`): a
+    short lead is a short latency, but a plan that takes longer than its
+    lead cannot start where it was meant to and is made again. So the lead
+    grows by ``growth`` after a plan made too late, and shrinks by
+    ``shrink`` after one made in time, within [``shortest``, ``longest``].
+
+    Args:
+        shortest: the shortest lead [s].
+        longest: the longest lead [s].
+        growth: the factor after a late plan (>= 1).
+        shrink: the factor after a plan in time (<= 1).
+    """
+
+    def __init__(
+        self, shortest: float, longest: float, growth: float, shrink: float
+    ) -> None:
+        """Start at the shortest lead."""
+        self.shortest, self.longest = shortest, longest
+        self.growth, self.shrink = growth, shrink
+        #: The lead now [s].
+        self.lead = shortest
+
+    def planned(self, in_time: bool) -> None:
+        """A plan for a goal that arrived mid-period was made in time or not."""
+        if in_time:
+            self.lead = max(self.lead * self.shrink, self.shortest)
+        else:
+            self.lead = min(self.lead * self.growth, self.longest)
 
 
 class DeadlineMisses:

@@ -6,8 +6,9 @@ to the low-level follower (CAT, and the IK and MP methods):
 
 1. At the start of a period (time t, length P) the operator's latest goal is
    taken. The deadline is t_f = t + P. In a live session, a goal that arrives
-   after the planning is planned for again in the time left before t_f
-   (the wall-clock pacer's wait ends on it), so it too is commanded at t_f.
+   after the planning ends the wait for t_f (the wall-clock pacer's wait ends
+   on it): it is planned for at once, from the state the robot is commanded
+   to be in a short lead later, and commanded then, not at t_f.
 2. The planning starts from the first point of the current trajectory scheduled
    after t_f (its position, velocity and acceleration), so the robot keeps
    moving while the planner works.
@@ -30,7 +31,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 import pinocchio as pin
@@ -40,10 +41,10 @@ from cbp.compilation import CompileCounter
 from cbp.engine import Engine
 from cbp.executors.backout import back_out
 from cbp.executors.clock import Budget, make_budget
-from cbp.executors.periods import DeadlineMisses, PeriodAdapter
+from cbp.executors.periods import DeadlineMisses, LeadAdapter, PeriodAdapter
 from cbp.methods.settings import ExecutorTiming
 from cbp.robot import FloatArray
-from cbp.run.pacing import WallClockPacer
+from cbp.run.pacing import Pacer
 from cbp.run.parts import RunParts, build_run
 from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import JointTrajectory, time_parameterize
@@ -182,9 +183,10 @@ def run_trajectory_executor(
     planner: Planner,
     timing: ExecutorTiming,
     *,
-    pacer: WallClockPacer | None = None,
+    pacer: Pacer | None = None,
     stop_requested: Callable[[], bool] = _never,
     commanded: Callable[[float], None] | None = None,
+    reached: Callable[[float], None] | None = None,
 ) -> Trace:
     """Run the scenario with ``planner`` each command period; return the trace.
 
@@ -202,10 +204,16 @@ def run_trajectory_executor(
         planner: plans each period.
         timing: the command period, budget and limits.
         pacer: keeps the loop in step with the wall clock (a live session);
-            None runs as fast as the work allows.
+            None runs as fast as the work allows. Paced, the loop plans a
+            period, waits it out (commanding each goal that arrives
+            meanwhile at once: :func:`_command_while_waiting`), then
+            simulates the robot's motion over it; unpaced, it simulates the
+            motion while it plans, then commands the plan.
         stop_requested: asked at each period's start; True ends the run
             there (an operator's stop).
         commanded: called with the start time of each trajectory spliced in.
+        reached: called with each period's end once the robot's motion is
+            simulated up to it (paced: the robot's state now).
     """
     robot = run.robot
     vmax = robot.velocity_limits * timing.velocity_scale
@@ -217,6 +225,9 @@ def run_trajectory_executor(
     sim = run.sim
     faults = run.faults
     adapter = PeriodAdapter(lo, hi, timing.growth, timing.shrink)
+    leads = LeadAdapter(
+        COMMAND_LEAD * lo, COMMAND_LEAD * hi, timing.growth, timing.shrink
+    )
     leaving = _LeavingContact(run, vmax * BACK_OUT_DT)
     misses = DeadlineMisses(run.event)
     compiles = CompileCounter.install()
@@ -248,6 +259,10 @@ def run_trajectory_executor(
             compiled = compiles.count
             hold: str | None = None
             backing: Plan | None = None
+            # The latest goal accepted before this period's (a live goal that
+            # arrives from now on is said new below).
+            accepted = run.goal.changes
+            taken = accepted[-1][1] if accepted else None
             try:
                 goal = run.goal.send(t)
                 hold = run.hold_reason(t)
@@ -272,45 +287,16 @@ def run_trajectory_executor(
                 new = stopping_trajectory(current, i, vmax, amax)
             compute = budget.elapsed()
             timed_out, steps = plan.timed_out, plan.steps
-            try:
-                # The robot moves on while the result is computed.
-                run.advance(t_f, look_ahead, reaction=2.0 * period)
-                if pacer is not None:
-                    pacer.wait_until(t_f)
-            except Exception as exc:
-                failed = True
-                note = faults.fault(t, "simulation", exc)
-            if pacer is not None and not (
-                failed or hold is not None or backing is not None or plan.stop
-            ):
+            # A live goal taken at the period's start or by the planner between
+            # its steps (CAT) is commanded by this plan only after t_f.
+            moved = taken is not None and accepted[-1][1] is not taken
+            if pacer is None:
                 try:
-                    again = _plan_while_waiting(
-                        pacer, t, t_f, q_s, planner, run, timing, lo, period
-                    )
-                except Exception as exc:  # as a failing period: hold the robot
+                    # The robot moves on while the result is computed.
+                    run.advance(t_f, look_ahead, reaction=2.0 * period)
+                except Exception as exc:
                     failed = True
-                    plan = Plan(None, 0, faults.fault(t, "planning", exc))
-                    note = plan.note
-                    again = None
-                    if i is not None:
-                        new = stopping_trajectory(current, i, vmax, amax)
-                if again is not None:
-                    steps += again.steps
-                    timed: JointTrajectory | None = None
-                    if again.path is not None and len(again.path) > 1:
-                        timed = time_parameterize(again.path, t_s, v_s, a_s, vmax, amax)
-                    if timed is not None:
-                        plan, note, new = again, again.note, timed
-                    elif again.stop or again.path is None or len(again.path) < 2:
-                        # The planner's answer for the new goal: brake, or no
-                        # motion (the current trajectory goes on).
-                        plan, note = again, again.note
-                        new = None
-                        if again.stop and i is not None:
-                            new = stopping_trajectory(current, i, vmax, amax)
-                    # else: too short to stop on; the period's own plan stands.
-            if not failed:
-                faults.ok()
+                    note = faults.fault(t, "simulation", exc)
             # A period that compiled kernels (numba, at start-up) is not a miss.
             startup = compiles.count > compiled
             if startup:
@@ -320,13 +306,40 @@ def run_trajectory_executor(
             if missed:
                 why = note if timed_out else "result discarded"
                 misses.missed(t, compute, period, why)
+            elif new is not None:
+                misses.met(t)
+                # Live, the simulation is not past t: new starts after t_f.
+                sim.follow(sim.trajectory.splice(new))
+                if commanded is not None:
+                    commanded(float(new.times[0]))
+                spliced = True
             else:
                 misses.met(t)
-                if new is not None:
-                    sim.follow(current.splice(new))
-                    if commanded is not None:
-                        commanded(float(new.times[0]))
-                    spliced = True
+            if pacer is not None:
+                # Live: wait for t_f, commanding each goal that arrives
+                # meanwhile at once; the robot's motion over the period is
+                # simulated by then.
+                answer = _wait_out(
+                    pacer,
+                    Waiting(t, t_f, period, lo, leads, pending=moved),
+                    planner,
+                    run,
+                    timing,
+                    (vmax, amax),
+                    commanded,
+                    look_ahead,
+                    answer=not (
+                        failed or hold is not None or backing is not None or plan.stop
+                    ),
+                )
+                steps += answer.steps
+                note = answer.note if answer.note is not None else note
+                spliced = spliced or answer.spliced
+                failed = failed or answer.failed
+                if reached is not None:
+                    reached(t_f)
+            if not failed:
+                faults.ok()
             next_period = adapter.next(t, period, compute, missed)
             run.log.periods.append(
                 PeriodRecord(t, period, steps, compute, missed, spliced, note)
@@ -347,57 +360,210 @@ def run_trajectory_executor(
     return trace
 
 
-#: A goal that arrives while the loop waits for its period's end is planned for
-#: when at least this share of the shortest period is left (else it waits for
-#: the next period, which starts by then).
+#: A goal that arrives while the loop waits for its period's end is planned
+#: for within a lead and commanded at the lead's end, from the state the
+#: robot is commanded to be in then. The lead is this share of the shortest
+#: period to start with, longer after plans made too late
+#: (:class:`~cbp.executors.periods.LeadAdapter`, up to this share of the
+#: longest period).
+COMMAND_LEAD = 0.4
+#: ... when at least this share of the shortest period is left before the
+#: period's end (else it waits for the next period, which starts by then).
 REPLAN_SHARE = 0.2
 
 
-def _plan_while_waiting(
-    pacer: WallClockPacer,
-    t: float,
-    t_f: float,
-    q_s: FloatArray,
+class Waiting(NamedTuple):
+    """The period a live loop waits out: from ``t`` to ``t_f`` [s].
+
+    Attributes:
+        t: the period's start.
+        t_f: its end (the deadline).
+        period: its length.
+        shortest: the shortest period.
+        leads: the lead of a plan for a goal that arrives meanwhile.
+        pending: a goal newer than the period's arrived while its plan was
+            made (and was taken by the planner): plan for it at once.
+    """
+
+    t: float
+    t_f: float
+    period: float
+    shortest: float
+    leads: LeadAdapter
+    pending: bool = False
+
+
+class WaitAnswer(NamedTuple):
+    """What the goals that arrived during a wait were given.
+
+    Attributes:
+        steps: planning steps taken for them.
+        note: the last plan's note (None: no plan was made).
+        spliced: whether a trajectory planned for one was commanded.
+        failed: whether planning or simulating failed (an event said so).
+    """
+
+    steps: int
+    note: str | None
+    spliced: bool
+    failed: bool = False
+
+
+def _wait_out(
+    pacer: Pacer,
+    waiting: Waiting,
     planner: Planner,
     run: RunParts,
     timing: ExecutorTiming,
-    shortest: float,
-    period: float,
-) -> Plan | None:
-    """A plan for a goal that arrived while the loop waited for its deadline.
+    limits: tuple[FloatArray, FloatArray],
+    commanded: Callable[[float], None] | None,
+    look_ahead: float,
+    answer: bool,
+) -> WaitAnswer:
+    """A live period after its plan: simulate, wait out, answer new goals.
 
-    A live goal sets the pacer's wake event: the wait ends, and when at least
-    :data:`REPLAN_SHARE` of the shortest period is left until ``t_f`` (a goal
-    that came while the robot's motion was simulated finds the wait's event
-    set), the planner plans again from the same start point toward the new
-    goal, within the time left, so the goal is commanded at ``t_f`` and not a
-    period later. The wait then
-    goes on until ``t_f`` (again for a goal that arrives meanwhile). None when
-    no goal arrived in time, and for a plan that ran out of time before it had
-    a result (the period's own plan stands).
+    The robot's motion is simulated at most a lead (:data:`COMMAND_LEAD`)
+    ahead of now before the wait, the rest after it, so a goal that arrives
+    during the wait can be commanded a lead after it
+    (:func:`_command_while_waiting`; only when ``answer``: not while the
+    robot holds, brakes or backs out). A failure to plan brakes the robot; a
+    failure to simulate is a fault of the period, as in an unpaced run.
     """
-    result: Plan | None = None
-    while True:
-        pacer.wait_until(t_f)
-        left = pacer.left(t_f)
-        if left <= 0:
-            return result
-        if not run.goal.changed() or left < REPLAN_SHARE * shortest:
-            # Woken with too little time to plan: the goal waits for the
-            # next period, which starts at t_f.
+    t, t_f, period = waiting.t, waiting.t_f, waiting.period
+    faults = run.faults
+    now = t_f - pacer.left(t_f)
+    try:
+        run.advance(
+            min(t_f, now + waiting.leads.lead),
+            look_ahead,
+            reaction=2.0 * period,
+        )
+    except Exception as exc:
+        note = faults.fault(t, "simulation", exc)
+        pacer.wait_until(t_f, wakeable=False)
+        return WaitAnswer(0, note, False, failed=True)
+    result = WaitAnswer(0, None, False)
+    if not answer:
+        pacer.wait_until(t_f, wakeable=False)
+    else:
+        try:
+            result = _command_while_waiting(
+                pacer, waiting, planner, run, timing, *limits, commanded
+            )
+        except Exception as exc:  # as a failing period: hold the robot
+            note = faults.fault(t, "planning", exc)
+            _brake_after(run, t_f, *limits)
             pacer.wait_until(t_f, wakeable=False)
-            return result
+            result = WaitAnswer(0, note, False, failed=True)
+    try:
+        run.advance(t_f, look_ahead, reaction=2.0 * period)
+    except Exception as exc:
+        note = faults.fault(t, "simulation", exc)
+        return WaitAnswer(result.steps, note, result.spliced, failed=True)
+    return result
+
+
+def _command_while_waiting(
+    pacer: Pacer,
+    waiting: Waiting,
+    planner: Planner,
+    run: RunParts,
+    timing: ExecutorTiming,
+    vmax: FloatArray,
+    amax: FloatArray,
+    commanded: Callable[[float], None] | None,
+) -> WaitAnswer:
+    """Wait until ``waiting.t_f``; plan for and command each goal that arrives.
+
+    A live goal sets the pacer's wake event: the wait ends at the loop's time
+    ``now``. The splice time is ``t_c = now + lead``, the lead being
+    :class:`~cbp.executors.periods.LeadAdapter`'s (or the time left, if less); the
+    planner plans from the state the current trajectory commands at ``t_c``
+    (position, velocity, acceleration) toward the new goal, within
+    ``timing.time_budget`` of the lead, and a result made within the lead is
+    timed from that state and spliced in at ``t_c``: the goal is commanded
+    as soon as it is planned for, not at the period's end. The simulation
+    has not run past the period's start (the loop simulates a period after
+    waiting it out), so the robot has not yet passed ``t_c``. A result made
+    after ``t_c`` is made again from a later start with a longer lead, while
+    the time left allows (then the next period takes the goal); one too short
+    to stop on is dropped (the current trajectory goes on); a plan that says
+    stop brakes along the current trajectory from ``t_c`` on. With less than
+    :data:`REPLAN_SHARE` of the shortest period left, the goal waits for the
+    next period. The wait goes on until ``t_f``. A goal that the period's
+    planner took between its steps (``waiting.pending``) is planned for so
+    at once, without waiting: the period's plan commands it only after
+    ``t_f``.
+    """
+    t_f = waiting.t_f
+    steps, note, spliced, late = 0, None, False, 0
+    sim = run.sim
+    fresh = waiting.pending
+    while True:
+        if not fresh:
+            pacer.wait_until(t_f)
+            fresh = run.goal.changed()
+        left = pacer.left(t_f)
+        if left > 0 and (not fresh or left < REPLAN_SHARE * waiting.shortest):
+            pacer.wait_until(t_f, wakeable=False)
+            left = 0.0
+        if left <= 0:
+            if late:
+                note = f"{note}; {late} plan(s) made after their lead".lstrip("; ")
+            return WaitAnswer(steps, note, spliced)
+        fresh = False
+        now = t_f - left
+        # Not before the simulated robot's time (it is at most a lead ahead).
+        t_c = max(now + min(waiting.leads.lead, left), sim.t)
+        lead = t_c - now
+        current = sim.trajectory
+        q_c, v_c, a_c = current.sample(t_c)
+        # Followed until the next period's plan replaces it (a period after t_f).
         budget = make_budget(
             timing.clock,
-            timing.time_budget * left,
+            timing.time_budget * lead,
             timing.virtual_costs,
-            horizon=period,
+            horizon=t_f + waiting.period - t_c,
         )
-        goal = run.goal.resend(t)
+        goal = run.goal.resend(t_c)
         with held(run.world):
-            plan = planner.plan(q_s.copy(), goal, budget, run)
-        if not plan.timed_out:
-            result = plan
+            plan = planner.plan(q_c.copy(), goal, budget, run)
+        steps += plan.steps
+        note = plan.note
+        new: JointTrajectory | None = None
+        if plan.path is not None and len(plan.path) > 1:
+            new = time_parameterize(plan.path, t_c, v_c, a_c, vmax, amax)
+            budget.charge("trajectory_point", len(plan.path))
+            if new is None:
+                note = "path too short to stop on; current trajectory kept"
+        elif plan.stop:  # brake (an operator's pause): at once, whenever planned
+            _brake_after(run, t_c, vmax, amax)
+        in_time = not plan.timed_out and budget.elapsed() <= lead
+        before = waiting.leads.lead
+        waiting.leads.planned(in_time)
+        if not in_time:
+            # Made again from a later start, with a longer lead (if it could
+            # grow, and time is left).
+            late += 1
+            fresh = not plan.stop and waiting.leads.lead > before
+            continue
+        if new is not None:
+            sim.follow(current.splice(new))
+            if commanded is not None:
+                commanded(t_c)
+            spliced = True
+
+
+def _brake_after(run: RunParts, t: float, vmax: FloatArray, amax: FloatArray) -> None:
+    """Brake along the trajectory the robot follows from its first point after ``t``."""
+    sim = run.sim
+    current = sim.trajectory
+    i = current.first_point_after(t)
+    if i is None:
+        return
+    stopping = stopping_trajectory(current, i, vmax, amax)
+    if stopping is not None:
+        sim.follow(current.splice(stopping))
 
 
 def stopping_trajectory(

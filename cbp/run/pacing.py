@@ -14,8 +14,25 @@ from __future__ import annotations
 import math
 import threading
 import time
+from typing import Protocol
 
-__all__ = ["WallClockPacer"]
+__all__ = ["Pacer", "WallClockPacer"]
+
+
+class Pacer(Protocol):
+    """What a live loop asks of its clock: wait for a time, say how long is left.
+
+    :class:`WallClockPacer` is the wall clock's; a test may pace a loop on a
+    clock of its own (the same loop, on virtual time).
+    """
+
+    def wait_until(self, t: float, wakeable: bool = True) -> float:
+        """Wait until the loop's time ``t`` is now (or a wake); return how late [s]."""
+        ...
+
+    def left(self, t: float) -> float:
+        """How long until the loop's time ``t`` is now [s] (< 0: past)."""
+        ...
 
 
 class WallClockPacer:

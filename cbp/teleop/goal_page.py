@@ -8,7 +8,8 @@ drags. The panel: the method (switched at the next command period), pause and
 stop, jog buttons for the goal (translate or rotate by a step, in the world's
 or the hand's axes) and a reset, a readout (time, method, steps per period,
 deadline misses, goal error, contact force, the latest events) and a live plot
-of goal error and contact force over the last seconds.
+of goal error and contact force over the last seconds (in a folder, folded to
+start with: in a browser without a GPU it cost a quarter of each frame).
 
 Why the arm holds is drawn and said: a red arrow at each contact that holds
 the arm, pointing along the direction it may not move (toward the obstacle);
@@ -243,17 +244,21 @@ class TeleopPage(Page[TeleopSession]):
         self.legend = gui.add_html(legend_html())
         self.add_render_toggle()
         self._history: deque[tuple[float, float, float]] = deque()
-        self.plot = gui.add_uplot(
-            data=(np.zeros(1), np.zeros(1), np.zeros(1)),
-            series=(
-                viser.uplot.Series(label="t [s]"),
-                viser.uplot.Series(label="goal error [mm]", stroke="blue", width=2),
-                viser.uplot.Series(label="contact [N]", stroke="red", width=2),
-            ),
-            title="goal error and contact force",
-            aspect=2.0,
-            scales={"x": viser.uplot.Scale(time=False)},
-        )
+        # Folded to start with: in headless Chromium without a GPU the live
+        # plot cost about a quarter of the browser's work per frame of the
+        # page (benchmarks/RESULTS.md); a click on the folder shows it.
+        with gui.add_folder("plot", expand_by_default=False):
+            self.plot = gui.add_uplot(
+                data=(np.zeros(1), np.zeros(1), np.zeros(1)),
+                series=(
+                    viser.uplot.Series(label="t [s]"),
+                    viser.uplot.Series(label="goal error [mm]", stroke="blue", width=2),
+                    viser.uplot.Series(label="contact [N]", stroke="red", width=2),
+                ),
+                title="goal error and contact force",
+                aspect=2.0,
+                scales={"x": viser.uplot.Scale(time=False)},
+            )
         self._cells: Any = None
         # Where the arm is heading when the goal is out of its reach: a
         # wireframe robot at the end of the commanded trajectory, and the

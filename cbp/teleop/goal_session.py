@@ -78,7 +78,8 @@ class Commanded(NamedTuple):
             while CAT planned, or on waking from the period's wait).
         planned: when the plan that was commanded for it was made.
         commanded: when the first trajectory planned for it started to be
-            commanded (the splice point, or the splice itself if later).
+            commanded (the splice point, or the splice itself if later; of
+            two plans for it, the earlier).
     """
 
     number: int
@@ -184,8 +185,8 @@ class TeleopSession:
         #: arm's state at it is now), a new goal, a new trajectory.
         self.changes = Changes()
         # A new goal ends the loop's wait for its deadline: it is planned for
-        # at once and commanded at that deadline, not a period later.
-        self._pacer = _TellingPacer(self.changes, wake=self.goal.arrived)
+        # and commanded at once, not at that deadline.
+        self._pacer = WallClockPacer(wake=self.goal.arrived)
         self._latencies: list[float] = []
         self._commands: list[Commanded] = []
         self._state = RobotState(robot)
@@ -211,6 +212,7 @@ class TeleopSession:
                 pacer=self._pacer,
                 stop_requested=self._stop_requested,
                 commanded=self._commanded,
+                reached=self._reached,
             )
         except BaseException as exc:  # kept for stop() to raise in the caller
             self.error = exc
@@ -220,16 +222,34 @@ class TeleopSession:
         sim = self.parts.sim
         return self._stopping.is_set() and sim.trajectory.end_time <= sim.t
 
+    def _reached(self, t: float) -> None:
+        """The arm's motion is simulated up to now (a period's end): tell."""
+        self.changes.notify()
+
     def _commanded(self, t_start: float) -> None:
         """Measure the latency of the goal this trajectory was planned for."""
         taken = self.goal.take_sampled()
         self.changes.notify()
-        if taken is None or not self._pacer.started:
+        if not self._pacer.started:
+            return
+        starts = max(time.perf_counter(), self._pacer.wall_time(t_start))
+        planned = self.planner.planned_at
+        if taken is None:
+            # Planned for again, for the same goal (taken by the period's
+            # planner between its steps): commanded from the earlier start.
+            last = self._commands[-1] if self._commands else None
+            if (
+                last is not None
+                and last.number == self.goal.sampled_number
+                and starts < last.commanded
+            ):
+                self._commands[-1] = Commanded(
+                    last.number, last.arrival, last.sampled, planned, starts
+                )
+                self._latencies[-1] = starts - last.arrival
             return
         number, arrival, sampled = taken
-        starts = max(time.perf_counter(), self._pacer.wall_time(t_start))
         self._latencies.append(starts - arrival)
-        planned = self.planner.planned_at
         self._commands.append(Commanded(number, arrival, sampled, planned, starts))
 
     def set_goal(self, position: FloatArray, rotation: FloatArray) -> int:
@@ -377,26 +397,6 @@ class TeleopSession:
     def commands(self) -> list[Commanded]:
         """Each goal commanded so far, with where its time went."""
         return list(self._commands)
-
-
-class _TellingPacer(WallClockPacer):
-    """The session's pacer: tells the listeners when a period's end is now.
-
-    The loop has simulated the arm to the period's end before it waits for
-    it; at the end, that state is the arm's state now, for a page to show.
-    """
-
-    def __init__(self, changes: Changes, wake: threading.Event) -> None:
-        """Pace the loop; a set ``wake`` (a new goal) ends a wait early."""
-        super().__init__(wake=wake)
-        self._changes = changes
-
-    def wait_until(self, t: float, wakeable: bool = True) -> float:
-        """Wait as :class:`WallClockPacer` does; tell the listeners if ``t`` is now."""
-        late = super().wait_until(t, wakeable)
-        if late > 0 or self.left(t) <= 0:
-            self._changes.notify()
-        return late
 
 
 def latency_summary(latencies_ms: list[float]) -> dict[str, Any]:

@@ -71,6 +71,11 @@ class LiveGoal:
             self._taken.setdefault(self.count, time.perf_counter())
             return self._position.copy(), self._rotation.copy()
 
+    @property
+    def sampled_number(self) -> int:
+        """The number of the goal the control loop sampled last."""
+        return self._sampled
+
     def changed(self) -> bool:
         """Whether a goal was set after the last sample."""
         return self.count != self._sampled

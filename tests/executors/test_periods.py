@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from cbp.executors.periods import FLOOR_HOLD, DeadlineMisses, PeriodAdapter
+from cbp.executors.periods import (
+    FLOOR_HOLD,
+    DeadlineMisses,
+    LeadAdapter,
+    PeriodAdapter,
+)
 
 
 def _misses(adapter: PeriodAdapter, seconds: float) -> int:
@@ -77,3 +82,19 @@ def test_a_single_miss_is_one_event() -> None:
     assert [m for _, m in said] == [
         "deadline missed (40.0 ms for a 33.0 ms period): result discarded"
     ]
+
+
+def test_the_lead_grows_after_a_late_plan_and_shrinks_back_within_its_bounds() -> None:
+    """Late: times growth, up to the longest; in time: times shrink, to the shortest."""
+    leads = LeadAdapter(0.006, 0.024, growth=1.5, shrink=0.9)
+    assert leads.lead == 0.006
+    leads.planned(in_time=False)
+    assert leads.lead == pytest.approx(0.009)
+    for _ in range(10):
+        leads.planned(in_time=False)
+    assert leads.lead == 0.024
+    leads.planned(in_time=True)
+    assert leads.lead == pytest.approx(0.0216)
+    for _ in range(50):
+        leads.planned(in_time=True)
+    assert leads.lead == 0.006

@@ -1,0 +1,224 @@
+"""The paced trajectory loop: a goal that arrives mid-period is commanded at once.
+
+The loop runs a real session's parts (the boards, CAT, PyBullet) on virtual
+time: its budgets count work (``timing.clock: virtual``) and its pacer is a
+clock the test moves, on which the operator's goals arrive at set times. What
+is asserted does not depend on the machine's load.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cbp.executors.trajectory import COMMAND_LEAD, REPLAN_SHARE, run_trajectory_executor
+from cbp.sim.trajectory import JointTrajectory
+from cbp.state import RobotState
+from cbp.teleop import TeleopSession
+
+BOARDS = Path(__file__).resolve().parents[2] / "scenarios" / "cat_boards.yaml"
+#: A fixed command period [s] (no adaptation), so a test knows where periods end.
+PERIOD = 0.03
+
+
+class VirtualPacer:
+    """Paces a live loop on virtual time; ``arrivals`` happen at their times.
+
+    A wait that reaches an arrival's time runs it there (an operator's goal:
+    it sets ``wake``); a wakeable wait ends at it, as the wall-clock pacer's
+    does when a goal arrives.
+    """
+
+    def __init__(
+        self, wake: threading.Event, arrivals: list[tuple[float, Callable[[], object]]]
+    ) -> None:
+        """Time 0, the arrivals to come."""
+        self.now = 0.0
+        self.wake = wake
+        self.arrivals = sorted(arrivals, key=lambda a: a[0])
+
+    def wait_until(self, t: float, wakeable: bool = True) -> float:
+        """Move time to ``t``, or to the first arrival before it (wakeable)."""
+        if t <= self.now:
+            return self.now - t
+        if wakeable and self.wake.is_set():
+            return 0.0
+        while self.arrivals and self.arrivals[0][0] <= t:
+            at, arrive = self.arrivals.pop(0)
+            self.now = max(self.now, at)
+            arrive()
+            if wakeable:
+                return 0.0
+        self.now = t
+        return 0.0
+
+    def left(self, t: float) -> float:
+        """Virtual time until ``t``."""
+        return t - self.now
+
+
+def _fixed_period_session(**more: str) -> TeleopSession:
+    period = str(PERIOD)
+    return TeleopSession(
+        BOARDS,
+        "cat",
+        overrides={
+            "duration": "0.75",
+            "method.cat.timing.clock": "virtual",
+            "method.cat.timing.period": period,
+            "method.cat.timing.min_period": period,
+            "method.cat.timing.max_period": period,
+            **more,
+        },
+    )
+
+
+def _run_with_arrival(
+    at: float, **more: str
+) -> tuple[
+    TeleopSession,
+    list[tuple[float, float]],
+    list[tuple[float, JointTrajectory, JointTrajectory]],
+]:
+    """A session whose goal jogs 2 cm along +x at virtual time ``at``.
+
+    Returns the session (run), each splice as (the pacer's time when it was
+    made, its start time), and each trajectory change as (simulated time,
+    the trajectory before, the one after).
+    """
+    session = _fixed_period_session(**more)
+    sim = session.parts.sim
+    follow = sim.follow
+    changes: list[tuple[float, JointTrajectory, JointTrajectory]] = []
+
+    def watched(trajectory: JointTrajectory) -> None:
+        changes.append((sim.t, sim.trajectory, trajectory))
+        follow(trajectory)
+
+    sim.follow = watched  # type: ignore[method-assign]
+    pacer = VirtualPacer(session.goal.arrived, [(at, lambda: session.jog("x", 0.02))])
+    starts: list[tuple[float, float]] = []
+    run_trajectory_executor(
+        session.parts,
+        session.planner,
+        session.timing,
+        pacer=pacer,
+        commanded=lambda t_start: starts.append((pacer.now, t_start)),
+    )
+    return session, starts, changes
+
+
+def test_a_goal_that_arrives_mid_period_is_commanded_a_lead_later_not_at_its_end() -> (
+    None
+):
+    """Spliced at arrival + lead < the period's end, from the commanded state then."""
+    at = 10 * PERIOD + 0.25 * PERIOD  # early in the period [0.30, 0.33] s
+    session, starts, changes = _run_with_arrival(at)
+    lead = COMMAND_LEAD * PERIOD
+    t_c = at + lead
+    assert t_c < 11 * PERIOD  # what is asserted: before the period's end
+    first = next(start for now, start in starts if now >= at)
+    assert abs(first - t_c) < 1e-9, starts
+    simulated, before, after = next(
+        c for c in changes if np.any(np.abs(c[2].times - t_c) < 1e-9)
+    )
+    assert simulated <= t_c + 1e-12  # the robot had not been simulated past it
+    k = int(np.argmin(np.abs(after.times - t_c)))
+    # The new part starts from the state the robot was commanded to be in.
+    q, v, a = before.sample(t_c)
+    np.testing.assert_allclose(after.positions[k], q, atol=1e-12)
+    np.testing.assert_allclose(after.velocities[k], v, atol=1e-12)
+    np.testing.assert_allclose(after.accelerations[k], a, atol=1e-12)
+    # Before t_c the commanded motion is unchanged (the quintic cut at t_c).
+    for s in np.linspace(max(before.start_time, t_c - PERIOD), t_c, 7):
+        np.testing.assert_allclose(after.sample(s)[0], before.sample(s)[0], atol=1e-9)
+    # Within the limits, and toward the goal jogged along +x.
+    robot = session.scenario.robot
+    vmax = robot.velocity_limits * session.timing.velocity_scale
+    assert np.all(np.abs(after.velocities[k + 1 :]) <= vmax * (1 + 1e-9))
+    hand = robot.frame_id(session.scenario.ee_frame)
+    start = RobotState(robot, after.positions[k]).frame_position(hand)
+    end = RobotState(robot, after.positions[-1]).frame_position(hand)
+    assert end[0] - start[0] > 0.002
+
+
+def test_a_plan_made_after_its_lead_is_made_again_with_a_longer_lead() -> None:
+    """A QP step longer than the lead: late, then made again from 1.5 leads on."""
+    at = 10 * PERIOD + 0.25 * PERIOD
+    lead = COMMAND_LEAD * PERIOD
+    # One step (virtual time) costs more than a lead and fits in 1.5 leads;
+    # half the period is the budget, so one step ends each period's plan.
+    session, starts, _ = _run_with_arrival(
+        at,
+        **{
+            "method.cat.timing.virtual_costs.qp_step": str(1.3 * lead),
+            "method.cat.timing.time_budget": "0.5",
+            # Room for the lead to grow (it is a share of the longest period).
+            "method.cat.timing.max_period": str(2 * PERIOD),
+        },
+    )
+    first = next(start for now, start in starts if now >= at)
+    assert abs(first - (at + 1.5 * lead)) < 1e-9, starts
+    notes = [p.note for p in session.parts.log.periods if p.t < at < p.t + p.period]
+    assert notes[0].endswith("; 1 plan(s) made after their lead")
+
+
+def test_a_goal_too_near_the_period_s_end_is_taken_by_the_next_period() -> None:
+    """With less than REPLAN_SHARE of the period left, the next period plans for it."""
+    at = 11 * PERIOD - 0.5 * REPLAN_SHARE * PERIOD
+    _, starts, _ = _run_with_arrival(at)
+    first = next(start for now, start in starts if now >= at)
+    # Commanded by the next period's plan: from its first point after that
+    # period's end on, not mid-period.
+    assert first >= 12 * PERIOD - 1e-9
+
+
+def test_unpaced_every_splice_starts_after_its_period_s_end() -> None:
+    """Without a pacer the loop simulates while it plans: splices start at t_f or later."""
+    session = _fixed_period_session()
+    starts: list[float] = []
+    run_trajectory_executor(
+        session.parts, session.planner, session.timing, commanded=starts.append
+    )
+    ends = [p.t + p.period for p in session.parts.log.periods if p.spliced]
+    assert len(ends) == len(starts)
+    assert all(s >= e - 1e-9 for s, e in zip(starts, ends, strict=True))
+
+
+class _OperatorDuringPlanning:
+    """The session's planner; the operator jogs the goal while one plan is made."""
+
+    def __init__(self, session: TeleopSession, at: float) -> None:
+        """Jog at the plan of the period that starts at ``at``."""
+        self.session, self.at, self.done = session, at, False
+
+    def plan(self, q: Any, goal: Any, budget: Any, run: Any) -> Any:
+        """Jog (once, in the chosen period), then plan as the session does."""
+        if not self.done and run.sim.t >= self.at - 1e-9:
+            self.done = True
+            self.session.jog("x", 0.02)
+        return self.session.planner.plan(q, goal, budget, run)
+
+    def close(self) -> None:
+        """Close the session's planner."""
+        self.session.planner.close()
+
+
+def test_a_goal_taken_while_the_period_is_planned_is_commanded_a_lead_later() -> None:
+    """CAT takes it between its steps; it is planned for again at once, not at t_f."""
+    session = _fixed_period_session()
+    pacer = VirtualPacer(session.goal.arrived, [])
+    starts: list[tuple[float, float]] = []
+    run_trajectory_executor(
+        session.parts,
+        _OperatorDuringPlanning(session, 10 * PERIOD),
+        session.timing,
+        pacer=pacer,
+        commanded=lambda t_start: starts.append((pacer.now, t_start)),
+    )
+    t_c = 10 * PERIOD + COMMAND_LEAD * PERIOD
+    assert any(abs(start - t_c) < 1e-9 for _, start in starts), starts
