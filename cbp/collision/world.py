@@ -297,6 +297,11 @@ class CollisionWorld:
         between = self.sweep.between(a, b, self.sweep_step)
         return all(check(q) for q in between) and check(b)
 
+    @property
+    def against_map(self) -> bool:
+        """Whether the obstacles are an occupancy map's (checks cost more)."""
+        return getattr(self._environment, "blocked", None) is not None
+
     def is_free(self, q: FloatArray) -> bool:
         """Whether ``q`` is collision-free, in one pinocchio call (planners, IK).
 

@@ -20,18 +20,27 @@ import pinocchio as pin
 
 from cbp.collision.world import CollisionWorld
 from cbp.executors.clock import Budget
-from cbp.methods.settings import IkSearchSettings
+from cbp.methods.settings import IkSearchSettings, Work
 from cbp.robot import FloatArray, RobotModel
 
 if TYPE_CHECKING:
     from cbp.run.parts import RunParts
 
-__all__ = ["IkSearch", "SearchEvents"]
+__all__ = ["IkSearch", "SearchEvents", "check_work"]
 
 #: One start of a search: (seed, the joint held fixed or None).
 _Start = tuple[FloatArray, int | None]
 #: What a search is for: (goal, the world's environment, the configuration near).
 _SearchKey = tuple[pin.SE3, object, FloatArray]
+
+
+def check_work(world: CollisionWorld) -> Work:
+    """The work one yes-or-no check of ``world`` is charged as.
+
+    A check against an occupancy map costs an order of magnitude more than
+    one against declared objects (:class:`~cbp.methods.settings.VirtualCosts`).
+    """
+    return "map_check" if world.against_map else "collision_check"
 
 
 class IkSearch:
@@ -207,7 +216,7 @@ class IkSearch:
         if self.world is None:
             return True
         if budget is not None:
-            budget.charge("collision_check")
+            budget.charge(check_work(self.world))
         return self.world.is_free(q)
 
     def _solve_from(

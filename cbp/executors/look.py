@@ -50,7 +50,7 @@ from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.executors.aiming import clear_line, looking_at, solve_camera, unseen_held
 from cbp.executors.clock import Budget
-from cbp.executors.ik_search import IkSearch
+from cbp.executors.ik_search import IkSearch, check_work
 from cbp.executors.visibility import visibility
 from cbp.methods.settings import LookSettings, PlannerSettings
 from cbp.perception.frame import camera_parent
@@ -412,7 +412,7 @@ class Looker:
 
         scored = []
         for sample in samples:
-            budget.charge("collision_check")
+            budget.charge(check_work(world))
             if not world.is_free(sample):
                 continue
             body.update(sample)
@@ -501,7 +501,7 @@ class Looker:
         for solved in itertools.chain(self._opening, solves):
             if solved is None:
                 continue
-            budget.charge("collision_check")
+            budget.charge(check_work(world))
             if world.is_free(solved):
                 found.append(solved)
                 if len(found) == AIM_SOLVED:
@@ -523,7 +523,7 @@ class Looker:
         """The straight joint motion from ``q`` to ``view``, if free all along."""
 
         def free(c: FloatArray) -> bool:
-            budget.charge("collision_check")
+            budget.charge(check_work(world))
             return world.is_free(c)
 
         if not world.motion_free(q, view, free):

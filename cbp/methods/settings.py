@@ -32,7 +32,9 @@ __all__ = [
 #: How a planning budget is counted.
 ClockKind = Literal["wall", "virtual"]
 #: The kinds of work a planner charges.
-Work = Literal["qp_step", "ik_iteration", "collision_check", "trajectory_point"]
+Work = Literal[
+    "qp_step", "ik_iteration", "collision_check", "map_check", "trajectory_point"
+]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,13 +46,19 @@ class VirtualCosts:
     ik_iteration: float = 26e-6
     """One damped-least-squares iteration of the IK search [s]."""
     collision_check: float = 11e-6
-    """One yes-or-no collision check of a configuration (IK, MP) [s]."""
+    """One yes-or-no collision check of a configuration against declared
+    objects (IK, MP) [s]."""
+    map_check: float = 150e-6
+    """The same check against an occupancy map [s] (35-350 us measured in the
+    paper's scenes with the cameras, by how near the configurations are to
+    the map's cells: ``docs/comparison.md``)."""
     trajectory_point: float = 4e-6
     """Timing one path point of the spliced trajectory [s]."""
 
     def __post_init__(self) -> None:
         """Positive costs."""
         require(self, "> 0", "qp_step", "ik_iteration", "collision_check")
+        require(self, "> 0", "map_check")
         require(self, "> 0", "trajectory_point")
 
 

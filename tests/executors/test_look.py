@@ -150,12 +150,20 @@ def test_mp_with_the_cameras_reaches_the_wrist_limit_goal() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="with a check against the map charged as it costs (150 us, not the "
+    "11 us of one against declared objects) the search misses its deadline "
+    "every period after the looks, and no plan is made in 20 s; on the wall "
+    "clock too (docs/comparison.md)",
+)
 def test_the_hybrid_escapes_the_local_minimum_with_the_cameras() -> None:
     """CAT stalls before the wall; the hybrid looks until it sees a way, plans, reaches.
 
     The run is 20 s long: the stall takes 2.2 s, six looks about a second
-    each and the plan over the wall 3.4 s (it reaches at 12.6 s); the
-    scene's own 8 s ends while the hybrid is still looking.
+    each and the plan over the wall 3.4 s (it reached at 12.6 s when a map
+    check was charged as one against declared objects); the scene's own 8 s
+    ends while the hybrid is still looking.
     """
     scenario = load_scenario(
         SCENARIOS / "cat_local_minimum.yaml",
