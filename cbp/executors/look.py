@@ -191,10 +191,10 @@ class Looker:
         assert self.camera is not None
         t = run.sim.t
         arrived = run.sim.trajectory.end_time
+        if t < arrived - 1e-9:
+            return True  # still on the way to the view
         mapped = run.mapped_since(self.camera.name, arrived)
-        if t < arrived + self.settings.dwell - 1e-9 and (
-            t < arrived - 1e-9 or mapped < self.settings.frames
-        ):
+        if mapped < self.settings.frames and t < arrived + self.settings.dwell - 1e-9:
             return True
         self._looking = False
         watched = self._watched

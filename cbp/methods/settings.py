@@ -58,8 +58,7 @@ class VirtualCosts:
     def __post_init__(self) -> None:
         """Positive costs."""
         require(self, "> 0", "qp_step", "ik_iteration", "collision_check")
-        require(self, "> 0", "map_check")
-        require(self, "> 0", "trajectory_point")
+        require(self, "> 0", "map_check", "trajectory_point")
 
 
 #: Shortest and longest control step or tick an executor accepts [s].
@@ -252,8 +251,8 @@ class LookSettings:
     whose frames are dropped, or a map that lags, ends the hold then)."""
     looks: int = 16
     """Looks per goal at most (tries that find no view count). Behind the
-    wall of ``cat_local_minimum`` the hybrid needed 11 (about a second each)
-    before the goal and the way to it were seen."""
+    wall of ``cat_local_minimum`` the hybrid needed 6 to 13 (about a second
+    each) before the goal and the way to it were seen."""
 
     def __post_init__(self) -> None:
         """Positive distances and times, a share in (0, 1]."""
