@@ -46,10 +46,12 @@ __all__ = [
     "HULL",
     "SLOT_BRICK",
     "VALUE_UNIT",
+    "BlockedCells",
     "Bricks",
     "Candidates",
     "Contacts",
     "Shapes",
+    "any_cell_nearer",
     "candidates",
     "cell_contacts",
     "cell_contacts_flat",
@@ -250,6 +252,23 @@ class Shapes(NamedTuple):
     faces: npt.NDArray[np.int16]
     values: npt.NDArray[np.uint8]
     step: float
+
+
+class BlockedCells(NamedTuple):
+    """A map's dense obstacle grid for :func:`any_cell_nearer`.
+
+    ``solid`` marks every obstacle cell, ``shell`` those of them beside a cell
+    that is not one (the obstacles' surfaces), both (nx, ny, nz); cell
+    ``(i, j, k)`` is centred ``(i, j, k) + 1/2`` cells from ``corner`` [m].
+    ``bricks`` marks the blocks of 4 x 4 x 4 cells that hold a shell cell
+    (block ``(i, j, k) // 4``).
+    """
+
+    solid: npt.NDArray[np.bool_]
+    shell: npt.NDArray[np.bool_]
+    bricks: npt.NDArray[np.bool_]
+    corner: FloatArray
+    cell: float
 
 
 class Candidates(NamedTuple):
@@ -1048,3 +1067,148 @@ def cell_contacts_flat(*args):  # type: ignore[no-untyped-def]
         *args[_S:_R],
         Contacts(shape, floats[0], floats[1], floats[2], floats[3][:, 0]),
     )
+
+
+@numba.njit(cache=True, nogil=True)
+def any_cell_nearer(
+    grid: BlockedCells,
+    shapes: Shapes,
+    frames: FloatArray,
+    centres: FloatArray,
+    nearer: float,
+) -> bool:
+    """Whether a shape reaches nearer than ``nearer`` to an obstacle cell's centre.
+
+    The yes-or-no check of the planners against a map (``grid``). The shapes
+    are placed by ``frames`` (S, 4, 4), and the distance is measured as
+    :func:`candidates` measures it (a hull's largest excess over the faces of
+    the eight grid points around the centre, a capsule's distance to its axis
+    less its radius), to the cells of the obstacles' shell; a shape whose
+    ``centres`` (S, 3, in its own frame) lies in an obstacle cell is inside
+    one. Only the shell cells in each shape's grown box are visited
+    (``shapes``' reach must be at least ``nearer``), and the first one nearer
+    ends the search.
+    """
+    solid, shell, bricks, corner, cell = grid
+    kind, to_frame, lower, upper, capsule = (
+        shapes.kind,
+        shapes.to_frame,
+        shapes.lower,
+        shapes.upper,
+        shapes.capsule,
+    )
+    planes, plane_start, faces, values = (
+        shapes.planes,
+        shapes.plane_start,
+        shapes.faces,
+        shapes.values,
+    )
+    grid_origin, grid_dims, grid_start, step = (
+        shapes.grid_origin,
+        shapes.grid_dims,
+        shapes.grid_start,
+        shapes.step,
+    )
+    nx, ny, nz = solid.shape
+    inv_step = 1.0 / step
+    cutoff = (0.5 * math.sqrt(3.0) * step + nearer) / VALUE_UNIT
+    M = np.empty((4, 4))
+    for s in range(len(kind)):
+        # Inside an obstacle: the shape's centre in one of its cells.
+        c = centres[s]
+        for a in range(3):
+            M[a, 0] = (
+                frames[s, a, 0] * c[0]
+                + frames[s, a, 1] * c[1]
+                + frames[s, a, 2] * c[2]
+                + frames[s, a, 3]
+            )
+        ci = math.floor((M[0, 0] - corner[0]) / cell)
+        cj = math.floor((M[1, 0] - corner[1]) / cell)
+        ck = math.floor((M[2, 0] - corner[2]) / cell)
+        if 0 <= ci < nx and 0 <= cj < ny and 0 <= ck < nz and solid[ci, cj, ck]:
+            return True
+        for i in range(4):
+            for j in range(4):
+                M[i, j] = (
+                    frames[s, i, 0] * to_frame[s, 0, j]
+                    + frames[s, i, 1] * to_frame[s, 1, j]
+                    + frames[s, i, 2] * to_frame[s, 2, j]
+                    + frames[s, i, 3] * to_frame[s, 3, j]
+                )
+        r00, r01, r02 = M[0, 0], M[0, 1], M[0, 2]
+        r10, r11, r12 = M[1, 0], M[1, 1], M[1, 2]
+        r20, r21, r22 = M[2, 0], M[2, 1], M[2, 2]
+        tx, ty, tz = M[0, 3], M[1, 3], M[2, 3]
+        lx, ly, lz = lower[s, 0], lower[s, 1], lower[s, 2]
+        ux, uy, uz = upper[s, 0], upper[s, 1], upper[s, 2]
+        # The grid's cells in the world box around the shape's grown box.
+        cx, cy, cz = 0.5 * (lx + ux), 0.5 * (ly + uy), 0.5 * (lz + uz)
+        ex, ey, ez = 0.5 * (ux - lx), 0.5 * (uy - ly), 0.5 * (uz - lz)
+        mx = r00 * cx + r01 * cy + r02 * cz + tx
+        my = r10 * cx + r11 * cy + r12 * cz + ty
+        mz = r20 * cx + r21 * cy + r22 * cz + tz
+        wx = abs(r00) * ex + abs(r01) * ey + abs(r02) * ez
+        wy = abs(r10) * ex + abs(r11) * ey + abs(r12) * ez
+        wz = abs(r20) * ex + abs(r21) * ey + abs(r22) * ez
+        i0, i1 = _brick_range(mx - wx, mx + wx, corner[0], cell, nx)
+        j0, j1 = _brick_range(my - wy, my + wy, corner[1], cell, ny)
+        k0, k1 = _brick_range(mz - wz, mz + wz, corner[2], cell, nz)
+        is_capsule = kind[s] == CAPSULE
+        radius, half_length = capsule[s, 0], capsule[s, 1]
+        hull_planes = planes[plane_start[s] : plane_start[s + 1]]
+        hull_faces = faces[grid_start[s] : grid_start[s + 1]]
+        hull_values = values[grid_start[s] : grid_start[s + 1]]
+        gx, gy, gz = grid_origin[s, 0], grid_origin[s, 1], grid_origin[s, 2]
+        gny, gnz = grid_dims[s, 1], grid_dims[s, 2]
+        for bi in range(i0 >> 2, (i1 >> 2) + 1):
+            for bj in range(j0 >> 2, (j1 >> 2) + 1):
+                for bk in range(k0 >> 2, (k1 >> 2) + 1):
+                    if not bricks[bi, bj, bk]:
+                        continue  # no shell cell in these 64
+                    for i in range(max(bi << 2, i0), min((bi << 2) + 4, i1 + 1)):
+                        dx = corner[0] + (i + 0.5) * cell - tx
+                        for j in range(max(bj << 2, j0), min((bj << 2) + 4, j1 + 1)):
+                            dy = corner[1] + (j + 0.5) * cell - ty
+                            for k in range(
+                                max(bk << 2, k0), min((bk << 2) + 4, k1 + 1)
+                            ):
+                                if not shell[i, j, k]:
+                                    continue
+                                dz = corner[2] + (k + 0.5) * cell - tz
+                                x = r00 * dx + r10 * dy + r20 * dz
+                                y = r01 * dx + r11 * dy + r21 * dz
+                                z = r02 * dx + r12 * dy + r22 * dz
+                                if (
+                                    (x < lx)
+                                    | (x > ux)
+                                    | (y < ly)
+                                    | (y > uy)
+                                    | (z < lz)
+                                    | (z > uz)
+                                ):
+                                    continue  # beyond the reach
+                                if is_capsule:
+                                    on_axis = min(max(z, -half_length), half_length)
+                                    w = z - on_axis
+                                    depth = math.sqrt(x * x + y * y + w * w) - radius
+                                else:
+                                    depth, _ = _hull_excess(
+                                        x,
+                                        y,
+                                        z,
+                                        hull_planes,
+                                        hull_faces,
+                                        hull_values,
+                                        gx,
+                                        gy,
+                                        gz,
+                                        gny,
+                                        gnz,
+                                        inv_step,
+                                        cutoff,
+                                        np.inf,
+                                    )
+                                if depth < nearer:
+                                    return True
+    return False

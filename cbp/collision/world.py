@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.collision.broad import shape_bounds
+from cbp.collision.cell_kernels import BlockedCells, any_cell_nearer
 from cbp.collision.checker import FreeSpaceChecker
 from cbp.collision.contacts import ContactRow, ContactSet
 from cbp.collision.convex_kernels import (
@@ -33,10 +34,12 @@ from cbp.collision.convex_kernels import (
 )
 from cbp.collision.environment import Environment, signed_distance
 from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
+from cbp.collision.map_environment import BlockedGrid
 from cbp.collision.motion import SweepBound
 from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.placements import ShapeKinematics
 from cbp.collision.settings import CollisionSettings
+from cbp.collision.shape_table import ShapeTable
 from cbp.robot import FloatArray, IntArray
 from cbp.state import RobotState
 
@@ -72,6 +75,37 @@ class _Cache:
     key: bytes = b""
     environment: Environment | None = None
     contacts: ContactSet = field(default_factory=ContactSet.empty)
+
+
+def blocked_cells(blocked: BlockedGrid) -> BlockedCells:
+    """A map's obstacle cells and their shell, for the compiled free check.
+
+    A cell is in the shell unless its six neighbours are all obstacle cells
+    (the grid's border cells always are); a brick of 4 x 4 x 4 cells is
+    marked when it holds one.
+    """
+    solid = np.ascontiguousarray(blocked.mask, dtype=bool)
+    inner = solid.copy()
+    inner[0, :, :] = inner[-1, :, :] = False
+    inner[:, 0, :] = inner[:, -1, :] = False
+    inner[:, :, 0] = inner[:, :, -1] = False
+    middle = inner[1:-1, 1:-1, 1:-1]
+    middle &= solid[:-2, 1:-1, 1:-1]
+    middle &= solid[2:, 1:-1, 1:-1]
+    middle &= solid[1:-1, :-2, 1:-1]
+    middle &= solid[1:-1, 2:, 1:-1]
+    middle &= solid[1:-1, 1:-1, :-2]
+    middle &= solid[1:-1, 1:-1, 2:]
+    shell = solid & ~inner
+    nx, ny, nz = (-(-n // 4) * 4 for n in shell.shape)
+    padded = np.zeros((nx, ny, nz), dtype=bool)
+    padded[: shell.shape[0], : shell.shape[1], : shell.shape[2]] = shell
+    bricks = np.asarray(
+        padded.reshape(nx // 4, 4, ny // 4, 4, nz // 4, 4).any(axis=(1, 3, 5))
+    )
+    return BlockedCells(
+        solid, shell, bricks, np.asarray(blocked.lower, dtype=float), blocked.cell
+    )
 
 
 class CollisionWorld:
@@ -114,6 +148,7 @@ class CollisionWorld:
         self._holds = 0
         self._waiting: Environment | None = None
         self._free_space: FreeSpaceChecker | None = None
+        self._blocked_cells: tuple[BlockedGrid, BlockedCells] | None = None
         self._geometry_model = geometry.geometry_model()
         self._geometry_data = pin.GeometryData(self._geometry_model)
         # Bounding-sphere (and box) centres in the shapes' own frames, (n, 3).
@@ -303,19 +338,27 @@ class CollisionWorld:
         return getattr(self._environment, "blocked", None) is not None
 
     def is_free(self, q: FloatArray) -> bool:
-        """Whether ``q`` is collision-free, in one pinocchio call (planners, IK).
+        """Whether ``q`` is collision-free (planners, IK).
 
         Against declared objects, the same answer as ``check(q).penetration ==
-        0``, without the contacts (:class:`~cbp.collision.checker.FreeSpaceChecker`).
-        Against an occupancy map, by the rule CAT's step validation uses: a
-        padded shape may reach ``collision.penetration_tolerance`` plus half
-        a cell into the map's cells inflated by half a cell (that is,
-        the tolerance into the cells themselves). Space no camera has seen
-        hugs the padded shapes of a robot that has held it, so the strict
-        rule would find no configuration near the arm free, and the planners
-        could not plan where CAT can move.
+        0``, without the contacts, in one pinocchio call
+        (:class:`~cbp.collision.checker.FreeSpaceChecker`). Against an
+        occupancy map, by the rule CAT's step validation uses: a padded shape
+        may reach ``collision.penetration_tolerance`` plus half a cell into the
+        map's cells inflated by half a cell (that is, the tolerance into the
+        cells themselves). Space no camera has seen hugs the padded shapes of
+        a robot that has held it, so a stricter rule would find no
+        configuration near the arm free, and the planners could not plan where
+        CAT can move. With the compiled narrow phase the map's cells are
+        measured as CAT's step validation measures them, in one compiled pass
+        over the dense grid that stops at the first cell too near
+        (:func:`~cbp.collision.cell_kernels.any_cell_nearer`); the robot's
+        own pairs by coal.
         """
         environment = self._environment
+        blocked = getattr(environment, "blocked", None)
+        if blocked is not None and self.settings.narrow_phase == "compiled":
+            return self._free_in_map(np.asarray(q, dtype=float), blocked)
         checker = self._free_space
         if checker is None or checker.environment is not environment:
             checker = self._free_space = FreeSpaceChecker(
@@ -330,6 +373,37 @@ class CollisionWorld:
                 ),
             )
         return checker.is_free(q)
+
+    def _free_in_map(self, q: FloatArray, blocked: BlockedGrid) -> bool:
+        """:meth:`is_free` against a map's dense grid ``blocked``."""
+        if not math.isfinite(q.dot(q)):
+            return False
+        own = self._self_free
+        if own is not None and not own.is_free(q):
+            return False
+        # CAT keeps a step whose cells' distances, less the padding and half
+        # a cell (the query's) and half a cell again (the map's resolution),
+        # are no deeper than the tolerance plus half a cell: each cell's
+        # centre at least this far from the shapes.
+        nearer = 0.5 * blocked.cell + self.padding - self.settings.penetration_tolerance
+        cells = self._blocked_cells
+        if cells is None or cells[0] is not blocked:
+            cells = self._blocked_cells = (blocked, blocked_cells(blocked))
+        state = self._state
+        state.update(q)
+        table = ShapeTable.for_shapes(self.geometry.shapes, nearer + blocked.cell)
+        return not any_cell_nearer(
+            cells[1], table.arrays, self.shape_frames(state), self._centres, nearer
+        )
+
+    @functools.cached_property
+    def _self_free(self) -> FreeSpaceChecker | None:
+        """The robot's own pairs' check (None without self-collision checks)."""
+        if not self.settings.self_collision:
+            return None
+        return FreeSpaceChecker(
+            self.geometry, PrimitiveEnvironment([]), self.padding, self_collision=True
+        )
 
     def carry_over(self, contacts: ContactSet) -> None:
         """Add ``contacts`` (from a rejected configuration) to the next query.

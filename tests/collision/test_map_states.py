@@ -187,6 +187,38 @@ def test_the_checker_finds_a_shape_wholly_inside_unknown_space(robots) -> None:
     assert world.check(home).penetration == 0.0
 
 
+@pytest.mark.parametrize("seen", [False, True])
+def test_the_planners_check_against_a_map_is_cats_step_validation(
+    scene, robots, seen: bool
+) -> None:
+    """``is_free`` against a map answers as CAT's ``check(q).accepted``, inside too."""
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    grid = OccupancyGrid(replace(SPEC, cell_size=0.01), geometry)
+    home = robot.home()
+    state = RobotState(robot, home)
+    grid.carve_robot(state)
+    if seen:  # the box and the space before it; its shadow stays unseen
+        grid.integrate(DepthCamera(scene.client, FRONT).capture(), state)
+    world = CollisionWorld(geometry, grid.environment())
+    rng = np.random.default_rng(3)
+    qs = [
+        np.clip(
+            home + rng.uniform(-s, s, robot.nq), robot.lower_limits, robot.upper_limits
+        )
+        for s in (0.05, 0.3, 1.0)
+        for _ in range(150)
+    ]
+    free = np.array([world.is_free(q) for q in qs])
+    accepted = np.array([world.check(q).accepted for q in qs])
+    assert np.array_equal(free, accepted)
+    assert 0 < free.sum() < len(qs)  # both answers are tried
+    inside = home.copy()
+    inside[0] += 1.5  # the whole arm swings into space nothing has seen
+    assert not world.is_free(inside)
+    assert not world.is_free(np.full(robot.nq, np.nan))
+
+
 def test_frames_without_valid_readings_change_nothing(scene, robots) -> None:
     robot = robots["panda"]
     grid = OccupancyGrid(SPEC, RobotGeometry(robot))
