@@ -1076,8 +1076,9 @@ def any_cell_nearer(
     frames: FloatArray,
     centres: FloatArray,
     nearer: float,
-) -> bool:
-    """Whether a shape reaches nearer than ``nearer`` to an obstacle cell's centre.
+    order: IntArray,
+) -> int:
+    """The first shape found nearer than ``nearer`` to an obstacle cell's centre.
 
     The yes-or-no check of the planners against a map (``grid``). The shapes
     are placed by ``frames`` (S, 4, 4), and the distance is measured as
@@ -1088,6 +1089,13 @@ def any_cell_nearer(
     one. Only the shell cells in each shape's grown box are visited
     (``shapes``' reach must be at least ``nearer``), and the first one nearer
     ends the search.
+
+    The shapes are tried in ``order`` (a permutation of their indices), and
+    the one found is moved to its front: a planner's next configuration is
+    most often blocked by the same shape.
+
+    Returns:
+        The shape's index, or -1 when none is that near.
     """
     solid, shell, bricks, corner, cell = grid
     kind, to_frame, lower, upper, capsule = (
@@ -1113,7 +1121,8 @@ def any_cell_nearer(
     inv_step = 1.0 / step
     cutoff = (0.5 * math.sqrt(3.0) * step + nearer) / VALUE_UNIT
     M = np.empty((4, 4))
-    for s in range(len(kind)):
+    for n in range(len(order)):
+        s = order[n]
         # Inside an obstacle: the shape's centre in one of its cells.
         c = centres[s]
         for a in range(3):
@@ -1127,7 +1136,7 @@ def any_cell_nearer(
         cj = math.floor((M[1, 0] - corner[1]) / cell)
         ck = math.floor((M[2, 0] - corner[2]) / cell)
         if 0 <= ci < nx and 0 <= cj < ny and 0 <= ck < nz and solid[ci, cj, ck]:
-            return True
+            return _to_front(order, n)
         for i in range(4):
             for j in range(4):
                 M[i, j] = (
@@ -1210,5 +1219,15 @@ def any_cell_nearer(
                                         np.inf,
                                     )
                                 if depth < nearer:
-                                    return True
-    return False
+                                    return _to_front(order, n)
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _to_front(order: IntArray, n: int) -> int:
+    """Move ``order[n]`` to the front of ``order``; return it."""
+    s = order[n]
+    for m in range(n, 0, -1):
+        order[m] = order[m - 1]
+    order[0] = s
+    return int(s)

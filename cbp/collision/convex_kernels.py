@@ -92,6 +92,7 @@ __all__ = [
     "pair_distance",
     "placed_robot",
     "self_contacts",
+    "self_overlap",
 ]
 
 #: Kinds of :attr:`ConvexShapes.kind`.
@@ -1034,6 +1035,46 @@ def declared_contacts(
             left[:, obstacles_missed:],
         )
     return obstacles, own, obstacles_missed, own_missed
+
+
+@numba.njit(cache=True, nogil=True)
+def self_overlap(frames: FloatArray, bounds: LocalBounds, pairs: SelfPairs) -> int:
+    """Whether two of the robot's shapes come nearer than the pairs' margin.
+
+    The planners' yes-or-no self check: the shapes placed by ``frames``
+    (n, 4, 4), the ``pairs`` the broad phase keeps measured in turn until the
+    first nearer than their margin (``pairs``' fourth field; twice the padding
+    checks the padded shapes for overlap).
+
+    Returns:
+        1 for a pair that near, 0 for none, -1 when a pair could not be
+        measured (a shape the kernels skip) and none was found nearer.
+    """
+    centres_local, halves_local, radii, table = bounds
+    first, second, self_guess, margin, _ = pairs
+    n = len(frames)
+    centres = np.empty((n, 3))
+    halves = np.empty((n, 3))
+    shape_bounds(frames, centres_local, halves_local, centres, halves)
+    near = np.empty(len(first), dtype=np.intp)
+    found = near_pairs(centres, halves, radii, first, second, margin, near)
+    work = np.empty((16, 3))
+    out = np.empty(10)
+    answer = 0
+    for p in range(found):
+        k = near[p]
+        status = _measure(
+            _placed(table, frames, first[k]),
+            _placed(table, frames, second[k]),
+            self_guess[k],
+            work,
+            out,
+        )
+        if status != 0:
+            answer = -1
+        elif out[0] < margin:
+            return 1
+    return answer
 
 
 #: Packed robot shapes by the shapes' identities, with the shapes they are for.

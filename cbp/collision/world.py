@@ -31,6 +31,7 @@ from cbp.collision.convex_kernels import (
     packed_robot,
     placed_robot,
     self_contacts,
+    self_overlap,
 )
 from cbp.collision.environment import Environment, signed_distance
 from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
@@ -108,6 +109,26 @@ def blocked_cells(blocked: BlockedGrid) -> BlockedCells:
     )
 
 
+@dataclass(frozen=True)
+class _MapCheck:
+    """What :meth:`CollisionWorld.is_free` needs against one map snapshot.
+
+    Attributes:
+        blocked: the snapshot's dense grid.
+        cells: its obstacle cells and their shell (:func:`blocked_cells`).
+        table: the robot's shapes as the cell kernels read them.
+        nearer: how near a cell's centre may come to a shape [m].
+        order: the order the shapes are tried in, the last one found too near
+            first (kept from one snapshot to the next).
+    """
+
+    blocked: BlockedGrid
+    cells: BlockedCells
+    table: ShapeTable
+    nearer: float
+    order: IntArray
+
+
 class CollisionWorld:
     """Robot geometry + environment snapshot: contact queries and step validation.
 
@@ -148,7 +169,8 @@ class CollisionWorld:
         self._holds = 0
         self._waiting: Environment | None = None
         self._free_space: FreeSpaceChecker | None = None
-        self._blocked_cells: tuple[BlockedGrid, BlockedCells] | None = None
+        #: The planners' check against a map (:meth:`is_free`), per snapshot.
+        self._map_check: _MapCheck | None = None
         self._geometry_model = geometry.geometry_model()
         self._geometry_data = pin.GeometryData(self._geometry_model)
         # Bounding-sphere (and box) centres in the shapes' own frames, (n, 3).
@@ -179,6 +201,8 @@ class CollisionWorld:
         #: Where each self pair's GJK starts next (all pairs, for
         #: :meth:`self_set`; the table's are those it checks).
         self._self_guess = np.zeros((len(geometry.self_pairs), 5))
+        #: Where the planners' self check starts each pair's GJK.
+        self._free_guess = np.zeros((len(first), 5))
         if self.settings.narrow_phase == "compiled":
             compile_convex_kernels()
         self._environment.prepare(geometry.shapes, self.margin(self._environment))
@@ -318,9 +342,10 @@ class CollisionWorld:
     ) -> bool:
         """Whether the straight joint-space motion from ``a`` to ``b`` is free.
 
-        ``b`` and the configurations :attr:`sweep` places between them
-        :attr:`sweep_step` apart are checked, in order, up to the first that is
-        not free; ``a`` is not (the motion starts there).
+        ``b``, then the configurations :attr:`sweep` places between them
+        :attr:`sweep_step` apart, in order, are checked up to the first that
+        is not free; ``a`` is not (the motion starts there). A motion that ends
+        in collision is refused at its first check.
 
         Args:
             a: where the motion starts.
@@ -329,8 +354,9 @@ class CollisionWorld:
                 planners pass one that charges their budget).
         """
         check = is_free or self.is_free
-        between = self.sweep.between(a, b, self.sweep_step)
-        return all(check(q) for q in between) and check(b)
+        if not check(b):
+            return False
+        return all(check(q) for q in self.sweep.between(a, b, self.sweep_step))
 
     @property
     def against_map(self) -> bool:
@@ -352,8 +378,9 @@ class CollisionWorld:
         CAT can move. With the compiled narrow phase the map's cells are
         measured as CAT's step validation measures them, in one compiled pass
         over the dense grid that stops at the first cell too near
-        (:func:`~cbp.collision.cell_kernels.any_cell_nearer`); the robot's
-        own pairs by coal.
+        (:func:`~cbp.collision.cell_kernels.any_cell_nearer`, the shape last
+        found too near tried first), then the robot's own pairs in another
+        (:func:`~cbp.collision.convex_kernels.self_overlap`).
         """
         environment = self._environment
         blocked = getattr(environment, "blocked", None)
@@ -378,29 +405,55 @@ class CollisionWorld:
         """:meth:`is_free` against a map's dense grid ``blocked``."""
         if not math.isfinite(q.dot(q)):
             return False
-        own = self._self_free
-        if own is not None and not own.is_free(q):
-            return False
-        # CAT keeps a step whose cells' distances, less the padding and half
-        # a cell (the query's) and half a cell again (the map's resolution),
-        # are no deeper than the tolerance plus half a cell: each cell's
-        # centre at least this far from the shapes.
-        nearer = 0.5 * blocked.cell + self.padding - self.settings.penetration_tolerance
-        cells = self._blocked_cells
-        if cells is None or cells[0] is not blocked:
-            cells = self._blocked_cells = (blocked, blocked_cells(blocked))
+        check = self._map_check
+        if check is None or check.blocked is not blocked:
+            # CAT keeps a step whose cells' distances, less the padding and
+            # half a cell (the query's) and half a cell again (the map's
+            # resolution), are no deeper than the tolerance plus half a cell:
+            # each cell's centre at least this far from the shapes.
+            nearer = (
+                0.5 * blocked.cell + self.padding - self.settings.penetration_tolerance
+            )
+            check = self._map_check = _MapCheck(
+                blocked,
+                blocked_cells(blocked),
+                ShapeTable.for_shapes(self.geometry.shapes, nearer + blocked.cell),
+                nearer,
+                np.arange(len(self.geometry.shapes), dtype=np.intp)
+                if check is None
+                else check.order,
+            )
         state = self._state
         state.update(q)
-        table = ShapeTable.for_shapes(self.geometry.shapes, nearer + blocked.cell)
-        return not any_cell_nearer(
-            cells[1], table.arrays, self.shape_frames(state), self._centres, nearer
+        frames = self.shape_frames(state)
+        if (
+            any_cell_nearer(
+                check.cells,
+                check.table.arrays,
+                frames,
+                self._centres,
+                check.nearer,
+                check.order,
+            )
+            >= 0
+        ):
+            return False
+        if not self.settings.self_collision:
+            return True
+        table = self._table
+        pad2 = 2.0 * self.padding
+        own = self_overlap(
+            frames,
+            table.bounds,
+            (table.first, table.second, self._free_guess, pad2, pad2),
         )
+        if own < 0:  # a shape the kernels skip: coal measures the pairs
+            return self._self_free.is_free(q)
+        return own == 0
 
     @functools.cached_property
-    def _self_free(self) -> FreeSpaceChecker | None:
-        """The robot's own pairs' check (None without self-collision checks)."""
-        if not self.settings.self_collision:
-            return None
+    def _self_free(self) -> FreeSpaceChecker:
+        """The robot's own pairs' check by coal."""
         return FreeSpaceChecker(
             self.geometry, PrimitiveEnvironment([]), self.padding, self_collision=True
         )

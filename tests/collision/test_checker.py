@@ -14,6 +14,8 @@ from cbp.collision import (
     PrimitiveEnvironment,
     RobotGeometry,
 )
+from cbp.collision.checker import FreeSpaceChecker
+from cbp.collision.convex_kernels import self_overlap
 from cbp.state import RobotState
 from cbp.testing import sample_configurations
 
@@ -143,3 +145,20 @@ def test_new_environment_snapshots_are_used(geometry, robots) -> None:
     )
     world.set_environment(PrimitiveEnvironment([ball]))
     assert not world.is_free(q)
+
+
+def test_the_compiled_self_check_agrees_with_coals(geometry, robots, rng) -> None:
+    """The planners' self check against a map answers as coal's for the robot's pairs."""
+    world = CollisionWorld(geometry, PrimitiveEnvironment([]))
+    coal_check = FreeSpaceChecker(geometry, PrimitiveEnvironment([]), geometry.padding)
+    table = world._table
+    pad2 = 2.0 * geometry.padding
+    pairs = (table.first, table.second, np.zeros((len(table.first), 5)), pad2, pad2)
+    state = RobotState(robots["panda"])
+    got, expected = [], []
+    for q in sample_configurations(robots["panda"], rng, n=600):
+        state.update(q)
+        got.append(self_overlap(world.shape_frames(state), table.bounds, pairs))
+        expected.append(0 if coal_check.is_free(q) else 1)
+    assert 30 < sum(expected) < 570  # both answers are well represented
+    np.testing.assert_array_equal(got, expected)
