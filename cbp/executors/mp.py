@@ -146,6 +146,22 @@ class RrtConnect:
         self._setup = setup
         self._q_start = q.copy()
 
+    def continues(self, q: FloatArray, target: FloatArray) -> bool:
+        """Whether the trees begun last are for ``q`` to ``target`` (and unused).
+
+        Then :meth:`grow` goes on with them: a hard plan adds up the checks of
+        several periods instead of starting over in each. Their states were
+        checked against the snapshots of those periods; the path taken from
+        them is checked against the current one (:meth:`path`).
+        """
+        if self._setup is None:
+            return False
+        goal = np.array([self._goal_state[i] for i in range(q.size)])
+        return bool(
+            np.max(np.abs(q - self._q_start)) < 1e-9
+            and np.max(np.abs(target - goal)) < 1e-9
+        )
+
     def grow(self, budget: Budget, seconds: float) -> bool:
         """Grow the trees for ``seconds`` more of ``budget``; True once solved."""
         setup: Any = self._setup
@@ -163,7 +179,8 @@ class RrtConnect:
 
         Every segment of the resampled path is then checked all along
         (:meth:`IkSearch.motion_free`), whatever the budget: the robot moves
-        along them.
+        along them. Where the simplified path touches, the path as the trees
+        found it is checked and taken instead.
 
         Returns:
             The points (the first exactly the start) and a note; None for the
@@ -176,6 +193,7 @@ class RrtConnect:
         try:
             left = budget.left()
             path = setup.getSolutionPath()
+            found = self._states(path, q)
             if left > 0:
                 if s.simplify == "full":
                     setup.simplifySolution(self._until(budget, left))
@@ -188,9 +206,14 @@ class RrtConnect:
             # robot sweeps everything between. (Falling back to OMPL's own
             # interpolation, as this did, kept the same segments.)
             if not self.search.path_free(points, budget):
-                return None, "the plan touches between the states OMPL checked"
+                # Shortcuts graze obstacles between OMPL's checks more often
+                # than the trees' short edges do: the path as found, then.
+                points = _resample(found, s.waypoint_step)
+                if not self.search.path_free(points, budget):
+                    return None, "the plan touches between the states OMPL checked"
         finally:
             self._budget = None
+            self._setup = None  # the trees are used up
         return points, "planned"
 
     def solve(
@@ -293,7 +316,10 @@ class MpPlanner:
             return Plan(None, 0, "start in collision: no plan")
         checks = self.checks
         while True:
-            self.rrt.begin(q, target)
+            # While the arm holds for a plan, its trees grow on from period to
+            # period: a plan that takes longer than a period's budget is found.
+            if not self.rrt.continues(q, target):
+                self.rrt.begin(q, target)
             if not self.rrt.grow(budget, budget.left() * (1.0 - s.simplify_fraction)):
                 note = "no plan in time"
                 return Plan(None, self.checks - checks, note, timed_out=True)
