@@ -166,6 +166,30 @@ def test_a_plan_that_touches_between_the_states_ompl_checked_is_dropped(
     assert "touches between" in note
 
 
+def test_rrt_connect_keeps_its_trees_for_the_same_start_and_target(robots) -> None:
+    """Begun for a start and a target, the trees are grown on for them until a path is taken."""
+    robot = robots["panda"]
+    a, b, world = _across_a_plate(robot)
+    settings = PlannerSettings()
+    search = IkSearch(robot, "panda_hand", world, settings.search)
+    rrt = RrtConnect(robot, search, settings, seeded=True)
+    try:
+        assert not rrt.continues(a, b)  # nothing begun
+        rrt.begin(a, b)
+        assert rrt.continues(a, b)
+        assert not rrt.continues(a + 1e-3, b)
+        assert not rrt.continues(a, b - 1e-3)
+        checks = rrt.checks
+        assert rrt.grow(WallBudget(10.0), 5.0)
+        assert rrt.checks > checks
+        assert rrt.continues(a, b)  # solved, not yet taken
+        points, _ = rrt.path(WallBudget(1.0))
+        assert points is not None
+        assert not rrt.continues(a, b)  # taken: the next plan begins anew
+    finally:
+        rrt.close()
+
+
 def test_interpolation_is_checked_between_its_points(robots) -> None:
     """A joint step that would jump the plate: the path stops before it."""
     robot = robots["panda"]
