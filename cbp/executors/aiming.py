@@ -15,7 +15,7 @@ import pinocchio as pin
 
 from cbp.collision.world import CollisionWorld
 from cbp.executors.clock import Budget
-from cbp.perception.kernels import FREE
+from cbp.perception.kernels import FREE, UNKNOWN
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray, RobotModel
 from cbp.state import RobotState
@@ -64,15 +64,40 @@ def solve_camera(
 
 
 def unseen_held(
-    world: CollisionWorld, cell: float, q: FloatArray, unknown: FloatArray
+    world: CollisionWorld, grid: OccupancyGrid, q: FloatArray
 ) -> FloatArray:
-    """The ``unknown`` cell centres within a cell of the padded arm at ``q``."""
+    """The centres of ``grid``'s unseen cells within a cell of the padded arm at ``q``.
+
+    Only the cells in the boxes about the shapes' grown bounding spheres are
+    looked at, each once.
+    """
     state = RobotState(world.geometry.robot)
     state.update(q)
     geometry = world.geometry
-    held = geometry.contains(
-        state, unknown, margin=world.padding - geometry.padding + cell
+    margin = world.padding - geometry.padding + grid.cell
+    shapes = geometry.world_shapes(state)
+    reach = shapes.radii + geometry.padding + margin
+    dims = np.array(grid.cells.shape)
+    lo = np.clip(
+        np.floor((shapes.centres.T - reach - grid.lower[:, None]) / grid.cell),
+        0,
+        dims[:, None],
     )
+    hi = np.clip(
+        np.floor((shapes.centres.T + reach - grid.lower[:, None]) / grid.cell) + 1,
+        0,
+        dims[:, None],
+    )
+    found = [np.zeros(0, dtype=np.intp)]
+    for s in range(len(reach)):
+        (i0, j0, k0), (i1, j1, k1) = lo[:, s].astype(int), hi[:, s].astype(int)
+        i, j, k = np.nonzero(grid.cells[i0:i1, j0:j1, k0:k1] == UNKNOWN)
+        found.append(np.ravel_multi_index((i + i0, j + j0, k + k0), grid.cells.shape))
+    cells = np.array(
+        np.unravel_index(np.unique(np.concatenate(found)), grid.cells.shape)
+    )
+    unknown = grid.lower + (cells.T + 0.5) * grid.cell
+    held = geometry.contains(state, unknown, margin=margin)
     return np.asarray(unknown[held], dtype=float)
 
 

@@ -51,10 +51,10 @@ from cbp.collision.world import CollisionWorld
 from cbp.executors.aiming import clear_line, looking_at, solve_camera, unseen_held
 from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch, check_work
-from cbp.executors.visibility import visibility
+from cbp.executors.visibility import CellStates, visibility
 from cbp.methods.settings import LookSettings, PlannerSettings
 from cbp.perception.frame import camera_parent
-from cbp.perception.kernels import OCCUPIED, UNKNOWN
+from cbp.perception.kernels import OCCUPIED
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray
@@ -354,12 +354,9 @@ class Looker:
         self._seen = None
         if found is None:
             return np.zeros((0, 3))
-        unknown = grid.centres(UNKNOWN)
-        if not len(unknown):
-            return np.zeros((0, 3))
         # Within a cell of the padded shapes (their world boxes would hold
         # several times as many cells, most of them free of the arm).
-        return unseen_held(world, grid.cell, found, unknown)
+        return unseen_held(world, grid, found)
 
     def _view(
         self,
@@ -405,11 +402,7 @@ class Looker:
         targets = [*targets, blocking]
         geometry = world.geometry
         body = RobotState(robot)
-        bare = -geometry.padding  # the shapes themselves hide what is behind
-
-        def inside(points: FloatArray) -> np.ndarray:
-            return geometry.contains(body, points, margin=bare)
-
+        states = CellStates(grid.cells, grid.lower, grid.cell)
         scored = []
         for sample in samples:
             budget.charge(check_work(world))
@@ -417,14 +410,11 @@ class Looker:
                 continue
             body.update(sample)
             pose = self._pose(sample)
+            # The shapes themselves (not grown by the padding) hide what is
+            # behind them.
+            shapes = geometry.world_shapes(body)
             seen = [
-                float(
-                    np.sum(
-                        visibility(
-                            pose, self.camera, t, grid.state_at, grid.cell, inside
-                        )
-                    )
-                )
+                float(np.sum(visibility(pose, self.camera, t, states, shapes)))
                 for t in targets
             ]
             score = sum(s / len(t) for s, t in zip(seen, targets, strict=True) if s)
@@ -469,7 +459,7 @@ class Looker:
         found: list[FloatArray] = []
         candidates: list[tuple[float, pin.SE3]] = []
         here = self._pose(q)
-        unknown = grid.centres(UNKNOWN)
+        states = CellStates(grid.cells, grid.lower, grid.cell)
         assert self.camera is not None
         for centre in (np.mean(t, axis=0) for t in sets):
             u = rng.normal(size=(AIMS, 3))
@@ -480,11 +470,7 @@ class Looker:
                     continue
                 pose = looking_at(eye, centre, here.rotation)
                 score = sum(
-                    float(
-                        np.mean(
-                            visibility(pose, self.camera, t, grid.state_at, grid.cell)
-                        )
-                    )
+                    float(np.mean(visibility(pose, self.camera, t, states)))
                     for t in sets
                 )
                 if score > 0:
@@ -507,7 +493,7 @@ class Looker:
                 if len(found) == AIM_SOLVED:
                     break
             else:
-                kept.append((solved, unseen_held(world, grid.cell, solved, unknown)))
+                kept.append((solved, unseen_held(world, grid, solved)))
         # The views that the fewest unseen cells keep the arm from; the one
         # kept by the fewest is opened until it is free (else every look would
         # open a little of another).

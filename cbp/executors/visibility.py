@@ -14,47 +14,65 @@ unseen space empty.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
+from typing import NamedTuple
 
+import numba
 import numpy as np
 import pinocchio as pin
 
-from cbp.perception.kernels import OCCUPIED, UNKNOWN
+from cbp.collision.geometry import WorldShapes, inside_convex
+from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.spec import CameraSpec
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, IntArray
 
-__all__ = ["UNSEEN_DEPTH", "visibility"]
+__all__ = ["UNSEEN_DEPTH", "CellStates", "visibility"]
 
 #: The length of unseen space a line of sight crosses with a chance 1/e [m].
 UNSEEN_DEPTH = 0.05
+
+
+class CellStates(NamedTuple):
+    """A map's cell states as :func:`visibility` reads them.
+
+    Cell ``(i, j, k)`` of ``cells`` (nx, ny, nz; :data:`FREE`,
+    :data:`UNKNOWN` or :data:`OCCUPIED`) spans ``lower + (i, j, k) * cell`` to
+    one cell beyond; outside the grid everything is free.
+    """
+
+    cells: np.ndarray
+    lower: FloatArray
+    cell: float
 
 
 def visibility(
     camera: pin.SE3,
     spec: CameraSpec,
     points: FloatArray,
-    state_at: Callable[[FloatArray], np.ndarray],
-    cell: float,
-    body: Callable[[FloatArray], np.ndarray] | None = None,
+    grid: CellStates,
+    body: WorldShapes | None = None,
+    grow: float = 0.0,
 ) -> FloatArray:
     """The chance (n,) that a camera at ``camera`` (optical frame) sees ``points``.
 
     0 outside its field of view (the spec's vertical angle, its image's
     aspect) and range, behind an occupied cell or behind the robot; else
     ``exp(-u / UNSEEN_DEPTH)`` for the length ``u`` of unseen cells on the
-    line. The point's own cell and the one before it do not count.
+    line. The point's own cell and the one before it do not count. Each line
+    is sampled every half cell (or less: the longest line's spacing) in one
+    compiled pass.
 
     Args:
         camera: the camera's optical pose (+z along its axis).
         spec: the camera.
         points: the points (n, 3).
-        state_at: a map's cell states of points (m, 3).
-        cell: the map's cell size [m].
-        body: which points (m, 3) lie within the robot where the camera looks
-            from (None: nothing of the robot in the way). Points nearer the
-            camera than its ``near`` are not asked: the camera sits on the
-            robot.
+        grid: the map's cell states.
+        body: the robot's shapes where the camera looks from (None: nothing
+            of the robot in the way). Points nearer the camera than its
+            ``near`` are not asked: the camera sits on the robot.
+        grow: how much the shapes are grown [m] (0: as they are).
     """
+    points = np.ascontiguousarray(points, dtype=float).reshape(-1, 3)
     local = (points - camera.translation) @ camera.rotation  # into the camera
     z = local[:, 2]
     half = np.tan(np.deg2rad(spec.fov_deg) / 2.0)
@@ -69,22 +87,118 @@ def visibility(
     out = np.zeros(len(points))
     if not inside.any():
         return out
-    eye = camera.translation
-    d = points[inside] - eye
-    length = np.linalg.norm(d, axis=1)
-    k = max(2, int(np.max(length) / (0.5 * cell)))
-    ts = np.linspace(0.0, 1.0, k)
-    along = eye + ts[None, :, None] * d[:, None, :]
-    at = ts[None, :] * length[:, None]  # distance from the eye [m]
-    before = at < length[:, None] - 1.5 * cell
-    state = state_at(along.reshape(-1, 3)).reshape(len(d), k)
-    blocked = np.any((state == OCCUPIED) & before, axis=1)
-    if body is not None:
-        asked = before & (at > spec.near) & ~blocked[:, None]
-        hit = np.zeros_like(asked)
-        hit[asked] = body(along[asked])
-        blocked |= np.any(hit, axis=1)
-    step = length / (k - 1)  # the samples' spacing on each line [m]
-    unseen = np.count_nonzero((state == UNKNOWN) & before, axis=1) * step
-    out[inside] = np.where(blocked, 0.0, np.exp(-unseen / UNSEEN_DEPTH))
+    eye = np.ascontiguousarray(camera.translation, dtype=float)
+    seen = points[inside]
+    length = np.linalg.norm(seen - eye, axis=1)
+    samples = max(2, int(np.max(length) / (0.5 * grid.cell)))
+    shapes = body or _NO_BODY
+    chance = np.empty(len(seen))
+    _lines_of_sight(
+        eye,
+        seen,
+        np.ascontiguousarray(grid.cells),
+        np.asarray(grid.lower, dtype=float),
+        float(grid.cell),
+        samples,
+        float(spec.near),
+        shapes.planes,
+        shapes.plane_start,
+        shapes.centres,
+        shapes.radii,
+        float(grow),
+        chance,
+    )
+    out[inside] = chance
     return out
+
+
+_NO_BODY = WorldShapes(
+    np.zeros((0, 4)),
+    np.zeros(1, dtype=np.intp),
+    np.zeros((0, 3)),
+    np.zeros(0),
+    np.zeros((0, 4, 4)),
+)
+
+
+@numba.njit(cache=True, nogil=True)
+def _lines_of_sight(
+    eye: FloatArray,
+    points: FloatArray,
+    cells: np.ndarray,
+    lower: FloatArray,
+    cell: float,
+    samples: int,
+    near: float,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    grow: float,
+    out: FloatArray,
+) -> None:
+    """:func:`visibility` of each point from ``eye``, into ``out``.
+
+    Each line has ``samples`` points from the eye to its end; those up to
+    1.5 cells before the end are looked up in ``cells`` (the first occupied
+    one blocks the line), and, where the line passes within a shape's grown
+    bounding sphere, tested against its grown planes (the robot blocks it).
+    """
+    nx, ny, nz = cells.shape
+    spacing = 1.0 / (samples - 1)
+    for r in range(points.shape[0]):
+        dx = points[r, 0] - eye[0]
+        dy = points[r, 1] - eye[1]
+        dz = points[r, 2] - eye[2]
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        limit = length - 1.5 * cell
+        blocked = False
+        unseen = 0
+        for j in range(samples):
+            t = j * spacing
+            if not t * length < limit:
+                break  # the point's own cell and the one before it
+            i = math.floor((eye[0] + t * dx - lower[0]) / cell)
+            k = math.floor((eye[1] + t * dy - lower[1]) / cell)
+            m = math.floor((eye[2] + t * dz - lower[2]) / cell)
+            state = FREE
+            if 0 <= i < nx and 0 <= k < ny and 0 <= m < nz:
+                state = cells[i, k, m]
+            if state == OCCUPIED:
+                blocked = True
+                break
+            if state == UNKNOWN:
+                unseen += 1
+        # The robot: only the samples within a shape's grown sphere are asked.
+        dd = dx * dx + dy * dy + dz * dz
+        s = 0
+        while not blocked and s < radii.size and dd > 0.0:
+            ex = eye[0] - centres[s, 0]
+            ey = eye[1] - centres[s, 1]
+            ez = eye[2] - centres[s, 2]
+            reach = radii[s] + grow
+            b = ex * dx + ey * dy + ez * dz
+            c = ex * ex + ey * ey + ez * ez - reach * reach
+            disc = b * b - dd * c
+            if disc >= 0.0:
+                root = math.sqrt(disc)
+                first = max(0, math.ceil((-b - root) / dd / spacing))
+                last = min(samples - 1, math.floor((-b + root) / dd / spacing))
+                for j in range(first, last + 1):
+                    t = j * spacing
+                    at = t * length
+                    if not at < limit:
+                        break
+                    if at > near and inside_convex(
+                        eye[0] + t * dx,
+                        eye[1] + t * dy,
+                        eye[2] + t * dz,
+                        planes,
+                        plane_start[s],
+                        plane_start[s + 1],
+                        grow,
+                    ):
+                        blocked = True
+                        break
+            s += 1
+        out[r] = 0.0 if blocked else math.exp(-unseen * length * spacing / UNSEEN_DEPTH)

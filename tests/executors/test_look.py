@@ -8,11 +8,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from cbp.collision.geometry import WorldShapes
 from cbp.errors import ConfigError, ScenarioError
 from cbp.executors import load_executor
 from cbp.executors.aiming import looking_at, solve_camera
 from cbp.executors.clock import VirtualBudget, VirtualCosts
-from cbp.executors.visibility import UNSEEN_DEPTH, visibility
+from cbp.executors.visibility import UNSEEN_DEPTH, CellStates, visibility
 from cbp.methods.settings import LookSettings
 from cbp.metrics import run_metrics
 from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
@@ -31,11 +32,10 @@ def test_a_camera_sees_points_in_its_view_not_behind_an_occupied_cell() -> None:
     camera = pin.SE3(np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]]), np.zeros(3))
     spec = CameraSpec(name="c", position=(0, 0, 0), target=(1, 0, 0), fov_deg=60.0)
     cell = 0.01
-    wall = np.array([0.5, 0.3, 0.0])
-
-    def state_at(points: np.ndarray) -> np.ndarray:
-        near = np.all(np.abs(points - wall) <= cell / 2, axis=1)
-        return np.where(near, OCCUPIED, FREE).astype(np.uint8)
+    # Free cells from the camera to x = 1.1, one occupied at (0.5, 0.3, 0).
+    cells = np.full((111, 70, 1), FREE, dtype=np.uint8)
+    cells[50, 30, 0] = OCCUPIED
+    grid = CellStates(cells, np.array([-0.005, -0.005, -0.005]), cell)
 
     points = np.array(
         [
@@ -47,7 +47,7 @@ def test_a_camera_sees_points_in_its_view_not_behind_an_occupied_cell() -> None:
             [0.5, 0.3, 0.0],  # the occupied cell itself is seen
         ]
     )
-    got = visibility(camera, spec, points, state_at, cell)
+    got = visibility(camera, spec, points, grid)
     np.testing.assert_array_equal(got, [1.0, 0.0, 0.0, 0.0, 0.0, 1.0])
 
 
@@ -56,21 +56,110 @@ def test_unseen_space_on_the_line_makes_a_point_less_likely_seen() -> None:
     camera = pin.SE3(np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]]), np.zeros(3))
     spec = CameraSpec(name="c", position=(0, 0, 0), target=(1, 0, 0), fov_deg=60.0)
     cell = 0.01
-
-    def state_at(points: np.ndarray) -> np.ndarray:  # unseen beyond x = 0.5
-        return np.where(points[:, 0] > 0.5, UNKNOWN, FREE).astype(np.uint8)
+    # Unseen beyond x = 0.5 (the grid's cells), free before it (outside it).
+    cells = np.full((30, 20, 20), UNKNOWN, dtype=np.uint8)
+    grid = CellStates(cells, np.array([0.5, -0.1, -0.1]), cell)
 
     points = np.array([[0.505, 0.0, 0.0], [0.6, 0.0, 0.0], [0.7, 0.0, 0.0]])
-    got = visibility(camera, spec, points, state_at, cell)
+    got = visibility(camera, spec, points, grid)
     assert got[0] == 1.0  # on the frontier
     depth = points[1:, 0] - 0.5 - 1.5 * cell  # the unseen length before each
     np.testing.assert_allclose(got[1:], np.exp(-depth / UNSEEN_DEPTH), rtol=0.1)
 
-    def body(points: np.ndarray) -> np.ndarray:  # a link across the line at 0.3
-        return np.asarray(np.abs(points[:, 0] - 0.3) < 0.02)
-
-    hidden = visibility(camera, spec, points, state_at, cell, body)
+    # A link across the line at x = 0.3: a slab 4 cm thick.
+    slab = WorldShapes(
+        np.array(
+            [
+                [1.0, 0, 0, 0.32],
+                [-1, 0, 0, -0.28],
+                [0, 1, 0, 1],
+                [0, -1, 0, 1],
+                [0, 0, 1, 1],
+                [0, 0, -1, 1],
+            ]
+        ),
+        np.array([0, 6]),
+        np.array([[0.3, 0.0, 0.0]]),
+        np.array([1.42]),
+        np.zeros((1, 4, 4)),
+    )
+    hidden = visibility(camera, spec, points, grid, slab)
     np.testing.assert_array_equal(hidden, 0.0)
+    beside = visibility(camera, spec, points, grid, slab, grow=-0.03)
+    assert np.all(beside > 0.0)  # shrunk to nothing, the slab hides nothing
+
+
+def _visibility_by_numpy(camera, spec, points, grid, body):  # type: ignore[no-untyped-def]
+    """The prediction as first written, in numpy: every line sampled whole."""
+    local = (points - camera.translation) @ camera.rotation
+    z = local[:, 2]
+    half = np.tan(np.deg2rad(spec.fov_deg) / 2.0)
+    aspect = spec.width / spec.height
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inside = (
+            (z > spec.near)
+            & (z < spec.far)
+            & (np.abs(local[:, 1] / z) < half)
+            & (np.abs(local[:, 0] / z) < half * aspect)
+        )
+    out = np.zeros(len(points))
+    eye = camera.translation
+    d = points[inside] - eye
+    length = np.linalg.norm(d, axis=1)
+    k = max(2, int(np.max(length) / (0.5 * grid.cell)))
+    ts = np.linspace(0.0, 1.0, k)
+    along = eye + ts[None, :, None] * d[:, None, :]
+    at = ts[None, :] * length[:, None]
+    before = at < length[:, None] - 1.5 * grid.cell
+    idx = np.floor((along.reshape(-1, 3) - grid.lower) / grid.cell).astype(int)
+    ok = np.all((idx >= 0) & (idx < grid.cells.shape), axis=1)
+    state = np.full(len(idx), FREE, dtype=np.uint8)
+    state[ok] = grid.cells[idx[ok, 0], idx[ok, 1], idx[ok, 2]]
+    state = state.reshape(len(d), k)
+    blocked = np.any((state == OCCUPIED) & before, axis=1)
+    asked = before & (at > spec.near) & ~blocked[:, None]
+    flat = along[asked]
+    hit = np.zeros_like(asked)
+    hit[asked] = np.all(flat @ body.planes[:, :3].T - body.planes[:, 3] <= 0.0, axis=1)
+    blocked |= np.any(hit, axis=1)
+    unseen = np.count_nonzero((state == UNKNOWN) & before, axis=1) * length / (k - 1)
+    out[inside] = np.where(blocked, 0.0, np.exp(-unseen / UNSEEN_DEPTH))
+    return out
+
+
+def test_the_compiled_lines_of_sight_agree_with_sampling_every_line_whole() -> None:
+    """A random map, a box of the robot in the way: the same chances as numpy's."""
+    rng = np.random.default_rng(7)
+    cells = rng.choice(
+        np.array([FREE, UNKNOWN, OCCUPIED], dtype=np.uint8),
+        size=(60, 60, 60),
+        p=[0.9, 0.095, 0.005],
+    )
+    grid = CellStates(cells, np.array([0.2, -0.3, -0.3]), 0.01)
+    camera = pin.SE3(np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]]), np.zeros(3))
+    spec = CameraSpec(name="c", position=(0, 0, 0), target=(1, 0, 0), fov_deg=60.0)
+    box = WorldShapes(
+        np.array(
+            [
+                [1.0, 0, 0, 0.45],
+                [-1, 0, 0, -0.35],
+                [0, 1, 0, 0.05],
+                [0, -1, 0, 0.05],
+                [0, 0, 1, 0.05],
+                [0, 0, -1, 0.05],
+            ]
+        ),
+        np.array([0, 6]),
+        np.array([[0.4, 0.0, 0.0]]),
+        np.array([0.09]),
+        np.zeros((1, 4, 4)),
+    )
+    points = rng.uniform([0.2, -0.3, -0.3], [0.8, 0.3, 0.3], (400, 3))
+    got = visibility(camera, spec, points, grid, box)
+    want = _visibility_by_numpy(camera, spec, points, grid, box)
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    assert 0 < np.count_nonzero(got == 0.0) < len(points)  # some hidden, some not
+    assert np.count_nonzero((got > 0.0) & (got < 1.0)) > 0  # some behind unseen
 
 
 def test_the_arm_is_solved_for_a_camera_pose_aimed_at_a_point(
