@@ -114,6 +114,7 @@ class RrtConnect:
         self._start = self._space.allocState()
         self._goal_state = self._space.allocState()
         self._setup: object = None
+        self._taken = False  # a path was taken from the trees begun last
         self._q_start = np.zeros(n)
 
     @property
@@ -144,17 +145,18 @@ class RrtConnect:
             planner.setRange(self.settings.range)
         setup.setPlanner(planner)
         self._setup = setup
+        self._taken = False
         self._q_start = q.copy()
 
     def continues(self, q: FloatArray, target: FloatArray) -> bool:
-        """Whether the trees begun last are for ``q`` to ``target`` (and unused).
+        """Whether the trees begun last are for ``q`` to ``target``, no path taken yet.
 
         Then :meth:`grow` goes on with them: a hard plan adds up the checks of
         several periods instead of starting over in each. Their states were
         checked against the snapshots of those periods; the path taken from
         them is checked against the current one (:meth:`path`).
         """
-        if self._setup is None:
+        if self._setup is None or self._taken:
             return False
         goal = np.array([self._goal_state[i] for i in range(q.size)])
         return bool(
@@ -213,7 +215,7 @@ class RrtConnect:
                     return None, "the plan touches between the states OMPL checked"
         finally:
             self._budget = None
-            self._setup = None  # the trees are used up
+        self._taken = True  # the next plan begins anew (:meth:`continues`)
         return points, "planned"
 
     def solve(

@@ -12,6 +12,7 @@ from cbp.executors.hybrid import StallDetector, run_hybrid
 from cbp.methods.settings import HybridSettings
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
+from tests.conftest import load_virtual
 from tests.executors.test_cat import SCENARIOS
 
 PERIOD = 1.0 / 30.0
@@ -179,7 +180,9 @@ def test_the_plan_goes_to_the_nearest_configuration_found(monkeypatch) -> None:
     monkeypatch.setattr(
         hybrid_module.HybridPlanner, "_search_configuration", record_start
     )
-    scenario = load_scenario(
+    # On the virtual clock: on the wall clock a period made late by a busy
+    # machine is discarded, and the search begins again.
+    scenario = load_virtual(
         SCENARIOS / "cat_local_minimum.yaml", overrides={"duration": "3"}
     )
     trace = run_hybrid(scenario)
