@@ -48,10 +48,11 @@ class VirtualCosts:
     collision_check: float = 11e-6
     """One yes-or-no collision check of a configuration against declared
     objects (IK, MP) [s]."""
-    map_check: float = 150e-6
-    """The same check against an occupancy map [s] (35-350 us measured in the
-    paper's scenes with the cameras, by how near the configurations are to
-    the map's cells: ``docs/comparison.md``)."""
+    map_check: float = 60e-6
+    """The same check against an occupancy map [s] (compiled: 18-89 us of CPU
+    measured in the paper's scenes with the cameras, by how near the
+    configurations are to the map's cells; 46-57 us on average along MP's
+    runs: ``docs/comparison.md``)."""
     trajectory_point: float = 4e-6
     """Timing one path point of the spliced trajectory [s]."""
 
