@@ -501,6 +501,41 @@ def face_grid(
                 k += 1
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _shape_frame(
+    frames: FloatArray, to_frame: FloatArray, s: int, M: FloatArray
+) -> None:
+    """Shape ``s``'s frame in the world into ``M``: its placement x ``to_frame``."""
+    for i in range(4):
+        for j in range(4):
+            M[i, j] = (
+                frames[s, i, 0] * to_frame[s, 0, j]
+                + frames[s, i, 1] * to_frame[s, 1, j]
+                + frames[s, i, 2] * to_frame[s, 2, j]
+                + frames[s, i, 3] * to_frame[s, 3, j]
+            )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _world_box(
+    M: FloatArray, lx: float, ly: float, lz: float, ux: float, uy: float, uz: float
+) -> tuple[float, float, float, float, float, float]:
+    """The world box about box ``l``-``u`` of frame ``M``: centre, half extents."""
+    cx, cy, cz = 0.5 * (lx + ux), 0.5 * (ly + uy), 0.5 * (lz + uz)
+    ex, ey, ez = 0.5 * (ux - lx), 0.5 * (uy - ly), 0.5 * (uz - lz)
+    r00, r01, r02 = M[0, 0], M[0, 1], M[0, 2]
+    r10, r11, r12 = M[1, 0], M[1, 1], M[1, 2]
+    r20, r21, r22 = M[2, 0], M[2, 1], M[2, 2]
+    return (
+        r00 * cx + r01 * cy + r02 * cz + M[0, 3],
+        r10 * cx + r11 * cy + r12 * cz + M[1, 3],
+        r20 * cx + r21 * cy + r22 * cz + M[2, 3],
+        abs(r00) * ex + abs(r01) * ey + abs(r02) * ez,
+        abs(r10) * ex + abs(r11) * ey + abs(r12) * ez,
+        abs(r20) * ex + abs(r21) * ey + abs(r22) * ez,
+    )
+
+
 @numba.njit(cache=True, nogil=True)
 def candidates(
     bricks: Bricks,
@@ -560,15 +595,7 @@ def candidates(
     inv_step = 1.0 / step
     count = 0
     for s in range(len(kind)):
-        # The shape's frame in the world: placement x to_frame.
-        for i in range(4):
-            for j in range(4):
-                M[i, j] = (
-                    frames[s, i, 0] * to_frame[s, 0, j]
-                    + frames[s, i, 1] * to_frame[s, 1, j]
-                    + frames[s, i, 2] * to_frame[s, 2, j]
-                    + frames[s, i, 3] * to_frame[s, 3, j]
-                )
+        _shape_frame(frames, to_frame, s, M)
         r00, r01, r02 = M[0, 0], M[0, 1], M[0, 2]
         r10, r11, r12 = M[1, 0], M[1, 1], M[1, 2]
         r20, r21, r22 = M[2, 0], M[2, 1], M[2, 2]
@@ -582,14 +609,7 @@ def candidates(
         lx, ly, lz = lower[s, 0], lower[s, 1], lower[s, 2]
         ux, uy, uz = upper[s, 0], upper[s, 1], upper[s, 2]
         # The bricks that overlap the world box around that box.
-        cx, cy, cz = 0.5 * (lx + ux), 0.5 * (ly + uy), 0.5 * (lz + uz)
-        ex, ey, ez = 0.5 * (ux - lx), 0.5 * (uy - ly), 0.5 * (uz - lz)
-        mx = r00 * cx + r01 * cy + r02 * cz + tx
-        my = r10 * cx + r11 * cy + r12 * cz + ty
-        mz = r20 * cx + r21 * cy + r22 * cz + tz
-        wx = abs(r00) * ex + abs(r01) * ey + abs(r02) * ez
-        wy = abs(r10) * ex + abs(r11) * ey + abs(r12) * ez
-        wz = abs(r20) * ex + abs(r21) * ey + abs(r22) * ez
+        mx, my, mz, wx, wy, wz = _world_box(M, lx, ly, lz, ux, uy, uz)
         bx0, bx1 = _brick_range(mx - wx, mx + wx, origin[0], size, dims[0])
         by0, by1 = _brick_range(my - wy, my + wy, origin[1], size, dims[1])
         bz0, bz1 = _brick_range(mz - wz, mz + wz, origin[2], size, dims[2])
@@ -1098,25 +1118,10 @@ def any_cell_nearer(
         The shape's index, or -1 when none is that near.
     """
     solid, shell, bricks, corner, cell = grid
-    kind, to_frame, lower, upper, capsule = (
-        shapes.kind,
-        shapes.to_frame,
-        shapes.lower,
-        shapes.upper,
-        shapes.capsule,
-    )
-    planes, plane_start, faces, values = (
-        shapes.planes,
-        shapes.plane_start,
-        shapes.faces,
-        shapes.values,
-    )
-    grid_origin, grid_dims, grid_start, step = (
-        shapes.grid_origin,
-        shapes.grid_dims,
-        shapes.grid_start,
-        shapes.step,
-    )
+    (
+        kind, to_frame, lower, upper, capsule, planes, plane_start,
+        grid_origin, grid_dims, grid_start, faces, values, step,
+    ) = shapes  # fmt: skip
     nx, ny, nz = solid.shape
     inv_step = 1.0 / step
     cutoff = (0.5 * math.sqrt(3.0) * step + nearer) / VALUE_UNIT
@@ -1137,14 +1142,7 @@ def any_cell_nearer(
         ck = math.floor((M[2, 0] - corner[2]) / cell)
         if 0 <= ci < nx and 0 <= cj < ny and 0 <= ck < nz and solid[ci, cj, ck]:
             return _to_front(order, n)
-        for i in range(4):
-            for j in range(4):
-                M[i, j] = (
-                    frames[s, i, 0] * to_frame[s, 0, j]
-                    + frames[s, i, 1] * to_frame[s, 1, j]
-                    + frames[s, i, 2] * to_frame[s, 2, j]
-                    + frames[s, i, 3] * to_frame[s, 3, j]
-                )
+        _shape_frame(frames, to_frame, s, M)
         r00, r01, r02 = M[0, 0], M[0, 1], M[0, 2]
         r10, r11, r12 = M[1, 0], M[1, 1], M[1, 2]
         r20, r21, r22 = M[2, 0], M[2, 1], M[2, 2]
@@ -1152,14 +1150,7 @@ def any_cell_nearer(
         lx, ly, lz = lower[s, 0], lower[s, 1], lower[s, 2]
         ux, uy, uz = upper[s, 0], upper[s, 1], upper[s, 2]
         # The grid's cells in the world box around the shape's grown box.
-        cx, cy, cz = 0.5 * (lx + ux), 0.5 * (ly + uy), 0.5 * (lz + uz)
-        ex, ey, ez = 0.5 * (ux - lx), 0.5 * (uy - ly), 0.5 * (uz - lz)
-        mx = r00 * cx + r01 * cy + r02 * cz + tx
-        my = r10 * cx + r11 * cy + r12 * cz + ty
-        mz = r20 * cx + r21 * cy + r22 * cz + tz
-        wx = abs(r00) * ex + abs(r01) * ey + abs(r02) * ez
-        wy = abs(r10) * ex + abs(r11) * ey + abs(r12) * ez
-        wz = abs(r20) * ex + abs(r21) * ey + abs(r22) * ez
+        mx, my, mz, wx, wy, wz = _world_box(M, lx, ly, lz, ux, uy, uz)
         i0, i1 = _brick_range(mx - wx, mx + wx, corner[0], cell, nx)
         j0, j1 = _brick_range(my - wy, my + wy, corner[1], cell, ny)
         k0, k1 = _brick_range(mz - wz, mz + wz, corner[2], cell, nz)
