@@ -997,7 +997,7 @@ def declared_contacts(
     index: IntArray,
     floats: FloatArray,
     left: IntArray,
-) -> tuple[int, int, int, int]:
+) -> tuple[int, int, int, int, int]:
     """A whole contact query against declared objects, in one call.
 
     The shapes' bounds from their world placements ``frames`` (n, 4, 4) and
@@ -1012,7 +1012,8 @@ def declared_contacts(
     (-1, self pair index).
 
     Returns:
-        (obstacle contacts, self contacts, obstacle pairs left, self pairs left).
+        (obstacle contacts, self contacts, obstacle pairs left, self pairs left,
+        the most obstacle contacts of any one shape).
     """
     centres_local, halves_local, radii, table = bounds
     n = len(frames)
@@ -1021,9 +1022,14 @@ def declared_contacts(
     shape_bounds(frames, centres_local, halves_local, centres, halves)
     robot = (centres, halves, radii, frames, table)
     obstacles, obstacles_missed = obstacle_contacts(robot, objects, index, floats, left)
+    per_shape = np.zeros(n, dtype=np.intp)
+    most = 0
     for c in range(obstacles):
         index[1, c] = -1
         floats[3, c, 0] -= padding
+        s = index[0, c]
+        per_shape[s] += 1
+        most = max(most, per_shape[s])
     own = own_missed = 0
     if len(pairs[0]):
         own, own_missed = self_contacts(
@@ -1033,7 +1039,7 @@ def declared_contacts(
             floats[:, obstacles:],
             left[:, obstacles_missed:],
         )
-    return obstacles, own, obstacles_missed, own_missed
+    return obstacles, own, obstacles_missed, own_missed, most
 
 
 #: Packed robot shapes by the shapes' identities, with the shapes they are for.

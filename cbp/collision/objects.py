@@ -336,7 +336,7 @@ class PrimitiveEnvironment(Environment):
         index = np.empty((2, capacity), dtype=np.intp)
         floats = np.empty((4, capacity, 3))
         left = np.empty((2, capacity), dtype=np.intp)
-        obstacles, own, missed, missed_own = declared_contacts(
+        obstacles, own, missed, missed_own, most = declared_contacts(
             frames,
             table.bounds,
             self._kernel_objects(candidates, shapes, margin),
@@ -347,7 +347,7 @@ class PrimitiveEnvironment(Environment):
             left,
         )
         contacts = ContactSet.packed(index, floats, obstacles, obstacles + own)
-        if not (missed or missed_own or obstacles > per_shape):
+        if not (missed or missed_own or most > per_shape):
             return contacts
         # Rare: pairs for coal, or more contacts than a shape may keep.
         found = contacts.environment_part()
