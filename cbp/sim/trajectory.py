@@ -86,24 +86,8 @@ class JointTrajectory:
         Before the first point: the first point's position, at rest; after the
         last: the last position, at rest.
         """
-        times = self.times
-        if t < times[0]:
-            return (
-                self.positions[0],
-                np.zeros_like(self.positions[0]),
-                np.zeros_like(self.positions[0]),
-            )
-        if t >= times[-1]:
-            last = self.positions[-1]
-            return last, np.zeros_like(last), np.zeros_like(last)
-        i = int(np.searchsorted(times, t, side="right")) - 1
-        return _quintic(
-            self.positions,
-            self.velocities,
-            self.accelerations,
-            i,
-            times[i + 1] - times[i],
-            t - times[i],
+        return _sample(
+            self.times, self.positions, self.velocities, self.accelerations, float(t)
         )
 
     def first_point_after(self, t: float) -> int | None:
@@ -304,6 +288,35 @@ def _start_speed(v0: FloatArray, d0: FloatArray) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
+def _sample(
+    times: FloatArray,
+    positions: FloatArray,
+    velocities: FloatArray,
+    accelerations: FloatArray,
+    t: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """:meth:`JointTrajectory.sample` in one call: find the segment, evaluate it."""
+    n = times.size
+    if t < times[0]:
+        return positions[0], np.zeros(positions.shape[1]), np.zeros(positions.shape[1])
+    if t >= times[n - 1]:
+        last = positions[n - 1]
+        return last, np.zeros(last.size), np.zeros(last.size)
+    # The last point at or before t (numpy's searchsorted, side right, less one).
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if t < times[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    i = lo - 1
+    return _quintic(
+        positions, velocities, accelerations, i, times[i + 1] - times[i], t - times[i]
+    )
+
+
+@numba.njit(cache=True, nogil=True)
 def _quintic(
     positions: FloatArray,
     velocities: FloatArray,
@@ -340,3 +353,7 @@ def _quintic(
         dq[j] = (v0 + 2.0 * s * c2 + 3.0 * s2 * c3 + 4.0 * s3 * c4 + 5.0 * s4 * c5) / T
         ddq[j] = (2.0 * c2 + 6.0 * s * c3 + 12.0 * s2 * c4 + 20.0 * s3 * c5) / (T * T)
     return q, dq, ddq
+
+
+# Compiled (or loaded from numba's cache) on import, not in a run's first period.
+_sample(np.array([0.0, 1.0]), np.zeros((2, 1)), np.zeros((2, 1)), np.zeros((2, 1)), 0.5)
