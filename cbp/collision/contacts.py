@@ -336,4 +336,7 @@ def _penetration(distance: FloatArray) -> float:
     return deepest
 
 
-_penetration(np.zeros(1))  # compiled (or loaded from numba's cache) on import
+# Compiled (or loaded from numba's cache) on import, for contiguous distances
+# and a kernel's strided column (two rows: a shorter one is flagged contiguous).
+_penetration(np.zeros(1))
+_penetration(np.zeros((2, 4))[:, 0])

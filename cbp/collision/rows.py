@@ -29,6 +29,9 @@ from cbp.state import RobotState
 
 __all__ = ["LatchedContacts"]
 
+#: Lower bounds kept per :class:`LatchedContacts` (one per number of rows in use).
+_KEPT_BOUNDS = 64
+
 
 class LatchedContacts:
     """Up to ``capacity`` contacts held fixed on the links for one step.
@@ -56,10 +59,12 @@ class LatchedContacts:
         # Both sides' points in their frames at the latch configuration, when a
         # configuration away from it is first evaluated.
         self._local: tuple[FloatArray, FloatArray] | None = None
-        self._lower = np.full(capacity, -np.inf)
+        # The lower bounds by (active rows, safety distance), read-only: the
+        # QP copies bounds only when they are another array than at its last
+        # step (as a constraint's fixed limits).
+        self._lower: dict[tuple[int, float], FloatArray] = {}
         self._upper = np.full(capacity, np.inf)
-        # The active rows and safety distance ``_lower`` was last written for.
-        self._bounds_of: tuple[int, float] = (0, -np.inf)
+        self._upper.flags.writeable = False
         # Compile the rows (or load them from numba's cache) here, not in the
         # first control step: no contact, and arrays of the kinds a step passes.
         empty = ContactSet.empty()
@@ -75,7 +80,8 @@ class LatchedContacts:
             np.zeros((capacity, geometry.robot.nv)),
         )
         # Distances as sets hold them: contiguous, or a kernel's strided column.
-        for distance in (empty.distance, np.zeros((0, 3))[:, 0]):
+        # (Two rows: numpy flags a shorter strided column contiguous.)
+        for distance in (empty.distance, np.zeros((2, 3))[:, 0]):
             latched_rows(
                 (
                     distance,
@@ -181,13 +187,17 @@ class LatchedContacts:
     def bounds(self, safety_distance: float) -> tuple[FloatArray, FloatArray]:
         """Active rows: [safety_distance, inf); inactive rows: (-inf, inf).
 
-        The arrays are this object's own, rewritten by the next call.
+        Read-only arrays, the same ones for the same number of active rows.
         """
-        lower = self._lower
-        if (self.count, safety_distance) != self._bounds_of:
+        key = (self.count, safety_distance)
+        lower = self._lower.get(key)
+        if lower is None:
+            if len(self._lower) >= _KEPT_BOUNDS:
+                self._lower.clear()
+            lower = np.full(self.capacity, -np.inf)
             lower[: self.count] = safety_distance
-            lower[self.count :] = -np.inf
-            self._bounds_of = (self.count, safety_distance)
+            lower.flags.writeable = False
+            self._lower[key] = lower
         return lower, self._upper
 
     def _moved_points(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
