@@ -49,6 +49,7 @@ function gives the support point of A - B for GJK and EPA alike.
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from dataclasses import dataclass
@@ -166,7 +167,7 @@ class RobotTable:
     second: IntArray
     self_guess: FloatArray
 
-    @property
+    @functools.cached_property
     def bounds(self) -> LocalBounds:
         """Bounds and packed shapes as :func:`declared_contacts` takes them."""
         return (self.centres, self.halves, self.radii, fields(self.shapes))
