@@ -171,7 +171,7 @@ class QPProblem:
                 np.abs(self.upper - Ax) <= tolerance * (1.0 + np.abs(self.upper))
             )
         rows = np.flatnonzero(low | high)
-        return {self.entry_names[i] for i in np.unique(self.row_entry[rows])}
+        return {self.entry_names[i] for i in self.row_entry[rows].tolist()}
 
 
 class QPAssembler:

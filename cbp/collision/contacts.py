@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from cbp.collision.cell_kernels import spread_contacts
@@ -285,7 +286,7 @@ class ContactSet:
     @property
     def penetration(self) -> float:
         """Deepest penetration of the padded shapes [m]; 0 when nothing overlaps."""
-        return float(max(0.0, -self.distance.min())) if len(self) else 0.0
+        return _penetration(self.distance)
 
     def __len__(self) -> int:
         """Number of contacts."""
@@ -318,3 +319,24 @@ class ContactSet:
             keep,
         )
         return self.select(keep[:count])
+
+
+@numba.njit(cache=True, nogil=True)
+def _penetration(distance: FloatArray) -> float:
+    """max(0, -min(distance)) in one pass; 0 for none.
+
+    Also 0 when a distance is NaN, as before: numpy's min gave NaN there,
+    which max(0, .) dropped.
+    """
+    deepest = 0.0
+    for d in distance:
+        if math.isnan(d):
+            return 0.0
+        deepest = max(deepest, -d)
+    return deepest
+
+
+# Compiled (or loaded from numba's cache) on import, for contiguous distances
+# and a kernel's strided column (two rows: a shorter one is flagged contiguous).
+_penetration(np.zeros(1))
+_penetration(np.zeros((2, 4))[:, 0])

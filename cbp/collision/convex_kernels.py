@@ -49,6 +49,7 @@ function gives the support point of A - B for GJK and EPA alike.
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from dataclasses import dataclass
@@ -167,7 +168,7 @@ class RobotTable:
     second: IntArray
     self_guess: FloatArray
 
-    @property
+    @functools.cached_property
     def bounds(self) -> LocalBounds:
         """Bounds and packed shapes as :func:`declared_contacts` takes them."""
         return (self.centres, self.halves, self.radii, fields(self.shapes))
@@ -998,7 +999,7 @@ def declared_contacts(
     index: IntArray,
     floats: FloatArray,
     left: IntArray,
-) -> tuple[int, int, int, int]:
+) -> tuple[int, int, int, int, int]:
     """A whole contact query against declared objects, in one call.
 
     The shapes' bounds from their world placements ``frames`` (n, 4, 4) and
@@ -1013,7 +1014,8 @@ def declared_contacts(
     (-1, self pair index).
 
     Returns:
-        (obstacle contacts, self contacts, obstacle pairs left, self pairs left).
+        (obstacle contacts, self contacts, obstacle pairs left, self pairs left,
+        the most obstacle contacts of any one shape).
     """
     centres_local, halves_local, radii, table = bounds
     n = len(frames)
@@ -1022,9 +1024,14 @@ def declared_contacts(
     shape_bounds(frames, centres_local, halves_local, centres, halves)
     robot = (centres, halves, radii, frames, table)
     obstacles, obstacles_missed = obstacle_contacts(robot, objects, index, floats, left)
+    per_shape = np.zeros(n, dtype=np.intp)
+    most = 0
     for c in range(obstacles):
         index[1, c] = -1
         floats[3, c, 0] -= padding
+        s = index[0, c]
+        per_shape[s] += 1
+        most = max(most, per_shape[s])
     own = own_missed = 0
     if len(pairs[0]):
         own, own_missed = self_contacts(
@@ -1034,7 +1041,7 @@ def declared_contacts(
             floats[:, obstacles:],
             left[:, obstacles_missed:],
         )
-    return obstacles, own, obstacles_missed, own_missed
+    return obstacles, own, obstacles_missed, own_missed, most
 
 
 @numba.njit(cache=True, nogil=True)

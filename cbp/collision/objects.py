@@ -211,6 +211,9 @@ class PrimitiveEnvironment(Environment):
         #: (shape, object) pairs are wanted contacts, left out, and where each
         #: pair's GJK starts next (n, m, 5)).
         self._skips: dict[int, tuple[list[LinkShape], np.ndarray, FloatArray]] = {}
+        #: The last shapes and margin of :meth:`query_with_self`, with its
+        #: objects as the kernel takes them.
+        self._kernel_arguments: tuple[list[LinkShape], float, Obstacles] | None = None
 
     def prepare(self, shapes: list[LinkShape], margin: float) -> None:
         """Compile the kernels (once per process), pack the shapes."""
@@ -336,10 +339,16 @@ class PrimitiveEnvironment(Environment):
         index = np.empty((2, capacity), dtype=np.intp)
         floats = np.empty((4, capacity, 3))
         left = np.empty((2, capacity), dtype=np.intp)
-        obstacles, own, missed, missed_own = declared_contacts(
+        # The objects as the kernel takes them, made once per shapes and margin
+        # (this environment's objects do not change).
+        made = self._kernel_arguments
+        if made is None or made[0] is not shapes or made[1] != margin:
+            objects = self._kernel_objects(candidates, shapes, margin)
+            made = self._kernel_arguments = (shapes, margin, objects)
+        obstacles, own, missed, missed_own, most = declared_contacts(
             frames,
             table.bounds,
-            self._kernel_objects(candidates, shapes, margin),
+            made[2],
             float(padding),
             table.pairs(float(self_margin), float(self_padding)),
             index,
@@ -347,7 +356,7 @@ class PrimitiveEnvironment(Environment):
             left,
         )
         contacts = ContactSet.packed(index, floats, obstacles, obstacles + own)
-        if not (missed or missed_own or obstacles > per_shape):
+        if not (missed or missed_own or most > per_shape):
             return contacts
         # Rare: pairs for coal, or more contacts than a shape may keep.
         found = contacts.environment_part()

@@ -29,6 +29,9 @@ from cbp.state import RobotState
 
 __all__ = ["LatchedContacts"]
 
+#: Lower bounds kept per :class:`LatchedContacts` (one per number of rows in use).
+_KEPT_BOUNDS = 64
+
 
 class LatchedContacts:
     """Up to ``capacity`` contacts held fixed on the links for one step.
@@ -56,8 +59,12 @@ class LatchedContacts:
         # Both sides' points in their frames at the latch configuration, when a
         # configuration away from it is first evaluated.
         self._local: tuple[FloatArray, FloatArray] | None = None
-        self._lower = np.full(capacity, -np.inf)
+        # The lower bounds by (active rows, safety distance), read-only: the
+        # QP copies bounds only when they are another array than at its last
+        # step (as a constraint's fixed limits).
+        self._lower: dict[tuple[int, float], FloatArray] = {}
         self._upper = np.full(capacity, np.inf)
+        self._upper.flags.writeable = False
         # Compile the rows (or load them from numba's cache) here, not in the
         # first control step: no contact, and arrays of the kinds a step passes.
         empty = ContactSet.empty()
@@ -72,6 +79,23 @@ class LatchedContacts:
             joint_jacobians,
             np.zeros((capacity, geometry.robot.nv)),
         )
+        # Distances as sets hold them: contiguous, or a kernel's strided column.
+        # (Two rows: numpy flags a shorter strided column contiguous.)
+        for distance in (empty.distance, np.zeros((2, 3))[:, 0]):
+            latched_rows(
+                (
+                    distance,
+                    empty.point,
+                    empty.other_point,
+                    empty.normal,
+                    empty.shape,
+                    empty.other_shape,
+                ),
+                self._support,
+                joint_jacobians,
+                np.zeros(capacity),
+                np.zeros((capacity, geometry.robot.nv)),
+            )
 
     @property
     def contacts(self) -> ContactSet:
@@ -113,6 +137,26 @@ class LatchedContacts:
             move = (point - c.point) - (other - c.other_point)
             out[:n] += np.einsum("ij,ij->i", c.normal, move)
 
+    def linearize_into(
+        self, state: RobotState, value: FloatArray, jacobian: FloatArray
+    ) -> None:
+        """:meth:`value_into` and :meth:`jacobian_into` together.
+
+        At the latch configuration (every engine step) in one compiled pass.
+        """
+        if not self._at_latch(state):
+            self.value_into(state, value)
+            self.jacobian_into(state, jacobian)
+            return
+        c = self._contacts
+        latched_rows(
+            (c.distance, c.point, c.other_point, c.normal, c.shape, c.other_shape),
+            self._support,
+            state.joint_jacobians(),
+            value,
+            jacobian,
+        )
+
     def jacobian(self, state: RobotState) -> FloatArray:
         """n^T (J_p - J_p') for the active rows, zeros after, shape (capacity, nv)."""
         out = np.empty((self.capacity, state.robot.nv))
@@ -143,11 +187,17 @@ class LatchedContacts:
     def bounds(self, safety_distance: float) -> tuple[FloatArray, FloatArray]:
         """Active rows: [safety_distance, inf); inactive rows: (-inf, inf).
 
-        The arrays are this object's own, rewritten by the next call.
+        Read-only arrays, the same ones for the same number of active rows.
         """
-        lower = self._lower
-        lower[: self.count] = safety_distance
-        lower[self.count :] = -np.inf
+        key = (self.count, safety_distance)
+        lower = self._lower.get(key)
+        if lower is None:
+            if len(self._lower) >= _KEPT_BOUNDS:
+                self._lower.clear()
+            lower = np.full(self.capacity, -np.inf)
+            lower[: self.count] = safety_distance
+            lower.flags.writeable = False
+            self._lower[key] = lower
         return lower, self._upper
 
     def _moved_points(self, state: RobotState) -> tuple[FloatArray, FloatArray]:
@@ -238,3 +288,27 @@ def contact_jacobian_rows(
                         + wy * J[4, c]
                         + wz * J[5, c]
                     )
+
+
+@numba.njit(cache=True, nogil=True)
+def latched_rows(
+    contacts: tuple[FloatArray, FloatArray, FloatArray, FloatArray, IntArray, IntArray],
+    support: FloatArray,
+    J: FloatArray,
+    value: FloatArray,
+    jacobian: FloatArray,
+) -> None:
+    """The rows at the latch configuration: values and Jacobian rows, zeros after.
+
+    ``contacts``: (distance, point, other point, normal, shape, other shape)
+    of the latched contacts; the values are the distances, the Jacobian rows
+    those of :func:`contact_jacobian_rows`.
+    """
+    distance, point, other_point, normal, shape, other_shape = contacts
+    n = distance.size
+    for r in range(value.size):
+        value[r] = distance[r] if r < n else 0.0
+    jacobian[:] = 0.0
+    contact_jacobian_rows(
+        point, other_point, normal, shape, other_shape, support, J, jacobian
+    )

@@ -44,7 +44,10 @@ def contact_depth(world: CollisionWorld, contacts: ContactSet) -> float:
 
 
 def back_out(
-    world: CollisionWorld, q: FloatArray, step_bound: FloatArray
+    world: CollisionWorld,
+    q: FloatArray,
+    step_bound: FloatArray,
+    state: RobotState | None = None,
 ) -> tuple[FloatArray | None, float]:
     """A path from ``q`` out of the obstacles the robot is in contact with.
 
@@ -53,13 +56,19 @@ def back_out(
         q: where the robot is.
         step_bound: the largest change of each joint between two points of the
             path (nv) [rad or m].
+        state: a state of the world's robot to work in (moved to ``q``), so
+            that a caller that backs out every period makes one; None: a new
+            one.
 
     Returns:
         The path (its first point is ``q``; None when the unpadded robot
         touches no obstacle there), and the depth at ``q`` [m].
     """
     robot = world.geometry.robot
-    state = RobotState(robot, q)
+    if state is None:
+        state = RobotState(robot, q)
+    else:
+        state.update(q)
     # The contacts there as they are: ``query``, not ``check``, so that the
     # contacts a planner's rejected step carried over are neither counted nor
     # taken from the planner's next query.

@@ -15,6 +15,7 @@ CAT is a configuration (``scenarios/configs/cat.yaml``), not code here.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pinocchio as pin
 
@@ -111,7 +112,7 @@ class CatPlanner:
             path.append(q)
             covered += dt
             assert step.dq is not None
-            if float(np.max(np.abs(step.dq))) < s.converged_step:
+            if _largest(step.dq) < s.converged_step:
                 still += 1
                 if still >= 3:
                     note = "converged"
@@ -187,6 +188,18 @@ class CatPlanner:
             f" nearest at {x:.2f}, {y:.2f}, {z:.2f} m): a camera that sees it, or"
             " perception.unknown: free, lets the arm on",
         )
+
+
+@numba.njit(cache=True, nogil=True)
+def _largest(dq: FloatArray) -> float:
+    """The largest magnitude of a step's entries (finite: the step guard's)."""
+    largest = 0.0
+    for x in dq:
+        largest = max(largest, abs(x))
+    return largest
+
+
+_largest(np.zeros(1))  # compiled (or loaded from numba's cache) on import
 
 
 def make_planner(scenario: Scenario, run: RunParts) -> CatPlanner:

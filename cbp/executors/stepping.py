@@ -97,7 +97,9 @@ class ValidatedStepper:
             self._event(f"QP eased: {eased}")
         self._eased = eased
         dq = result.dq
-        q_next = engine.robot.integrate(q, dq)
+        robot = engine.robot
+        # q + dq is pinocchio's integration on a Euclidean model, without its call.
+        q_next = q + dq if robot.is_euclidean else robot.integrate(q, dq)
         if self.world is None:
             return Step("taken", q_next, dq, 0.0)
         check = self.world.try_step(q_next, self.depth)

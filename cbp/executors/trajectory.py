@@ -48,6 +48,7 @@ from cbp.run.pacing import Pacer
 from cbp.run.parts import RunParts, build_run
 from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import JointTrajectory, time_parameterize
+from cbp.state import RobotState
 from cbp.trace import PeriodRecord, Trace
 
 __all__ = [
@@ -145,13 +146,16 @@ class _LeavingContact:
         self.run = run
         self.step_bound = step_bound
         self.since: float | None = None
+        self._state: RobotState | None = None  # one for every period's check
 
     def plan(self, t: float, q: FloatArray) -> Plan | None:
         """A back-out plan from ``q``, or None when the robot touches nothing."""
         world = self.run.world
         if world is None or world.environment.resolution > 0.0:
             return None
-        path, depth = back_out(world, q, self.step_bound)
+        if self._state is None or self._state.robot is not world.geometry.robot:
+            self._state = RobotState(world.geometry.robot)
+        path, depth = back_out(world, q, self.step_bound, self._state)
         if path is None:
             if self.since is not None:
                 self.run.event(

@@ -124,8 +124,14 @@ def clearance(scenario: Scenario, t: FloatArray, q: FloatArray) -> FloatArray:
     if not scenario.spec.world.objects:
         out[:] = np.inf
         return out
-    geometry = RobotGeometry(
-        scenario.robot, padding=0.0, attachments=scenario.attachments()
+    # The run's world has the same shapes (its padding is a setting, 0 here):
+    # its geometry is not loaded again.
+    geometry = (
+        scenario.world.geometry
+        if scenario.world is not None
+        else RobotGeometry(
+            scenario.robot, padding=0.0, attachments=scenario.attachments()
+        )
     )
     settings = CollisionSettings(
         activation_distance=CLEARANCE_RANGE, self_collision=False, padding=0.0

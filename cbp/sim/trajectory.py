@@ -16,6 +16,7 @@ into an inevitable collision state).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -86,24 +87,8 @@ class JointTrajectory:
         Before the first point: the first point's position, at rest; after the
         last: the last position, at rest.
         """
-        times = self.times
-        if t < times[0]:
-            return (
-                self.positions[0],
-                np.zeros_like(self.positions[0]),
-                np.zeros_like(self.positions[0]),
-            )
-        if t >= times[-1]:
-            last = self.positions[-1]
-            return last, np.zeros_like(last), np.zeros_like(last)
-        i = int(np.searchsorted(times, t, side="right")) - 1
-        return _quintic(
-            self.positions,
-            self.velocities,
-            self.accelerations,
-            i,
-            times[i + 1] - times[i],
-            t - times[i],
+        return _sample(
+            self.times, self.positions, self.velocities, self.accelerations, float(t)
         )
 
     def first_point_after(self, t: float) -> int | None:
@@ -199,79 +184,26 @@ def time_parameterize(
         ``v0`` within the acceleration limits (the caller keeps its previous
         trajectory, which does stop).
     """
-    path = np.asarray(path, dtype=float)
-    v0 = np.asarray(v0, dtype=float)
-    # Drop repeated points (steps that did not move).
-    moved = np.concatenate([[True], np.any(np.abs(np.diff(path, axis=0)) > 1e-10, 1)])
-    path = path[moved]
+    # Contiguous, as the compiled passes are compiled for (once, on import).
+    path = np.ascontiguousarray(path, dtype=float)
+    v0 = np.ascontiguousarray(v0, dtype=float)
+    path = _moved(path)  # without repeated points (steps that did not move)
     if len(path) < 2:
         if np.any(np.abs(v0) > 1e-9):
             return None
         return JointTrajectory.hold(t0, path[0])
-    delta = np.diff(path, axis=0)  # (N, n)
-    absd = np.abs(delta)
-    with np.errstate(divide="ignore", over="ignore"):  # a joint that does not move
-        seg_vel = np.min(max_velocity / absd, axis=1)  # path-speed limit per segment
-        seg_acc = np.min(max_acceleration / absd, axis=1)
-    n_points = len(path)
-    limit = np.empty(n_points)
-    limit[0] = seg_vel[0]
-    limit[-1] = seg_vel[-1]
-    limit[1:-1] = np.minimum(seg_vel[:-1], seg_vel[1:])
-    if n_points > 2:
-        # Corners: turning from one segment's direction to the next within about
-        # one segment's time needs |d_i - d_(i-1)| s'^2 <= a_max (per joint).
-        turn = np.abs(np.diff(delta, axis=0))
-        with np.errstate(divide="ignore", over="ignore"):
-            corner = np.sqrt(np.min(max_acceleration / turn, axis=1))
-        limit[1:-1] = np.minimum(limit[1:-1], corner)
-    # Backward: able to stop at the end.
-    speed2 = np.minimum(limit, 1e12) ** 2
-    speed2[-1] = 0.0
-    for i in range(n_points - 2, -1, -1):
-        speed2[i] = min(speed2[i], speed2[i + 1] + 2.0 * seg_acc[i])
-    start = _start_speed(v0, delta[0])
-    if start * start > speed2[0] * (1.0 + 1e-9) + 1e-12:
+    timed = _timing(
+        path,
+        float(t0),
+        v0,
+        np.ascontiguousarray(a0, dtype=float),
+        np.ascontiguousarray(max_velocity, dtype=float),
+        np.ascontiguousarray(max_acceleration, dtype=float),
+        _start_speed(v0, path[1] - path[0]),
+    )
+    if timed is None:
         return None
-    # Forward: from the starting speed, within the acceleration limits.
-    speed2[0] = start * start
-    for i in range(n_points - 1):
-        speed2[i + 1] = min(speed2[i + 1], speed2[i] + 2.0 * seg_acc[i])
-    speed = np.sqrt(speed2)
-    # Segment durations: unit path length at the mean of the end speeds, but
-    # never longer than a quintic from rest to rest within the limits takes.
-    # Slow ends (a start velocity nearly across the path, both ends near rest)
-    # made the mean speed tiny and the segment seconds long, and the quintic
-    # kept the starting velocity over all of it: off the path by radians.
-    mean = 0.5 * (speed[:-1] + speed[1:])
-    with np.errstate(divide="ignore"):
-        at_mean = 1.0 / mean
-        rest_to_rest = np.maximum(
-            np.sqrt(QUINTIC_PEAK_ACCELERATION / seg_acc),
-            QUINTIC_PEAK_VELOCITY / seg_vel,
-        )
-    durations = np.minimum(at_mean, rest_to_rest)
-    velocities = np.empty_like(path)
-    velocities[0] = v0
-    velocities[-1] = 0.0
-    if n_points > 2:
-        direction = 0.5 * (delta[:-1] + delta[1:])
-        velocities[1:-1] = direction * speed[1:-1, None]
-    change = np.abs(velocities[1] - v0)
-    durations[0] = max(durations[0], float(np.max(change / max_acceleration)))
-    times = t0 + np.concatenate([[0.0], np.cumsum(durations)])
-    accelerations = np.zeros_like(path)
-    accelerations[0] = a0
-    if n_points > 2:
-        accelerations[1:-1] = (velocities[2:] - velocities[:-2]) / (
-            times[2:] - times[:-2]
-        )[:, None]
-        np.clip(
-            accelerations[1:-1],
-            -max_acceleration,
-            max_acceleration,
-            out=accelerations[1:-1],
-        )
+    times, velocities, accelerations = timed
     return JointTrajectory(times, path, velocities, accelerations)
 
 
@@ -301,6 +233,147 @@ def _start_speed(v0: FloatArray, d0: FloatArray) -> float:
         return 0.0
     cos = float(v0.dot(d0)) / (speed * norm)
     return speed / norm * min(1.0, max(0.0, cos) / ALIGNED_COS)
+
+
+@numba.njit(cache=True, nogil=True)
+def _moved(path: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+    """The path without the points that repeat the one before (within 1e-10)."""
+    keep = np.ones(path.shape[0], dtype=np.bool_)
+    for i in range(1, path.shape[0]):
+        moved = False
+        for j in range(path.shape[1]):
+            if abs(path[i, j] - path[i - 1, j]) > 1e-10:
+                moved = True
+                break
+        keep[i] = moved
+    return path[keep]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _timing(
+    path: FloatArray,
+    t0: float,
+    v0: FloatArray,
+    a0: FloatArray,
+    max_velocity: FloatArray,
+    max_acceleration: FloatArray,
+    start: float,
+) -> tuple[FloatArray, FloatArray, FloatArray] | None:  # pragma: no cover - compiled
+    """Times, velocities and accelerations of :func:`time_parameterize`'s path.
+
+    ``start``: the path speed that continues ``v0`` (:func:`_start_speed`).
+    None when the path is too short to stop on from there. The operations
+    of the numpy version this replaced, in its order (the same numbers);
+    division by zero gives inf as numpy's did (a joint that does not move).
+    """
+    n_points, n = path.shape
+    segments = n_points - 1
+    delta = np.empty((segments, n))
+    seg_vel = np.empty(segments)  # path-speed limit per segment
+    seg_acc = np.empty(segments)
+    for i in range(segments):
+        for j in range(n):
+            delta[i, j] = path[i + 1, j] - path[i, j]
+        fastest = max_velocity[0] / abs(delta[i, 0])
+        hardest = max_acceleration[0] / abs(delta[i, 0])
+        for j in range(1, n):
+            fastest = min(fastest, max_velocity[j] / abs(delta[i, j]))
+            hardest = min(hardest, max_acceleration[j] / abs(delta[i, j]))
+        seg_vel[i], seg_acc[i] = fastest, hardest
+    limit = np.empty(n_points)
+    limit[0] = seg_vel[0]
+    limit[n_points - 1] = seg_vel[segments - 1]
+    for i in range(1, n_points - 1):
+        limit[i] = min(seg_vel[i - 1], seg_vel[i])
+        # Corners: turning from one segment's direction to the next within
+        # about one segment's time needs |d_i - d_(i-1)| s'^2 <= a_max.
+        corner = max_acceleration[0] / abs(delta[i, 0] - delta[i - 1, 0])
+        for j in range(1, n):
+            turn = abs(delta[i, j] - delta[i - 1, j])
+            corner = min(corner, max_acceleration[j] / turn)
+        limit[i] = min(limit[i], math.sqrt(corner))
+    # Backward: able to stop at the end.
+    speed2 = np.empty(n_points)
+    for i in range(n_points):
+        capped = min(limit[i], 1e12)
+        speed2[i] = capped * capped
+    speed2[n_points - 1] = 0.0
+    for i in range(n_points - 2, -1, -1):
+        speed2[i] = min(speed2[i], speed2[i + 1] + 2.0 * seg_acc[i])
+    if start * start > speed2[0] * (1.0 + 1e-9) + 1e-12:
+        return None
+    # Forward: from the starting speed, within the acceleration limits.
+    speed2[0] = start * start
+    for i in range(n_points - 1):
+        speed2[i + 1] = min(speed2[i + 1], speed2[i] + 2.0 * seg_acc[i])
+    speed = np.sqrt(speed2)
+    # Segment durations: unit path length at the mean of the end speeds, but
+    # never longer than a quintic from rest to rest within the limits takes.
+    # Slow ends (a start velocity nearly across the path, both ends near rest)
+    # made the mean speed tiny and the segment seconds long, and the quintic
+    # kept the starting velocity over all of it: off the path by radians.
+    durations = np.empty(segments)
+    for i in range(segments):
+        at_mean = 1.0 / (0.5 * (speed[i] + speed[i + 1]))
+        rest_to_rest = max(
+            math.sqrt(QUINTIC_PEAK_ACCELERATION / seg_acc[i]),
+            QUINTIC_PEAK_VELOCITY / seg_vel[i],
+        )
+        durations[i] = min(at_mean, rest_to_rest)
+    velocities = np.empty((n_points, n))
+    velocities[0] = v0
+    velocities[n_points - 1] = 0.0
+    for i in range(1, n_points - 1):
+        for j in range(n):
+            velocities[i, j] = 0.5 * (delta[i - 1, j] + delta[i, j]) * speed[i]
+    change = abs(velocities[1, 0] - v0[0]) / max_acceleration[0]
+    for j in range(1, n):
+        change = max(change, abs(velocities[1, j] - v0[j]) / max_acceleration[j])
+    durations[0] = max(durations[0], change)
+    times = np.empty(n_points)
+    times[0] = t0 + 0.0
+    elapsed = 0.0
+    for i in range(segments):
+        elapsed += durations[i]
+        times[i + 1] = t0 + elapsed
+    accelerations = np.zeros((n_points, n))
+    accelerations[0] = a0
+    for i in range(1, n_points - 1):
+        span = times[i + 1] - times[i - 1]
+        for j in range(n):
+            a = (velocities[i + 1, j] - velocities[i - 1, j]) / span
+            bound = max_acceleration[j]
+            accelerations[i, j] = -bound if a < -bound else (bound if a > bound else a)
+    return times, velocities, accelerations
+
+
+@numba.njit(cache=True, nogil=True)
+def _sample(
+    times: FloatArray,
+    positions: FloatArray,
+    velocities: FloatArray,
+    accelerations: FloatArray,
+    t: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """:meth:`JointTrajectory.sample` in one call: find the segment, evaluate it."""
+    n = times.size
+    if t < times[0]:
+        return positions[0], np.zeros(positions.shape[1]), np.zeros(positions.shape[1])
+    if t >= times[n - 1]:
+        last = positions[n - 1]
+        return last, np.zeros(last.size), np.zeros(last.size)
+    # The last point at or before t (numpy's searchsorted, side right, less one).
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if t < times[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    i = lo - 1
+    return _quintic(
+        positions, velocities, accelerations, i, times[i + 1] - times[i], t - times[i]
+    )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -340,3 +413,9 @@ def _quintic(
         dq[j] = (v0 + 2.0 * s * c2 + 3.0 * s2 * c3 + 4.0 * s3 * c4 + 5.0 * s4 * c5) / T
         ddq[j] = (2.0 * c2 + 6.0 * s * c3 + 12.0 * s2 * c4 + 20.0 * s3 * c5) / (T * T)
     return q, dq, ddq
+
+
+# Compiled (or loaded from numba's cache) on import, not in a run's first period.
+_sample(np.array([0.0, 1.0]), np.zeros((2, 1)), np.zeros((2, 1)), np.zeros((2, 1)), 0.5)
+_ONE = np.ones(1)
+_timing(_moved(np.array([[0.0], [1.0], [2.0]])), 0.0, _ONE, _ONE, _ONE, _ONE, 0.0)

@@ -113,9 +113,7 @@ class ContactNormalsConstraint(Constraint[ContactParams]):
         self, state: RobotState, value: FloatArray, jacobian: FloatArray
     ) -> None:
         """Distances and n^T J_c, written in place."""
-        rows = self._latched()
-        rows.value_into(state, value)
-        rows.jacobian_into(state, jacobian)
+        self._latched().linearize_into(state, value, jacobian)
 
     def value_into(self, state: RobotState, value: FloatArray) -> None:
         """Distances, written in place."""
