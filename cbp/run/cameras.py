@@ -123,6 +123,7 @@ class Cameras:
                 synchronous=True,
                 estimator=estimator,
                 latency=spec.virtual_latency,
+                batch=True,
             )
             if clock == "virtual"
             else updater(grid, world, estimator=estimator)
@@ -175,7 +176,10 @@ class Cameras:
                 error, self.mapper.error = self.mapper.error, None
                 self._log.event(sim.t, f"map update: {error}")
             due[i] += 1.0 / self.cameras[i].spec.rate_hz
-        self.mapper.release(t)
+        self.mapper.release(t)  # the last instant's snapshot (batch)
+        if self.mapper.error is not None:
+            error, self.mapper.error = self.mapper.error, None
+            self._log.event(sim.t, f"map update: {error}")
         self.separation.check(sim.t, sim.q)
 
     def mapped_since(self, name: str, t: float) -> int:
