@@ -4,8 +4,9 @@
 Each camera captures at its rate in simulated time; a frame is checked
 (:meth:`~cbp.perception.frame.DepthFrame.problem`) and handed with the robot's
 configuration to the map (:class:`~cbp.perception.mapper.MapUpdater`): at once
-on the virtual clock (the map a planner sees then depends on simulated time
-only), in the map's worker on the wall clock (never blocking the loop). A
+on the virtual clock, the frames of one instant making one snapshot (the map a
+planner sees then depends on simulated time only), in the map's worker on the
+wall clock (never blocking the loop). A
 camera whose last valid frame is older than ``perception.camera_timeout``
 holds the robot until it gives one again. A frame is valid when it is well
 formed (:meth:`~cbp.perception.frame.DepthFrame.problem`) and believable
