@@ -909,8 +909,9 @@ def frame_changes(
     A pixel changed when its reading differs from the one last integrated
     (``kept.range``) by more than sqrt(2) times the spread of the camera's
     noise at its depth (``frame.spread``: two readings of a still surface
-    differ by less, but for one in a few hundred at three sigmas; no noise:
-    by nothing), or it gained or lost a reading or the far plane. A pixel
+    differ by less, but for one in a few hundred at three sigmas) plus
+    ``slack`` [m] (with noise only; no noise: by anything), or it gained or
+    lost a reading or the far plane. A pixel
     without a return (NaN) says nothing and is left as it was. A pixel is
     integrated when it changed, or its last reading was taken for the robot
     or came nearer than the space seen free (``kept.cell``, ``kept.hold``);

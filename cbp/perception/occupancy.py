@@ -34,6 +34,15 @@ its surface, not its volume.
 
 Robot pixels: their readings are not inserted, but the space in front of them
 along their rays is seen, so the robot never clears what it hides.
+
+A camera's frame from the view of its last one is integrated only where it
+changed (``perception.whole_frame_every``): the pixels whose reading moved
+beyond the noise, the space seen through over the image's tiles around them
+and over the bricks whose cells changed since the camera's last frame
+(:func:`~cbp.perception.kernels.frame_changes`,
+:func:`~cbp.perception.kernels.mark_seen`); each unchanged reading keeps its
+cell occupied. The rest would do what it did at the camera's last frame: on
+exact frames the map is the one whole frames give.
 """
 
 from __future__ import annotations
