@@ -171,8 +171,10 @@ class MapUpdater(SnapshotPublisher):
         self.world = world
         self.synchronous = synchronous
         self.latency = float(latency) if synchronous else 0.0
-        #: Snapshots made, waiting for their time: (due [s], snapshot).
-        self._due: deque[tuple[float, OccupancyEnvironment]] = deque()
+        #: Snapshots made, waiting for their time: (due [s], stamp [s],
+        #: snapshot). The stamp is kept apart: a map that has not changed
+        #: gives its last snapshot again, maybe still waiting here.
+        self._due: deque[tuple[float, float, OccupancyEnvironment]] = deque()
         self.estimator = estimator
         self._mapped: OccupancyEnvironment | None = None  # the last, as mapped
         #: Velocities of the mapped obstacles, cluster by cluster (with an
@@ -311,10 +313,10 @@ class MapUpdater(SnapshotPublisher):
         )
         published.stamp = stamp
         if self.latency > 0.0:
-            self._due.append((stamp + self.latency, published))
+            self._due.append((stamp + self.latency, stamp, published))
             self.release(self.submitted_t)
         else:
-            self._install(published)
+            self._install(published, stamp)
         done = time.perf_counter()
         self.last_update_s = done - start
         self.published.append(
@@ -332,14 +334,16 @@ class MapUpdater(SnapshotPublisher):
             self._publish_held()
         newest = None
         while self._due and self._due[0][0] <= t + 1e-9:
-            newest = self._due.popleft()[1]
+            _, stamp, snapshot = self._due.popleft()
+            newest = (snapshot, stamp)
         if newest is not None:
-            self._install(newest)
+            self._install(*newest)
 
-    def _install(self, published: OccupancyEnvironment) -> None:
-        """Hand ``published`` to the world."""
+    def _install(self, published: OccupancyEnvironment, stamp: float) -> None:
+        """Hand ``published``, stamped ``stamp`` [s], to the world."""
+        published.stamp = stamp
         self.world.set_environment(published)
-        self.stamp = max(self.stamp, published.stamp or 0.0)
+        self.stamp = max(self.stamp, stamp)
         self.updates += 1
 
     def close(self) -> None:
