@@ -18,10 +18,12 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial import cKDTree
 
+from cbp.collision.broad import shape_bounds
 from cbp.collision.cell_index import CellIndex
 from cbp.collision.contacts import ContactSet
+from cbp.collision.convex_kernels import RobotTable, self_contacts
 from cbp.collision.environment import Environment, NarrowPhase
-from cbp.collision.geometry import LinkShape, PlacedShapes
+from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
 from cbp.collision.shape_table import CellContactQuery, ShapeTable, compile_kernels
 from cbp.robot import FloatArray
 
@@ -244,9 +246,63 @@ class OccupancyEnvironment(Environment):
         is for declared shapes).
         """
         del narrow_phase
+        return self._cells(robot.shapes, robot.placements, margin, per_shape)
+
+    def query_with_self(
+        self,
+        frames: FloatArray,
+        table: RobotTable,
+        shapes: list[LinkShape],
+        margin: float,
+        per_shape: int,
+        padding: float,
+        self_margin: float,
+        self_padding: float,
+    ) -> ContactSet | None:
+        """:meth:`query` and the self pairs from the shapes' frames, no placements.
+
+        The cells' compiled pass and the self pairs' (as the declared objects'
+        query measures them) from ``frames`` (n, 4, 4), without the pinocchio
+        placements :meth:`query` takes (building them cost more than the
+        cells' pass); see :meth:`Environment.query_with_self`. None for a
+        snapshot whose query adds to this one's (moving cells), or when a self
+        pair needs coal: the world then queries them apart.
+        """
+        if type(self).query is not OccupancyEnvironment.query:
+            return None
+        own = ContactSet.empty()
+        if len(table.first):
+            centres_local, halves_local, radii, packed = table.bounds
+            n = len(frames)
+            centres, halves = np.empty((n, 3)), np.empty((n, 3))
+            shape_bounds(frames, centres_local, halves_local, centres, halves)
+            k = len(table.first)
+            index = np.empty((2, k), dtype=np.intp)
+            floats = np.empty((4, k, 3))
+            left = np.empty((2, k), dtype=np.intp)
+            count, missed = self_contacts(
+                (centres, halves, radii, frames, packed),
+                table.pairs(float(self_margin), float(self_padding)),
+                index,
+                floats,
+                left,
+            )
+            if missed:
+                return None
+            own = ContactSet.packed(index, floats, 0, count)
+        found = self._cells(shapes, _Frames(frames), margin, per_shape)
+        return ContactSet.stack(found, padding, own)
+
+    def _cells(
+        self,
+        shapes: list[LinkShape],
+        placements: ShapePlacements,
+        margin: float,
+        per_shape: int,
+    ) -> ContactSet:
+        """The cells' contacts of ``shapes`` at ``placements`` (:meth:`query`)."""
         if not len(self.centres):
             return ContactSet.empty()
-        shapes = robot.shapes
         refiner = self.refiner
         metaball = refiner if isinstance(refiner, MetaballRefiner) else None
         # The query bound to the last shapes and settings, kept as one tuple
@@ -279,7 +335,7 @@ class OccupancyEnvironment(Environment):
                 ),
             )
             self._last_query = ((shapes, margin, per_shape, refiner), query)
-        hits = query(robot.placements)
+        hits = query(placements)
         if not len(hits.shape):
             return ContactSet.empty()
         normal = hits.normal
@@ -298,6 +354,18 @@ class OccupancyEnvironment(Environment):
             return np.full(len(points), np.inf)
         d, _ = self.tree.query(points)
         return np.asarray(d, dtype=float) - 0.5 * self.cell
+
+
+class _Frames(ShapePlacements):
+    """Shape placements as homogeneous matrices only (no pinocchio SE3s).
+
+    For the compiled cell pass, which reads :attr:`homogeneous` only.
+    """
+
+    def __init__(self, frames: FloatArray) -> None:
+        """Keep the matrices (n, 4, 4)."""
+        list.__init__(self)
+        self.homogeneous = frames
 
 
 #: Occupancy contacts of one shape closer than this angle (25 degrees) and two

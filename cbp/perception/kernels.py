@@ -37,6 +37,24 @@ class PixelHistory(NamedTuple):
     moved_at: FloatArray
 
 
+class KeptPixels(NamedTuple):
+    """What a camera's pixels last gave the map, each (H, W).
+
+    ``range``: the reading last integrated, along the axis [m] (``inf``: the
+    far plane, ``-inf``: no reading, NaN: none integrated yet); ``cell``:
+    what it did, the flat index (``(i * ny + j) * nz + k``) of the cell it
+    made occupied, or :data:`KEPT_NONE` (nothing), :data:`KEPT_ROBOT` - s
+    (taken for the robot: inside its shape s); ``hold``: it came nearer than
+    the space seen free (hidden space: integrated again at every frame).
+    """
+
+    range: FloatArray
+    cell: IntArray
+    hold: np.ndarray
+    distance: FloatArray
+    bound: FloatArray
+
+
 class GridArrays(NamedTuple):
     """A grid's arrays as the passes update them (built once per grid).
 
@@ -46,7 +64,9 @@ class GridArrays(NamedTuple):
     cells a side, ``dirty``: True where a cell changed state (set by the
     passes, cleared by :func:`shell_update`), and ``clear``: True where every
     cell was free at the last :func:`shell_update` (a brick clear and not
-    dirty holds free cells only: :func:`mark_seen` skips it).
+    dirty holds free cells only: :func:`mark_seen` skips it); ``stamp``: per
+    brick, the frame (``clock[0]``, counted by the grid) in which a cell of
+    it last changed state or misses (set by the passes, never cleared).
     """
 
     cells: np.ndarray
@@ -56,6 +76,8 @@ class GridArrays(NamedTuple):
     dirty: np.ndarray
     brick: int
     clear: np.ndarray
+    stamp: IntArray
+    clock: IntArray
 
 
 class RobotShapes(NamedTuple):
@@ -102,19 +124,24 @@ class FrameArrays(NamedTuple):
 
 __all__ = [
     "FREE",
+    "KEPT_NONE",
+    "KEPT_ROBOT",
     "OCCUPIED",
     "UNKNOWN",
     "FrameArrays",
     "GridArrays",
+    "KeptPixels",
     "PixelHistory",
     "RobotShapes",
     "carve_shapes",
     "eroded_ranges",
+    "frame_changes",
     "insert_readings",
     "mark_seen",
     "merge_entered",
     "occupied_centres",
     "shell_update",
+    "tile_windows",
 ]
 
 UNKNOWN = 0
@@ -123,6 +150,12 @@ FREE = 1
 """Seen through, or held by the robot (see ``OccupancyGrid.carve_robot``)."""
 OCCUPIED = 2
 """A depth reading fell in it (and no later frame saw through it often enough)."""
+
+KEPT_NONE = -1
+"""A pixel whose reading made no cell occupied (:class:`KeptPixels`)."""
+KEPT_ROBOT = -2
+"""A pixel whose reading was taken for the robot: this minus the shape it was
+in (:class:`KeptPixels`)."""
 
 
 @numba.njit(cache=True, nogil=True)
@@ -136,6 +169,11 @@ def mark_seen(
     near: float,
     max_range: float,
     misses_to_clear: int,
+    windows: IntArray,
+    unproject: FloatArray,
+    since: int,
+    tiles: np.ndarray,
+    frame: FrameArrays,
 ) -> int:
     """Mark the cells a depth image sees through; return how many changed state.
 
@@ -161,25 +199,171 @@ def mark_seen(
             possible reading) [m].
         max_range: cells farther from the camera are not marked [m].
         misses_to_clear: misses that clear an occupied cell.
+        windows: the parts of the image to mark through, (n, 4) pixel ranges
+            [c0, c1) x [r0, r1) that do not overlap: only the cells whose
+            centre falls in one are visited (each window's own frustum, to
+            the far plane, within ``box``). One window of the whole image: the
+            frame as a whole.
+        unproject: the inverse of P V (4, 4) (the windows' frusta).
+        since: also the cells of the bricks stamped at or after this frame
+            (``grid.stamp``) whose centre falls outside the windows, with
+            their range eroded from ``frame.depth`` as :func:`eroded_ranges`
+            does (the cells whose state or misses changed since the camera's
+            last frame: the others would do what they did then); < 0: none.
+        tiles: which tiles of the image the windows cover ((H / tile, W /
+            tile), the tile's size from their shapes): the bricks' cells
+            there are the windows'.
+        frame: the frame (its depth buffer and limits, for those ranges).
     """
-    lower, cell, dirty, clear, brick = (
-        grid.lower,
-        grid.cell,
-        grid.dirty,
-        grid.clear,
-        grid.brick,
-    )
+    changed = 0
+    h, w = ranges.shape
+    span = _open_spans(grid.clear, grid.dirty, grid.brick, grid.cells.shape[2])
+    if since >= 0:
+        changed += _mark_bricks(
+            grid, box, clip, axis, ranges.shape, near, max_range, misses_to_clear,
+            since, tiles, frame,
+        )  # fmt: skip
+    for n in range(windows.shape[0]):
+        c0, c1, r0, r1 = windows[n, 0], windows[n, 1], windows[n, 2], windows[n, 3]
+        if c0 == 0 and r0 == 0 and c1 == w and r1 == h:
+            changed += _mark_window(
+                grid, box, clip, axis, centre, ranges, near, max_range,
+                misses_to_clear, windows[n], span, np.inf,
+            )  # fmt: skip
+            continue
+        part, deepest = _window_box(
+            windows[n], unproject, centre, axis, ranges, grid, box
+        )
+        if part[0] < part[1] and part[2] < part[3] and part[4] < part[5]:
+            changed += _mark_window(
+                grid, part, clip, axis, centre, ranges, near, max_range,
+                misses_to_clear, windows[n], span, deepest,
+            )  # fmt: skip
+    return changed
+
+
+@numba.njit(cache=True, nogil=True)
+def _window_ndc(window: IntArray, h: int, w: int) -> tuple[float, float, float, float]:
+    """A window's NDC x and y bounds, a pixel wider than its pixels' centres.
+
+    The whole image: [-1, 1] both ways, as wide (the side planes of the frame).
+    """
+    pixel = 2.0 / min(h, w)  # a pixel of the side planes' rounding
+    c0, c1, r0, r1 = window[0], window[1], window[2], window[3]
+    if c0 == 0 and r0 == 0 and c1 == w and r1 == h:
+        slack = 1.0 + pixel
+        return -slack, slack, -slack, slack
+    # col = rint((x + 1) w / 2), row = rint(h - 1 - (y + 1) h / 2)
+    xa = 2.0 * (c0 - 0.5) / w - 1.0 - pixel
+    xb = 2.0 * (c1 - 0.5) / w - 1.0 + pixel
+    ya = 2.0 * (h - 0.5 - r1) / h - 1.0 - pixel
+    yb = 2.0 * (h - 0.5 - r0) / h - 1.0 + pixel
+    return xa, xb, ya, yb
+
+
+@numba.njit(cache=True, nogil=True)
+def _window_box(
+    window: IntArray,
+    unproject: FloatArray,
+    centre: FloatArray,
+    axis: FloatArray,
+    ranges: FloatArray,
+    grid: GridArrays,
+    box: IntArray,
+) -> tuple[IntArray, float]:
+    """The cells' index range of a window's frustum, within ``box``; its depth.
+
+    The frustum reaches as deep as the window's farthest range (no cell
+    beyond can be seen through), returned too; empty when the window says
+    nothing.
+    """
+    h, w = ranges.shape
+    out = np.zeros(6, dtype=np.int64)
+    deepest = -np.inf
+    for r in range(window[2], window[3]):
+        for c in range(window[0], window[1]):
+            if ranges[r, c] > deepest:
+                deepest = ranges[r, c]
+    if not deepest > 0.0:
+        return out, deepest
+    xa, xb, ya, yb = _window_ndc(window, h, w)
+    lo = centre.copy()
+    hi = centre.copy()
+    for x in (xa, xb):
+        for y in (ya, yb):
+            # The corner ray's point on the far plane, brought to ``deepest``
+            # along the axis (the window's ranges are axial depths).
+            p = unproject[:, 0] * x + unproject[:, 1] * y + unproject[:, 2]
+            p += unproject[:, 3]
+            far = p[:3] / p[3]
+            depth = -(axis[0] * far[0] + axis[1] * far[1] + axis[2] * far[2] + axis[3])
+            scale = deepest / depth
+            for a in range(3):
+                v = centre[a] + (far[a] - centre[a]) * scale
+                lo[a] = min(lo[a], v)
+                hi[a] = max(hi[a], v)
+    out = np.empty(6, dtype=np.int64)
+    for a in range(3):
+        out[2 * a] = max(box[2 * a], math.floor((lo[a] - grid.lower[a]) / grid.cell))
+        top = math.floor((hi[a] - grid.lower[a]) / grid.cell) + 1
+        out[2 * a + 1] = min(box[2 * a + 1], top)
+    return out, deepest
+
+
+@numba.njit(cache=True, nogil=True)
+def _mark_window(
+    grid: GridArrays,
+    box: IntArray,
+    clip: FloatArray,
+    axis: FloatArray,
+    centre: FloatArray,
+    ranges: FloatArray,
+    near: float,
+    max_range: float,
+    misses_to_clear: int,
+    window: IntArray,
+    span: IntArray,
+    deepest: float,
+) -> int:
+    """:func:`mark_seen` over one window's cells (``box``: their index range).
+
+    ``deepest``: the window's farthest range [m]: the cells beyond it cannot
+    be seen through, and are not visited.
+
+    ``span``: :func:`_open_spans` of the grid at the frame's start (cells only
+    become free while marking: the spans stay true).
+    """
+    lower, cell, brick = grid.lower, grid.cell, grid.brick
     h, w = ranges.shape
     _, ny, nz = grid.cells.shape
     flat = grid.cells.reshape(-1)
-    missed = grid.misses.reshape(-1)
-    span = _open_spans(clear, dirty, brick, nz)
     changed = 0
     limit2 = (max_range - cell) * (max_range - cell)
-    slack = 1.0 + 2.0 / min(h, w)  # a pixel of the side planes' rounding
+    xa, xb, ya, yb = _window_ndc(window, h, w)
+    col_lo, col_hi, row_lo, row_hi = window[0], window[1], window[2], window[3]
+    # A window's frustum as half-spaces a x + b y + c z + d >= 0: in front of
+    # the near plane and behind ``deepest``, within its side planes. At each
+    # x of the box, only the y its cross-section spans is visited.
+    sides = np.empty((6, 4))
+    sides[0] = -axis
+    sides[0, 3] -= near
+    sides[1] = axis
+    sides[1, 3] += deepest
+    sides[2] = clip[0] - xa * clip[2]
+    sides[3] = xb * clip[2] - clip[0]
+    sides[4] = clip[1] - ya * clip[2]
+    sides[5] = yb * clip[2] - clip[1]
+    slim = deepest < np.inf
     for i in range(box[0], box[1]):
         x = lower[0] + (i + 0.5) * cell
-        for j in range(box[2], box[3]):
+        j_lo, j_hi = box[2], box[3]
+        if slim:
+            y_lo, y_hi = _cross_section(sides, x)
+            if not y_lo <= y_hi:
+                continue
+            j_lo = max(j_lo, math.floor((y_lo - lower[1]) / cell - 0.5) - 1)
+            j_hi = min(j_hi, math.ceil((y_hi - lower[1]) / cell - 0.5) + 2)
+        for j in range(j_lo, j_hi):
             y = lower[1] + (j + 0.5) * cell
             row = (i * ny + j) * nz
             # Everything but z is the same along the row: per cell, one multiply-add
@@ -195,13 +379,13 @@ def mark_seen(
             # the cells are still tested one by one.
             lo, hi = -np.inf, np.inf
             lo, hi = _half_line(lo, hi, -d0 - near, -axis[2])
-            for a, b in (
-                (x0, clip[0, 2]),
-                (-x0, -clip[0, 2]),
-                (y0, clip[1, 2]),
-                (-y0, -clip[1, 2]),
-            ):
-                lo, hi = _half_line(lo, hi, slack * w0 + a, slack * clip[2, 2] + b)
+            if deepest < np.inf:  # depth <= deepest
+                lo, hi = _half_line(lo, hi, deepest + d0, axis[2])
+            # x / w >= xa, x / w <= xb, the same for y (w > 0 in front).
+            lo, hi = _half_line(lo, hi, x0 - xa * w0, clip[0, 2] - xa * clip[2, 2])
+            lo, hi = _half_line(lo, hi, xb * w0 - x0, xb * clip[2, 2] - clip[0, 2])
+            lo, hi = _half_line(lo, hi, y0 - ya * w0, clip[1, 2] - ya * clip[2, 2])
+            lo, hi = _half_line(lo, hi, yb * w0 - y0, yb * clip[2, 2] - clip[1, 2])
             left = limit2 - r0
             if left < 0.0:
                 continue
@@ -227,30 +411,181 @@ def mark_seen(
                     continue
                 cw = w0 + clip[2, 2] * z
                 col = int(np.rint(((x0 + clip[0, 2] * z) / cw + 1.0) * w * 0.5))
-                if col < 0 or col >= w:
+                if col < col_lo or col >= col_hi:
                     continue
                 ndc_y = (y0 + clip[1, 2] * z) / cw
                 prow = int(np.rint(h - 1 - (ndc_y + 1.0) * h * 0.5))
-                if prow < 0 or prow >= h:
+                if prow < row_lo or prow >= row_hi:
                     continue
                 if not depth < ranges[prow, col] - cell:  # also false for NaN
                     continue
                 if r0 + (z - centre[2]) ** 2 > limit2:
                     continue
-                if state == UNKNOWN:
-                    flat[c] = FREE
-                    dirty[i // brick, j // brick, k // brick] = True
-                    changed += 1
-                else:
-                    m = missed[c] + 1
-                    if m >= misses_to_clear:
-                        flat[c] = FREE
-                        missed[c] = 0
-                        dirty[i // brick, j // brick, k // brick] = True
-                        changed += 1
-                    else:
-                        missed[c] = m
+                changed += _see_cell(grid, c, i, j, k, misses_to_clear)
     return changed
+
+
+@numba.njit(cache=True, nogil=True)
+def _cross_section(sides: FloatArray, x: float) -> tuple[float, float]:
+    """The y the region where every row a x + b y + c z + d >= 0 spans at ``x``.
+
+    (The region's cross-section is a convex polygon in y and z: its corners
+    are where two of the lines meet; lo > hi when it is empty. The region
+    must be bounded.)
+    """
+    n = sides.shape[0]
+    lo, hi = np.inf, -np.inf
+    for p in range(n):
+        b1, c1, d1 = sides[p, 1], sides[p, 2], sides[p, 0] * x + sides[p, 3]
+        for q in range(p + 1, n):
+            b2, c2, d2 = sides[q, 1], sides[q, 2], sides[q, 0] * x + sides[q, 3]
+            det = b1 * c2 - b2 * c1
+            if abs(det) < 1e-12:
+                continue
+            y = (c1 * d2 - c2 * d1) / det
+            z = (b2 * d1 - b1 * d2) / det
+            inside = True
+            for r in range(n):
+                v = sides[r, 0] * x + sides[r, 1] * y + sides[r, 2] * z + sides[r, 3]
+                if v < -1e-9:
+                    inside = False
+                    break
+            if inside:
+                lo = min(lo, y)
+                hi = max(hi, y)
+    return lo, hi
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _see_cell(grid: GridArrays, c: int, i: int, j: int, k: int, to_clear: int) -> int:
+    """A cell (not free; flat index ``c``, grid index i, j, k) seen through.
+
+    Unknown: free. Occupied: a miss, free at ``to_clear`` misses. Its brick
+    is stamped with the grid's clock, and made dirty if it changed state.
+    Returns 1 if it changed state, else 0.
+    """
+    flat = grid.cells.reshape(-1)
+    missed = grid.misses.reshape(-1)
+    b = grid.brick
+    grid.stamp[i // b, j // b, k // b] = grid.clock[0]
+    if flat[c] == UNKNOWN:
+        flat[c] = FREE
+        grid.dirty[i // b, j // b, k // b] = True
+        return 1
+    m = missed[c] + 1
+    if m >= to_clear:
+        flat[c] = FREE
+        missed[c] = 0
+        grid.dirty[i // b, j // b, k // b] = True
+        return 1
+    missed[c] = m
+    return 0
+
+
+@numba.njit(cache=True, nogil=True)
+def _mark_bricks(
+    grid: GridArrays,
+    box: IntArray,
+    clip: FloatArray,
+    axis: FloatArray,
+    shape: tuple[int, int],
+    near: float,
+    max_range: float,
+    misses_to_clear: int,
+    since: int,
+    tiles: np.ndarray,
+    frame: FrameArrays,
+) -> int:
+    """:func:`mark_seen` over the cells of the bricks stamped ``since`` on.
+
+    Those whose centre falls in a tile of ``tiles`` are left to the windows.
+    """
+    lower, cell, brick, stamp = grid.lower, grid.cell, grid.brick, grid.stamp
+    h, w = shape
+    tile = -(-h // tiles.shape[0])
+    _, ny, nz = grid.cells.shape
+    flat = grid.cells.reshape(-1)
+    depth, spread = frame.depth, frame.spread
+    centre = frame.camera
+    limit2 = (max_range - cell) * (max_range - cell)
+    changed = 0
+    bx, by, bz = stamp.shape
+    for p in range(box[0] // brick, min((box[1] + brick - 1) // brick, bx)):
+        for q in range(box[2] // brick, min((box[3] + brick - 1) // brick, by)):
+            for r in range(box[4] // brick, min((box[5] + brick - 1) // brick, bz)):
+                if stamp[p, q, r] < since:
+                    continue
+                for i in range(max(p * brick, box[0]), min((p + 1) * brick, box[1])):
+                    x = lower[0] + (i + 0.5) * cell
+                    for j in range(
+                        max(q * brick, box[2]), min((q + 1) * brick, box[3])
+                    ):
+                        y = lower[1] + (j + 0.5) * cell
+                        row = (i * ny + j) * nz
+                        for k in range(
+                            max(r * brick, box[4]), min((r + 1) * brick, box[5])
+                        ):
+                            c = row + k
+                            if flat[c] == FREE:
+                                continue
+                            z = lower[2] + (k + 0.5) * cell
+                            d = -(axis[0] * x + axis[1] * y + axis[3] + axis[2] * z)
+                            if d <= near:
+                                continue
+                            cw = clip[2, 0] * x + clip[2, 1] * y + clip[2, 3]
+                            cw += clip[2, 2] * z
+                            cx = clip[0, 0] * x + clip[0, 1] * y + clip[0, 3]
+                            cx += clip[0, 2] * z
+                            col = int(np.rint((cx / cw + 1.0) * w * 0.5))
+                            if col < 0 or col >= w:
+                                continue
+                            cy = clip[1, 0] * x + clip[1, 1] * y + clip[1, 3]
+                            cy += clip[1, 2] * z
+                            prow = int(np.rint(h - 1 - (cy / cw + 1.0) * h * 0.5))
+                            if prow < 0 or prow >= h:
+                                continue
+                            if tiles[prow // tile, col // tile]:
+                                continue
+                            least = _eroded_at(
+                                depth, prow, col, spread[0], spread[1],
+                                frame.nearest, frame.far_plane, frame.far_buffer,
+                            )  # fmt: skip
+                            if not d < least - cell:
+                                continue
+                            rx, ry = (x - centre[0]) ** 2, (y - centre[1]) ** 2
+                            if rx + ry + (z - centre[2]) ** 2 > limit2:
+                                continue
+                            changed += _see_cell(grid, c, i, j, k, misses_to_clear)
+    return changed
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _eroded_at(
+    depth: FloatArray,
+    r: int,
+    c: int,
+    near: float,
+    far: float,
+    nearest: float,
+    far_plane: float,
+    far_buffer: float,
+) -> float:
+    """:func:`eroded_ranges` at one pixel (the least over its 3 x 3 neighbours)."""
+    h, w = depth.shape
+    least = np.nan
+    for rr in range(max(r - 1, 0), min(r + 2, h)):
+        for cc in range(max(c - 1, 0), min(c + 2, w)):
+            z = depth[rr, cc]
+            if np.isnan(z):
+                continue
+            if not _holds_reading(z, nearest, far_buffer):
+                v = -np.inf
+            elif z >= far_plane:
+                v = far
+            else:
+                v = far * near / (far - (far - near) * z)
+            least = _least(least, v)
+    return -np.inf if np.isnan(least) else least
 
 
 @numba.njit(cache=True, nogil=True)
@@ -335,6 +670,7 @@ def carve_shapes(
                     if inside_convex(x, y, z, planes, first, last, grow):
                         flat[row + k] = FREE
                         dirty[i // brick, j // brick, k // brick] = True
+                        grid.stamp[i // brick, j // brick, k // brick] = grid.clock[0]
                         changed += 1
     return changed
 
@@ -550,6 +886,146 @@ def eroded_ranges(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _axial(z: float, nearest: float, far_plane: float, far_buffer: float,
+           near: float, far: float) -> float:  # fmt: skip
+    """A depth buffer value along the axis [m]; inf: the far plane, -inf: none."""
+    if not _holds_reading(z, nearest, far_buffer):
+        return -np.inf
+    if z >= far_plane:
+        return np.inf
+    return far * near / (far - (far - near) * z)
+
+
+@numba.njit(cache=True, nogil=True)
+def frame_changes(
+    frame: FrameArrays,
+    kept: KeptPixels,
+    whole: bool,
+    tile: int,
+    slack: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which pixels of a frame to integrate, and which tiles to see through.
+
+    A pixel changed when its reading differs from the one last integrated
+    (``kept.range``) by more than sqrt(2) times the spread of the camera's
+    noise at its depth (``frame.spread``: two readings of a still surface
+    differ by less, but for one in a few hundred at three sigmas) plus
+    ``slack`` [m] (with noise only; no noise: by anything), or it gained or
+    lost a reading or the far plane. A pixel
+    without a return (NaN) says nothing and is left as it was. A pixel is
+    integrated when it changed, or its last reading was taken for the robot
+    or came nearer than the space seen free (``kept.cell``, ``kept.hold``);
+    ``kept.range`` takes its reading then. A tile (``tile`` pixels a side) is
+    seen through when a pixel in it or beside it (the range is eroded over 3 x
+    3 pixels) changed.
+
+    ``whole``: every pixel and tile (the frame as a whole).
+
+    Returns (integrate (H, W) bool, tiles (ceil(H / tile), ceil(W / tile)) bool).
+    """
+    depth, spread = frame.depth, frame.spread
+    nearest, far_plane, far_buffer = frame.nearest, frame.far_plane, frame.far_buffer
+    near, far = spread[0], spread[1]
+    h, w = depth.shape
+    todo = np.zeros((h, w), dtype=np.bool_)
+    tiles = np.zeros(((h + tile - 1) // tile, (w + tile - 1) // tile), dtype=np.bool_)
+    if whole:
+        tiles[:] = True
+    rng, cells, hold = kept.range, kept.cell, kept.hold
+    margin = slack if spread[2] > 0.0 or spread[3] > 0.0 else 0.0
+    for r in range(h):
+        for c in range(w):
+            z = depth[r, c]
+            if np.isnan(z):
+                todo[r, c] = whole
+                continue
+            now = _axial(z, nearest, far_plane, far_buffer, near, far)
+            before = rng[r, c]
+            if np.isfinite(now) and np.isfinite(before):
+                allowed = spread[2] + spread[3] * (now - spread[4]) ** 2
+                changed = abs(now - before) > margin + math.sqrt(2.0) * allowed
+            else:  # gained or lost a reading, or the far plane (NaN: never kept)
+                changed = now != before
+            if changed and not whole:
+                for rr in range(max(r - 1, 0), min(r + 2, h)):
+                    for cc in range(max(c - 1, 0), min(c + 2, w)):
+                        tiles[rr // tile, cc // tile] = True
+            if whole or changed or cells[r, c] <= KEPT_ROBOT or hold[r, c]:
+                todo[r, c] = True
+                rng[r, c] = now
+    return todo, tiles
+
+
+@numba.njit(cache=True, nogil=True)
+def tile_windows(tiles: np.ndarray, tile: int, h: int, w: int) -> IntArray:
+    """The marked tiles as windows (n, 4) of pixels [c0, c1) x [r0, r1).
+
+    Runs of marked tiles along a row of tiles, each merged with the run of
+    the rows below that spans the same columns; clipped to the image.
+    """
+    th, tw = tiles.shape
+    out = np.empty((th * tw, 4), dtype=np.int64)
+    n = 0
+    for tr in range(th):
+        tc = 0
+        while tc < tw:
+            if not tiles[tr, tc]:
+                tc += 1
+                continue
+            start = tc
+            while tc < tw and tiles[tr, tc]:
+                tc += 1
+            c0, c1 = start * tile, min(tc * tile, w)
+            r0, r1 = tr * tile, min((tr + 1) * tile, h)
+            merged = False
+            for m in range(n):  # the same columns, ending where this starts
+                if out[m, 0] == c0 and out[m, 1] == c1 and out[m, 3] == r0:
+                    out[m, 3] = r1
+                    merged = True
+                    break
+            if not merged:
+                out[n, 0], out[n, 1], out[n, 2], out[n, 3] = c0, c1, r0, r1
+                n += 1
+    return out[:n].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def eroded_ranges_in(
+    depth: FloatArray,
+    near: float,
+    far: float,
+    nearest: float,
+    far_plane: float,
+    far_buffer: float,
+    windows: IntArray,
+) -> FloatArray:
+    """:func:`eroded_ranges` in the ``windows`` (n, 4) only; -inf elsewhere.
+
+    The same values there (the least over 3 x 3 pixels, NaN left out).
+    """
+    h, w = depth.shape
+    out = np.full((h, w), -np.inf)
+    for n in range(windows.shape[0]):
+        for r in range(windows[n, 2], windows[n, 3]):
+            for c in range(windows[n, 0], windows[n, 1]):
+                least = np.nan
+                for rr in range(max(r - 1, 0), min(r + 2, h)):
+                    for cc in range(max(c - 1, 0), min(c + 2, w)):
+                        z = depth[rr, cc]
+                        if np.isnan(z):
+                            continue
+                        if not _holds_reading(z, nearest, far_buffer):
+                            v = -np.inf
+                        elif z >= far_plane:
+                            v = far
+                        else:
+                            v = far * near / (far - (far - near) * z)
+                        least = _least(least, v)
+                out[r, c] = -np.inf if np.isnan(least) else least
+    return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _least(a: float, b: float) -> float:
     """The lesser of two values, NaN counting as none (NaN if both are)."""
     if np.isnan(a):
@@ -568,6 +1044,9 @@ def insert_readings(
     t: float,
     hold: float,
     entered: np.ndarray,
+    todo: np.ndarray,
+    kept: KeptPixels,
+    motion: FloatArray,
 ) -> tuple[int, int, int, int, int]:
     """Mark the cells depth readings fall in occupied; count valid, robot, inserted.
 
@@ -597,16 +1076,31 @@ def insert_readings(
     indices (``(i * ny + j) * nz + k``) are written to ``entered``, as many as
     it holds.
 
+    Only the pixels ``todo`` marks (:func:`frame_changes`) are integrated so;
+    each other pixel holding a reading keeps the cell its last integrated
+    reading made occupied (``kept.cell``) occupied with no misses, as that
+    reading would. ``kept`` takes what each integrated pixel did.
+
+    A reading of a pixel last taken for the robot is tested against the same
+    shape first, without its face planes while a bound shows it inside:
+    ``motion`` (S, 2) holds how far each shape's sphere centre moved since the
+    camera's last frame [m] and by what angle it turned [rad] (inf: not
+    known), so a point at r from the centre moved at most the first plus
+    the second times r; with how far the reading moved along its ray, that
+    bounds how much nearer to the faces it can be (the planes' normals are
+    unit vectors). The pixel is taken for the robot exactly when the
+    planes would say so.
+
     Returns (pixels holding a reading, readings taken for the robot, readings
-    inserted, cells hidden, cells entered).
+    inserted or kept, cells hidden, cells entered).
     """
     depth, u, camera, spread = frame.depth, frame.unproject, frame.camera, frame.spread
     nearest, far_plane, far_buffer = frame.nearest, frame.far_plane, frame.far_buffer
     max_range = frame.max_range
     planes, plane_start = robot.planes, robot.plane_start
+    columns = np.ascontiguousarray(planes.T)  # the planes a few at a time
     centres, radii, reach = robot.centres, robot.radii, robot.reach
     cells, misses, lower, cell = grid.cells, grid.misses, grid.lower, grid.cell
-    dirty, brick = grid.dirty, grid.brick
     h, w = depth.shape
     nx, ny, nz = cells.shape
     valid = 0
@@ -628,13 +1122,29 @@ def insert_readings(
         for a in range(3):
             box[a] = min(box[a], centres[s, a] - r)
             box[3 + a] = max(box[3 + a], centres[s, a] + r)
+    flat_cells = cells.reshape(-1)
+    flat_misses = misses.reshape(-1)
     for r in range(h):
         y = 2.0 * (h - 1 - r) / h - 1.0
         for c in range(w):
             z = depth[r, c]
             if not _holds_reading(z, nearest, far_buffer):
+                if todo[r, c] and not np.isnan(z):
+                    kept.cell[r, c] = KEPT_NONE
                 continue
             valid += 1
+            if not todo[r, c]:  # as the reading last integrated left it
+                f = kept.cell[r, c]
+                if f >= 0:
+                    inserted += 1
+                    if flat_cells[f] != OCCUPIED or flat_misses[f] != 0:
+                        i, rest = divmod(f, ny * nz)
+                        j, k = divmod(rest, nz)
+                        _occupy(grid, i, j, k)
+                continue
+            was = kept.cell[r, c]
+            kept.cell[r, c] = KEPT_NONE
+            kept.hold[r, c] = False
             if z >= far_plane:
                 if track:  # seen free to the far plane
                     seen_to[r, c] = max_range
@@ -665,10 +1175,40 @@ def insert_readings(
                 and box[1] - extra <= py <= box[4] + extra
                 and box[2] - extra <= pz <= box[5] + extra
             )
-            if near_robot and inside_any(
-                px, py, pz, planes, plane_start, centres, radii, reach, extra
-            ):
+            shape = KEPT_ROBOT - was  # the shape it was in, or < 0
+            bound = np.inf
+            if near_robot and 0 <= shape < radii.size:  # that shape first
+                ex, ey = px - centres[shape, 0], py - centres[shape, 1]
+                ez = pz - centres[shape, 2]
+                moved = motion[shape, 0] + motion[shape, 1] * math.sqrt(
+                    ex * ex + ey * ey + ez * ez
+                )
+                shift = abs(distance - kept.distance[r, c]) + moved
+                bound = kept.bound[r, c] + shift * (1.0 + 1e-6)
+                if not bound <= extra:  # not known inside: its planes
+                    bound = _beyond(
+                        px,
+                        py,
+                        pz,
+                        columns,
+                        plane_start[shape],
+                        plane_start[shape + 1],
+                        reach[shape] + extra,
+                    )
+                    bound -= reach[shape]  # fmt: skip
+                    if not bound <= extra:
+                        shape = -1
+            else:
+                shape = -1
+            if near_robot and shape < 0:
+                shape, bound = _inside_which(
+                    px, py, pz, columns, plane_start, centres, radii, reach, extra
+                )
+            if shape >= 0:
                 on_robot += 1
+                kept.cell[r, c] = KEPT_ROBOT - shape
+                kept.distance[r, c] = distance
+                kept.bound[r, c] = bound
                 if track:  # seen free up to the robot; it hides nothing new
                     seen_to[r, c] = max(seen_to[r, c], distance)
                 continue
@@ -680,6 +1220,7 @@ def insert_readings(
                 # Two readings of a still surface differ by sqrt(2) sigma.
                 if distance < seen_to[r, c] - gap - math.sqrt(2.0) * extra:
                     came = True
+                    kept.hold[r, c] = True
                     hidden += _hide_ray(
                         camera,
                         dx / distance,
@@ -700,14 +1241,87 @@ def insert_readings(
             if i < 0 or j < 0 or k < 0 or i >= nx or j >= ny or k >= nz:
                 continue
             inserted += 1
-            misses[i, j, k] = 0
-            if cells[i, j, k] != OCCUPIED:
-                cells[i, j, k] = OCCUPIED
-                dirty[i // brick, j // brick, k // brick] = True
+            kept.cell[r, c] = (i * ny + j) * nz + k
+            if cells[i, j, k] != OCCUPIED or misses[i, j, k] != 0:
+                _occupy(grid, i, j, k)
             if came and n_entered < entered.shape[0]:
                 entered[n_entered] = (i * ny + j) * nz + k
                 n_entered += 1
     return valid, on_robot, inserted, hidden, n_entered
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _occupy(grid: GridArrays, i: int, j: int, k: int) -> None:
+    """Make a cell occupied with no misses; its brick stamped (and dirty)."""
+    b = grid.brick
+    grid.misses[i, j, k] = 0
+    grid.stamp[i // b, j // b, k // b] = grid.clock[0]
+    if grid.cells[i, j, k] != OCCUPIED:
+        grid.cells[i, j, k] = OCCUPIED
+        grid.dirty[i // b, j // b, k // b] = True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _inside_which(
+    x: float,
+    y: float,
+    z: float,
+    planes: FloatArray,
+    plane_start: IntArray,
+    centres: FloatArray,
+    radii: FloatArray,
+    grow: FloatArray,
+    extra: float,
+) -> tuple[int, float]:
+    """The first shape s holding (x, y, z) grown by ``grow[s] + extra``, or -1.
+
+    :func:`~cbp.collision.geometry.inside_any`, telling which, and how far
+    beyond its face planes the point lies, less ``grow[s]`` (inf: none);
+    ``planes`` (4, P) as :func:`_beyond` takes them.
+    """
+    for s in range(radii.size):
+        grown = grow[s] + extra
+        dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
+        reach = radii[s] + grown
+        if dx * dx + dy * dy + dz * dz > reach * reach:
+            continue
+        beyond = _beyond(x, y, z, planes, plane_start[s], plane_start[s + 1], grown)
+        if beyond <= grown:
+            return s, beyond - grow[s]
+    return -1, np.inf
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def _beyond(
+    x: float,
+    y: float,
+    z: float,
+    planes: FloatArray,
+    start: int,
+    stop: int,
+    grow: float,
+) -> float:
+    """How far (x, y, z) lies beyond the planes [start, stop): the largest n . x - d.
+
+    Stops at the first run of 32 planes with one it lies more than ``grow``
+    beyond (that run's largest value): inside the planes grown by ``grow``
+    when at most ``grow``, as :func:`~cbp.collision.geometry.inside_convex`
+    tells. ``planes`` (4, P): the planes' columns (n, d) as rows, so that a
+    run's values are taken a few at a time (the planes are finite).
+    """
+    nx, ny, nz, d = planes[0], planes[1], planes[2], planes[3]
+    most = -np.inf
+    p = start
+    while p < stop:
+        end = min(p + 32, stop)
+        run = -np.inf
+        for q in range(p, end):
+            run = max(run, nx[q] * x + ny[q] * y + nz[q] * z - d[q])
+        if run > grow:
+            return run
+        most = max(most, run)
+        p = end
+    return most
 
 
 @numba.njit(cache=True, nogil=True)
@@ -757,6 +1371,9 @@ def _hide_ray(
         if cells[i, j, k] == FREE:
             cells[i, j, k] = UNKNOWN
             grid.dirty[i // grid.brick, j // grid.brick, k // grid.brick] = True
+            grid.stamp[i // grid.brick, j // grid.brick, k // grid.brick] = grid.clock[
+                0
+            ]
             hidden += 1
     return hidden
 

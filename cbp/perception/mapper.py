@@ -140,6 +140,13 @@ class MapUpdater(SnapshotPublisher):
         estimator: measures how fast the map's obstacles approach the robot
             (None: snapshots as mapped; with it and
             ``perception.cluster_motion``, moving clusters are swept too).
+        batch: with ``synchronous``, the frames of one capture time make one
+            snapshot: each frame is integrated at once, the snapshot is made
+            when a frame of a later time comes or at :meth:`release` (the
+            cameras of a run capture at the same instants; the loop plans
+            only after all of them, so the snapshots between were never
+            seen). As the worker does on the wall clock, which takes the
+            frames waiting together.
 
     What it reports (updates, skips, stamps, failures): :class:`SnapshotPublisher`.
     """
@@ -151,15 +158,23 @@ class MapUpdater(SnapshotPublisher):
         synchronous: bool = False,
         estimator: ApproachEstimator | None = None,
         latency: float = 0.0,
+        batch: bool = False,
     ) -> None:
         """Start the worker (unless synchronous)."""
         super().__init__()
+        self.batch = batch and synchronous
+        #: Frames integrated and not yet in a snapshot (``batch``), and the
+        #: CPU time integrating them took [s].
+        self._held: list[tuple[DepthFrame, FloatArray, float]] = []
+        self._held_s = (0.0, 0.0)
         self.grid = grid
         self.world = world
         self.synchronous = synchronous
         self.latency = float(latency) if synchronous else 0.0
-        #: Snapshots made, waiting for their time: (due [s], snapshot).
-        self._due: deque[tuple[float, OccupancyEnvironment]] = deque()
+        #: Snapshots made, waiting for their time: (due [s], stamp [s],
+        #: snapshot). The stamp is kept apart: a map that has not changed
+        #: gives its last snapshot again, maybe still waiting here.
+        self._due: deque[tuple[float, float, OccupancyEnvironment]] = deque()
         self.estimator = estimator
         self._mapped: OccupancyEnvironment | None = None  # the last, as mapped
         #: Velocities of the mapped obstacles, cluster by cluster (with an
@@ -183,6 +198,16 @@ class MapUpdater(SnapshotPublisher):
         Never waits for the map.
         """
         self.submitted_t = max(self.submitted_t, t)
+        if self.batch:
+            if self._held and t > self._held[-1][2]:
+                self._publish_held()
+            start = time.perf_counter()
+            self._state.update(q)
+            self.grid.integrate(frame, self._state, t)
+            first = self._held_s[0] if self._held else start
+            self._held_s = (first, self._held_s[1] + time.perf_counter() - start)
+            self._held.append((frame, q, t))
+            return
         if self.synchronous:
             self._integrate([(frame, q, t)])
             return
@@ -232,7 +257,25 @@ class MapUpdater(SnapshotPublisher):
         for frame, q, t in frames:
             self._state.update(q)
             self.grid.integrate(frame, self._state, t)
-        integrated = time.perf_counter()
+        self._publish(frames, start, time.perf_counter())
+
+    def _publish_held(self) -> None:
+        """Snapshot the frames integrated and held (``batch``)."""
+        frames, self._held = self._held, []
+        start, integrate_s = self._held_s
+        self._publish(frames, start, start + integrate_s)
+
+    def _publish(
+        self,
+        frames: list[tuple[DepthFrame, FloatArray, float]],
+        start: float,
+        integrated: float,
+    ) -> None:
+        """Snapshot the grid after ``frames`` and publish it.
+
+        ``start`` to ``integrated`` (``time.perf_counter``): when they were
+        integrated; the robot as in the last of them.
+        """
         mapped = self.grid.environment()
         stamp = max(t for _, _, t in frames)
         mapped.stamp = stamp
@@ -270,10 +313,10 @@ class MapUpdater(SnapshotPublisher):
         )
         published.stamp = stamp
         if self.latency > 0.0:
-            self._due.append((stamp + self.latency, published))
+            self._due.append((stamp + self.latency, stamp, published))
             self.release(self.submitted_t)
         else:
-            self._install(published)
+            self._install(published, stamp)
         done = time.perf_counter()
         self.last_update_s = done - start
         self.published.append(
@@ -283,17 +326,24 @@ class MapUpdater(SnapshotPublisher):
         )
 
     def release(self, t: float) -> None:
-        """Install the newest snapshot due by ``t`` [s] (see ``latency``)."""
+        """Install the newest snapshot due by ``t`` [s] (see ``latency``).
+
+        With ``batch``, the frames held are snapshot first.
+        """
+        if self._held:
+            self._publish_held()
         newest = None
         while self._due and self._due[0][0] <= t + 1e-9:
-            newest = self._due.popleft()[1]
+            _, stamp, snapshot = self._due.popleft()
+            newest = (snapshot, stamp)
         if newest is not None:
-            self._install(newest)
+            self._install(*newest)
 
-    def _install(self, published: OccupancyEnvironment) -> None:
-        """Hand ``published`` to the world."""
+    def _install(self, published: OccupancyEnvironment, stamp: float) -> None:
+        """Hand ``published``, stamped ``stamp`` [s], to the world."""
+        published.stamp = stamp
         self.world.set_environment(published)
-        self.stamp = max(self.stamp, published.stamp or 0.0)
+        self.stamp = max(self.stamp, stamp)
         self.updates += 1
 
     def close(self) -> None:

@@ -34,6 +34,15 @@ its surface, not its volume.
 
 Robot pixels: their readings are not inserted, but the space in front of them
 along their rays is seen, so the robot never clears what it hides.
+
+A camera's frame from the view of its last one is integrated only where it
+changed (``perception.whole_frame_every``): the pixels whose reading moved
+beyond the noise, the space seen through over the image's tiles around them
+and over the bricks whose cells changed since the camera's last frame
+(:func:`~cbp.perception.kernels.frame_changes`,
+:func:`~cbp.perception.kernels.mark_seen`); each unchanged reading keeps its
+cell occupied. The rest would do what it did at the camera's last frame: on
+exact frames the map is the one whole frames give.
 """
 
 from __future__ import annotations
@@ -53,19 +62,24 @@ from cbp.collision.map_environment import (
 from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import (
     FREE,
+    KEPT_NONE,
     OCCUPIED,
     UNKNOWN,
     FrameArrays,
     GridArrays,
+    KeptPixels,
     PixelHistory,
     RobotShapes,
     carve_shapes,
     eroded_ranges,
+    eroded_ranges_in,
+    frame_changes,
     insert_readings,
     mark_seen,
     merge_entered,
     occupied_centres,
     shell_update,
+    tile_windows,
 )
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import FloatArray
@@ -87,6 +101,10 @@ _NO_ROBOT = RobotShapes(
     np.zeros(0),
 )
 
+
+#: Pixels a side of the tiles a frame is seen through by (only the tiles
+#: where its readings changed, :func:`~cbp.perception.kernels.frame_changes`).
+TILE = 16
 
 #: A camera's pixel history when hidden space is not tracked.
 _UNTRACKED = PixelHistory(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)))
@@ -182,6 +200,10 @@ class OccupancyGrid:
         # Per brick: all its cells were free at the last snapshot (mark_seen
         # skips such bricks while they are not dirty).
         self._clear = np.zeros(tuple(int(n) for n in dims), dtype=np.bool_)
+        # Per brick: the frame a cell of it last changed state or misses in
+        # (frames counted in _clock[0]; mark_seen sees through those again).
+        self._stamp = np.zeros(tuple(int(n) for n in dims), dtype=np.int64)
+        self._clock = np.zeros(1, dtype=np.int64)
         self._shell = (
             np.empty((0, 3)),
             np.zeros(int(np.prod(dims)) + 1, np.int64),
@@ -202,6 +224,21 @@ class OccupancyGrid:
         # lately: flat indices and the last time each was entered [s].
         self._entered = np.empty(0, np.int64)
         self._recent = (np.zeros(0, np.int64), np.zeros(0))
+        # Per camera: the view its kept pixels were taken from, what they last
+        # gave the map, and its frames since the last one integrated whole.
+        self._kept: dict[
+            str,
+            tuple[
+                FloatArray,
+                KeptPixels,
+                int,
+                tuple[FloatArray, FloatArray] | None,
+                int,
+            ],
+        ] = {}
+        #: Frames integrated whole, and only where they changed.
+        self.whole_frames = 0
+        self.changed_frames = 0
 
     # ------------------------------------------------------------------ copies
 
@@ -223,8 +260,11 @@ class OccupancyGrid:
         state["misses"] = self.misses.copy()
         state["_dirty"] = self._dirty.copy()
         state["_clear"] = self._clear.copy()
+        state["_stamp"] = self._stamp.copy()
+        state["_clock"] = self._clock.copy()
         state["_blocked"] = self._blocked.copy()
         state["_moved"] = {}
+        state["_kept"] = {}
         state["_entered"] = np.empty(0, np.int64)
         state["_recent"] = (np.zeros(0, np.int64), np.zeros(0))
         out = OccupancyGrid.__new__(OccupancyGrid)
@@ -269,6 +309,8 @@ class OccupancyGrid:
             self._dirty,
             int(self._brick),
             self._clear,
+            self._stamp,
+            self._clock,
         )
 
     def count(self, state: int) -> int:
@@ -328,8 +370,10 @@ class OccupancyGrid:
                 again (``perception.shadow_hold``; the module's docstring).
                 None: not tracked for this frame.
         """
+        self._clock[0] += 1  # this frame's stamp (before the passes)
         robot = _NO_ROBOT
         carved = 0
+        shapes = None
         if state is not None and self.geometry is not None:
             shapes = self.geometry.world_shapes(state)
             carved = self.carve_robot(state, shapes)
@@ -343,7 +387,6 @@ class OccupancyGrid:
             )
         depth = np.ascontiguousarray(frame.depth, dtype=float)
         limits = frame.buffer_limits
-        seen = self._see_through(frame, depth, limits)
         nearest, far_plane, far_buffer = limits
         if self._entered.size < depth.size:  # one entry a pixel at most
             self._entered = np.empty(depth.size, np.int64)
@@ -357,6 +400,16 @@ class OccupancyGrid:
             float(self.spec.max_range),
             self._spread(frame),
         )
+        kept, since, motion = self._kept_pixels(frame, shapes)
+        whole = since < 0
+        todo, tiles = frame_changes(readings, kept, whole, TILE, 0.5 * self.cell)
+        h, w = depth.shape
+        windows = (
+            np.array([[0, w, 0, h]], dtype=np.int64)
+            if whole
+            else tile_windows(tiles, TILE, h, w)
+        )
+        seen = self._see_through(frame, readings, limits, windows, since, tiles)
         valid, removed, inserted, hidden, entered = insert_readings(
             readings,
             robot,
@@ -365,6 +418,9 @@ class OccupancyGrid:
             0.0 if t is None else float(t),
             float(self.spec.shadow_hold),
             self._entered,
+            todo,
+            kept,
+            motion,
         )
         if t is not None:
             self._remember_entered(entered, t)
@@ -396,6 +452,60 @@ class OccupancyGrid:
         return np.array(
             [frame.near, frame.far, k * noise.sigma_0, k * noise.sigma_growth, noise.z0]
         )
+
+    def _kept_pixels(
+        self, frame: DepthFrame, shapes: WorldShapes | None
+    ) -> tuple[KeptPixels, int, FloatArray]:
+        """The camera's kept pixels, the frame of its last one (-1: whole), motion.
+
+        The frame (the grid's clock) of the camera's last frame: the bricks
+        stamped since are seen through again (:func:`mark_seen`); -1: this
+        frame is integrated whole, as the camera's first frame from its view
+        (a fixed camera that was moved, a mounted one whenever the arm moved:
+        begun anew) and every ``whole_frame_every``-th after
+        (:attr:`PerceptionSpec.whole_frame_every`).
+        Motion: per robot shape, how far its sphere centre moved since the
+        camera's last frame [m] and the angle it turned [rad]
+        (:func:`~cbp.perception.kernels.insert_readings`); inf when not known.
+        """
+        entry = self._kept.get(frame.camera)
+        shape = frame.depth.shape
+        if (
+            entry is None
+            or entry[1].range.shape != shape
+            or not np.array_equal(entry[0], frame.view)
+        ):
+            kept = KeptPixels(
+                np.full(shape, np.nan),
+                np.full(shape, KEPT_NONE, dtype=np.int64),
+                np.zeros(shape, dtype=np.bool_),
+                np.zeros(shape),
+                np.zeros(shape),
+            )
+            count = 0
+            before = None
+            last = -1
+        else:
+            kept, count, before, last = entry[1], entry[2], entry[3], entry[4]
+        n = 0 if shapes is None else len(shapes.radii)
+        motion = np.full((n, 2), np.inf)
+        if shapes is not None and before is not None and len(before[0]) == n:
+            motion[:, 0] = np.linalg.norm(shapes.centres - before[0], axis=1)
+            turn = np.einsum("sij,sij->s", shapes.frames[:, :3, :3], before[1])
+            motion[:, 1] = np.arccos(np.clip(0.5 * (turn - 1.0), -1.0, 1.0))
+        now = (
+            (shapes.centres.copy(), shapes.frames[:, :3, :3].copy())
+            if shapes is not None
+            else None
+        )
+        whole = count % self.spec.whole_frame_every == 0
+        clock = int(self._clock[0])
+        self._kept[frame.camera] = (frame.view.copy(), kept, count + 1, now, clock)
+        if whole:
+            self.whole_frames += 1
+        else:
+            self.changed_frames += 1
+        return kept, -1 if whole else last, motion
 
     def _pixels(self, frame: DepthFrame, t: float | None) -> PixelHistory:
         """The camera's pixel history, begun anew when the camera moved.
@@ -469,20 +579,33 @@ class OccupancyGrid:
     def _see_through(
         self,
         frame: DepthFrame,
-        depth: FloatArray,
+        readings: FrameArrays,
         limits: tuple[float, float, float],
+        windows: np.ndarray,
+        since: int,
+        tiles: np.ndarray,
     ) -> int:
         """Free the cells in front of the readings (eroded over a cell's footprint).
 
-        ``depth``: the frame's depth buffer as contiguous float64; ``limits``:
-        its :attr:`~DepthFrame.buffer_limits` (both taken once per frame).
+        ``readings``: the frame as the passes read it; ``limits``: its
+        :attr:`~DepthFrame.buffer_limits` (both taken once per frame);
+        ``windows``: the parts of the image seen through (n, 4), pixel ranges
+        [c0, c1) x [r0, r1), ``since`` and ``tiles``: the bricks seen through
+        again (:func:`~cbp.perception.kernels.mark_seen`).
         """
+        depth = readings.depth
+        if not len(windows) and since < 0:
+            return 0
         # The nearest reading around each pixel: a cell at a depth edge or on a
         # grazing surface spans several pixels, and is free only in front of all
         # of them. A pixel without a reading says nothing: it becomes -inf (NaN,
         # no return, leaves its neighbours be; eroded_ranges); background sees
         # to the far plane.
-        ranges = eroded_ranges(depth, frame.near, frame.far, *limits)
+        h, w = depth.shape
+        if len(windows) == 1 and tuple(windows[0]) == (0, w, 0, h):
+            ranges = eroded_ranges(depth, frame.near, frame.far, *limits)
+        else:
+            ranges = eroded_ranges_in(depth, frame.near, frame.far, *limits, windows)
         box = self._frustum_box(frame)
         if box is None:
             return 0
@@ -499,6 +622,11 @@ class OccupancyGrid:
                 frame.closest,
                 self.spec.max_range,
                 self.spec.misses_to_clear,
+                windows,
+                np.ascontiguousarray(frame.unprojection),
+                since,
+                tiles,
+                readings,
             )
         )
 

@@ -207,6 +207,18 @@ class PerceptionSpec:
     """Depth readings farther than this are ignored [m]."""
     misses_to_clear: int = 2
     """Frames that must see through a cell before it is cleared."""
+    whole_frame_every: int = 15
+    """A camera's frames taken from where its last one was (a fixed camera's, a
+    mounted one's while the arm stands) are integrated only where they changed:
+    the pixels whose reading differs from the one last integrated by more than
+    two readings of a still surface differ (``map_sigmas`` sigmas of the
+    camera's noise times sqrt(2); with no noise, at all), the space seen
+    through only over the image's tiles holding one. An unchanged reading only
+    keeps its cell occupied, as the same reading would. Every this many frames
+    of a camera, and its first from a new pose, are integrated whole; 1: every
+    frame whole (the map as before; slower: a still scene's frames add nothing).
+    Skipping the space seen through along unchanged pixels can only leave cells
+    blocked that a whole frame would free, for at most this many frames."""
     robot_margin: float = 0.005
     """Depth readings within this distance of the robot's shapes are taken for
     the robot and dropped [m]. Measured from the shapes themselves (not the
@@ -382,6 +394,11 @@ class PerceptionSpec:
                 f"the map would have {cells:.3g} cells (bounds / cell_size); at most "
                 f"{MAX_CELLS:.3g}: shrink the bounds or grow the cells",
                 "bounds",
+            )
+        if not 1 <= self.whole_frame_every <= 1000:
+            raise ConfigError(
+                f"must be in [1, 1000], got {self.whole_frame_every}",
+                "whole_frame_every",
             )
         if not 1 <= self.misses_to_clear <= 1000:
             raise ConfigError(

@@ -4,8 +4,9 @@
 Each camera captures at its rate in simulated time; a frame is checked
 (:meth:`~cbp.perception.frame.DepthFrame.problem`) and handed with the robot's
 configuration to the map (:class:`~cbp.perception.mapper.MapUpdater`): at once
-on the virtual clock (the map a planner sees then depends on simulated time
-only), in the map's worker on the wall clock (never blocking the loop). A
+on the virtual clock, the frames of one instant making one snapshot (the map a
+planner sees then depends on simulated time only), in the map's worker on the
+wall clock (never blocking the loop). A
 camera whose last valid frame is older than ``perception.camera_timeout``
 holds the robot until it gives one again. A frame is valid when it is well
 formed (:meth:`~cbp.perception.frame.DepthFrame.problem`) and believable
@@ -123,6 +124,7 @@ class Cameras:
                 synchronous=True,
                 estimator=estimator,
                 latency=spec.virtual_latency,
+                batch=True,
             )
             if clock == "virtual"
             else updater(grid, world, estimator=estimator)
@@ -175,7 +177,10 @@ class Cameras:
                 error, self.mapper.error = self.mapper.error, None
                 self._log.event(sim.t, f"map update: {error}")
             due[i] += 1.0 / self.cameras[i].spec.rate_hz
-        self.mapper.release(t)
+        self.mapper.release(t)  # the last instant's snapshot (batch)
+        if self.mapper.error is not None:
+            error, self.mapper.error = self.mapper.error, None
+            self._log.event(sim.t, f"map update: {error}")
         self.separation.check(sim.t, sim.q)
 
     def mapped_since(self, name: str, t: float) -> int:

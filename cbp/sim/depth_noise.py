@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import zlib
 
+import numba
 import numpy as np
 
 from cbp.perception.spec import DepthNoise
@@ -60,31 +61,72 @@ class NoisyDepth:
                 plane (:attr:`DepthFrame.buffer_limits`).
         """
         noise = self.noise
-        z = np.asarray(buffer, dtype=float)
-        out = z.copy()
+        z = np.ascontiguousarray(buffer, dtype=float)
         hit = z < far_plane  # a reading nearer than the far plane (NaN: False)
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            d = far * near / (far - (far - near) * z[hit])
-            lost = None
-            if noise.edge_jump > 0.0:
-                depth = np.full(z.shape, np.inf)
-                depth[hit] = d
-                # Background beside an object lies inf beyond it: lost too.
-                # A pixel without a reading (NaN) neither loses nor makes lose.
-                lost = np.zeros(z.shape, dtype=bool)
-                step = depth[:, 1:] - depth[:, :-1]
-                lost[:, 1:] |= step > noise.edge_jump
-                lost[:, :-1] |= step < -noise.edge_jump
-                step = depth[1:, :] - depth[:-1, :]
-                lost[1:, :] |= step > noise.edge_jump
-                lost[:-1, :] |= step < -noise.edge_jump
-            d += noise.sigma(d) * self._rng.standard_normal(d.size, dtype=np.float32)
-            noisy = far / (far - near) * (1.0 - near / d)
-            noisy[(d >= far) | (d <= 0.0)] = np.nan  # out of range
-            out[hit] = noisy
-        if lost is not None:
-            out[lost] = np.nan
+        deviates = self._rng.standard_normal(
+            int(np.count_nonzero(hit)), dtype=np.float32
+        )
+        out = _noisy(
+            z,
+            far_plane,
+            near,
+            far,
+            noise.sigma_0,
+            noise.sigma_growth,
+            noise.z0,
+            noise.edge_jump,
+            deviates,
+        )
         if noise.dropout > 0.0:
             count = self._rng.binomial(z.size, noise.dropout)
             out.reshape(-1)[self._rng.choice(z.size, count, replace=False)] = np.nan
         return np.asarray(out)
+
+
+@numba.njit(cache=True, nogil=True)
+def _noisy(
+    z: FloatArray,
+    far_plane: float,
+    near: float,
+    far: float,
+    sigma_0: float,
+    sigma_growth: float,
+    z0: float,
+    edge_jump: float,
+    deviates: np.ndarray,
+) -> FloatArray:
+    """Steps 1 and 2 of :class:`NoisyDepth` in one pass: a new buffer.
+
+    ``deviates``: one normal deviate per pixel nearer than ``far_plane``, in
+    row order (as numpy would draw them for those pixels, so the same stream
+    gives the same frames as the array expressions this pass replaced).
+    """
+    h, w = z.shape
+    out = z.copy()
+    depth = np.full((h, w), np.inf)
+    n = 0
+    scale = far / (far - near)
+    for r in range(h):
+        for c in range(w):
+            v = z[r, c]
+            if not v < far_plane:
+                continue
+            d = far * near / (far - (far - near) * v)
+            depth[r, c] = d
+            d += (sigma_0 + sigma_growth * (d - z0) ** 2) * np.float64(deviates[n])
+            n += 1
+            if d >= far or d <= 0.0:
+                out[r, c] = np.nan  # out of range
+            else:
+                out[r, c] = scale * (1.0 - near / d)
+    if edge_jump > 0.0:
+        # A pixel more than edge_jump beyond a neighbour gives no reading
+        # (background beside an object lies inf beyond it; NaN compares false).
+        for r in range(h):
+            for c in range(w):
+                here = depth[r, c]
+                for rr, cc in ((r, c - 1), (r, c + 1), (r - 1, c), (r + 1, c)):
+                    if 0 <= rr < h and 0 <= cc < w and here - depth[rr, cc] > edge_jump:
+                        out[r, c] = np.nan
+                        break
+    return out

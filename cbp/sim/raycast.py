@@ -115,6 +115,10 @@ class RayCaster:
 
     Bodies added to the client later (objects that appear) are found at the
     next capture; removed ones are dropped. Mesh files are read once each.
+    The parts that have never moved are drawn once per camera and kept; each
+    capture casts only the others over a copy (a fixed camera's shelf costs
+    nothing after its first frame, the arm as much as before). The images
+    are the same: each pixel keeps its nearest surface, in any order.
 
     Args:
         client: the PyBullet client id.
@@ -134,6 +138,13 @@ class RayCaster:
         self._links: list[tuple[int, int]] = []
         self._part_link = np.zeros(0, dtype=np.intp)
         self._part_local = np.zeros((0, 4, 4))
+        # Parts that never moved: their first placements; which moved since.
+        self._first = np.zeros((0, 4, 4))
+        self._moved = np.zeros(0, dtype=np.bool_)
+        #: Per camera (its view, projection, size and planes): the depth of
+        #: the parts that never moved, drawn once (the triangle and shape
+        #: lists of the others are cast over a copy of it at each capture).
+        self._still: dict[bytes, FloatArray] = {}
 
     def render(
         self,
@@ -157,21 +168,43 @@ class RayCaster:
         """
         self._sync()
         placements = self._placements()
+        moved = self._moved
+        now = np.any(placements != self._first, axis=(1, 2)) & ~moved
+        if now.any():  # a part moves for the first time: drawn anew each time
+            moved |= now
+            self._still.clear()
         to_camera = np.einsum("ij,njk->nik", np.asarray(view, dtype=float), placements)
-        depth = np.empty((height, width))
-        _cast(
-            self._triangles,
-            self._tri_part,
-            self._shapes,
-            self._shape_part,
-            to_camera,
-            float(projection[0, 0]),
-            float(projection[1, 1]),
-            float(near),
-            float(far),
-            depth,
+        fx, fy = float(projection[0, 0]), float(projection[1, 1])
+        key = np.array([*np.ravel(view), fx, fy, width, height, near, far]).tobytes()
+        still = self._still.get(key)
+        if still is None:  # the parts that never moved, once per camera
+            still = np.full((height, width), np.inf)
+            _cast(
+                *self._lists(~moved),
+                to_camera,
+                fx,
+                fy,
+                float(near),
+                float(far),
+                still,
+            )
+            self._still[key] = still
+        depth = still.copy()
+        _cast(*self._lists(moved), to_camera, fx, fy, float(near), float(far), depth)
+        return _buffer(depth, float(near), float(far))
+
+    def _lists(
+        self, parts: np.ndarray
+    ) -> tuple[FloatArray, np.ndarray, FloatArray, np.ndarray]:
+        """The flagged ``parts`` triangles and shapes, as :func:`_cast` takes them."""
+        tri = parts[self._tri_part]
+        shape = parts[self._shape_part]
+        return (
+            self._triangles[tri],
+            self._tri_part[tri],
+            self._shapes[shape],
+            self._shape_part[shape],
         )
-        return depth
 
     def _sync(self) -> None:
         """Read the visual shapes of bodies new since the last capture.
@@ -228,6 +261,9 @@ class RayCaster:
         )
         self._shapes = np.array(shapes, dtype=float).reshape(-1, 3)
         self._shape_part = np.array(shape_part, dtype=np.intp)
+        self._first = self._placements()
+        self._moved = np.zeros(len(self._first), dtype=np.bool_)
+        self._still.clear()
 
     def _read(self, shapes: tuple[Any, ...]) -> list[_Part]:
         """A body's visual shapes (``getVisualShapeData``), each in its link's frame."""
@@ -308,11 +344,9 @@ def _cast(
     fy: float,
     near: float,
     far: float,
-    out: FloatArray,
+    depth: FloatArray,
 ) -> None:  # pragma: no cover - compiled
-    """Fill ``out`` (H, W) with the depth buffer of the nearest surfaces."""
-    h, w = out.shape
-    depth = np.full((h, w), np.inf)
+    """Keep in ``depth`` (H, W) [m] the nearer of it and the surfaces' depth."""
     canvas = _Canvas(fx, fy, near, far, depth)
     poly = np.empty((4, 3))
     v = np.empty((3, 3))
@@ -347,11 +381,19 @@ def _cast(
             _triangle(poly[0], poly[k], poly[k + 1], canvas)
     for s in range(len(shapes)):
         _analytic(shapes[s], to_camera[shape_part[s]], canvas)
+
+
+@numba.njit(cache=True, nogil=True)
+def _buffer(depth: FloatArray, near: float, far: float) -> FloatArray:
+    """The depth buffer in [0, 1] of depths [m] (1 where nothing is seen)."""
+    h, w = depth.shape
+    out = np.empty((h, w))
     scale = far / (far - near)
     for r in range(h):
         for c in range(w):
             d = depth[r, c]
             out[r, c] = scale * (1.0 - near / d) if d < far else 1.0
+    return out
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -51,11 +51,18 @@ EXPECTED: list[tuple[tuple[int, ...], str]] = [
 ]
 
 
-def replay() -> list[tuple[tuple[int, ...], str]]:
-    """Integrate the recorded frames one by one, snapshot after each: what each gave."""
+def replay(whole_frame_every: int = 1) -> list[tuple[tuple[int, ...], str]]:
+    """Integrate the recorded frames one by one, snapshot after each: what each gave.
+
+    ``whole_frame_every``: as ``perception.whole_frame_every`` (1: every frame
+    whole, as the passes were recorded with).
+    """
     scenario = load_scenario(
         ROOT / "scenarios" / "cat_shelf_reach.yaml",
-        overrides={"perception.source": "depth_camera"},
+        overrides={
+            "perception.source": "depth_camera",
+            "perception.whole_frame_every": str(whole_frame_every),
+        },
     )
     geometry = scenario.new_world().geometry
     grid = OccupancyGrid(scenario.spec.perception, geometry)
@@ -100,7 +107,7 @@ def replay() -> list[tuple[tuple[int, ...], str]]:
 
 
 def test_recorded_frames_give_the_cells_they_gave_before() -> None:
-    """Each recorded frame leaves the map as the passes before the speed-up left it."""
+    """Each recorded frame, integrated whole, leaves the map as the passes before the speed-up left it."""
     got = replay()
     assert len(got) == len(EXPECTED)
     for n, (summary, expected) in enumerate(zip(got, EXPECTED, strict=True)):
