@@ -18,7 +18,14 @@ import numpy as np
 from cbp.robot import FloatArray
 from cbp.spatial import Pose
 
-__all__ = ["add_gripper", "add_robot", "draw_objects", "joint_values", "wxyz"]
+__all__ = [
+    "RobotPose",
+    "add_gripper",
+    "add_robot",
+    "draw_objects",
+    "joint_values",
+    "wxyz",
+]
 
 #: The colour of declared objects (RGB 0-255).
 OBJECT_COLOUR = (170, 170, 170)
@@ -141,3 +148,91 @@ def add_gripper(
             position=(0.0, 0.06 * side, 0.0),
         )
     return frame
+
+
+class RobotPose:
+    """Poses a robot drawn by :func:`add_robot`, sending only the joints that moved.
+
+    viser's ``ViserUrdf.update_cfg`` computes the whole URDF's kinematics and
+    sends a rotation and a translation for every joint's frame at each call
+    (24 messages for a Panda, about 2 ms of the interpreter); an arm in
+    motion changes a few joints' angles. Here each joint's frame is sent
+    only when the value it depends on (its own, or the one it mimics) moved
+    by more than ``tolerance`` from the value drawn, and only what the joint
+    changes: a revolute joint's rotation, a prismatic joint's translation.
+
+    Args:
+        robot: the ``ViserUrdf`` of :func:`add_robot`.
+        tolerance: a joint that moved less than this is not sent [rad, m].
+    """
+
+    def __init__(self, robot: Any, tolerance: float) -> None:
+        """Read the URDF's joints; nothing drawn yet (the first pose sends all)."""
+        names = list(robot.get_actuated_joint_names())
+        self.robot = robot
+        self.tolerance = tolerance
+        self._scale = float(robot._scale)
+        #: Per joint frame: the frame, the joint, the index of the actuated
+        #: value it follows (None: fixed), the mimic's multiplier and offset.
+        self._frames: list[tuple[Any, Any, int | None, float, float]] = []
+        # viser 1.1.1's ViserUrdf: the URDF's joints and their frames, in order
+        # (collision meshes only: one frame per joint).
+        for joint, frame in zip(
+            robot._joint_map_values, robot._joint_frames, strict=True
+        ):
+            if joint.type == "fixed":
+                self._frames.append((frame, joint, None, 1.0, 0.0))
+            elif joint.mimic is not None and joint.mimic.joint in names:
+                self._frames.append(
+                    (
+                        frame,
+                        joint,
+                        names.index(joint.mimic.joint),
+                        float(joint.mimic.multiplier),
+                        float(joint.mimic.offset),
+                    )
+                )
+            elif joint.name in names:
+                self._frames.append((frame, joint, names.index(joint.name), 1.0, 0.0))
+            else:  # mimics a joint that is not actuated: fixed at its offset
+                self._frames.append((frame, joint, None, 1.0, 0.0))
+        #: The values drawn (None: nothing yet).
+        self.drawn: FloatArray | None = None
+
+    def moved(self, values: FloatArray) -> bool:
+        """Whether ``values`` would send anything (a joint moved, or the first pose)."""
+        drawn = self.drawn
+        return (
+            drawn is None
+            or drawn.shape != values.shape
+            or bool(np.any(np.abs(values - drawn) > self.tolerance))
+        )
+
+    def pose(self, values: FloatArray) -> bool:
+        """Draw the robot at the URDF's actuated joint ``values``; whether any sent."""
+        values = np.asarray(values, dtype=float)
+        drawn = self.drawn
+        if drawn is None or drawn.shape != values.shape:
+            self.robot.update_cfg(values)  # every frame, translations included
+            self.drawn = values.copy()
+            return True
+        changed = np.abs(values - drawn) > self.tolerance
+        if not changed.any():
+            return False
+        for frame, joint, index, multiplier, offset in self._frames:
+            if index is None or not changed[index]:
+                continue
+            q = float(values[index]) * multiplier + offset
+            origin = np.eye(4) if joint.origin is None else np.asarray(joint.origin)
+            axis = np.asarray(joint.axis, dtype=float)
+            if joint.type == "prismatic":
+                frame.position = tuple(
+                    (origin[:3, 3] + origin[:3, :3] @ (q * axis)) * self._scale
+                )
+            else:  # revolute, continuous
+                import pinocchio as pin
+
+                unit = axis / np.linalg.norm(axis)
+                frame.wxyz = wxyz(origin[:3, :3] @ pin.exp3(q * unit))
+        drawn[changed] = values[changed]
+        return True
