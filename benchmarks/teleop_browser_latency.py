@@ -416,6 +416,8 @@ def main() -> None:
             f" / {r['on_page'][1]:.0f} ms"
         )
     dpr = "" if args.dpr is None else f" (`?fixedDpr={args.dpr:g}`)"
+    if args.flag:
+        dpr += " with " + " ".join(f"`{f}`" for f in args.flag)
     lines = [
         "",
         "## Teleoperation: latency from a key in the browser "

@@ -69,6 +69,10 @@ class Page(abc.ABC, Generic[S]):
 
         self.session = session
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        # The panel docked beside the scene, not floating over it: a browser
+        # without a GPU draws and composites the scene in software, and a
+        # narrower canvas with nothing over it costs it less per frame.
+        self.server.gui.main_panel.dock_right()
         #: A line at the top of the panel: what the session is doing as a whole
         #: (stopping, where it saved).
         self.notice = self.server.gui.add_markdown("")
