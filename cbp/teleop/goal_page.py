@@ -355,23 +355,21 @@ class TeleopPage(Page[TeleopSession]):
         """The robot's measured pose when it moved: sent first, at each change.
 
         A pose the simulation reached ahead of the wall clock (by at most a
-        command lead) is sent when its time comes, not before: the page shows
-        the robot's state, never one it has yet to reach.
+        command lead) is not sent before its time: the page shows the
+        robot's state, never one it has yet to reach. It goes at a later
+        change (at the latest the period's end, when the loop has waited
+        for the wall clock to reach it).
         """
-        return self._pose_robot(wait=True)
+        return self._pose_robot()
 
-    def _pose_robot(self, wait: bool) -> bool:
-        """Send the joints that moved; whether any (``wait``: for a pose ahead)."""
+    def _pose_robot(self) -> bool:
+        """Send the joints that moved, once their time has come; whether any."""
         if self._pose is None:
             return False
         t, q, due = self.session.measured()
         values = self._cfg(q)
-        if not self._pose.moved(values):
+        if due > 0 or not self._pose.moved(values):
             return False
-        if due > 0:
-            if not wait:
-                return False  # sent at a later change, once its time has come
-            self._close.wait(due)
         self._pose.pose(values)
         self._state.update(q)
         self.posed = (t, self._state.frame_position(self._hand).copy())
@@ -388,7 +386,7 @@ class TeleopPage(Page[TeleopSession]):
         """
         session = self.session
         snap = session.snapshot()
-        self._pose_robot(wait=False)
+        self._pose_robot()
         if session.goal.count != self._shown_goal:  # sent from elsewhere
             self._after_goal(session.goal.count)
         goal, _ = session.goal.pose()
