@@ -179,14 +179,14 @@ def measure(
     posed = [page.posed]
     # When the pose's messages were queued (sent at the end of the batch).
     queued = [0.0]
-    assert page._pose is not None
-    pose = page._pose.pose
+    assert page.robot_pose is not None
+    pose = page.robot_pose.pose
 
     def timed_pose(values: Any) -> bool:
         queued[0] = time.time()
         return pose(values)
 
-    page._pose.pose = timed_pose  # type: ignore[method-assign]
+    page.robot_pose.pose = timed_pose  # type: ignore[method-assign]
 
     def record() -> None:
         if page.posed is not posed[0] and page.posed is not None:

@@ -9,6 +9,7 @@ pass their server.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -90,11 +91,10 @@ def add_robot(
         colour: RGB 0-255.
 
     Returns:
-        viser's ``ViserUrdf`` of it (its ``update_cfg`` poses it).
+        viser's ``ViserUrdf`` of it (its ``update_cfg`` poses it), which can
+        also send single joints (:class:`RobotPose`).
     """
-    from viser.extras import ViserUrdf
-
-    return ViserUrdf(
+    return _posable_urdf()(
         server,
         Path(urdf),
         root_node_name=name,
@@ -150,6 +150,30 @@ def add_gripper(
     return frame
 
 
+@functools.cache
+def _posable_urdf() -> type[Any]:
+    """The class of :func:`add_robot`'s robots (viser is imported late)."""
+    from viser.extras import ViserUrdf
+
+    class PosableUrdf(ViserUrdf):
+        """A ``ViserUrdf`` that sends the frames of chosen joints only."""
+
+        def joint_frames(self) -> list[tuple[Any, Any]]:
+            """Each joint of the URDF (yourdfpy's) with its frame, in order.
+
+            viser 1.1.1 keeps them in step (collision meshes only: one frame
+            per joint).
+            """
+            return list(zip(self._joint_map_values, self._joint_frames, strict=True))
+
+        @property
+        def scale(self) -> float:
+            """The robot's drawn scale."""
+            return float(self._scale)
+
+    return PosableUrdf
+
+
 class RobotPose:
     """Poses a robot drawn by :func:`add_robot`, sending only the joints that moved.
 
@@ -162,7 +186,7 @@ class RobotPose:
     changes: a revolute joint's rotation, a prismatic joint's translation.
 
     Args:
-        robot: the ``ViserUrdf`` of :func:`add_robot`.
+        robot: the robot of :func:`add_robot`.
         tolerance: a joint that moved less than this is not sent [rad, m].
     """
 
@@ -171,15 +195,11 @@ class RobotPose:
         names = list(robot.get_actuated_joint_names())
         self.robot = robot
         self.tolerance = tolerance
-        self._scale = float(robot._scale)
+        self._scale = robot.scale
         #: Per joint frame: the frame, the joint, the index of the actuated
         #: value it follows (None: fixed), the mimic's multiplier and offset.
         self._frames: list[tuple[Any, Any, int | None, float, float]] = []
-        # viser 1.1.1's ViserUrdf: the URDF's joints and their frames, in order
-        # (collision meshes only: one frame per joint).
-        for joint, frame in zip(
-            robot._joint_map_values, robot._joint_frames, strict=True
-        ):
+        for joint, frame in robot.joint_frames():
             if joint.type == "fixed":
                 self._frames.append((frame, joint, None, 1.0, 0.0))
             elif joint.mimic is not None and joint.mimic.joint in names:

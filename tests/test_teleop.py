@@ -698,13 +698,15 @@ def test_a_robot_pose_sends_only_the_joints_that_moved() -> None:
             q[-1] = abs(q[-1])
             pose.pose(q)
             full.update_cfg(q)
-            for a, b in zip(full._joint_frames, posed._joint_frames, strict=True):
+            frames = zip(full.joint_frames(), posed.joint_frames(), strict=True)
+            for (_, a), (_, b) in frames:
                 wa, wb = np.array(a.wxyz), np.array(b.wxyz)
                 np.testing.assert_allclose(wa * np.sign(wa @ wb), wb, atol=1e-9)
                 np.testing.assert_allclose(a.position, b.position, atol=1e-9)
         assert not pose.pose(q + 0.5e-3)  # within tolerance: nothing sent
         # A joint that did not move is not sent again: a mark on its frame stays.
-        frame = posed._joint_frames[2]  # follows the third actuated joint
+        joint, frame = posed.joint_frames()[2]
+        assert joint.name == "panda_joint3"
         frame.wxyz = (0.0, 1.0, 0.0, 0.0)
         moved = q.copy()
         moved[0] += 0.1

@@ -209,7 +209,7 @@ class TeleopPage(Page[TeleopSession]):
         )
         self._joints = self.robot.get_actuated_joint_names() if self.robot else []
         #: Sends the robot's joints that moved (its drawn values: ``.drawn``).
-        self._pose = (
+        self.robot_pose = (
             RobotPose(self.robot, DRAWN_TOLERANCE) if self.robot is not None else None
         )
         #: The robot's pose last sent: (simulated time [s], the hand's
@@ -364,13 +364,13 @@ class TeleopPage(Page[TeleopSession]):
 
     def _pose_robot(self) -> bool:
         """Send the joints that moved, once their time has come; whether any."""
-        if self._pose is None:
+        if self.robot_pose is None:
             return False
         t, q, due = self.session.measured()
         values = self._cfg(q)
-        if due > 0 or not self._pose.moved(values):
+        if due > 0 or not self.robot_pose.moved(values):
             return False
-        self._pose.pose(values)
+        self.robot_pose.pose(values)
         self._state.update(q)
         self.posed = (t, self._state.frame_position(self._hand).copy())
         return True
@@ -415,8 +415,8 @@ class TeleopPage(Page[TeleopSession]):
         return GoalPageState(
             robot_q=(
                 None
-                if self._pose is None or self._pose.drawn is None
-                else np.array(self._pose.drawn, dtype=float)
+                if self.robot_pose is None or self.robot_pose.drawn is None
+                else np.array(self.robot_pose.drawn, dtype=float)
             ),
             goal_position=np.array(self.gizmo.position, dtype=float),
             unreachable=self.unreachable,
