@@ -15,8 +15,9 @@ back) and measures per key, on the machine's wall clock:
   control loop took the goal, planned for it, commanded it
   (:class:`~cbp.teleop.goal_session.Commanded`);
 - **hand drawn**: to the end of the animation frame that drew a hand moved
-  1 mm toward the new goal. The server sends the hand with every page update
-  (a marker of it in the panel); a script installed before the page's own
+  1 mm toward the new goal. The server sends the robot's pose at each change
+  of the session, ahead of each page update (a marker of the hand in the
+  panel at each update); a script installed before the page's own
   records when each message batch from viser's websocket worker reaches the
   page's main thread and when each animation frame that issues WebGL draws
   begins and ends. The batch that carried the moved hand is the first to
@@ -152,10 +153,13 @@ def _percentiles(values: list[float]) -> tuple[float, float]:
     return float(np.median(a)), float(np.percentile(a, 95))
 
 
-def measure(keys: int, burners: int, dpr: float | None = None) -> dict[str, Any]:
+def measure(
+    keys: int, burners: int, dpr: float | None = None, flags: tuple[str, ...] = ()
+) -> dict[str, Any]:
     """One session: ``keys`` key presses, ``burners`` CPU-bound processes beside it.
 
     ``dpr``: the page's pixel ratio (viser's ``fixedDpr``; None: its adaptive one).
+    ``flags``: Chromium's command-line flags beyond the tests' own.
     """
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
@@ -166,21 +170,46 @@ def measure(keys: int, burners: int, dpr: float | None = None) -> dict[str, Any]
     session = TeleopSession(ROOT / "scenarios" / "cat_boards.yaml", "cat")
     page = TeleopPage(session, port=0)
     marker = page.server.gui.add_markdown("hand x 0")
-    update = page.update
+    update, send_first = page.update, page.send_first
 
-    sent: list[tuple[float, float]] = []  # (server time, the hand's x) per update
+    # (server time, the hand's x) per robot pose sent: ahead of each update,
+    # alone, and at each change between updates (TeleopPage.update_first).
+    sent: list[tuple[float, float]] = []
     page_cpu = [0.0]
+    posed = [page.posed]
+    # When the pose's messages were queued (sent at the end of the batch).
+    queued = [0.0]
+    assert page.robot_pose is not None
+    pose = page.robot_pose.pose
+
+    def timed_pose(values: Any) -> bool:
+        queued[0] = time.time()
+        return pose(values)
+
+    page.robot_pose.pose = timed_pose  # type: ignore[method-assign]
+
+    def record() -> None:
+        if page.posed is not posed[0] and page.posed is not None:
+            posed[0] = page.posed
+            sent.append((queued[0], float(page.posed[1][0])))
 
     def marked() -> None:
         start = time.thread_time()
         update()
         page_cpu[0] += time.thread_time() - start
+        record()
         if page.shown is not None:
-            x = float(page.shown.hand[0])
-            marker.content = f"hand x {x:.5f}"
-            sent.append((time.time(), x))
+            marker.content = f"hand x {float(page.shown.hand[0]):.5f}"
+
+    def first() -> bool:
+        start = time.thread_time()
+        done = send_first()
+        page_cpu[0] += time.thread_time() - start
+        record()
+        return done
 
     page.update = marked  # type: ignore[method-assign]
+    page.send_first = first  # type: ignore[method-assign]
     arrivals: dict[int, float] = {}
     set_goal = session.goal.set
 
@@ -191,7 +220,7 @@ def measure(keys: int, burners: int, dpr: float | None = None) -> dict[str, Any]
 
     session.goal.set = stamped  # type: ignore[method-assign]
     burning: list[subprocess.Popen[bytes]] = []
-    browser = headless_chromium()
+    browser = headless_chromium(flags)
     # On a shared machine beside the CPU-bound processes, one answer of the
     # page took over the driver's default 120 s.
     browser.command_executor.client_config.timeout = 300
@@ -355,13 +384,19 @@ def main() -> None:
         "--dpr", type=float, default=None, help="the page's fixed pixel ratio"
     )
     parser.add_argument(
+        "--flag",
+        action="append",
+        default=[],
+        help="a Chromium flag (repeat for more), e.g. --flag=--disable-gpu-compositing",
+    )
+    parser.add_argument(
         "--only", type=int, default=None, help="one row: this many CPU-bound processes"
     )
     args = parser.parse_args()
     loads = (0, args.burners) if args.only is None else (args.only,)
     rows = []
     for burners in loads:
-        rows.append(r := measure(args.keys, burners, args.dpr))
+        rows.append(r := measure(args.keys, burners, args.dpr, tuple(args.flag)))
         print(
             f"{r['burners']} CPU-bound: goal arrival -> taken by the loop -> "
             "planned -> commanded, median / p95 [ms]: "
@@ -381,6 +416,8 @@ def main() -> None:
             f" / {r['on_page'][1]:.0f} ms"
         )
     dpr = "" if args.dpr is None else f" (`?fixedDpr={args.dpr:g}`)"
+    if args.flag:
+        dpr += " with " + " ".join(f"`{f}`" for f in args.flag)
     lines = [
         "",
         "## Teleoperation: latency from a key in the browser "

@@ -9,6 +9,7 @@ pass their server.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,14 @@ import numpy as np
 from cbp.robot import FloatArray
 from cbp.spatial import Pose
 
-__all__ = ["add_gripper", "add_robot", "draw_objects", "joint_values", "wxyz"]
+__all__ = [
+    "RobotPose",
+    "add_gripper",
+    "add_robot",
+    "draw_objects",
+    "joint_values",
+    "wxyz",
+]
 
 #: The colour of declared objects (RGB 0-255).
 OBJECT_COLOUR = (170, 170, 170)
@@ -83,11 +91,10 @@ def add_robot(
         colour: RGB 0-255.
 
     Returns:
-        viser's ``ViserUrdf`` of it (its ``update_cfg`` poses it).
+        viser's ``ViserUrdf`` of it (its ``update_cfg`` poses it), which can
+        also send single joints (:class:`RobotPose`).
     """
-    from viser.extras import ViserUrdf
-
-    return ViserUrdf(
+    return _posable_urdf()(
         server,
         Path(urdf),
         root_node_name=name,
@@ -141,3 +148,111 @@ def add_gripper(
             position=(0.0, 0.06 * side, 0.0),
         )
     return frame
+
+
+@functools.cache
+def _posable_urdf() -> type[Any]:
+    """The class of :func:`add_robot`'s robots (viser is imported late)."""
+    from viser.extras import ViserUrdf
+
+    class PosableUrdf(ViserUrdf):
+        """A ``ViserUrdf`` that sends the frames of chosen joints only."""
+
+        def joint_frames(self) -> list[tuple[Any, Any]]:
+            """Each joint of the URDF (yourdfpy's) with its frame, in order.
+
+            viser 1.1.1 keeps them in step (collision meshes only: one frame
+            per joint).
+            """
+            return list(zip(self._joint_map_values, self._joint_frames, strict=True))
+
+        @property
+        def scale(self) -> float:
+            """The robot's drawn scale."""
+            return float(self._scale)
+
+    return PosableUrdf
+
+
+class RobotPose:
+    """Poses a robot drawn by :func:`add_robot`, sending only the joints that moved.
+
+    viser's ``ViserUrdf.update_cfg`` computes the whole URDF's kinematics and
+    sends a rotation and a translation for every joint's frame at each call
+    (24 messages for a Panda, about 2 ms of the interpreter); an arm in
+    motion changes a few joints' angles. Here each joint's frame is sent
+    only when the value it depends on (its own, or the one it mimics) moved
+    by more than ``tolerance`` from the value drawn, and only what the joint
+    changes: a revolute joint's rotation, a prismatic joint's translation.
+
+    Args:
+        robot: the robot of :func:`add_robot`.
+        tolerance: a joint that moved less than this is not sent [rad, m].
+    """
+
+    def __init__(self, robot: Any, tolerance: float) -> None:
+        """Read the URDF's joints; nothing drawn yet (the first pose sends all)."""
+        names = list(robot.get_actuated_joint_names())
+        self.robot = robot
+        self.tolerance = tolerance
+        self._scale = robot.scale
+        #: Per joint frame: the frame, the joint, the index of the actuated
+        #: value it follows (None: fixed), the mimic's multiplier and offset.
+        self._frames: list[tuple[Any, Any, int | None, float, float]] = []
+        for joint, frame in robot.joint_frames():
+            if joint.type == "fixed":
+                self._frames.append((frame, joint, None, 1.0, 0.0))
+            elif joint.mimic is not None and joint.mimic.joint in names:
+                self._frames.append(
+                    (
+                        frame,
+                        joint,
+                        names.index(joint.mimic.joint),
+                        float(joint.mimic.multiplier),
+                        float(joint.mimic.offset),
+                    )
+                )
+            elif joint.name in names:
+                self._frames.append((frame, joint, names.index(joint.name), 1.0, 0.0))
+            else:  # mimics a joint that is not actuated: fixed at its offset
+                self._frames.append((frame, joint, None, 1.0, 0.0))
+        #: The values drawn (None: nothing yet).
+        self.drawn: FloatArray | None = None
+
+    def moved(self, values: FloatArray) -> bool:
+        """Whether ``values`` would send anything (a joint moved, or the first pose)."""
+        drawn = self.drawn
+        return (
+            drawn is None
+            or drawn.shape != values.shape
+            or bool(np.any(np.abs(values - drawn) > self.tolerance))
+        )
+
+    def pose(self, values: FloatArray) -> bool:
+        """Draw the robot at the URDF's actuated joint ``values``; whether any sent."""
+        values = np.asarray(values, dtype=float)
+        drawn = self.drawn
+        if drawn is None or drawn.shape != values.shape:
+            self.robot.update_cfg(values)  # every frame, translations included
+            self.drawn = values.copy()
+            return True
+        changed = np.abs(values - drawn) > self.tolerance
+        if not changed.any():
+            return False
+        for frame, joint, index, multiplier, offset in self._frames:
+            if index is None or not changed[index]:
+                continue
+            q = float(values[index]) * multiplier + offset
+            origin = np.eye(4) if joint.origin is None else np.asarray(joint.origin)
+            axis = np.asarray(joint.axis, dtype=float)
+            if joint.type == "prismatic":
+                frame.position = tuple(
+                    (origin[:3, 3] + origin[:3, :3] @ (q * axis)) * self._scale
+                )
+            else:  # revolute, continuous
+                import pinocchio as pin
+
+                unit = axis / np.linalg.norm(axis)
+                frame.wxyz = wxyz(origin[:3, :3] @ pin.exp3(q * unit))
+        drawn[changed] = values[changed]
+        return True

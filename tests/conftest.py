@@ -8,7 +8,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 import pytest
@@ -82,10 +82,11 @@ def run_cbp(*args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
-def headless_chromium():  # type: ignore[no-untyped-def]
+def headless_chromium(extra_flags: Sequence[str] = ()):  # type: ignore[no-untyped-def]
     """Debian's Chromium through selenium, headless, 1280 x 900; fails without it.
 
     The browser tests are slow tests; ``make test-slow`` installs the browser.
+    ``extra_flags``: more command-line flags for Chromium.
     """
     webdriver = pytest.importorskip("selenium.webdriver")
     chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
@@ -103,6 +104,7 @@ def headless_chromium():  # type: ignore[no-untyped-def]
         "--use-angle=swiftshader",
         "--enable-unsafe-swiftshader",
         "--window-size=1280,900",
+        *extra_flags,
     ):
         options.add_argument(flag)
     service = webdriver.ChromeService(executable_path=driver)

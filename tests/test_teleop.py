@@ -615,3 +615,102 @@ def test_the_page_sends_a_path_again_only_when_it_looks_different(
     sim.follow(dataclasses.replace(moving, positions=np.stack([q0, q0 - 0.2])))
     page.update()
     assert page._path_lines is not drawn
+
+
+def _moved_robot(session: TeleopSession, by: float) -> np.ndarray:
+    """Simulate the (not started) session's arm moving every joint by ``by``."""
+    import dataclasses
+
+    sim = session.parts.sim
+    q0 = np.array(sim.q, dtype=float)
+    t = float(sim.t)
+    sim.follow(
+        dataclasses.replace(
+            sim.trajectory,
+            times=np.array([t, t + 0.05]),
+            positions=np.stack([q0, q0 + by]),
+            velocities=np.zeros((2, q0.size)),
+            accelerations=np.zeros((2, q0.size)),
+        )
+    )
+    sim.run_until(t + 0.3)
+    return np.array(sim.q, dtype=float)
+
+
+def test_the_robot_pose_is_sent_at_a_change_before_the_next_update(
+    boards_page: tuple[TeleopSession, Any],
+) -> None:
+    """The arm's moved pose is sent at the change, not at the update interval's end."""
+    session, page = boards_page
+    # One update a minute at most: the pose goes out on its own meanwhile.
+    page.start(max_rate=1.0 / 60.0, idle_rate=1.0 / 60.0, while_running=False)
+    assert wait_until(lambda: page.updates >= 1, 60.0), "no first update"
+    drawn = page.state().robot_q
+    assert drawn is not None
+    q = _moved_robot(session, 0.02)
+    session.changes.notify()
+    assert wait_until(lambda: not np.allclose(page.state().robot_q, drawn), 60.0), (
+        "the moved arm was not sent"
+    )
+    assert page.updates == 1  # no update of the rest: the pose alone
+    assert page.first_sent >= 1
+    np.testing.assert_allclose(page.state().robot_q[:7], q[:7], atol=2e-4)
+
+
+def test_the_page_never_shows_a_pose_before_its_time(
+    boards_page: tuple[TeleopSession, Any],
+) -> None:
+    """A pose simulated ahead of the wall clock is drawn only once its time comes."""
+    session, page = boards_page
+    page.update()
+    drawn = page.state().robot_q
+    assert drawn is not None
+    _moved_robot(session, 0.02)
+    # The loop's clock: the simulated state is a minute ahead of now.
+    session._pacer.start(session.parts.sim.t - 60.0)
+    page.update()
+    np.testing.assert_array_equal(page.state().robot_q, drawn)
+    session._pacer.start(session.parts.sim.t)  # its time is now
+    page.update()
+    assert not np.allclose(page.state().robot_q, drawn)
+
+
+def test_a_robot_pose_sends_only_the_joints_that_moved() -> None:
+    """Posing matches viser's full update, within tolerance, joint by joint."""
+    pytest.importorskip("viser", reason="the viewer extra is not installed")
+    import viser
+
+    from cbp.drawing import RobotPose, add_robot
+    from cbp.scene_file import scene_description
+
+    urdf = scene_description(load_scenario(BOARDS), duration=0.0)["urdf"]
+    server = viser.ViserServer(port=free_port(), verbose=False)
+    try:
+        full = add_robot(server, urdf, "/full", (200, 200, 200))
+        posed = add_robot(server, urdf, "/posed", (200, 200, 200))
+        pose = RobotPose(posed, 1e-3)
+        rng = np.random.default_rng(3)
+        q = rng.uniform(-0.5, 0.5, len(full.get_actuated_joint_names()))
+        q[-1] = 0.02  # a finger (prismatic; its twin mimics it)
+        assert pose.pose(q)
+        for _ in range(5):
+            q = q + rng.normal(0.0, 0.05, q.size) * (rng.random(q.size) < 0.5)
+            q[-1] = abs(q[-1])
+            pose.pose(q)
+            full.update_cfg(q)
+            frames = zip(full.joint_frames(), posed.joint_frames(), strict=True)
+            for (_, a), (_, b) in frames:
+                wa, wb = np.array(a.wxyz), np.array(b.wxyz)
+                np.testing.assert_allclose(wa * np.sign(wa @ wb), wb, atol=1e-9)
+                np.testing.assert_allclose(a.position, b.position, atol=1e-9)
+        assert not pose.pose(q + 0.5e-3)  # within tolerance: nothing sent
+        # A joint that did not move is not sent again: a mark on its frame stays.
+        joint, frame = posed.joint_frames()[2]
+        assert joint.name == "panda_joint3"
+        frame.wxyz = (0.0, 1.0, 0.0, 0.0)
+        moved = q.copy()
+        moved[0] += 0.1
+        assert pose.pose(moved)
+        np.testing.assert_array_equal(frame.wxyz, (0.0, 1.0, 0.0, 0.0))
+    finally:
+        server.stop()

@@ -34,7 +34,14 @@ from typing import Any
 
 import numpy as np
 
-from cbp.drawing import add_gripper, add_robot, draw_objects, joint_values, wxyz
+from cbp.drawing import (
+    RobotPose,
+    add_gripper,
+    add_robot,
+    draw_objects,
+    joint_values,
+    wxyz,
+)
 from cbp.executors.cat import HOLDING_DISTANCE
 from cbp.perception.kernels import OCCUPIED, UNKNOWN
 from cbp.run.goal_input import GoalBounds
@@ -145,7 +152,8 @@ class GoalPageState:
 
     Attributes:
         robot_q: the configuration the robot is drawn at (URDF actuated
-            joints, in the URDF's order), or None without a URDF.
+            joints, in the URDF's order), or None without a URDF or before
+            the robot is first drawn.
         goal_position: where the goal's gizmo is (3,) [m].
         unreachable: the goal is drawn out of reach (a gripper, with the
             posture the arm stopped in).
@@ -200,7 +208,13 @@ class TeleopPage(Page[TeleopSession]):
             add_robot(self.server, urdf, "/robot", ARM) if urdf is not None else None
         )
         self._joints = self.robot.get_actuated_joint_names() if self.robot else []
-        self._drawn_q = np.zeros(len(self._joints))
+        #: Sends the robot's joints that moved (its drawn values: ``.drawn``).
+        self.robot_pose = (
+            RobotPose(self.robot, DRAWN_TOLERANCE) if self.robot is not None else None
+        )
+        #: The robot's pose last sent: (simulated time [s], the hand's
+        #: position (3,) [m]), None before the first.
+        self.posed: tuple[float, np.ndarray] | None = None
         self._q_names = session.scenario.robot.coordinate_names("q")
         self._objects = draw_objects(self.server, description)
         camera = self.server.initial_camera
@@ -337,24 +351,42 @@ class TeleopPage(Page[TeleopSession]):
 
     # ------------------------------------------------------------------ output
 
+    def update_first(self) -> bool:
+        """The robot's measured pose when it moved: sent first, at each change.
+
+        A pose the simulation reached ahead of the wall clock (by at most a
+        command lead) is not sent before its time: the page shows the
+        robot's state, never one it has yet to reach. It goes at a later
+        change (at the latest the period's end, when the loop has waited
+        for the wall clock to reach it).
+        """
+        return self._pose_robot()
+
+    def _pose_robot(self) -> bool:
+        """Send the joints that moved, once their time has come; whether any."""
+        if self.robot_pose is None:
+            return False
+        t, q, due = self.session.measured()
+        values = self._cfg(q)
+        if due > 0 or not self.robot_pose.moved(values):
+            return False
+        self.robot_pose.pose(values)
+        self._state.update(q)
+        self.posed = (t, self._state.frame_position(self._hand).copy())
+        return True
+
     def update(self) -> None:
         """Bring the page up to date with the session (at each of its changes).
 
-        The robot, the goal, the contacts and the path at every update; the
-        readout and the plot every :data:`PANEL_PERIOD`, or at once when the
-        hold changes (each redraw of them costs the browser a render of the
-        panel, on the cores the control loop runs on).
+        The robot (unless :meth:`update_first` sent it), the goal, the
+        contacts and the path at every update; the readout and the plot every
+        :data:`PANEL_PERIOD`, or at once when the hold changes (each redraw
+        of them costs the browser a render of the panel, on the cores the
+        control loop runs on).
         """
         session = self.session
         snap = session.snapshot()
-        if self.robot is not None:
-            q = self._cfg(snap.q)
-            moved = q.shape != self._drawn_q.shape or not np.allclose(
-                q, self._drawn_q, rtol=0.0, atol=DRAWN_TOLERANCE
-            )
-            if moved or self.shown is None:
-                self._drawn_q = q
-                self.robot.update_cfg(q)
+        self._pose_robot()
         if session.goal.count != self._shown_goal:  # sent from elsewhere
             self._after_goal(session.goal.count)
         goal, _ = session.goal.pose()
@@ -382,7 +414,9 @@ class TeleopPage(Page[TeleopSession]):
         """What the page shows now."""
         return GoalPageState(
             robot_q=(
-                None if self.robot is None else np.array(self._drawn_q, dtype=float)
+                None
+                if self.robot_pose is None or self.robot_pose.drawn is None
+                else np.array(self.robot_pose.drawn, dtype=float)
             ),
             goal_position=np.array(self.gizmo.position, dtype=float),
             unreachable=self.unreachable,

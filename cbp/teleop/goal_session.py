@@ -390,6 +390,23 @@ class TeleopSession:
             recent_misses=recent,
         )
 
+    def measured(self) -> tuple[float, FloatArray, float]:
+        """The robot's measured joint positions now, with their time.
+
+        Returns:
+            Simulated time ``t`` [s], the joint positions at it, and how long
+            until the wall clock reaches ``t`` [s]: above 0 when the loop has
+            simulated ahead of the wall clock (by at most a command lead, so
+            that a new goal can be commanded then), 0 before it starts.
+        """
+        sim = self.parts.sim
+        # q before t: a physics step in between makes t later than q's time,
+        # never earlier (due is then the later one).
+        q = np.array(sim.q, dtype=float)
+        t = float(sim.t)
+        due = self._pacer.left(t) if self._pacer.started else 0.0
+        return t, q, max(due, 0.0)
+
     def latency_ms(self) -> list[float]:
         """Goal-to-command latencies measured so far [ms]."""
         return [1e3 * x for x in self._latencies]

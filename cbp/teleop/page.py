@@ -5,7 +5,10 @@ A page is updated when its session changes, not on a timer: the session tells
 it at each change (a command period's end, a new goal) and the page's thread
 wakes and sends the change at once, at most :data:`MAX_UPDATE_RATE` times a
 second; without changes it updates at :data:`IDLE_UPDATE_RATE` (the readout's
-clock, a session that has stopped).
+clock, a session that has stopped). What must be seen first (the robot's
+pose, :meth:`Page.update_first`) goes ahead of each update as a message batch
+of its own, and at each change between updates too, without waiting for the
+rate's interval.
 """
 
 from __future__ import annotations
@@ -66,6 +69,10 @@ class Page(abc.ABC, Generic[S]):
 
         self.session = session
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        # The panel docked beside the scene, not floating over it: a browser
+        # without a GPU draws and composites the scene in software, and a
+        # narrower canvas with nothing over it costs it less per frame.
+        self.server.gui.main_panel.dock_right()
         #: A line at the top of the panel: what the session is doing as a whole
         #: (stopping, where it saved).
         self.notice = self.server.gui.add_markdown("")
@@ -76,6 +83,8 @@ class Page(abc.ABC, Generic[S]):
         self._changed = threading.Event()
         #: Page updates made so far (each one message batch to the browsers).
         self.updates = 0
+        #: Batches of :meth:`update_first` alone sent between updates so far.
+        self.first_sent = 0
         #: Why each update was made: ``change`` (the session told of one) or
         #: ``idle`` (none for :data:`IDLE_UPDATE_RATE`'s interval), the latest
         #: last (up to 100).
@@ -120,6 +129,27 @@ class Page(abc.ABC, Generic[S]):
     def update(self) -> None:
         """Bring the page up to date with the session."""
 
+    def update_first(self) -> bool:
+        """Send what the operator must see first (the robot's pose); whether any.
+
+        Called ahead of each :meth:`update` and at each change of the
+        session between updates; its messages go to the browsers at once,
+        as a batch of their own. Nothing here; pages that draw a robot say.
+        """
+        return False
+
+    def send_first(self) -> bool:
+        """:meth:`update_first` as a message batch of its own, sent at once."""
+        with self.server.atomic():
+            sent = self.update_first()
+        if sent:
+            self.server.flush()
+        return sent
+
+    def _send_between(self) -> None:
+        if self.send_first():
+            self.first_sent += 1
+
     def refresh(self) -> None:
         """:meth:`update`, sent to the browsers at once as one message batch.
 
@@ -127,8 +157,10 @@ class Page(abc.ABC, Generic[S]):
         pose is one; an update sends dozens), each a switch between threads
         competing for the interpreter with the control loop, and holds what it
         queued for up to a 60 Hz window before sending it. Measured on the
-        boards: an update took 34 ms (median) without the batch.
+        boards: an update took 34 ms (median) without the batch. What
+        :meth:`update_first` sends goes ahead, in a batch of its own.
         """
+        self.send_first()
         with self.server.atomic():
             self.update()
         self.server.flush()
@@ -142,12 +174,15 @@ class Page(abc.ABC, Generic[S]):
         """Update the page until :meth:`close`, the stop button or the session's end.
 
         At each change the session tells of, at most ``max_rate`` times a
-        second; ``idle_rate`` times a second without changes. With
+        second; ``idle_rate`` times a second without changes. A change within
+        ``1 / max_rate`` of the last update sends :meth:`update_first` at
+        once (the robot's pose), the rest at the interval's end. With
         ``while_running`` False, a session that does not run (not started
         yet) does not end the updates.
         """
         gap, idle = 1.0 / max_rate, 1.0 / idle_rate
         refresh = Guarded(log, "page update")  # the page must not stop the session
+        first = Guarded(log, "page update (robot pose)")
         cause = "idle"
         while not self._close.is_set() and not self.stopped.is_set():
             started = time.perf_counter()
@@ -160,10 +195,17 @@ class Page(abc.ABC, Generic[S]):
                 break
             cause = "change" if self._changed.wait(idle) else "idle"
             # Not more often than max_rate: the rest of the gap is waited out
-            # (changes meanwhile are sent together at its end).
-            rest = started + gap - time.perf_counter()
-            if rest > 0:
-                self._close.wait(rest)
+            # (changes meanwhile are sent together at its end), but what must
+            # be seen first is sent at each change.
+            while not self._close.is_set():
+                rest = started + gap - time.perf_counter()
+                if rest <= 0:
+                    break
+                if self._changed.is_set():
+                    self._changed.clear()
+                    first.call(self._send_between)
+                    continue
+                self._changed.wait(rest)
 
     def start(self, **run: Any) -> None:
         """Update the page in a thread of its own (``run``: :meth:`run`'s options)."""
