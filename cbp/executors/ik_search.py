@@ -226,18 +226,21 @@ class IkSearch:
         model, data = self.robot.model, self._data
         q = q.copy()
         damping = 1e-6
-        for _ in range(s.max_iterations):
+        stall = s.stall_iterations
+        errors = np.empty(s.max_iterations)  # position + rotation error norms
+        for k in range(s.max_iterations):
             self.solves += 1
             budget.charge("ik_iteration")
             pin.framesForwardKinematics(model, data, q)
             M = data.oMf[self.frame_id]
             error = goal.actInv(M)
             err = pin.log6(error).vector
-            if (
-                np.linalg.norm(err[:3]) < s.position_tolerance
-                and np.linalg.norm(err[3:]) < s.rotation_tolerance
-            ):
+            position, rotation = np.linalg.norm(err[:3]), np.linalg.norm(err[3:])
+            if position < s.position_tolerance and rotation < s.rotation_tolerance:
                 return q
+            errors[k] = position + rotation
+            if stall and k >= stall and errors[k] > 0.999 * errors[k - stall]:
+                return None  # stalled (a joint limit, a singularity)
             J = pin.computeFrameJacobian(model, data, q, self.frame_id, pin.LOCAL)
             J = pin.Jlog6(error).dot(J)
             if fixed is not None:

@@ -166,6 +166,26 @@ def test_a_plan_that_touches_between_the_states_ompl_checked_is_dropped(
     assert "touches between" in note
 
 
+def test_an_ik_solve_that_stalls_is_given_up_early(robots) -> None:
+    """Out of reach, a solve stops once its error stops falling; within reach it solves."""
+    robot = robots["panda"]
+    search = IkSearch(robot, "panda_hand", None, IkSearchSettings())
+    budget = WallBudget(10.0)
+    far = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))  # 2 m away: out of reach
+    before = search.solves
+    assert search._solve_from(far, robot.home(), None, budget) is None
+    stalled = search.solves - before
+    assert IkSearchSettings().stall_iterations < stalled < 80
+    never = IkSearch(robot, "panda_hand", None, IkSearchSettings(stall_iterations=0))
+    assert never._solve_from(far, robot.home(), None, budget) is None
+    assert never.solves == 80  # every iteration, as before
+    data = robot.model.createData()
+    q = robot.home() + 0.3
+    pin.framesForwardKinematics(robot.model, data, q)
+    near = data.oMf[search.frame_id].copy()
+    assert search._solve_from(near, robot.home(), None, budget) is not None
+
+
 def test_rrt_connect_keeps_its_trees_for_the_same_start_and_target(robots) -> None:
     """Begun for a start and a target, the trees are grown on for them until a path is taken."""
     robot = robots["panda"]
@@ -322,10 +342,12 @@ def test_a_search_cut_short_goes_on_where_it_stopped(boards: Scenario) -> None:
 
     run = build_run(boards, method="ik")
     try:
-        search = IkSearch(boards.robot, run.ee_frame, run.world, IkSearchSettings())
+        # Every solve runs all its iterations (none given up as stalled).
+        settings = IkSearchSettings(stall_iterations=0)
+        search = IkSearch(boards.robot, run.ee_frame, run.world, settings)
         out_of_reach = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))
         q = boards.q0.copy()
-        whole = IkSearch(boards.robot, run.ee_frame, run.world, IkSearchSettings())
+        whole = IkSearch(boards.robot, run.ee_frame, run.world, settings)
         assert whole.solve(out_of_reach, q, WallBudget(10.0)) is None
         # Each budget holds about two starts' iterations (80 x 26 us each).
         calls = 0
