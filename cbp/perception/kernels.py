@@ -1008,20 +1008,9 @@ def eroded_ranges_in(
     for n in range(windows.shape[0]):
         for r in range(windows[n, 2], windows[n, 3]):
             for c in range(windows[n, 0], windows[n, 1]):
-                least = np.nan
-                for rr in range(max(r - 1, 0), min(r + 2, h)):
-                    for cc in range(max(c - 1, 0), min(c + 2, w)):
-                        z = depth[rr, cc]
-                        if np.isnan(z):
-                            continue
-                        if not _holds_reading(z, nearest, far_buffer):
-                            v = -np.inf
-                        elif z >= far_plane:
-                            v = far
-                        else:
-                            v = far * near / (far - (far - near) * z)
-                        least = _least(least, v)
-                out[r, c] = -np.inf if np.isnan(least) else least
+                out[r, c] = _eroded_at(
+                    depth, r, c, near, far, nearest, far_plane, far_buffer
+                )
     return out
 
 
