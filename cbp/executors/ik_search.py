@@ -72,6 +72,7 @@ class IkSearch:
         self._lower = robot.lower_limits + margin
         self._upper = robot.upper_limits - margin
         self.solves = 0
+        self._rng = np.random.default_rng(0)
         self._goal: pin.SE3 | None = None
         self._solution: FloatArray | None = None
         # Searches by (goal, the world's environment, the configuration searched
@@ -86,8 +87,11 @@ class IkSearch:
         """:meth:`solve`, spread over calls and remembered while the goal stays.
 
         The executors ask every command period. A search that ``budget`` cuts
-        short goes on from where it stopped at the next call, while the goal,
-        the collision world and ``q_near`` stay (otherwise it starts again). A
+        short goes on from where it stopped at the next call while the goal and
+        ``q_near`` stay (otherwise it starts again); each start is tried
+        against the world of its own call. A new map snapshot does not start
+        it again: with the cameras one comes nearly every period, and a search
+        begun anew in each would never try its later starts nor end. A
         solution is kept while the goal stays the same; a search that tried
         every start and found none is not repeated until the goal, the world
         (a new map snapshot, a moved object) or the arm's configuration (by
@@ -98,12 +102,11 @@ class IkSearch:
         self._goal = self._solution = None
         if self._failed is not None and self._same(self._failed, goal, q_near):
             return None
-        if self._pending is None or not self._same(self._pending[0], goal, q_near):
-            self._pending = (
-                (goal, self._environment(), q_near.copy()),
-                self.attempts(q_near),
-            )
-        key, starts = self._pending
+        pending = self._pending
+        if pending is None or not self._same(pending[0], goal, q_near, world=False):
+            key = (goal, None, q_near.copy())
+            pending = self._pending = (key, self.attempts(q_near))
+        starts = pending[1]
         while starts and not budget.spent():
             seed, fixed = starts.pop(0)
             q = self.attempt(goal, seed, fixed, budget)
@@ -111,20 +114,22 @@ class IkSearch:
                 self._pending = None
                 self._goal, self._solution = goal, q
                 return q
-        if not starts:  # every start tried
+        if not starts:  # every start tried; the last ones against this world
             self._pending = None
-            self._failed = key
+            self._failed = (goal, self._environment(), pending[0][2])
         return None
 
     def _environment(self) -> object:
         return None if self.world is None else self.world.environment
 
-    def _same(self, key: _SearchKey, goal: pin.SE3, q: FloatArray) -> bool:
-        """``key``'s search is this one: same goal, same world, same start."""
+    def _same(
+        self, key: _SearchKey, goal: pin.SE3, q: FloatArray, world: bool = True
+    ) -> bool:
+        """``key``'s search is this one: same goal and start (and ``world``: world)."""
         their_goal, environment, their_q = key
         return (
             goal.isApprox(their_goal, 1e-9)
-            and environment is self._environment()
+            and (not world or environment is self._environment())
             and float(np.max(np.abs(q - their_q))) < 1e-3
         )
 
@@ -148,7 +153,8 @@ class IkSearch:
 
         The nearest solution first lets every joint move; then the redundant
         joint is swept outward from its value in ``q_near``, nearest values
-        first, and held at each.
+        first, and held at each; then ``random_starts`` starts drawn within the
+        limits let every joint move (from the search's own seeded stream).
         """
         s = self.settings
         j = self.redundant
@@ -166,6 +172,8 @@ class IkSearch:
             seed = np.clip(q_near, self._lower, self._upper)
             seed[j] = value
             out.append((seed, None if i == 0 else j))
+        for _ in range(s.random_starts):
+            out.append((self._rng.uniform(self._lower, self._upper), None))
         return out
 
     def attempt(

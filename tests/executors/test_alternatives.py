@@ -360,3 +360,59 @@ def test_a_search_cut_short_goes_on_where_it_stopped(boards: Scenario) -> None:
         assert search.solves == whole.solves  # ... and tried every start once
     finally:
         run.finish()
+
+
+def test_a_search_cut_short_goes_on_in_a_new_world(boards: Scenario) -> None:
+    """A new world each call (a map snapshot each period) does not start the search again."""
+    from cbp.collision import PrimitiveEnvironment
+    from cbp.executors.clock import VirtualBudget
+    from cbp.methods.settings import VirtualCosts
+
+    run = build_run(boards, method="ik")
+    try:
+        settings = IkSearchSettings(stall_iterations=0)
+        search = IkSearch(boards.robot, run.ee_frame, run.world, settings)
+        out_of_reach = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))
+        q = boards.q0.copy()
+        starts = len(search.attempts(q))
+        calls = 0
+        while search._failed is None:
+            run.world.set_environment(PrimitiveEnvironment([]))
+            budget = VirtualBudget(0.004, VirtualCosts())
+            assert search.solution_for(out_of_reach, q, budget) is None
+            calls += 1
+            assert calls < 200  # started again in every call, it would never end
+        assert search.solves == starts * settings.max_iterations
+        # Tried out against the last world: not searched again in it ...
+        assert search.solution_for(out_of_reach, q, WallBudget(10.0)) is None
+        assert search.solves == starts * settings.max_iterations
+        # ... but in the next one.
+        run.world.set_environment(PrimitiveEnvironment([]))
+        assert search.solution_for(out_of_reach, q, WallBudget(10.0)) is None
+        assert search.solves == 2 * starts * settings.max_iterations
+    finally:
+        run.finish()
+
+
+def test_the_search_tries_random_starts_after_the_sweep(robots) -> None:
+    """After the redundant joint's sweep come seeded random starts, within the limits."""
+    robot = robots["panda"]
+    settings = IkSearchSettings()
+    search = IkSearch(robot, "panda_hand", None, settings)
+    q = robot.home()
+    starts = search.attempts(q)
+    swept = IkSearch(robot, "panda_hand", None, IkSearchSettings(random_starts=0))
+    sweep = swept.attempts(q)
+    assert len(starts) == len(sweep) + settings.random_starts
+    for (a, fixed_a), (b, fixed_b) in zip(starts, sweep, strict=False):
+        assert fixed_a == fixed_b
+        np.testing.assert_array_equal(a, b)
+    randoms = np.array([seed for seed, fixed in starts[len(sweep) :]])
+    assert all(fixed is None for _, fixed in starts[len(sweep) :])
+    margin = settings.limit_margin
+    assert np.all(randoms >= robot.lower_limits + margin)
+    assert np.all(randoms <= robot.upper_limits - margin)
+    assert np.min(np.ptp(randoms, axis=0)) > 0.5  # spread over the joint ranges
+    again = IkSearch(robot, "panda_hand", None, settings).attempts(q)
+    for (a, _), (b, _) in zip(starts, again, strict=True):
+        np.testing.assert_array_equal(a, b)  # the same stream in every run
