@@ -85,6 +85,7 @@ __all__ = [
     "SelfPairs",
     "Table",
     "compile_convex_kernels",
+    "contact_buffers",
     "declared_contacts",
     "fields",
     "obstacle_contacts",
@@ -1138,14 +1139,6 @@ def compile_convex_kernels() -> None:
     robot = (centres, halves, radii, frames, shapes)
     first = np.array([0, 1], dtype=np.intp)
     pairs = (first, first + 2, np.zeros((2, 5)), 0.1, 0.01)
-
-    def out() -> tuple[IntArray, FloatArray, IntArray]:
-        return (
-            np.empty((2, 32), dtype=np.intp),
-            np.empty((4, 32, 3)),
-            np.empty((2, 32), dtype=np.intp),
-        )
-
     for moving in (False, True):
         # The same shapes as objects, every one a candidate.
         objects = (
@@ -1160,11 +1153,30 @@ def compile_convex_kernels() -> None:
             moving,
             0.1,
         )
-        obstacle_contacts(robot, objects, *out())
+        obstacle_contacts(robot, objects, *contact_buffers(32))
         declared_contacts(
-            frames, (centres, halves, radii, shapes), objects, 0.01, pairs, *out()
+            frames,
+            (centres, halves, radii, shapes),
+            objects,
+            0.01,
+            pairs,
+            *contact_buffers(32),
         )
-    self_contacts(robot, pairs, *out())
+    self_contacts(robot, pairs, *contact_buffers(32))
+
+
+def contact_buffers(n: int) -> tuple[IntArray, FloatArray, IntArray]:
+    """Room for ``n`` contacts as the contact kernels write them.
+
+    ``index`` (2, n) and ``floats`` (4, n, 3), as
+    :meth:`~cbp.collision.contacts.ContactSet.packed` reads them, and ``left``
+    (2, n), the pairs the kernels leave to coal.
+    """
+    return (
+        np.empty((2, n), dtype=np.intp),
+        np.empty((4, n, 3)),
+        np.empty((2, n), dtype=np.intp),
+    )
 
 
 def fields(shapes: ConvexShapes) -> Table:

@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from cbp.collision.broad import shape_bounds
 from cbp.collision.cell_index import CellIndex
 from cbp.collision.contacts import ContactSet
-from cbp.collision.convex_kernels import RobotTable, self_contacts
+from cbp.collision.convex_kernels import RobotTable, contact_buffers, self_contacts
 from cbp.collision.environment import Environment, NarrowPhase
 from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
 from cbp.collision.shape_table import CellContactQuery, ShapeTable, compile_kernels
@@ -276,10 +276,7 @@ class OccupancyEnvironment(Environment):
             n = len(frames)
             centres, halves = np.empty((n, 3)), np.empty((n, 3))
             shape_bounds(frames, centres_local, halves_local, centres, halves)
-            k = len(table.first)
-            index = np.empty((2, k), dtype=np.intp)
-            floats = np.empty((4, k, 3))
-            left = np.empty((2, k), dtype=np.intp)
+            index, floats, left = contact_buffers(len(table.first))
             count, missed = self_contacts(
                 (centres, halves, radii, frames, packed),
                 table.pairs(float(self_margin), float(self_padding)),

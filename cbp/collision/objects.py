@@ -25,6 +25,7 @@ from cbp.collision.convex_kernels import (
     Obstacles,
     RobotTable,
     compile_convex_kernels,
+    contact_buffers,
     declared_contacts,
     fields,
     obstacle_contacts,
@@ -336,9 +337,7 @@ class PrimitiveEnvironment(Environment):
             return None
         candidates = self._all
         capacity = len(frames) * len(candidates) + len(table.first)
-        index = np.empty((2, capacity), dtype=np.intp)
-        floats = np.empty((4, capacity, 3))
-        left = np.empty((2, capacity), dtype=np.intp)
+        index, floats, left = contact_buffers(capacity)
         # The objects as the kernel takes them, made once per shapes and margin
         # (this environment's objects do not change).
         made = self._kernel_arguments

@@ -69,32 +69,19 @@ class LatchedContacts:
         # first control step: no contact, and arrays of the kinds a step passes.
         empty = ContactSet.empty()
         joint_jacobians = RobotState(geometry.robot).joint_jacobians()
-        contact_jacobian_rows(
-            empty.point,
-            empty.other_point,
-            empty.normal,
-            empty.shape,
-            empty.other_shape,
-            self._support,
-            joint_jacobians,
-            np.zeros((capacity, geometry.robot.nv)),
+        jacobian = np.zeros((capacity, geometry.robot.nv))
+        self._jacobian_rows(
+            empty, empty.point, empty.other_point, joint_jacobians, jacobian
         )
         # Distances as sets hold them: contiguous, or a kernel's strided column.
         # (Two rows: numpy flags a shorter strided column contiguous.)
         for distance in (empty.distance, np.zeros((2, 3))[:, 0]):
             latched_rows(
-                (
-                    distance,
-                    empty.point,
-                    empty.other_point,
-                    empty.normal,
-                    empty.shape,
-                    empty.other_shape,
-                ),
+                _latched_arrays(empty, distance),
                 self._support,
                 joint_jacobians,
                 np.zeros(capacity),
-                np.zeros((capacity, geometry.robot.nv)),
+                jacobian,
             )
 
     @property
@@ -150,7 +137,7 @@ class LatchedContacts:
             return
         c = self._contacts
         latched_rows(
-            (c.distance, c.point, c.other_point, c.normal, c.shape, c.other_shape),
+            _latched_arrays(c, c.distance),
             self._support,
             state.joint_jacobians(),
             value,
@@ -173,16 +160,27 @@ class LatchedContacts:
                 if self._at_latch(state)
                 else self._moved_points(state)
             )
-            contact_jacobian_rows(
-                point,
-                other,
-                c.normal,
-                c.shape,
-                c.other_shape,
-                self._support,
-                state.joint_jacobians(),
-                out,
-            )
+            self._jacobian_rows(c, point, other, state.joint_jacobians(), out)
+
+    def _jacobian_rows(
+        self,
+        contacts: ContactSet,
+        point: FloatArray,
+        other: FloatArray,
+        joint_jacobians: FloatArray,
+        out: FloatArray,
+    ) -> None:
+        """:func:`contact_jacobian_rows` of ``contacts``, their points at these."""
+        contact_jacobian_rows(
+            point,
+            other,
+            contacts.normal,
+            contacts.shape,
+            contacts.other_shape,
+            self._support,
+            joint_jacobians,
+            out,
+        )
 
     def bounds(self, safety_distance: float) -> tuple[FloatArray, FloatArray]:
         """Active rows: [safety_distance, inf); inactive rows: (-inf, inf).
@@ -221,6 +219,14 @@ class LatchedContacts:
             _in_frames(oMf, frames, c.shape, point),
             _in_frames(oMf, frames, c.other_shape, other),
         )
+
+
+def _latched_arrays(
+    contacts: ContactSet, distance: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, IntArray, IntArray]:
+    """``contacts`` as :func:`latched_rows` takes them, with these distances."""
+    c = contacts
+    return (distance, c.point, c.other_point, c.normal, c.shape, c.other_shape)
 
 
 def _in_frames(

@@ -33,7 +33,33 @@ FLOOR_HOLD = 2.0
 MISS_REPORT = 1.0
 
 
-class PeriodAdapter:
+class _Scaled:
+    """A duration kept within [``shortest``, ``longest``], scaled by a factor.
+
+    Args:
+        shortest: the shortest duration [s].
+        longest: the longest duration [s].
+        growth: the factor it grows by (>= 1).
+        shrink: the factor it shrinks by (<= 1).
+    """
+
+    def __init__(
+        self, shortest: float, longest: float, growth: float, shrink: float
+    ) -> None:
+        """Keep the bounds and factors."""
+        self.shortest, self.longest = shortest, longest
+        self.growth, self.shrink = growth, shrink
+
+    def _grown(self, value: float) -> float:
+        """``value`` grown once, at most :attr:`longest` [s]."""
+        return min(value * self.growth, self.longest)
+
+    def _shrunk(self, value: float, floor: float) -> float:
+        """``value`` shrunk once, at least ``floor`` [s]."""
+        return max(value * self.shrink, floor)
+
+
+class PeriodAdapter(_Scaled):
     """The next command period from how the last one went.
 
     Args:
@@ -47,8 +73,7 @@ class PeriodAdapter:
         self, shortest: float, longest: float, growth: float, shrink: float
     ) -> None:
         """No miss yet: the floor is the shortest period."""
-        self.shortest, self.longest = shortest, longest
-        self.growth, self.shrink = growth, shrink
+        super().__init__(shortest, longest, growth, shrink)
         self._floor = shortest
         self._floor_until = -1.0
 
@@ -62,16 +87,16 @@ class PeriodAdapter:
         if t >= self._floor_until:
             self._floor = self.shortest
         if missed:
-            grown = min(period * self.growth, self.longest)
+            grown = self._grown(period)
             self._floor = max(self._floor, grown)
             self._floor_until = t + FLOOR_HOLD
             return grown
         if compute < 0.5 * period:
-            return max(period * self.shrink, self._floor)
+            return self._shrunk(period, self._floor)
         return period
 
 
-class LeadAdapter:
+class LeadAdapter(_Scaled):
     """How long before its first command a goal that arrives mid-period is planned.
 
     A live loop plans for such a goal within a lead and commands it at the
@@ -92,17 +117,16 @@ class LeadAdapter:
         self, shortest: float, longest: float, growth: float, shrink: float
     ) -> None:
         """Start at the shortest lead."""
-        self.shortest, self.longest = shortest, longest
-        self.growth, self.shrink = growth, shrink
+        super().__init__(shortest, longest, growth, shrink)
         #: The lead now [s].
         self.lead = shortest
 
     def planned(self, in_time: bool) -> None:
         """A plan for a goal that arrived mid-period was made in time or not."""
         if in_time:
-            self.lead = max(self.lead * self.shrink, self.shortest)
+            self.lead = self._shrunk(self.lead, self.shortest)
         else:
-            self.lead = min(self.lead * self.growth, self.longest)
+            self.lead = self._grown(self.lead)
 
 
 class DeadlineMisses:

@@ -99,14 +99,17 @@ class RobotShapes(NamedTuple):
 
 
 class FrameArrays(NamedTuple):
-    """One depth frame as :func:`insert_readings` reads it.
+    """One depth frame as :func:`insert_readings` and :func:`mark_seen` read it.
 
     The depth buffer (H, W) and ``unproject``, the inverse of projection times
     view (4, 4), as :meth:`~cbp.perception.frame.DepthFrame.points` uses it;
-    depth buffer values ``nearest`` (the minimum range), ``far_plane`` (from
-    there on: nothing seen) and ``far_buffer`` (the largest valid); the
-    optical centre ``camera`` [m]; ``max_range`` [m], beyond which readings
-    are dropped; and ``spread``, how far the camera's noise spreads a reading:
+    ``clip``, the first, second and fourth rows of projection times view (3,
+    4): world to clip x, y and w; ``axis``, the third row of the view (4,):
+    -depth along the optical axis; depth buffer values ``nearest`` (the
+    minimum range), ``far_plane`` (from there on: nothing seen) and
+    ``far_buffer`` (the largest valid); the optical centre ``camera`` [m];
+    ``max_range`` [m], beyond which readings are dropped (and cells not seen
+    through); and ``spread``, how far the camera's noise spreads a reading:
     the projection's near and far planes [m] and c0, c2, z0 [m], c0 + c2 (z -
     z0)^2 along the axis at depth z (so many sigmas of the noise; c0 and c2 0:
     no noise).
@@ -114,6 +117,8 @@ class FrameArrays(NamedTuple):
 
     depth: FloatArray
     unproject: FloatArray
+    clip: FloatArray
+    axis: FloatArray
     nearest: float
     far_plane: float
     far_buffer: float
@@ -162,15 +167,10 @@ in (:class:`KeptPixels`)."""
 def mark_seen(
     grid: GridArrays,
     box: IntArray,
-    clip: FloatArray,
-    axis: FloatArray,
-    centre: FloatArray,
     ranges: FloatArray,
     near: float,
-    max_range: float,
     misses_to_clear: int,
     windows: IntArray,
-    unproject: FloatArray,
     since: int,
     tiles: np.ndarray,
     frame: FrameArrays,
@@ -189,22 +189,16 @@ def mark_seen(
     Args:
         grid: the grid's arrays; cells, misses and dirty bricks updated in place.
         box: index range [i0, i1, j0, j1, k0, k1) to visit (the frustum's box).
-        clip: the first, second and fourth rows of P V (3, 4): world to clip x,
-            y and w.
-        axis: the third row of V (4,): -depth along the optical axis.
-        centre: the optical centre [m].
         ranges: measured depth along the axis per pixel (H, W): inf sees to
-            ``max_range``, -inf (or NaN) says nothing.
+            ``frame.max_range``, -inf (or NaN) says nothing.
         near: cells nearer than this are not marked (the frame's closest
             possible reading) [m].
-        max_range: cells farther from the camera are not marked [m].
         misses_to_clear: misses that clear an occupied cell.
         windows: the parts of the image to mark through, (n, 4) pixel ranges
             [c0, c1) x [r0, r1) that do not overlap: only the cells whose
             centre falls in one are visited (each window's own frustum, to
             the far plane, within ``box``). One window of the whole image: the
             frame as a whole.
-        unproject: the inverse of P V (4, 4) (the windows' frusta).
         since: also the cells of the bricks stamped at or after this frame
             (``grid.stamp``) whose centre falls outside the windows, with
             their range eroded from ``frame.depth`` as :func:`eroded_ranges`
@@ -213,31 +207,29 @@ def mark_seen(
         tiles: which tiles of the image the windows cover ((H / tile, W /
             tile), the tile's size from their shapes): the bricks' cells
             there are the windows'.
-        frame: the frame (its depth buffer and limits, for those ranges).
+        frame: the frame: its view (``clip``, ``axis``, ``unproject`` for the
+            windows' frusta), its optical centre, ``max_range`` (cells
+            farther from the camera are not marked), and its depth buffer and
+            limits, for those ranges.
     """
     changed = 0
     h, w = ranges.shape
     span = _open_spans(grid.clear, grid.dirty, grid.brick, grid.cells.shape[2])
     if since >= 0:
-        changed += _mark_bricks(
-            grid, box, clip, axis, ranges.shape, near, max_range, misses_to_clear,
-            since, tiles, frame,
-        )  # fmt: skip
+        changed += _mark_bricks(grid, box, near, misses_to_clear, since, tiles, frame)
     for n in range(windows.shape[0]):
         c0, c1, r0, r1 = windows[n, 0], windows[n, 1], windows[n, 2], windows[n, 3]
         if c0 == 0 and r0 == 0 and c1 == w and r1 == h:
             changed += _mark_window(
-                grid, box, clip, axis, centre, ranges, near, max_range,
-                misses_to_clear, windows[n], span, np.inf,
+                grid, box, ranges, near, misses_to_clear, windows[n], span, np.inf,
+                frame,
             )  # fmt: skip
             continue
-        part, deepest = _window_box(
-            windows[n], unproject, centre, axis, ranges, grid, box
-        )
+        part, deepest = _window_box(windows[n], ranges, grid, box, frame)
         if part[0] < part[1] and part[2] < part[3] and part[4] < part[5]:
             changed += _mark_window(
-                grid, part, clip, axis, centre, ranges, near, max_range,
-                misses_to_clear, windows[n], span, deepest,
+                grid, part, ranges, near, misses_to_clear, windows[n], span, deepest,
+                frame,
             )  # fmt: skip
     return changed
 
@@ -264,12 +256,10 @@ def _window_ndc(window: IntArray, h: int, w: int) -> tuple[float, float, float, 
 @numba.njit(cache=True, nogil=True)
 def _window_box(
     window: IntArray,
-    unproject: FloatArray,
-    centre: FloatArray,
-    axis: FloatArray,
     ranges: FloatArray,
     grid: GridArrays,
     box: IntArray,
+    frame: FrameArrays,
 ) -> tuple[IntArray, float]:
     """The cells' index range of a window's frustum, within ``box``; its depth.
 
@@ -277,6 +267,7 @@ def _window_box(
     beyond can be seen through), returned too; empty when the window says
     nothing.
     """
+    unproject, centre, axis = frame.unproject, frame.camera, frame.axis
     h, w = ranges.shape
     out = np.zeros(6, dtype=np.int64)
     deepest = -np.inf
@@ -314,16 +305,13 @@ def _window_box(
 def _mark_window(
     grid: GridArrays,
     box: IntArray,
-    clip: FloatArray,
-    axis: FloatArray,
-    centre: FloatArray,
     ranges: FloatArray,
     near: float,
-    max_range: float,
     misses_to_clear: int,
     window: IntArray,
     span: IntArray,
     deepest: float,
+    frame: FrameArrays,
 ) -> int:
     """:func:`mark_seen` over one window's cells (``box``: their index range).
 
@@ -334,6 +322,8 @@ def _mark_window(
     become free while marking: the spans stay true).
     """
     lower, cell, brick = grid.lower, grid.cell, grid.brick
+    clip, axis = frame.clip, frame.axis
+    centre, max_range = frame.camera, frame.max_range
     h, w = ranges.shape
     _, ny, nz = grid.cells.shape
     flat = grid.cells.reshape(-1)
@@ -486,11 +476,7 @@ def _see_cell(grid: GridArrays, c: int, i: int, j: int, k: int, to_clear: int) -
 def _mark_bricks(
     grid: GridArrays,
     box: IntArray,
-    clip: FloatArray,
-    axis: FloatArray,
-    shape: tuple[int, int],
     near: float,
-    max_range: float,
     misses_to_clear: int,
     since: int,
     tiles: np.ndarray,
@@ -501,12 +487,13 @@ def _mark_bricks(
     Those whose centre falls in a tile of ``tiles`` are left to the windows.
     """
     lower, cell, brick, stamp = grid.lower, grid.cell, grid.brick, grid.stamp
-    h, w = shape
+    clip, axis = frame.clip, frame.axis
+    centre, max_range = frame.camera, frame.max_range
+    depth, spread = frame.depth, frame.spread
+    h, w = depth.shape
     tile = -(-h // tiles.shape[0])
     _, ny, nz = grid.cells.shape
     flat = grid.cells.reshape(-1)
-    depth, spread = frame.depth, frame.spread
-    centre = frame.camera
     limit2 = (max_range - cell) * (max_range - cell)
     changed = 0
     bx, by, bz = stamp.shape

@@ -390,9 +390,12 @@ class OccupancyGrid:
         nearest, far_plane, far_buffer = limits
         if self._entered.size < depth.size:  # one entry a pixel at most
             self._entered = np.empty(depth.size, np.int64)
+        clip = frame.projection.dot(frame.view)[[0, 1, 3]]
         readings = FrameArrays(
             depth,
             frame.unprojection,
+            np.ascontiguousarray(clip),
+            np.ascontiguousarray(frame.view[2]),
             nearest,
             far_plane,
             far_buffer,
@@ -609,21 +612,14 @@ class OccupancyGrid:
         box = self._frustum_box(frame)
         if box is None:
             return 0
-        PV = frame.projection.dot(frame.view)
-        clip = np.ascontiguousarray(PV[[0, 1, 3]])
         return int(
             mark_seen(
                 self.arrays,
                 box,
-                clip,
-                np.ascontiguousarray(frame.view[2]),
-                np.ascontiguousarray(frame.position),
                 ranges,
                 frame.closest,
-                self.spec.max_range,
                 self.spec.misses_to_clear,
                 windows,
-                np.ascontiguousarray(frame.unprojection),
                 since,
                 tiles,
                 readings,
