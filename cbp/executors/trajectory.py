@@ -307,8 +307,20 @@ def run_trajectory_executor(
                 note = f"{note}; compiled kernels ({compute * 1e3:.0f} ms)".lstrip("; ")
             missed = (compute > period or timed_out) and not failed and not startup
             spliced = False
-            if missed:
-                why = note if timed_out else "result discarded"
+            if missed and new is not None and not timed_out and i is None:
+                # Late, but the robot holds at rest where the plan starts, and
+                # nothing else was commanded meanwhile: the plan is as good when
+                # it is ready, and is commanded from then (a look, a plan over
+                # the wall: seconds of work a discard would throw away).
+                ready = t + compute
+                late = new.delayed(max(0.0, ready - new.start_time))
+                misses.missed(t, compute, period, f"used from rest at {ready:.2f} s")
+                sim.follow(sim.trajectory.splice(late))
+                if commanded is not None:
+                    commanded(float(late.times[0]))
+                spliced = True
+            elif missed:
+                why = "result discarded" if new is not None and not timed_out else note
                 misses.missed(t, compute, period, why)
             elif new is not None:
                 misses.met(t)

@@ -121,6 +121,16 @@ class JointTrajectory:
             self.accelerations[i:],
         )
 
+    def delayed(self, dt: float) -> JointTrajectory:
+        """The same motion ``dt`` later (>= 0): held at the first point until then."""
+        if dt < 0:
+            raise ValueError(f"a trajectory is delayed by dt >= 0, got {dt}")
+        if dt == 0:
+            return self
+        return JointTrajectory(
+            self.times + dt, self.positions, self.velocities, self.accelerations
+        )
+
     def splice(self, new: JointTrajectory, tolerance: float = 1e-9) -> JointTrajectory:
         """This trajectory up to ``new``'s first point, then ``new``.
 

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
+import numpy as np
 import pytest
 
 from cbp.executors.periods import (
@@ -10,6 +14,12 @@ from cbp.executors.periods import (
     LeadAdapter,
     PeriodAdapter,
 )
+from cbp.executors.trajectory import Plan, run_trajectory_executor
+from cbp.run import build_run
+from cbp.scenario import load_scenario
+from cbp.sim.trajectory import time_parameterize
+
+BOARDS = Path(__file__).resolve().parents[2] / "scenarios" / "cat_boards.yaml"
 
 
 def _misses(adapter: PeriodAdapter, seconds: float) -> int:
@@ -98,3 +108,71 @@ def test_the_lead_grows_after_a_late_plan_and_shrinks_back_within_its_bounds() -
     for _ in range(50):
         leads.planned(in_time=True)
     assert leads.lead == 0.006
+
+
+class _SlowPlanner:
+    """Plans a small move of the first joint once, with 2.5 periods of work."""
+
+    def __init__(self, at: float, period: float) -> None:
+        """Plan at the first period from ``at`` on."""
+        self.at, self.period, self.calls = at, period, []
+
+    def plan(self, q: Any, goal: Any, budget: Any, run: Any) -> Plan:
+        """The move once (late); no motion otherwise."""
+        if self.calls or run.sim.t < self.at - 1e-9:
+            return Plan(None, 0, "holding")
+        self.calls.append(run.sim.t)
+        budget.charge("ik_iteration", int(2.5 * self.period / 26e-6))
+        path = np.vstack([q, q + np.eye(q.size)[0] * 0.05])
+        return Plan(path, 1, "moved")
+
+    def close(self) -> None:
+        """Nothing held."""
+
+
+@pytest.mark.parametrize("moving", [False, True])
+def test_a_late_plan_from_rest_is_commanded_when_ready_not_discarded(moving) -> None:
+    """At rest where it starts, a late plan moves the robot from when it was ready.
+
+    A late plan made while the robot still moves is discarded, as before.
+    """
+    scenario = load_scenario(
+        BOARDS,
+        overrides={
+            "method.name": "ik",
+            "duration": "1.0",
+            "method.ik.timing.clock": "virtual",
+            "method.ik.timing.period": "0.1",
+        },
+    )
+    timing = scenario.spec.method.timing("ik")
+    parts = build_run(scenario, method="ik", clock="virtual")
+    if moving:  # a slow motion under way when the late plan is made
+        q0 = parts.sim.q.copy()
+        path = np.vstack([q0, q0 + np.eye(q0.size)[6] * 0.4])  # the wrist turns
+        parts.sim.follow(
+            time_parameterize(
+                path,
+                0.0,
+                np.zeros(q0.size),
+                np.zeros(q0.size),
+                0.2 * parts.robot.velocity_limits,
+                0.2 * parts.robot.acceleration_limits,
+            )
+        )
+    planner = _SlowPlanner(0.3, timing.period)
+    starts: list[float] = []
+    trace = run_trajectory_executor(parts, planner, timing, commanded=starts.append)
+    events = "\n".join(message for _, message in trace.events)
+    assert planner.calls == [pytest.approx(0.3)], events
+    assert "deadline missed" in events
+    moved = np.abs(trace.q_cmd[:, 0] - trace.q_cmd[0, 0]) > 1e-6
+    if moving:
+        assert "result discarded" in events
+        assert starts == []
+        assert not moved.any()
+        return
+    assert "used from rest at 0.55 s" in events
+    assert starts == [pytest.approx(0.3 + 2.5 * timing.period, abs=1e-4)]
+    assert not moved[trace.t < starts[0] - 1e-9].any()  # held until it was ready
+    assert moved[-1]
