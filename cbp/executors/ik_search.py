@@ -13,8 +13,10 @@ close to it, so small goal changes give small joint changes.
 from __future__ import annotations
 
 import itertools
+import math
 from typing import TYPE_CHECKING
 
+import numba
 import numpy as np
 import pinocchio as pin
 
@@ -231,34 +233,114 @@ class IkSearch:
         self, goal: pin.SE3, q: FloatArray, fixed: int | None, budget: Budget
     ) -> FloatArray | None:
         s = self.settings
-        model, data = self.robot.model, self._data
-        q = q.copy()
-        damping = 1e-6
+        model, data, frame = self.robot.model, self._data, self.frame_id
+        lower, upper = self._lower, self._upper
+        # Joints whose configuration is their angle (revolute, prismatic): the
+        # step is added and clipped in the compiled pass; else pinocchio
+        # integrates it.
+        vector = model.nq == model.nv
+        q, step = q.copy(), np.empty(model.nv)
+        held = -1 if fixed is None else fixed
         stall = s.stall_iterations
         errors = np.empty(s.max_iterations)  # position + rotation error norms
         for k in range(s.max_iterations):
             self.solves += 1
             budget.charge("ik_iteration")
             pin.framesForwardKinematics(model, data, q)
-            M = data.oMf[self.frame_id]
-            error = goal.actInv(M)
+            error = goal.actInv(data.oMf[frame])
             err = pin.log6(error).vector
-            position, rotation = np.linalg.norm(err[:3]), np.linalg.norm(err[3:])
+            position = math.hypot(err[0], err[1], err[2])
+            rotation = math.hypot(err[3], err[4], err[5])
             if position < s.position_tolerance and rotation < s.rotation_tolerance:
                 return q
             errors[k] = position + rotation
             if stall and k >= stall and errors[k] > 0.999 * errors[k - stall]:
                 return None  # stalled (a joint limit, a singularity)
-            J = pin.computeFrameJacobian(model, data, q, self.frame_id, pin.LOCAL)
-            J = pin.Jlog6(error).dot(J)
-            if fixed is not None:
-                J[:, fixed] = 0.0
-            JJt = J.dot(J.T)
-            JJt[np.diag_indices(6)] += damping
-            dq = -J.T.dot(np.linalg.solve(JJt, err))
-            q = np.clip(pin.integrate(model, q, dq), self._lower, self._upper)
+            J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL)
+            _dls_step(
+                err, J, pin.Jlog6(error), held, DAMPING, q, lower, upper, vector, step
+            )
+            if vector:
+                q, step = step, q
+            else:
+                q = np.clip(pin.integrate(model, q, step), lower, upper)
         return None
 
+
+#: Damping of the least-squares steps (added to J J^T's diagonal).
+DAMPING = 1e-6
+
+
+@numba.njit(cache=True, nogil=True)
+def _dls_step(
+    err: FloatArray,
+    J: FloatArray,
+    Jlog: FloatArray,
+    held: int,
+    damping: float,
+    q: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    vector: bool,
+    out: FloatArray,
+) -> None:  # pragma: no cover - compiled
+    """One damped least-squares step on the pose error ``err`` (log6), into ``out``.
+
+    The step is -Jt^T (Jt Jt^T + damping I)^-1 err with Jt = ``Jlog`` ``J``
+    (the frame's local Jacobian through the log's), joint ``held`` (>= 0)
+    kept still; J Jt^T is solved by its Cholesky factors. ``vector``: ``out``
+    is ``q`` plus the step, within the limits; else the step alone.
+    """
+    n = J.shape[1]
+    Jt = np.zeros((6, n))
+    for i in range(6):
+        for k in range(6):
+            a = Jlog[i, k]
+            if a != 0.0:
+                for j in range(n):
+                    Jt[i, j] += a * J[k, j]
+    if held >= 0:
+        for i in range(6):
+            Jt[i, held] = 0.0
+    L = np.zeros((6, 6))
+    for i in range(6):
+        for k in range(i + 1):
+            s = damping if i == k else 0.0
+            for j in range(n):
+                s += Jt[i, j] * Jt[k, j]
+            for j in range(k):
+                s -= L[i, j] * L[k, j]
+            L[i, k] = math.sqrt(s) if i == k else s / L[k, k]
+    x = np.empty(6)
+    for i in range(6):  # L y = err
+        s = err[i]
+        for j in range(i):
+            s -= L[i, j] * x[j]
+        x[i] = s / L[i, i]
+    for i in range(5, -1, -1):  # L^T x = y
+        s = x[i]
+        for j in range(i + 1, 6):
+            s -= L[j, i] * x[j]
+        x[i] = s / L[i, i]
+    for j in range(n):
+        s = 0.0
+        for i in range(6):
+            s -= Jt[i, j] * x[i]
+        out[j] = min(max(q[j] + s, lower[j]), upper[j]) if vector else s
+
+
+_dls_step(  # compiled (or loaded from numba's cache) on import
+    np.zeros(6),
+    np.eye(6, 1),
+    np.eye(6),
+    -1,
+    DAMPING,
+    np.zeros(1),
+    -np.ones(1),
+    np.ones(1),
+    True,
+    np.zeros(1),
+)
 
 #: A goal the search has not solved for this long [s] is reported even when
 #: every search was cut short by the period's budget.

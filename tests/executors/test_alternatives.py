@@ -416,3 +416,34 @@ def test_the_search_tries_random_starts_after_the_sweep(robots) -> None:
     again = IkSearch(robot, "panda_hand", None, settings).attempts(q)
     for (a, _), (b, _) in zip(starts, again, strict=True):
         np.testing.assert_array_equal(a, b)  # the same stream in every run
+
+
+def test_the_compiled_least_squares_step_agrees_with_numpy(robots) -> None:
+    """The search's step equals -J^T (J J^T + d I)^-1 e, clipped, with a joint held or not."""
+    from cbp.executors.ik_search import DAMPING, _dls_step
+
+    robot = robots["panda"]
+    model, data = robot.model, robot.model.createData()
+    frame = robot.frame_id("panda_hand")
+    rng = np.random.default_rng(3)
+    lower, upper = robot.lower_limits, robot.upper_limits
+    out = np.empty(model.nv)
+    for k in range(50):
+        q = rng.uniform(lower, upper)
+        goal = pin.SE3.Random()
+        pin.framesForwardKinematics(model, data, q)
+        error = goal.actInv(data.oMf[frame])
+        err = pin.log6(error).vector
+        J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL)
+        held = -1 if k % 2 else k % model.nv
+        _dls_step(err, J, pin.Jlog6(error), held, DAMPING, q, lower, upper, True, out)
+        Jt = pin.Jlog6(error).dot(J)
+        if held >= 0:
+            Jt[:, held] = 0.0
+        step = -Jt.T.dot(np.linalg.solve(Jt.dot(Jt.T) + DAMPING * np.eye(6), err))
+        expected = np.clip(q + step, lower, upper)
+        np.testing.assert_allclose(
+            out, expected, rtol=0, atol=1e-9 * (1 + np.abs(step).max())
+        )
+        if held >= 0:
+            assert out[held] == q[held]
