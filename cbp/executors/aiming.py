@@ -10,11 +10,14 @@ configuration from being free (:func:`unseen_held`).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
 from cbp.collision.world import CollisionWorld
 from cbp.executors.clock import Budget
+from cbp.executors.ik_search import dls_step
 from cbp.perception.kernels import FREE, UNKNOWN
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray, RobotModel
@@ -25,6 +28,8 @@ __all__ = ["clear_line", "looking_at", "solve_camera", "unseen_held"]
 #: The solve's iterations, and how near the pose it must come [m], [rad].
 AIM_ITERATIONS = 100
 AIM_POSITION, AIM_ANGLE = 0.01, 0.05
+#: The solve's damping (added to J J^T's diagonal).
+AIM_DAMPING = 1e-4
 
 
 def solve_camera(
@@ -44,22 +49,26 @@ def solve_camera(
     data = model.createData()
     goal = pose * offset.inverse()
     lower, upper = robot.lower_limits, robot.upper_limits
-    q = q.copy()
+    vector = model.nq == model.nv
+    q, step = q.copy(), np.empty(model.nv)
     for _ in range(AIM_ITERATIONS):
         budget.charge("ik_iteration")
         pin.framesForwardKinematics(model, data, q)
         error = goal.actInv(data.oMf[frame])
         err = pin.log6(error).vector
         if (
-            np.linalg.norm(err[:3]) < AIM_POSITION
-            and np.linalg.norm(err[3:]) < AIM_ANGLE
+            math.hypot(err[0], err[1], err[2]) < AIM_POSITION
+            and math.hypot(err[3], err[4], err[5]) < AIM_ANGLE
         ):
             return q
-        J = pin.Jlog6(error) @ pin.computeFrameJacobian(
-            model, data, q, frame, pin.LOCAL
+        J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL)
+        dls_step(
+            err, J, pin.Jlog6(error), -1, AIM_DAMPING, q, lower, upper, vector, step
         )
-        dq = -J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(6), err)
-        q = np.clip(pin.integrate(model, q, dq), lower, upper)
+        if vector:
+            q, step = step, q
+        else:
+            q = np.clip(pin.integrate(model, q, step), lower, upper)
     return None
 
 

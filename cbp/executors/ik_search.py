@@ -28,7 +28,7 @@ from cbp.robot import FloatArray, RobotModel
 if TYPE_CHECKING:
     from cbp.run.parts import RunParts
 
-__all__ = ["IkSearch", "SearchEvents", "check_work"]
+__all__ = ["IkSearch", "SearchEvents", "check_work", "dls_step"]
 
 #: One start of a search: (seed, the joint held fixed or None).
 _Start = tuple[FloatArray, int | None]
@@ -257,7 +257,7 @@ class IkSearch:
             if stall and k >= stall and errors[k] > 0.999 * errors[k - stall]:
                 return None  # stalled (a joint limit, a singularity)
             J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL)
-            _dls_step(
+            dls_step(
                 err, J, pin.Jlog6(error), held, DAMPING, q, lower, upper, vector, step
             )
             if vector:
@@ -272,7 +272,7 @@ DAMPING = 1e-6
 
 
 @numba.njit(cache=True, nogil=True)
-def _dls_step(
+def dls_step(
     err: FloatArray,
     J: FloatArray,
     Jlog: FloatArray,
@@ -329,7 +329,7 @@ def _dls_step(
         out[j] = min(max(q[j] + s, lower[j]), upper[j]) if vector else s
 
 
-_dls_step(  # compiled (or loaded from numba's cache) on import
+dls_step(  # compiled (or loaded from numba's cache) on import
     np.zeros(6),
     np.eye(6, 1),
     np.eye(6),

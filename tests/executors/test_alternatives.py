@@ -420,7 +420,7 @@ def test_the_search_tries_random_starts_after_the_sweep(robots) -> None:
 
 def test_the_compiled_least_squares_step_agrees_with_numpy(robots) -> None:
     """The search's step equals -J^T (J J^T + d I)^-1 e, clipped, with a joint held or not."""
-    from cbp.executors.ik_search import DAMPING, _dls_step
+    from cbp.executors.ik_search import DAMPING, dls_step
 
     robot = robots["panda"]
     model, data = robot.model, robot.model.createData()
@@ -436,7 +436,7 @@ def test_the_compiled_least_squares_step_agrees_with_numpy(robots) -> None:
         err = pin.log6(error).vector
         J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL)
         held = -1 if k % 2 else k % model.nv
-        _dls_step(err, J, pin.Jlog6(error), held, DAMPING, q, lower, upper, True, out)
+        dls_step(err, J, pin.Jlog6(error), held, DAMPING, q, lower, upper, True, out)
         Jt = pin.Jlog6(error).dot(J)
         if held >= 0:
             Jt[:, held] = 0.0
