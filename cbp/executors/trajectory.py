@@ -216,8 +216,10 @@ def run_trajectory_executor(
         stop_requested: asked at each period's start; True ends the run
             there (an operator's stop).
         commanded: called with the start time of each trajectory spliced in.
-        reached: called with each period's end once the robot's motion is
-            simulated up to it (paced: the robot's state now).
+        reached: called with the time up to which the robot's motion is
+            simulated: each period's end, and paced, every
+            :data:`SHOW_STEP` while the loop waits (the robot's state now,
+            for a page that draws it).
     """
     robot = run.robot
     vmax = robot.velocity_limits * timing.velocity_scale
@@ -347,6 +349,7 @@ def run_trajectory_executor(
                     answer=not (
                         failed or hold is not None or backing is not None or plan.stop
                     ),
+                    shown=reached,
                 )
                 steps += answer.steps
                 note = answer.note if answer.note is not None else note
@@ -386,6 +389,10 @@ COMMAND_LEAD = 0.4
 #: ... when at least this share of the shortest period is left before the
 #: period's end (else it waits for the next period, which starts by then).
 REPLAN_SHARE = 0.2
+#: While a live loop waits out its period, the robot's motion is simulated up
+#: to now and shown (``reached``) this often [s]: a page sees the arm move
+#: within this, not only at the period's end.
+SHOW_STEP = 0.005
 
 
 class Waiting(NamedTuple):
@@ -435,15 +442,18 @@ def _wait_out(
     commanded: Callable[[float], None] | None,
     look_ahead: float,
     answer: bool,
+    shown: Callable[[float], None] | None = None,
 ) -> WaitAnswer:
     """A live period after its plan: simulate, wait out, answer new goals.
 
     The robot's motion is simulated at most a lead (:data:`COMMAND_LEAD`)
-    ahead of now before the wait, the rest after it, so a goal that arrives
-    during the wait can be commanded a lead after it
-    (:func:`_command_while_waiting`; only when ``answer``: not while the
-    robot holds, brakes or backs out). A failure to plan brakes the robot; a
-    failure to simulate is a fault of the period, as in an unpaced run.
+    ahead of now before the wait, up to now during it (every
+    :data:`SHOW_STEP`, each time told to ``shown``), the rest after it, so a
+    goal that arrives during the
+    wait can be commanded a lead after it (:func:`_command_while_waiting`;
+    only when ``answer``: not while the robot holds, brakes or backs out). A
+    failure to plan brakes the robot; a failure to simulate is a fault of the
+    period, as in an unpaced run.
     """
     t, t_f, period = waiting.t, waiting.t_f, waiting.period
     faults = run.faults
@@ -458,13 +468,14 @@ def _wait_out(
         note = faults.fault(t, "simulation", exc)
         pacer.wait_until(t_f, wakeable=False)
         return WaitAnswer(0, note, False, failed=True)
+    wait = _Showing(pacer, run, waiting, look_ahead, shown)
     result = WaitAnswer(0, None, False)
     if not answer:
-        pacer.wait_until(t_f, wakeable=False)
+        wait.until(t_f, wakeable=False)
     else:
         try:
             result = _command_while_waiting(
-                pacer, waiting, planner, run, timing, *limits, commanded
+                wait, waiting, planner, run, timing, *limits, commanded
             )
         except Exception as exc:  # as a failing period: hold the robot
             note = faults.fault(t, "planning", exc)
@@ -479,8 +490,62 @@ def _wait_out(
     return result
 
 
+class _Showing:
+    """A live loop's wait that simulates the robot up to now as it goes.
+
+    Each :data:`SHOW_STEP` of the wait the robot's motion is simulated up to
+    now, once now is past the lead simulated before the wait, and ``shown``
+    is told: a page shows the robot's state once the wall clock has reached
+    it, so it is not simulated ahead here. A failure to simulate ends that:
+    the period's last step simulates the rest and reports it.
+    """
+
+    def __init__(
+        self,
+        pacer: Pacer,
+        run: RunParts,
+        waiting: Waiting,
+        look_ahead: float,
+        shown: Callable[[float], None] | None,
+    ) -> None:
+        """The loop's pacer and parts; ``waiting``: the period waited out."""
+        self.pacer, self.run, self.waiting = pacer, run, waiting
+        self.look_ahead, self.shown = look_ahead, shown
+        self._failed = False
+
+    def left(self, t: float) -> float:
+        """How long until the loop's time ``t`` is now [s]."""
+        return self.pacer.left(t)
+
+    def until(self, t_f: float, wakeable: bool = True) -> None:
+        """Wait until ``t_f`` (or a wake, when ``wakeable``), showing the robot."""
+        pacer, waiting = self.pacer, self.waiting
+        while True:
+            left = pacer.left(t_f)
+            if left <= 0:
+                return
+            step = t_f if self.shown is None or self._failed else None
+            if step is None:
+                step = min(t_f, t_f - left + SHOW_STEP)
+            pacer.wait_until(step, wakeable)
+            if wakeable and pacer.left(step) > 1e-9:
+                return  # woken: a new goal
+            if step >= t_f or self.shown is None or self._failed:
+                continue
+            sim = self.run.sim
+            now = min(t_f, t_f - pacer.left(t_f))
+            if now <= sim.t:
+                continue  # still within the lead simulated before the wait
+            try:
+                self.run.advance(now, self.look_ahead, reaction=2.0 * waiting.period)
+            except Exception:
+                self._failed = True  # the period's end simulates it, and says so
+                continue
+            self.shown(sim.t)
+
+
 def _command_while_waiting(
-    pacer: Pacer,
+    pacer: _Showing,
     waiting: Waiting,
     planner: Planner,
     run: RunParts,
@@ -517,11 +582,11 @@ def _command_while_waiting(
     fresh = waiting.pending
     while True:
         if not fresh:
-            pacer.wait_until(t_f)
+            pacer.until(t_f)
             fresh = run.goal.changed()
         left = pacer.left(t_f)
         if left > 0 and (not fresh or left < REPLAN_SHARE * waiting.shortest):
-            pacer.wait_until(t_f, wakeable=False)
+            pacer.until(t_f, wakeable=False)
             left = 0.0
         if left <= 0:
             if late:

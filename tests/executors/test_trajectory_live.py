@@ -222,3 +222,28 @@ def test_a_goal_taken_while_the_period_is_planned_is_commanded_a_lead_later() ->
     )
     t_c = 10 * PERIOD + COMMAND_LEAD * PERIOD
     assert any(abs(start - t_c) < 1e-9 for _, start in starts), starts
+
+
+def test_a_paced_loop_shows_the_robot_while_it_waits_never_past_a_lead() -> None:
+    """``reached`` is told every SHOW_STEP of the wait, a lead ahead of now at most."""
+    from cbp.executors.trajectory import SHOW_STEP
+
+    session = _fixed_period_session()
+    pacer = VirtualPacer(session.goal.arrived, [(0.1, lambda: session.jog("x", 0.02))])
+    shown: list[tuple[float, float]] = []
+    run_trajectory_executor(
+        session.parts,
+        session.planner,
+        session.timing,
+        pacer=pacer,
+        reached=lambda t: shown.append((pacer.now, t)),
+    )
+    times = np.array([t for _, t in shown])
+    assert np.all(np.diff(times) > -1e-12)  # the robot's time only goes on
+    lead = COMMAND_LEAD * PERIOD
+    assert all(t <= now + lead + 1e-9 for now, t in shown)
+    periods = len(session.parts.log.periods)
+    # Each period: its end, and the wait's steps before it.
+    assert len(shown) >= periods * (PERIOD / SHOW_STEP - 2)
+    gaps = np.diff(times)
+    assert np.max(gaps) <= SHOW_STEP + lead + 1e-9
