@@ -404,7 +404,9 @@ def _frames(placements: list[pin.SE3]) -> FloatArray:
 
 #: Tables by shapes and reach, oldest first, with the shapes they were built for.
 _TABLES: dict[tuple[tuple[int, ...], float], tuple[list[LinkShape], ShapeTable]] = {}
-_TABLE_CACHE = 8
+#: Enough for a run's snapshot, its planners' checks and the moving cells'
+#: reaches prepared before it (:func:`cbp.perception.moving.prepare_moving_tables`).
+_TABLE_CACHE = 16
 
 
 def _largest_faces(

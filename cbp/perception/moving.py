@@ -41,9 +41,11 @@ from cbp.robot import FloatArray
 
 __all__ = [
     "GROWTH_STEP",
+    "PREPARED_LOOK_AHEAD",
     "REACH_STEP",
     "MovingCellsEnvironment",
     "moving_growth",
+    "prepare_moving_tables",
     "with_moving",
 ]
 
@@ -56,6 +58,12 @@ GROWTH_STEP = 0.01
 #: wall-clock runs: a table per centimetre of growth took 4.8-15 s of CPU
 #: each, most of the planning time, while two obstacles closed on the arm.
 REACH_STEP = 0.05
+
+
+#: The look-ahead [s] a wall-clock run's moving cells are prepared for before
+#: it starts (:func:`prepare_moving_tables`): two of the longest command
+#: periods (0.133 s) and a Panda's stopping time, rounded up.
+PREPARED_LOOK_AHEAD = 0.6
 
 
 class _MovingCells(OccupancyEnvironment):
@@ -162,6 +170,41 @@ class MovingCellsEnvironment(OccupancyEnvironment):
             contacts.normal[keep],
             contacts.distance[keep],
         )
+
+
+def prepare_moving_tables(
+    shapes: list[LinkShape], margin: float, cell: float, speed: float, horizon: float
+) -> list[float]:
+    """Build the query tables for every reach moving cells may need; the reaches.
+
+    Moving cells are queried at the snapshot's ``margin`` plus their growth
+    (:func:`moving_growth`), whose reach is rounded up to :data:`REACH_STEP`;
+    a new reach's table (a face grid per hull, 0.1-0.4 s of CPU each for a
+    Panda) was built when the first obstacle set off, in the thread that
+    adopts the map's snapshots. On a wall-clock run that held up the
+    snapshots, and the robot was stopped for the map lagging behind the
+    cameras (the generated scene moving_11: 22 of 30 runs, mostly the first
+    run of a process). This builds them before the run, for growths up to
+    ``speed`` times ``horizon`` [s] (a longer one still builds its table when
+    it comes).
+
+    Args:
+        shapes: the robot's shapes.
+        margin: the snapshots' query margin [m] (the collision world's).
+        cell: the map's cell [m].
+        speed: the assumed approach speed (``perception.moving_speed``) [m/s].
+        horizon: the longest look-ahead plus snapshot age prepared for [s].
+    """
+    if not speed > 0.0:
+        return []
+    probe = _MovingCells(np.zeros((0, 3)), cell)
+    reaches: list[float] = []
+    for k in range(round(moving_growth(speed, horizon, 0.0) / GROWTH_STEP) + 1):
+        growth = k * GROWTH_STEP
+        if probe.table_reach(margin + growth) not in reaches:
+            reaches.append(probe.table_reach(margin + growth))
+            probe.prepare(shapes, margin + growth)
+    return reaches
 
 
 def with_moving(

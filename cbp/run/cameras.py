@@ -28,6 +28,7 @@ from cbp.perception.kernels import UNKNOWN
 from cbp.perception.map_process import ProcessMapUpdater
 from cbp.perception.mapper import MapUpdater
 from cbp.perception.motion import ApproachEstimator
+from cbp.perception.moving import PREPARED_LOOK_AHEAD, prepare_moving_tables
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.plausibility import FrameCheck, PlausibilityLimits
 from cbp.perception.spec import PerceptionSpec
@@ -111,6 +112,16 @@ class Cameras:
             if spec.motion_window > 0 and predict_motion
             else None
         )
+        if clock != "virtual":
+            # The moving cells' tables, before the clock starts: built when the
+            # first obstacle sets off, they held up the map's snapshots.
+            prepare_moving_tables(
+                world.geometry.shapes,
+                world.margin(grid.environment()),
+                grid.cell,
+                spec.moving_speed,
+                PREPARED_LOOK_AHEAD + spec.camera_timeout,
+            )
         # Wall clock: the map in a process of its own unless
         # perception.map_process is off (the interpreter lock would make the
         # loop and a map thread wait for each other); virtual: in the loop.

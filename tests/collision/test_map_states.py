@@ -616,3 +616,24 @@ def test_a_virtual_map_with_latency_installs_each_snapshot_that_much_later(
     now.submit(DepthCamera(scene.client, FRONT).capture(), robot.home(), 0.2)
     assert now.updates == 1
     assert now.stamp == 0.2
+
+
+def test_the_moving_cells_tables_are_built_before_a_run(robots) -> None:
+    """Every reach a moving cell's query takes within the horizon is kept beforehand."""
+    from cbp.collision.shape_table import ShapeTable
+    from cbp.perception.moving import REACH_STEP, prepare_moving_tables
+
+    geometry = RobotGeometry(robots["panda"])
+    cell, margin, speed, horizon = 0.01, 0.065, 0.25, 1.1
+    reaches = prepare_moving_tables(geometry.shapes, margin, cell, speed, horizon)
+    assert reaches == sorted(reaches)
+    assert len(reaches) >= 5  # 6.5 cm to 34 cm in 5 cm steps
+    probe = OccupancyEnvironment(np.zeros((1, 3)), cell)
+    probe.reach_step = REACH_STEP  # as the moving cells' environment rounds
+    for look_ahead in np.linspace(0.0, 0.6, 7):
+        for age in np.linspace(0.0, horizon - look_ahead, 7):
+            growth = moving_growth(speed, look_ahead, age)
+            reach = probe.table_reach(margin + growth)
+            assert reach in reaches
+            assert ShapeTable.kept(geometry.shapes, reach) is not None
+    assert prepare_moving_tables(geometry.shapes, margin, cell, 0.0, horizon) == []
