@@ -285,7 +285,10 @@ class ContactSet:
 
     @property
     def penetration(self) -> float:
-        """Deepest penetration of the padded shapes [m]; 0 when nothing overlaps."""
+        """Deepest penetration of the padded shapes [m]; 0 when nothing overlaps.
+
+        Infinite when a distance is NaN (a contact not measured).
+        """
         return _penetration(self.distance)
 
     def __len__(self) -> int:
@@ -325,13 +328,14 @@ class ContactSet:
 def _penetration(distance: FloatArray) -> float:
     """max(0, -min(distance)) in one pass; 0 for none.
 
-    Also 0 when a distance is NaN, as before: numpy's min gave NaN there,
-    which max(0, .) dropped.
+    Infinite when a distance is NaN: a contact that could not be measured
+    counts as the deepest, so a step validated by it is refused (it had
+    counted as none, as numpy's max(0, min(.)) dropped the NaN).
     """
     deepest = 0.0
     for d in distance:
         if math.isnan(d):
-            return 0.0
+            return math.inf
         deepest = max(deepest, -d)
     return deepest
 

@@ -382,3 +382,24 @@ def test_a_snapshot_published_while_a_plan_is_made_waits_for_it(geometry) -> Non
     assert world.environment is third
     world.set_environment(second)  # no plan in progress: at once
     assert world.environment is second
+
+
+def test_a_contact_not_measured_counts_as_the_deepest() -> None:
+    """A NaN distance makes the penetration infinite: the step it validates is refused."""
+    from cbp.collision import ContactSet
+
+    def contacts(distance: list[float]) -> ContactSet:
+        n = len(distance)
+        return ContactSet(
+            np.zeros(n, dtype=np.int64),
+            np.full(n, -1, dtype=np.int64),
+            np.zeros((n, 3)),
+            np.zeros((n, 3)),
+            np.tile([0.0, 0.0, 1.0], (n, 1)),
+            np.array(distance, dtype=float),
+        )
+
+    assert contacts([]).penetration == 0.0
+    assert contacts([0.01, 0.02]).penetration == 0.0
+    assert contacts([0.01, -0.003]).penetration == pytest.approx(0.003)
+    assert contacts([0.01, float("nan"), -0.003]).penetration == float("inf")
