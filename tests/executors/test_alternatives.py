@@ -335,8 +335,16 @@ def test_a_failed_search_is_not_repeated_until_something_changes(
         run.finish()
 
 
-def test_a_search_cut_short_goes_on_where_it_stopped(boards: Scenario) -> None:
-    """Over several small budgets the search tries each start once, then stops."""
+@pytest.mark.parametrize("new_world", [False, True])
+def test_a_search_cut_short_goes_on_where_it_stopped(
+    boards: Scenario, new_world: bool
+) -> None:
+    """Over several small budgets the search tries each start once, then stops.
+
+    Also when the world is new at each call (a map snapshot each period):
+    then it is searched again only in the next new world.
+    """
+    from cbp.collision import PrimitiveEnvironment
     from cbp.executors.clock import VirtualBudget
     from cbp.methods.settings import VirtualCosts
 
@@ -349,47 +357,25 @@ def test_a_search_cut_short_goes_on_where_it_stopped(boards: Scenario) -> None:
         q = boards.q0.copy()
         whole = IkSearch(boards.robot, run.ee_frame, run.world, settings)
         assert whole.solve(out_of_reach, q, WallBudget(10.0)) is None
+        assert whole.solves == len(whole.attempts(q)) * settings.max_iterations
         # Each budget holds about two starts' iterations (80 x 26 us each).
         calls = 0
         while search._failed is None:
+            if new_world:
+                run.world.set_environment(PrimitiveEnvironment([]))
             budget = VirtualBudget(0.004, VirtualCosts())
             assert search.solution_for(out_of_reach, q, budget) is None
             calls += 1
-            assert calls < 200
+            assert calls < 200  # begun anew in each world, it would never end
         assert calls > 5  # it took several calls ...
         assert search.solves == whole.solves  # ... and tried every start once
-    finally:
-        run.finish()
-
-
-def test_a_search_cut_short_goes_on_in_a_new_world(boards: Scenario) -> None:
-    """A new world each call (a map snapshot each period) does not start the search again."""
-    from cbp.collision import PrimitiveEnvironment
-    from cbp.executors.clock import VirtualBudget
-    from cbp.methods.settings import VirtualCosts
-
-    run = build_run(boards, method="ik")
-    try:
-        settings = IkSearchSettings(stall_iterations=0)
-        search = IkSearch(boards.robot, run.ee_frame, run.world, settings)
-        out_of_reach = pin.SE3(np.eye(3), np.array([2.0, 0.0, 0.5]))
-        q = boards.q0.copy()
-        starts = len(search.attempts(q))
-        calls = 0
-        while search._failed is None:
+        # Tried out against the last world: not searched again in it.
+        assert search.solution_for(out_of_reach, q, WallBudget(10.0)) is None
+        assert search.solves == whole.solves
+        if new_world:  # ... but in the next one
             run.world.set_environment(PrimitiveEnvironment([]))
-            budget = VirtualBudget(0.004, VirtualCosts())
-            assert search.solution_for(out_of_reach, q, budget) is None
-            calls += 1
-            assert calls < 200  # started again in every call, it would never end
-        assert search.solves == starts * settings.max_iterations
-        # Tried out against the last world: not searched again in it ...
-        assert search.solution_for(out_of_reach, q, WallBudget(10.0)) is None
-        assert search.solves == starts * settings.max_iterations
-        # ... but in the next one.
-        run.world.set_environment(PrimitiveEnvironment([]))
-        assert search.solution_for(out_of_reach, q, WallBudget(10.0)) is None
-        assert search.solves == 2 * starts * settings.max_iterations
+            assert search.solution_for(out_of_reach, q, WallBudget(10.0)) is None
+            assert search.solves == 2 * whole.solves
     finally:
         run.finish()
 
