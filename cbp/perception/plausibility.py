@@ -13,7 +13,9 @@ without one for ``perception.camera_timeout`` stops the arm) when
   (:data:`EXPECTED_IN_VIEW`); a fixed camera, which sees the workcell, always;
 * it is **frozen**: the very same image as the camera's last one, while the arm
   moved in its view or the camera moved with the arm (a real sensor's noise
-  alone makes two frames differ; a stuck driver repeats its last frame);
+  alone makes two frames differ; a stuck driver repeats its last frame). An
+  image with no reading nearer than its far plane is not held frozen: moving
+  would not change it;
 * a fixed camera **sees through the robot**: where the robot's joints must be
   in the image, most pixels read farther away than the joints
   (``perception.see_through_fraction``, ``see_through_tolerance``): the camera
@@ -163,6 +165,11 @@ class FrameCheck:
         before, q_before = last
         if not np.array_equal(frame.depth, before.depth, equal_nan=True):
             self._stuck = False
+            return None
+        if not np.any(frame.depth < _FAR_PLANE):
+            # Nothing up to the far plane anywhere (open space ahead of a
+            # camera on the arm): no motion could change the image. A sensor
+            # blinded that way is the far-plane check's to refuse.
             return None
         if self._stuck:
             return "frozen: the same image as its last frame since it froze"

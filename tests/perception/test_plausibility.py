@@ -85,6 +85,36 @@ def test_a_frozen_frame_is_refused_only_when_the_arm_moved_in_view(seen) -> None
     assert check.check(camera.capture(), moved, _joints(robot, moved)) is None
 
 
+def _shifted(view: np.ndarray) -> np.ndarray:
+    """A camera's view 5 cm to the side."""
+    out = view.copy()
+    out[0, 3] += 0.05
+    return out
+
+
+def test_a_camera_on_the_arm_looking_into_open_space_is_not_frozen(seen) -> None:
+    """Nothing up to the far plane, the same again while it moves: believed.
+
+    No motion could change such an image (the wrist camera of cat_wrist_limit
+    with exact frames turns up into open space); where the map holds
+    obstacles in its view, the far-plane check refuses it.
+    """
+    robot, _, camera, q = seen
+    frame = camera.capture()
+    open_space = dataclasses.replace(frame, depth=np.ones_like(frame.depth))
+    check = FrameCheck("wrist", True, LIMITS)
+    joints = _joints(robot, q)
+    assert check.check(open_space, q, joints, lambda f: 0.0) is None
+    moved = dataclasses.replace(open_space, view=_shifted(open_space.view))
+    assert check.check(moved, q, joints, lambda f: 0.0) is None
+    # The same image of something while the camera moved: frozen.
+    check.check(frame, q, joints, lambda f: 0.0)
+    again = dataclasses.replace(frame, view=_shifted(frame.view))
+    problem = check.check(again, q, joints, lambda f: 0.0)
+    assert problem is not None
+    assert problem.startswith("frozen")
+
+
 def test_a_bumped_camera_sees_through_the_robot_and_is_refused(seen) -> None:
     """Turned by 20 degrees, its frame still claims the old pose: refused."""
     robot, scene, camera, q = seen
