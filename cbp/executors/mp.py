@@ -212,6 +212,9 @@ class RrtConnect:
                 # than the trees' short edges do: the path as found, then.
                 points = _resample(found, s.waypoint_step)
                 if not self.search.path_free(points, budget):
+                    # These trees would give the same path again: the next
+                    # plan begins anew (:meth:`continues`).
+                    self._taken = True
                     return None, "the plan touches between the states OMPL checked"
         finally:
             self._budget = None

@@ -114,19 +114,28 @@ def test_mp_plans_over_the_board(boards: Scenario, simplify: str) -> None:
 def test_mp_plans_again_in_the_period_when_a_plan_touches(
     boards: Scenario, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A plan dropped by the sweep check (injected) is replaced in the same call."""
-    original = RrtConnect.path
-    calls = [0]
+    """A plan dropped by the sweep check (injected) is replaced in the same call.
 
-    def path(self, budget):  # type: ignore[no-untyped-def]
-        calls[0] += 1
-        if calls[0] == 1:
-            return None, "the plan touches between the states OMPL checked"
-        return original(self, budget)
+    From new trees: the trees that found it would give the same path again.
+    """
+    from cbp.executors.ik_search import IkSearch
 
-    monkeypatch.setattr(RrtConnect, "path", path)
+    path_free, begin = IkSearch.path_free, RrtConnect.begin
+    checks, begun = [0], [0]
+
+    def touching_first(self, points, budget=None):  # type: ignore[no-untyped-def]
+        checks[0] += 1  # the first plan's shortened path and its path as found
+        return checks[0] > 2 and path_free(self, points, budget)
+
+    def counted(self, q, target):  # type: ignore[no-untyped-def]
+        begun[0] += 1
+        begin(self, q, target)
+
+    monkeypatch.setattr(IkSearch, "path_free", touching_first)
+    monkeypatch.setattr(RrtConnect, "begin", counted)
     plan, _, run = _plan_over_the_board(boards)
-    assert calls[0] >= 2
+    assert checks[0] >= 3
+    assert begun[0] == 2  # the second plan grew new trees
     assert plan.path is not None, plan.note
     events = "\n".join(msg for _, msg in run.log.events)
     assert "touches between the states OMPL checked; planning again" in events
