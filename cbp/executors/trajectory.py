@@ -315,24 +315,20 @@ def run_trajectory_executor(
                 # it is ready, and is commanded from then (a look, a plan over
                 # the wall: seconds of work a discard would throw away).
                 ready = t + compute
-                late = new.delayed(max(0.0, ready - new.start_time))
+                new = new.delayed(max(0.0, ready - new.start_time))
                 misses.missed(t, compute, period, f"used from rest at {ready:.2f} s")
-                sim.follow(sim.trajectory.splice(late))
-                if commanded is not None:
-                    commanded(float(late.times[0]))
-                spliced = True
             elif missed:
                 why = "result discarded" if new is not None and not timed_out else note
                 misses.missed(t, compute, period, why)
-            elif new is not None:
+                new = None
+            else:
                 misses.met(t)
+            if new is not None:
                 # Live, the simulation is not past t: new starts after t_f.
                 sim.follow(sim.trajectory.splice(new))
                 if commanded is not None:
                     commanded(float(new.times[0]))
                 spliced = True
-            else:
-                misses.met(t)
             if pacer is not None:
                 # Live: wait for t_f, commanding each goal that arrives
                 # meanwhile at once; the robot's motion over the period is
@@ -524,9 +520,8 @@ class _Showing:
             left = pacer.left(t_f)
             if left <= 0:
                 return
-            step = t_f if self.shown is None or self._failed else None
-            if step is None:
-                step = min(t_f, t_f - left + SHOW_STEP)
+            showing = self.shown is not None and not self._failed
+            step = min(t_f, t_f - left + SHOW_STEP) if showing else t_f
             pacer.wait_until(step, wakeable)
             if wakeable and pacer.left(step) > 1e-9:
                 return  # woken: a new goal
