@@ -10,14 +10,12 @@ configuration from being free (:func:`unseen_held`).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pinocchio as pin
 
 from cbp.collision.world import CollisionWorld
 from cbp.executors.clock import Budget
-from cbp.executors.ik_search import dls_step
+from cbp.executors.ik_search import solve_pose
 from cbp.perception.kernels import FREE, UNKNOWN
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray, RobotModel
@@ -45,31 +43,19 @@ def solve_camera(
     Damped least squares on the camera's parent ``frame`` (the camera is
     ``offset`` from it); each iteration is charged to ``budget``.
     """
-    model = robot.model
-    data = model.createData()
-    goal = pose * offset.inverse()
-    lower, upper = robot.lower_limits, robot.upper_limits
-    vector = model.nq == model.nv
-    q, step = q.copy(), np.empty(model.nv)
-    for _ in range(AIM_ITERATIONS):
-        budget.charge("ik_iteration")
-        pin.framesForwardKinematics(model, data, q)
-        error = goal.actInv(data.oMf[frame])
-        err = pin.log6(error).vector
-        if (
-            math.hypot(err[0], err[1], err[2]) < AIM_POSITION
-            and math.hypot(err[3], err[4], err[5]) < AIM_ANGLE
-        ):
-            return q
-        J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL)
-        dls_step(
-            err, J, pin.Jlog6(error), -1, AIM_DAMPING, q, lower, upper, vector, step
-        )
-        if vector:
-            q, step = step, q
-        else:
-            q = np.clip(pin.integrate(model, q, step), lower, upper)
-    return None
+    found, _ = solve_pose(
+        robot.model,
+        robot.model.createData(),
+        frame,
+        pose * offset.inverse(),
+        q,
+        (robot.lower_limits, robot.upper_limits),
+        budget,
+        iterations=AIM_ITERATIONS,
+        tolerances=(AIM_POSITION, AIM_ANGLE),
+        damping=AIM_DAMPING,
+    )
+    return found
 
 
 def unseen_held(

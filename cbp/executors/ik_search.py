@@ -28,7 +28,7 @@ from cbp.robot import FloatArray, RobotModel
 if TYPE_CHECKING:
     from cbp.run.parts import RunParts
 
-__all__ = ["IkSearch", "SearchEvents", "check_work", "dls_step"]
+__all__ = ["IkSearch", "SearchEvents", "check_work", "dls_step", "solve_pose"]
 
 #: One start of a search: (seed, the joint held fixed or None).
 _Start = tuple[FloatArray, int | None]
@@ -233,38 +233,90 @@ class IkSearch:
         self, goal: pin.SE3, q: FloatArray, fixed: int | None, budget: Budget
     ) -> FloatArray | None:
         s = self.settings
-        model, data, frame = self.robot.model, self._data, self.frame_id
-        lower, upper = self._lower, self._upper
-        # Joints whose configuration is their angle (revolute, prismatic): the
-        # step is added and clipped in the compiled pass; else pinocchio
-        # integrates it.
-        vector = model.nq == model.nv
-        q, step = q.copy(), np.empty(model.nv)
-        held = -1 if fixed is None else fixed
-        stall = s.stall_iterations
-        errors = np.empty(s.max_iterations)  # position + rotation error norms
-        for k in range(s.max_iterations):
-            self.solves += 1
-            budget.charge("ik_iteration")
-            pin.framesForwardKinematics(model, data, q)
-            error = goal.actInv(data.oMf[frame])
-            err = pin.log6(error).vector
-            position = math.hypot(err[0], err[1], err[2])
-            rotation = math.hypot(err[3], err[4], err[5])
-            if position < s.position_tolerance and rotation < s.rotation_tolerance:
-                return q
-            errors[k] = position + rotation
-            if stall and k >= stall and errors[k] > 0.999 * errors[k - stall]:
-                return None  # stalled (a joint limit, a singularity)
-            J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL)
-            dls_step(
-                err, J, pin.Jlog6(error), held, DAMPING, q, lower, upper, vector, step
-            )
-            if vector:
-                q, step = step, q
-            else:
-                q = np.clip(pin.integrate(model, q, step), lower, upper)
-        return None
+        found, iterations = solve_pose(
+            self.robot.model,
+            self._data,
+            self.frame_id,
+            goal,
+            q,
+            (self._lower, self._upper),
+            budget,
+            iterations=s.max_iterations,
+            tolerances=(s.position_tolerance, s.rotation_tolerance),
+            damping=DAMPING,
+            held=fixed,
+            stall=s.stall_iterations,
+        )
+        self.solves += iterations
+        return found
+
+
+def solve_pose(
+    model: pin.Model,
+    data: pin.Data,
+    frame: int,
+    goal: pin.SE3,
+    q: FloatArray,
+    limits: tuple[FloatArray, FloatArray],
+    budget: Budget,
+    *,
+    iterations: int,
+    tolerances: tuple[float, float],
+    damping: float,
+    held: int | None = None,
+    stall: int = 0,
+) -> tuple[FloatArray | None, int]:
+    """Damped least squares from ``q`` until ``frame`` is at ``goal``.
+
+    Args:
+        model: the robot's model.
+        data: its data (the kinematics are computed in it).
+        frame: the frame placed at the goal.
+        goal: the frame's pose sought.
+        q: the configuration to start from (not changed).
+        limits: the lower and upper joint limits the steps keep within.
+        budget: each iteration is charged to it.
+        iterations: the most iterations.
+        tolerances: the position [m] and rotation [rad] errors that count as
+            there.
+        damping: added to J J^T's diagonal.
+        held: a velocity coordinate kept still (None: every joint moves).
+        stall: give up once the error has not fallen by a thousandth over
+            this many iterations (0: never).
+
+    Returns:
+        The configuration (None: not reached), and the iterations taken.
+    """
+    lower, upper = limits
+    position_tolerance, rotation_tolerance = tolerances
+    # Joints whose configuration is their angle (revolute, prismatic): the
+    # step is added and clipped in the compiled pass; else pinocchio
+    # integrates it.
+    vector = model.nq == model.nv
+    q, step = q.copy(), np.empty(model.nv)
+    fixed = -1 if held is None else held
+    errors = np.empty(iterations)  # position + rotation error norms
+    for k in range(iterations):
+        budget.charge("ik_iteration")
+        pin.framesForwardKinematics(model, data, q)
+        error = goal.actInv(data.oMf[frame])
+        err = pin.log6(error).vector
+        position = math.hypot(err[0], err[1], err[2])
+        rotation = math.hypot(err[3], err[4], err[5])
+        if position < position_tolerance and rotation < rotation_tolerance:
+            return q, k + 1
+        errors[k] = position + rotation
+        if stall and k >= stall and errors[k] > 0.999 * errors[k - stall]:
+            return None, k + 1  # stalled (a joint limit, a singularity)
+        J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL)
+        dls_step(
+            err, J, pin.Jlog6(error), fixed, damping, q, lower, upper, vector, step
+        )
+        if vector:
+            q, step = step, q
+        else:
+            q = np.clip(pin.integrate(model, q, step), lower, upper)
+    return None, iterations
 
 
 #: Damping of the least-squares steps (added to J J^T's diagonal).
