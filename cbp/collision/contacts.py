@@ -47,6 +47,13 @@ class ContactSet:
         normal: unit normal from the other side toward ``shape``, (K, 3).
         distance: signed distance [m], negative when the shapes overlap (then
             its magnitude is the penetration depth), (K,).
+        lead: how much nearer than the obstacle's present surface each
+            contact is measured [m] (K,), or None: every contact where its
+            obstacle is. An obstacle the cameras see moving is measured nearer
+            by how far it may come over the look-ahead
+            (:mod:`cbp.perception.moving`); the contact rows keep the arm out
+            of that region, and step validation measures where the obstacle
+            is (:attr:`present_penetration`).
     """
 
     shape: IntArray
@@ -55,6 +62,7 @@ class ContactSet:
     other_point: FloatArray
     normal: FloatArray
     distance: FloatArray
+    lead: FloatArray | None = field(default=None, compare=False)
     _split: tuple[ContactSet, ContactSet] | None = field(
         default=None, repr=False, compare=False
     )
@@ -85,20 +93,25 @@ class ContactSet:
                 one.other_point,
                 one.normal,
                 one.distance,
+                one.lead,
             )
-        return cls(
-            *(
-                np.concatenate([getattr(s, f) for s in sets])
-                for f in (
-                    "shape",
-                    "other_shape",
-                    "point",
-                    "other_point",
-                    "normal",
-                    "distance",
-                )
+        lead = None
+        if any(s.lead is not None for s in sets):
+            lead = np.concatenate(
+                [np.zeros(len(s)) if s.lead is None else s.lead for s in sets]
+            )
+        shape, other_shape, point, other_point, normal, distance = (
+            np.concatenate([getattr(s, f) for s in sets])
+            for f in (
+                "shape",
+                "other_shape",
+                "point",
+                "other_point",
+                "normal",
+                "distance",
             )
         )
+        return cls(shape, other_shape, point, other_point, normal, distance, lead)
 
     @classmethod
     def from_rows(cls, rows: list[ContactRow]) -> ContactSet:
@@ -200,6 +213,9 @@ class ContactSet:
             )
         # The parts are views of the same arrays (the set itself would be a cycle).
         shape, other_shape, point_, other_point, normal_, distance_ = arrays
+        lead = obstacles.lead
+        if lead is not None and len(shape) > n:
+            lead = np.concatenate((lead, np.zeros(len(shape) - n)))
 
         def part(rows: slice) -> ContactSet:
             return cls(
@@ -209,6 +225,7 @@ class ContactSet:
                 other_point[rows],
                 normal_[rows],
                 distance_[rows],
+                None if lead is None else lead[rows],
             )
 
         return cls(
@@ -218,6 +235,7 @@ class ContactSet:
             other_point,
             normal_,
             distance_,
+            lead,
             _split=(part(slice(0, n)), part(slice(n, None))),
         )
 
@@ -256,6 +274,7 @@ class ContactSet:
             self.other_point[mask],
             self.normal[mask],
             self.distance[mask],
+            None if self.lead is None else self.lead[mask],
         )
 
     @property
@@ -290,6 +309,13 @@ class ContactSet:
         Infinite when a distance is NaN (a contact not measured).
         """
         return _penetration(self.distance)
+
+    @property
+    def present_penetration(self) -> float:
+        """:attr:`penetration` with each obstacle where it is, not ahead (``lead``)."""
+        if self.lead is None:
+            return _penetration(self.distance)
+        return _penetration(self.distance + self.lead)
 
     def __len__(self) -> int:
         """Number of contacts."""

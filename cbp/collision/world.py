@@ -62,7 +62,9 @@ class StepCheck:
 
     Attributes:
         accepted: the penetration is within the tolerance.
-        penetration: the deepest penetration of the padded shapes [m].
+        penetration: the deepest penetration of the padded shapes [m], each
+            obstacle where it is (one the cameras see moving is not measured
+            where it may come: :attr:`ContactSet.lead`).
         contacts: the contacts found there.
     """
 
@@ -288,7 +290,9 @@ class CollisionWorld:
         state = self._state
         state.update(q)
         contacts = self.contacts(state)
-        depth = contacts.penetration
+        # Against each obstacle where it is: a moving one is measured nearer
+        # for the contact rows (ContactSet.lead), not for the check.
+        depth = contacts.present_penetration
         tolerance = self.settings.penetration_tolerance + self._environment.resolution
         return StepCheck(depth <= tolerance, depth, contacts)
 

@@ -44,7 +44,7 @@ from cbp.executors.clock import Budget, make_budget
 from cbp.executors.periods import DeadlineMisses, LeadAdapter, PeriodAdapter
 from cbp.methods.settings import ExecutorTiming
 from cbp.robot import FloatArray
-from cbp.run.pacing import Pacer
+from cbp.run.pacing import Pacer, WallClockPacer
 from cbp.run.parts import RunParts, build_run
 from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import JointTrajectory, time_parameterize
@@ -212,7 +212,9 @@ def run_trajectory_executor(
             period, waits it out (commanding each goal that arrives
             meanwhile at once: :func:`_command_while_waiting`), then
             simulates the robot's motion over it; unpaced, it simulates the
-            motion while it plans, then commands the plan.
+            motion while it plans, then commands the plan. An unpaced run
+            with cameras on the wall clock simulates the world no faster
+            than the wall clock all the same (:func:`_advance_in_step`).
         stop_requested: asked at each period's start; True ends the run
             there (an operator's stop).
         commanded: called with the start time of each trajectory spliced in.
@@ -237,6 +239,19 @@ def run_trajectory_executor(
     leaving = _LeavingContact(run, vmax * BACK_OUT_DT)
     misses = DeadlineMisses(run.event)
     compiles = CompileCounter.install()
+    # With cameras on the wall clock the map works beside the loop in real
+    # time, so the simulated world must move in step with the wall clock too:
+    # run as fast as the work allows, it raced ahead of the map whenever
+    # plans came quickly (the map then read as lagging 0.5 s behind the
+    # cameras and the robot was stopped while obstacles came on) and fell
+    # behind it when they took their whole budget.
+    world_pacer = (
+        WallClockPacer()
+        if pacer is None and run.cameras is not None and run.clock == "wall"
+        else None
+    )
+    if world_pacer is not None:
+        world_pacer.start(t)
     try:
         while (
             t < run.duration - 1e-9 and faults.aborted is None and not stop_requested()
@@ -251,7 +266,7 @@ def run_trajectory_executor(
                 t_s, q_s, v_s, a_s = current.point(i)
             budget = make_budget(
                 timing.clock,
-                timing.time_budget * period,
+                _planning_time(timing.time_budget * period, pacer or world_pacer, t),
                 timing.virtual_costs,
                 horizon=period,
             )
@@ -299,7 +314,10 @@ def run_trajectory_executor(
             if pacer is None:
                 try:
                     # The robot moves on while the result is computed.
-                    run.advance(t_f, look_ahead, reaction=2.0 * period)
+                    if world_pacer is not None:
+                        _advance_in_step(world_pacer, run, t_f, look_ahead, period)
+                    else:
+                        run.advance(t_f, look_ahead, reaction=2.0 * period)
                 except Exception as exc:
                     failed = True
                     note = faults.fault(t, "simulation", exc)
@@ -373,6 +391,55 @@ def run_trajectory_executor(
         finally:
             trace = run.finish()
     return trace
+
+
+#: The least share of its planning budget a period keeps when the simulated
+#: world is behind the wall clock (:func:`_planning_time`).
+MIN_BUDGET_SHARE = 0.25
+
+
+def _planning_time(budget: float, pacer: Pacer | None, t: float) -> float:
+    """A period's planning budget [s]: ``budget``, less how late the period starts.
+
+    On the wall clock the simulated world and the cameras take their share
+    of the same core after the plan; a period that starts behind the wall
+    clock (``pacer``) plans that much less, down to :data:`MIN_BUDGET_SHARE`
+    of ``budget``, so the world catches up instead of falling further
+    behind. Measured on the generated scene moving_11 with the cameras (the
+    map in its own process, load 1): planning took up to 85 % of each
+    period and simulating the world and rendering its cameras 35 %, so the
+    world fell 0.4 s behind the wall clock in 3 s and caught up in a burst
+    once the plans came quickly.
+    """
+    if pacer is None:
+        return budget
+    late = -pacer.left(t)
+    if late <= 0.0:
+        return budget
+    return max(MIN_BUDGET_SHARE * budget, budget - late)
+
+
+def _advance_in_step(
+    pacer: Pacer, run: RunParts, t_f: float, look_ahead: float, period: float
+) -> None:
+    """Simulate the world up to ``t_f``, no faster than the wall clock.
+
+    Up to now every :data:`SHOW_STEP` (the cameras capture their frames about
+    when the wall clock reaches their capture times, as the map beside the
+    loop sees them), then the rest at ``t_f``; a world behind the wall clock
+    catches up at once.
+    """
+    sim = run.sim
+    while True:
+        now = t_f - pacer.left(t_f)
+        step = max(now, min(t_f, sim.t + SHOW_STEP))
+        if step >= t_f:
+            break
+        if step > now:
+            pacer.wait_until(step, wakeable=False)
+        run.advance(step, look_ahead, reaction=2.0 * period)
+    pacer.wait_until(t_f, wakeable=False)
+    run.advance(t_f, look_ahead, reaction=2.0 * period)
 
 
 #: A goal that arrives while the loop waits for its period's end is planned

@@ -133,6 +133,7 @@ class MovingCellsEnvironment(OccupancyEnvironment):
         if not len(ahead):
             return mapped
         ahead.distance = ahead.distance - self.growth
+        ahead.lead = np.full(len(ahead), self.growth)
         return ContactSet.concatenate([self._seen(mapped), ahead])
 
     def _seen(self, contacts: ContactSet) -> ContactSet:
@@ -162,14 +163,7 @@ class MovingCellsEnvironment(OccupancyEnvironment):
         keep = state == OCCUPIED
         if keep.all():
             return contacts
-        return ContactSet(
-            contacts.shape[keep],
-            contacts.other_shape[keep],
-            contacts.point[keep],
-            contacts.other_point[keep],
-            contacts.normal[keep],
-            contacts.distance[keep],
-        )
+        return contacts.select(keep)
 
 
 def prepare_moving_tables(

@@ -515,6 +515,27 @@ def test_moving_cells_are_met_ahead_and_unseen_space_gives_way(scene, robots) ->
     np.testing.assert_allclose(np.sort(short.distance), np.sort(still.distance))
 
 
+def test_step_validation_measures_moving_cells_where_they_are(scene, robots) -> None:
+    """Grown into the arm, the moving cells constrain it but do not refuse steps.
+
+    The contact rows keep the arm out of where the plate may come; a step is
+    refused only by where it is (before, a step out of one box's growth and
+    into another's was refused, and two boxes held the arm: moving_11).
+    """
+    grid, world, state, _ = _plate_before_the_hand(scene, robots)
+    centres = grid.moving_centres(0.1)
+    ahead = with_moving(grid.environment(), centres, 0.3, grid.cells, grid.lower)
+    world.set_environment(ahead)
+    check = world.check(state.q)
+    assert check.contacts.penetration > 0.1  # 0.3 m nearer: deep in the growth
+    assert check.contacts.lead is not None
+    assert check.contacts.lead.max() == pytest.approx(0.3)
+    # Where the plate is, nothing touches the hand: the step is kept.
+    assert check.accepted
+    assert check.penetration == pytest.approx(check.contacts.present_penetration)
+    assert check.penetration < 0.01
+
+
 def test_the_separation_monitor_says_when_a_moving_obstacle_is_too_near(
     scene, robots
 ) -> None:

@@ -403,3 +403,49 @@ def test_a_contact_not_measured_counts_as_the_deepest() -> None:
     assert contacts([0.01, 0.02]).penetration == 0.0
     assert contacts([0.01, -0.003]).penetration == pytest.approx(0.003)
     assert contacts([0.01, float("nan"), -0.003]).penetration == float("inf")
+
+
+def test_a_contact_measured_ahead_keeps_its_lead_through_the_set_operations() -> None:
+    """``lead`` follows each contact through concatenation, selection and stacking.
+
+    ``penetration`` is what the contact rows see (the obstacle where it may
+    come), ``present_penetration`` what step validation sees (where it is).
+    """
+    from cbp.collision import ContactSet
+
+    n = 3
+    ahead = ContactSet.obstacles(
+        np.arange(n),
+        np.zeros((n, 3)),
+        np.zeros((n, 3)),
+        np.tile([0.0, 0.0, 1.0], (n, 1)),
+        np.array([-0.05, 0.02, -0.01]),
+    )
+    ahead.lead = np.array([0.08, 0.08, 0.0])
+    still = ContactSet.obstacles(
+        np.array([4]),
+        np.zeros((1, 3)),
+        np.zeros((1, 3)),
+        np.array([[1.0, 0.0, 0.0]]),
+        np.array([-0.002]),
+    )
+    both = ContactSet.concatenate([still, ahead])
+    assert both.lead is not None
+    np.testing.assert_array_equal(both.lead, [0.0, 0.08, 0.08, 0.0])
+    assert both.penetration == pytest.approx(0.05)
+    assert both.present_penetration == pytest.approx(0.01)  # the third, no lead
+    chosen = both.select(np.array([1, 3]))
+    assert chosen.lead is not None
+    np.testing.assert_array_equal(chosen.lead, [0.08, 0.0])
+    own = ContactSet.obstacles(
+        np.array([0]), np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[:1], np.ones(1)
+    )
+    own.other_shape = np.array([2])
+    stacked = ContactSet.stack(ahead, 0.01, own)
+    assert stacked.lead is not None
+    np.testing.assert_array_equal(stacked.lead, [0.08, 0.08, 0.0, 0.0])
+    assert stacked.present_penetration == pytest.approx(0.02)
+    environment = stacked.environment_part()
+    assert environment.lead is not None
+    assert len(environment.lead) == n
+    assert still.present_penetration == still.penetration  # nothing ahead

@@ -466,3 +466,39 @@ def test_rows_follow_the_bounds_however_a_constraint_returns_them(robots) -> Non
         lower, upper = plugin.bounds
         np.testing.assert_allclose(problem.lower[:n], lower - q, atol=1e-12)
         np.testing.assert_allclose(problem.upper[:n], upper - q, atol=1e-12)
+
+
+def test_demands_that_cannot_all_be_met_are_met_as_nearly_as_they_allow() -> None:
+    """Two inequality rows push a point both ways: it moves, it is not held.
+
+    Along s = x0 + x1 (|x0|, |x1| <= 0.5) the capped demands, s >= 0.5 and
+    s <= -0.2, are widened by their least violation: the step backs away from
+    the larger demand (the nearer obstacle) as far as the smaller one lets
+    it, s = 0.15. Scaling every demand to "no further" held it at 0 while the
+    obstacles came on.
+    """
+    from cbp.engine.recovery import NEAREST, ease
+    from cbp.qp import QPProblem
+
+    problem = QPProblem(
+        H=np.eye(2) * 1e-3,
+        g=np.zeros(2),
+        A=np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [-1.0, -1.0]]),
+        lower=np.array([-0.5, -0.5, 0.6, 0.2]),
+        upper=np.array([0.5, 0.5, np.inf, np.inf]),
+        equality=np.zeros(4, dtype=bool),
+        row_entry=np.array([0, 0, 1, 1]),
+        entry_names=["velocity", "contacts"],
+        nv=2,
+    )
+    solver = make_solver("daqp")
+    with pytest.raises(SolveError) as raised:
+        solver.solve(problem)
+    with solver.trials():
+        x, easing = ease(
+            problem, raised.value, 0.01, solver, np.array([True, True]), np.zeros(2)
+        )
+    assert easing.description.endswith(NEAREST)
+    assert easing.scale is None
+    assert x[0] + x[1] == pytest.approx(0.15, abs=1e-6)
+    assert problem.violation(x) <= 1e-8  # within the widened bounds it answers

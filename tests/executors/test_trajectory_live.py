@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 
 from cbp.executors.trajectory import COMMAND_LEAD, REPLAN_SHARE, run_trajectory_executor
 from cbp.sim.trajectory import JointTrajectory
@@ -247,3 +248,50 @@ def test_a_paced_loop_shows_the_robot_while_it_waits_never_past_a_lead() -> None
     assert len(shown) >= periods * (PERIOD / SHOW_STEP - 2)
     gaps = np.diff(times)
     assert np.max(gaps) <= SHOW_STEP + lead + 1e-9
+
+
+class _World:
+    """A world whose simulation costs ``cost`` of the pacer's time per second."""
+
+    def __init__(self, pacer: VirtualPacer, cost: float) -> None:
+        self.pacer, self.cost = pacer, cost
+        self.sim = self
+        self.t = 0.0
+        #: (simulated time reached, the pacer's time then) per advance.
+        self.advances: list[tuple[float, float]] = []
+
+    def advance(self, t: float, look_ahead: float, reaction: float) -> None:
+        del look_ahead, reaction
+        self.pacer.now += self.cost * max(0.0, t - self.t)
+        self.t = max(self.t, t)
+        self.advances.append((self.t, self.pacer.now))
+
+
+def test_a_world_beside_its_cameras_is_simulated_no_faster_than_the_clock() -> None:
+    """Each advance reaches at most the clock's time; a late world catches up."""
+    from cbp.executors.trajectory import SHOW_STEP, _advance_in_step
+
+    pacer = VirtualPacer(threading.Event(), [])
+    world = _World(pacer, cost=0.2)
+    _advance_in_step(pacer, world, 0.1, 0.3, 0.1)  # type: ignore[arg-type]
+    assert world.t == 0.1
+    for reached, now in world.advances[:-1]:
+        assert reached <= now - 0.2 * SHOW_STEP + 1e-9  # begun at or before now
+    assert len(world.advances) >= 0.1 / SHOW_STEP / 2
+    # Behind the clock (a plan took 0.15 s): the world is simulated at once.
+    pacer.now = 0.25
+    _advance_in_step(pacer, world, 0.2, 0.3, 0.1)  # type: ignore[arg-type]
+    assert world.t == 0.2
+    assert world.advances[-1][1] == pytest.approx(0.25 + 0.2 * 0.1)
+
+
+def test_a_period_that_starts_late_plans_less() -> None:
+    """The budget shrinks by the lateness, to a quarter of it at least."""
+    from cbp.executors.trajectory import MIN_BUDGET_SHARE, _planning_time
+
+    pacer = VirtualPacer(threading.Event(), [])
+    pacer.now = 1.0
+    assert _planning_time(0.024, None, 0.5) == 0.024  # unpaced: as configured
+    assert _planning_time(0.024, pacer, 1.0) == 0.024  # on time
+    assert _planning_time(0.024, pacer, 0.99) == pytest.approx(0.014)
+    assert _planning_time(0.024, pacer, 0.5) == pytest.approx(MIN_BUDGET_SHARE * 0.024)
