@@ -193,7 +193,9 @@ def ease(
                 backing = "eased to half of what the velocity bounds reach "
                 return x, Easing(what + backing + "(backing out)", None)
         if not equality.any():
-            nearest = _nearest_to_demands(problem, rows, solver)
+            nearest = _nearest_to_demands(
+                problem, rows, given, (reach_hi[rows], reach_lo[rows]), solver
+            )
             if nearest is not None:
                 return nearest, Easing(what + NEAREST, None)
         lower[rows], upper[rows] = given  # infeasible, or equalities to scale
@@ -247,30 +249,51 @@ def ease(
     return best, Easing(what + "scaled down to what the limits allow", low)
 
 
-#: How an easing that met the capped demands as nearly as they allow together
-#: is described (:func:`_nearest_to_demands`).
+#: How an easing that met the demands as nearly as they allow together is
+#: described (:func:`_nearest_to_demands`).
 NEAREST = (
-    "eased to half of what the velocity bounds reach, then met as nearly as "
-    "they allow together (least squares; backing out)"
+    "scaled to what the velocity bounds reach, then met as nearly as they "
+    "allow together (least squares; backing out)"
 )
 
 
 def _nearest_to_demands(
-    problem: QPProblem, rows: IntArray, solver: QPSolver
+    problem: QPProblem,
+    rows: IntArray,
+    given: tuple[FloatArray, FloatArray],
+    reach: tuple[FloatArray, FloatArray],
+    solver: QPSolver,
 ) -> FloatArray | None:
-    """The step nearest to meeting the capped demands of ``rows``, or None.
+    """The step nearest to meeting the demands of ``rows`` together, or None.
 
     Inequality demands that cannot all be met (the arm inside the safety
-    distance of obstacles on two sides) are widened by their least violation
-    (sum of squares) that the other rows allow, and the step is the QP's
-    optimum within them: the arm backs away from the side that asks most
-    (the nearer obstacle) instead of holding still, which scaling every
-    demand to "no further" did. Step validation still refuses a step that
-    ends deeper in an obstacle where it is. Measured on the generated scene
-    moving_11 (cameras, wall clock): two boxes' moving cells, measured nearer
-    in every direction, held the arm at k = 0 while the faster box reached it.
-    Leaves the widened bounds in ``problem``.
+    distance of obstacles on two sides) are scaled by one factor, so that
+    each asks at most half of what the velocity bounds let its row reach
+    (``reach``: the row's largest and smallest value within them), then
+    widened by their least violation (sum of squares) that the other rows
+    allow; the step is the QP's optimum within them. One factor keeps what
+    the rows ask in proportion: the arm backs away from the side that asks
+    most (the nearer obstacle) instead of holding still, which scaling every
+    demand to "no further" did; capped one by one, rows that asked for
+    different motions asked alike. Step validation still refuses a step
+    that ends deeper in an obstacle where it is. Measured on the generated
+    scene moving_11 (cameras, wall clock): two boxes' moving cells, measured
+    nearer in every direction, held the arm at k = 0 while the faster box
+    reached it. ``given``: the rows' bounds as assembled. Leaves the widened
+    bounds in ``problem``.
     """
+    lo, hi = given
+    up, down = lo > EASE_TOL, hi < -EASE_TOL
+    room = np.concatenate(
+        [0.5 * reach[0][up] / lo[up], 0.5 * reach[1][down] / hi[down]]
+    )
+    # A row its bounds let go nowhere (no room) is left to the least violation.
+    room = room[room > 0.0]
+    factor = float(min(1.0, np.min(room))) if room.size else 1.0
+    lower, upper = lo.copy(), hi.copy()
+    lower[up] *= factor
+    upper[down] *= factor
+    problem.lower[rows], problem.upper[rows] = lower, upper
     found = _least_violation(problem, rows, np.zeros(len(problem.lower), bool), solver)
     if found is None:
         return None

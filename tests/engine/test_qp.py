@@ -471,11 +471,12 @@ def test_rows_follow_the_bounds_however_a_constraint_returns_them(robots) -> Non
 def test_demands_that_cannot_all_be_met_are_met_as_nearly_as_they_allow() -> None:
     """Two inequality rows push a point both ways: it moves, it is not held.
 
-    Along s = x0 + x1 (|x0|, |x1| <= 0.5) the capped demands, s >= 0.5 and
-    s <= -0.2, are widened by their least violation: the step backs away from
-    the larger demand (the nearer obstacle) as far as the smaller one lets
-    it, s = 0.15. Scaling every demand to "no further" held it at 0 while the
-    obstacles came on.
+    Along s = x0 + x1 (|x0|, |x1| <= 0.5) the demands s >= 0.6 and s <= -0.2
+    are scaled by one factor (5/6, so that neither asks more than half of
+    the reach, 1) and widened by their least violation: the step backs away
+    from the larger demand (the nearer obstacle) as far as the smaller one
+    lets it, s = (0.5 - 1/6) / 2. Scaling every demand to "no further" held
+    it at 0 while the obstacles came on.
     """
     from cbp.engine.recovery import NEAREST, ease
     from cbp.qp import QPProblem
@@ -500,5 +501,5 @@ def test_demands_that_cannot_all_be_met_are_met_as_nearly_as_they_allow() -> Non
         )
     assert easing.description.endswith(NEAREST)
     assert easing.scale is None
-    assert x[0] + x[1] == pytest.approx(0.15, abs=1e-6)
+    assert x[0] + x[1] == pytest.approx(1.0 / 6.0, abs=1e-6)
     assert problem.violation(x) <= 1e-8  # within the widened bounds it answers
