@@ -123,9 +123,10 @@ def ease(
     of them, or one beyond what the velocity and acceleration rows allow,
     can leave no feasible step. First each inequality demand is capped at
     half of what the single-joint rows (the velocity bounds) let that row
-    reach: the arm backs out as fast as its limits allow. Capped inequality
-    demands that still conflict (obstacles on two sides) are met as nearly
-    as they allow together (:func:`_nearest_to_demands`). With equality
+    reach: the arm backs out as fast as its limits allow. Inequality
+    demands that conflict even so (obstacles on two sides) are scaled by one
+    factor and met as nearly as they allow together
+    (:func:`_nearest_to_demands`). With equality
     demands, or if that is still infeasible, every demand, equalities'
     included, is scaled by the
     largest factor in [0, 1) that the limits allow (bisection); at 0 the
