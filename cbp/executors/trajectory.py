@@ -424,22 +424,20 @@ def _advance_in_step(
 ) -> None:
     """Simulate the world up to ``t_f``, no faster than the wall clock.
 
-    Up to now every :data:`SHOW_STEP` (the cameras capture their frames about
-    when the wall clock reaches their capture times, as the map beside the
-    loop sees them), then the rest at ``t_f``; a world behind the wall clock
-    catches up at once.
+    As a live loop's wait does (:class:`_Showing`): up to now every
+    :data:`SHOW_STEP` (the cameras capture their frames about when the wall
+    clock reaches their capture times, as the map beside the loop sees
+    them), then the rest at ``t_f``; a world behind the wall clock catches
+    up at once.
     """
-    sim = run.sim
-    while True:
-        now = t_f - pacer.left(t_f)
-        step = max(now, min(t_f, sim.t + SHOW_STEP))
-        if step >= t_f:
-            break
-        if step > now:
-            pacer.wait_until(step, wakeable=False)
-        run.advance(step, look_ahead, reaction=2.0 * period)
-    pacer.wait_until(t_f, wakeable=False)
+    _Showing(pacer, run, 2.0 * period, look_ahead, _simulated).until(
+        t_f, wakeable=False
+    )
     run.advance(t_f, look_ahead, reaction=2.0 * period)
+
+
+def _simulated(t: float) -> None:
+    """Nothing to show: an unpaced run's world only keeps the clock's pace."""
 
 
 #: A goal that arrives while the loop waits for its period's end is planned
@@ -531,7 +529,7 @@ def _wait_out(
         note = faults.fault(t, "simulation", exc)
         pacer.wait_until(t_f, wakeable=False)
         return WaitAnswer(0, note, False, failed=True)
-    wait = _Showing(pacer, run, waiting, look_ahead, shown)
+    wait = _Showing(pacer, run, 2.0 * period, look_ahead, shown)
     result = WaitAnswer(0, None, False)
     if not answer:
         wait.until(t_f, wakeable=False)
@@ -567,12 +565,12 @@ class _Showing:
         self,
         pacer: Pacer,
         run: RunParts,
-        waiting: Waiting,
+        reaction: float,
         look_ahead: float,
         shown: Callable[[float], None] | None,
     ) -> None:
-        """The loop's pacer and parts; ``waiting``: the period waited out."""
-        self.pacer, self.run, self.waiting = pacer, run, waiting
+        """The loop's pacer and parts; ``reaction``: the executor's [s]."""
+        self.pacer, self.run, self.reaction = pacer, run, reaction
         self.look_ahead, self.shown = look_ahead, shown
         self._failed = False
 
@@ -582,7 +580,7 @@ class _Showing:
 
     def until(self, t_f: float, wakeable: bool = True) -> None:
         """Wait until ``t_f`` (or a wake, when ``wakeable``), showing the robot."""
-        pacer, waiting = self.pacer, self.waiting
+        pacer = self.pacer
         while True:
             left = pacer.left(t_f)
             if left <= 0:
@@ -599,7 +597,7 @@ class _Showing:
             if now <= sim.t:
                 continue  # still within the lead simulated before the wait
             try:
-                self.run.advance(now, self.look_ahead, reaction=2.0 * waiting.period)
+                self.run.advance(now, self.look_ahead, reaction=self.reaction)
             except Exception:
                 self._failed = True  # the period's end simulates it, and says so
                 continue
