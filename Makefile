@@ -47,8 +47,11 @@ lint: $(DEV_STAMP)
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
 
+# The fast tests on TEST_JOBS workers, a file per worker (TEST_JOBS=1: one
+# process); their outcome does not depend on how busy the machine is.
+TEST_JOBS ?= 2
 test: lint
-	$(BIN)/python -m pytest -m "not slow" -q
+	$(BIN)/python -m pytest -m "not slow" -q $(if $(filter-out 1,$(TEST_JOBS)),-n $(TEST_JOBS) --dist loadfile)
 
 # The fast suite beside two CPU-bound processes (a loaded 2-core machine): a
 # test's outcome must not depend on how busy the machine is.

@@ -1,8 +1,10 @@
 """Obstacles that appear, move into the arm, or start in contact with it.
 
 Issue 16's recovery checks, run in PyBullet with CAT: a wall that appears in the
-moving arm's way, a box pushed into the standing hand, and a start 5 mm inside
-a box (``robot.allow_initial_contact``).
+moving arm's way and a box pushed into the standing hand, declared or seen by
+the cameras. A start inside a box is in ``test_start_in_contact.py``, the
+pincer of generated scene 3 in ``test_moving_pincer.py`` (one file a worker in
+CI: ``--dist loadfile``).
 """
 
 from __future__ import annotations
@@ -10,39 +12,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
-from cbp.collision import (
-    CollisionSettings,
-    CollisionWorld,
-    EnvironmentObject,
-    PrimitiveEnvironment,
-    RobotGeometry,
-)
 from cbp.errors import ScenarioError
 from cbp.executors.cat import run_cat
 from cbp.metrics import run_metrics
 from cbp.scenario import load_scenario
 from cbp.scenario.scene import ObjectSpec
-from cbp.scenes import write_scenes
-from cbp.state import RobotState
 from tests.conftest import VIRTUAL_CLOCK
+from tests.executors.obstacles import unpadded_distance
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
-
-
-def _unpadded_distance(scenario, obj: ObjectSpec, t: float, q: np.ndarray) -> float:
-    """Distance from the unpadded arm at ``q`` to ``obj`` as it is at ``t`` [m]."""
-    placement = obj.placement_at(t)
-    shape = EnvironmentObject.primitive(obj.name, obj.shape, obj.size, placement)
-    world = CollisionWorld(
-        RobotGeometry(scenario.robot, padding=0.0),
-        PrimitiveEnvironment([shape]),
-        CollisionSettings(activation_distance=1.0, self_collision=False, padding=0.0),
-    )
-    contacts = world.check(q).contacts
-    return float(contacts.distance.min()) if len(contacts) else np.inf
 
 
 def _object(scenario, name: str) -> ObjectSpec:
@@ -96,7 +76,7 @@ def test_a_wall_that_appears_ahead_of_the_arm_is_avoided(source) -> None:
     wall = _object(scenario, "wall")
     trace = run_cat(scenario)
     k = int(np.searchsorted(trace.t, wall.appear_at))
-    ahead = _unpadded_distance(scenario, wall, wall.appear_at, trace.q[k])
+    ahead = unpadded_distance(scenario, wall, wall.appear_at, trace.q[k])
     assert ahead >= 0.15, ahead
     m = run_metrics(trace)
     assert m["peak_contact_force_n"] == 0.0, m
@@ -124,8 +104,8 @@ def test_a_box_pushed_into_the_standing_hand_makes_the_arm_yield() -> None:
     m = run_metrics(trace)
     box = _object(cat, "box")
     end = trace.t[-1]
-    assert _unpadded_distance(cat, box, end, cat.q0) < -0.02  # had it stood still
-    assert _unpadded_distance(cat, box, end, trace.q[-1]) > 0.0
+    assert unpadded_distance(cat, box, end, cat.q0) < -0.02  # had it stood still
+    assert unpadded_distance(cat, box, end, trace.q[-1]) > 0.0
     assert holding["peak_contact_force_n"] > 50.0, holding
     assert m["peak_contact_force_n"] < 0.15 * holding["peak_contact_force_n"], m
     assert ik["peak_contact_force_n"] < 0.15 * holding["peak_contact_force_n"], ik
@@ -215,91 +195,6 @@ def run_with(method: str, path: Path):
 
 
 @pytest.mark.slow
-def test_a_start_inside_a_box_backs_out_and_never_goes_deeper(tmp_path) -> None:
-    """5 mm into a box with allow_initial_contact: out within 0.5 s."""
-    box, head = _box_in_the_arm(0.005)
-    refused = tmp_path / "inside.yaml"
-    refused.write_text(head)
-    with pytest.raises(ScenarioError, match="mm deep into 'box'"):
-        load_scenario(refused)
-    allowed = tmp_path / "allowed.yaml"
-    allowed.write_text(
-        head.replace("  initial:", "  allow_initial_contact: true\n  initial:", 1)
-    )
-    scenario = load_scenario(allowed)
-    start = _unpadded_distance(scenario, box, 0.0, scenario.q0)
-    assert start == pytest.approx(-0.005, abs=1e-3)
-    trace = run_cat(scenario)
-    depth = np.array([_unpadded_distance(scenario, box, 0.0, q) for q in trace.q[::10]])
-    times = trace.t[::10]
-    assert depth.min() >= start - 1e-3  # never deeper
-    assert np.all(depth[times >= 0.5] >= 0.0), depth[times >= 0.5].min()
-
-
-def _box_in_the_arm(depth: float) -> tuple[ObjectSpec, str]:
-    """The pushed-box scene with a still box ``depth`` [m] into the arm's lowest point.
-
-    Returns the box and the scenario's text (2 s; the start is refused unless
-    ``robot.allow_initial_contact`` is added).
-    """
-    base = load_scenario(SCENARIOS / "cat_pushed_obstacle.yaml")
-    state = RobotState(base.robot, base.q0)
-    # The box's top ``depth`` into the arm (a bisection on coal's signed distance).
-    box = ObjectSpec(
-        name="box",
-        shape="box",
-        size=(0.2, 0.2, 0.1),
-        pose=_pose_under_hand(base, state, depth=depth),
-    )
-    text = (
-        (SCENARIOS / "cat_pushed_obstacle.yaml")
-        .read_text()
-        .replace("include: configs/cat.yaml", f"include: {SCENARIOS}/configs/cat.yaml")
-    )
-    head, _, _ = text.partition("    - name: box")
-    x, y, z = box.pose.position
-    head += (
-        f"    - {{name: box, shape: box, size: [0.2, 0.2, 0.1], "
-        f"pose: {{position: [{x}, {y}, {z}]}}}}\n"
-    )
-    return box, head.replace("duration: 6.0", "duration: 2.0")
-
-
-def _pose_under_hand(scenario, state: RobotState, depth: float):
-    """A pose for a 10 cm high box whose top is ``depth`` into the arm."""
-    from cbp.spatial import Pose
-
-    geometry = RobotGeometry(scenario.robot, padding=0.0)
-    world = CollisionWorld(
-        geometry,
-        PrimitiveEnvironment([]),
-        CollisionSettings(activation_distance=1.0, self_collision=False, padding=0.0),
-    )
-    hand = state.data.oMf[scenario.robot.frame_id("panda_hand")].translation
-
-    def gap(top: float) -> float:
-        slab = EnvironmentObject.primitive(
-            "box",
-            "box",
-            (0.2, 0.2, 0.1),
-            pin.SE3(np.eye(3), np.array([hand[0], hand[1], top - 0.05])),
-        )
-        world.set_environment(PrimitiveEnvironment([slab]))
-        contacts = world.check(state.q).contacts
-        return float(contacts.distance.min()) if len(contacts) else 1.0
-
-    low, high = hand[2] - 0.5, hand[2]  # gap(low) > 0 > gap(high)
-    for _ in range(50):
-        mid = 0.5 * (low + high)
-        if gap(mid) > -depth:
-            low = mid
-        else:
-            high = mid
-    top = 0.5 * (low + high)
-    return Pose(position=(float(hand[0]), float(hand[1]), float(top - 0.05)))
-
-
-@pytest.mark.slow
 def test_a_box_lowered_onto_the_arm_is_kept_off_by_the_space_it_hides() -> None:
     """The cameras see the box's top and sides come down, never its bottom.
 
@@ -324,55 +219,3 @@ def test_a_box_lowered_onto_the_arm_is_kept_off_by_the_space_it_hides() -> None:
         )
     )
     assert kept["peak_contact_force_n"] > 5.0, kept
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("method", ["cat", "ik", "mp", "hybrid"])
-def test_every_method_backs_out_of_an_allowed_start_in_contact(
-    tmp_path, method: str
-) -> None:
-    """2 cm into a box with allow_initial_contact: out within 1.5 s, said in events."""
-    box, head = _box_in_the_arm(0.02)
-    head = head.replace("  initial:", "  allow_initial_contact: true\n  initial:", 1)
-    allowed = tmp_path / "allowed.yaml"
-    allowed.write_text(head)
-    virtual = {f"method.{m}.timing.clock": "virtual" for m in ("cat", "ik", "mp")}
-    scenario = load_scenario(allowed, overrides={"method.name": method, **virtual})
-    assert _unpadded_distance(scenario, box, 0.0, scenario.q0) < -0.015
-    from cbp.executors import load_executor
-
-    trace = load_executor(method)(scenario, False)
-    late = trace.t >= 1.5
-    depth = np.array([_unpadded_distance(scenario, box, 0.0, q) for q in trace.q[late]])
-    assert depth.min() >= 0.0, depth.min()
-    messages = [m for _, m in trace.events]
-    assert any(m.startswith("in contact with an obstacle") for m in messages)
-    assert any(m.startswith("out of contact after") for m in messages)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("latency", [0.0, 0.1])
-def test_a_pincer_of_moving_obstacles_is_outrun_with_the_cameras(
-    tmp_path, latency: float
-) -> None:
-    """Generated scene 3: a ball and a post close on the arm from two sides.
-
-    Virtual time, with the map's snapshots at once and 0.1 s late (as a map in
-    its own process delivers them in wall-clock runs, whose outcome depends on
-    the machine's load, which a test's must not: they are tabulated in
-    docs/moving_scenes.md). With the cameras the map's moving cells are
-    measured ahead and the arm retreats into its own shadow: 0 N, as with the
-    declared objects. Without them (``moving_speed: 0``) the arm was pinned
-    between the obstacles and unseen space (1.4 MN); with snapshots 67 ms late,
-    before unseen space was read from the newest map's states, 15 kN.
-    """
-    (path,) = write_scenes(tmp_path, 1, seed=3, moving=True)
-    assert path.stem == "moving_3"
-    seen = {
-        "method.cat.timing.clock": "virtual",
-        "perception.source": "depth_camera",
-        "perception.virtual_latency": str(latency),
-    }
-    trace = run_cat(load_scenario(path, overrides=seen))
-    assert run_metrics(trace)["peak_contact_force_n"] == 0.0
-    assert any("the cameras see moving" in message for _, message in trace.events)
