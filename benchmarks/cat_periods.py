@@ -41,7 +41,9 @@ def main() -> None:
     for scene, source in CASES:
         scenario = load_scenario(
             ROOT / "scenarios" / f"{scene}.yaml",
-            overrides={"perception.source": source},
+            # Steps until the budget is spent, as the paper's CAT: by default
+            # a period ends once its path is long enough (``reach_periods``).
+            overrides={"perception.source": source, "method.cat.reach_periods": "0"},
         )
         trace = run_cat(scenario)
         full = [p for p in trace.periods if p.note == FULL_PERIOD_NOTE]

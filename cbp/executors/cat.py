@@ -3,11 +3,13 @@
 
 Each command period, from the starting point chosen by the trajectory loop
 (:mod:`cbp.executors.trajectory`), the engine takes QP steps toward the current
-goal until the period's time budget is spent, the motion has converged, or a
-step cannot be made. Every step is validated against the collision world (Sec.
-IV-C): a step that penetrates deeper than ``collision.penetration_tolerance`` is
-rejected and the contacts found there constrain the retry. The steps form the
-path that the loop times (stoppable at its end) and splices in.
+goal until the period's time budget is spent, the motion has converged, the
+path reaches past what the arm could follow before the next period's plan
+replaces it (``reach_periods``), or a step cannot be made. Every step is
+validated against the collision world (Sec. IV-C): a step that penetrates
+deeper than ``collision.penetration_tolerance`` is rejected and the contacts
+found there constrain the retry. The steps form the path that the loop times
+(stoppable at its end) and splices in.
 
 The objective and constraints are the scenario's task and constraint entries:
 CAT is a configuration (``scenarios/configs/cat.yaml``), not code here.
@@ -30,10 +32,12 @@ from cbp.run.parts import RunParts
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 
-__all__ = ["CatPlanner", "make_planner", "run_cat"]
+__all__ = ["REACHED_NOTE", "CatPlanner", "make_planner", "run_cat"]
 
 #: A contact row within this of its bound (the safety distance) holds the arm [m].
 HOLDING_DISTANCE = 0.005
+#: A period's note when its path became long enough (``reach_periods``).
+REACHED_NOTE = "path reaches past the next period"
 
 
 class CatPlanner:
@@ -66,6 +70,11 @@ class CatPlanner:
         self._stepper: ValidatedStepper | None = None
         #: The duration of the last step taken [s] (``step_dt``, or stretched).
         self._dt = settings.step_dt
+        robot = scenario.robot
+        self._vmax = robot.velocity_limits * settings.timing.velocity_scale
+        self._stop = self._vmax**2 / (
+            2.0 * robot.acceleration_limits * settings.timing.acceleration_scale
+        )
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts
@@ -88,6 +97,8 @@ class CatPlanner:
         steps = rejections = still = 0
         covered = 0.0  # the path's duration at the steps' velocity bounds [s]
         note = FULL_PERIOD_NOTE
+        reach = self._reach(budget.horizon)
+        travel = np.zeros_like(reach)  # each joint's travel along the path
         while steps < s.max_steps:
             if budget.spent():
                 break
@@ -119,6 +130,10 @@ class CatPlanner:
                     break
             else:
                 still = 0
+            travel += np.abs(step.dq)
+            if np.any(travel >= reach):
+                note = REACHED_NOTE
+                break
         else:
             note = "max_steps reached"
         last = stepper.last
@@ -126,6 +141,19 @@ class CatPlanner:
             self.blocked_by = last.problem.active_entries(step.dq) - self.step_limits
         self._say_if_unseen_space_holds(run)
         return Plan(np.array(path), steps, note)
+
+    def _reach(self, horizon: float) -> FloatArray:
+        """Each joint's travel that makes the path long enough [rad or m].
+
+        At the timing's velocity limit for ``reach_periods`` periods of
+        ``horizon`` [s], then braking at its acceleration limit; infinite
+        (never long enough) when ``reach_periods`` is 0 or a limit unknown.
+        """
+        periods = self.settings.reach_periods
+        if periods <= 0.0:
+            return np.full_like(self._vmax, np.inf)
+        reach = self._vmax * periods * horizon + self._stop
+        return np.where(np.isfinite(reach) & (reach > 0.0), reach, np.inf)
 
     def _step_dt(self, budget: Budget, covered: float) -> float:
         """The next step's duration: ``step_dt``, longer when few steps fit.

@@ -46,7 +46,7 @@ duration [s] of the plans (timed from rest).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -133,7 +133,10 @@ class HybridPlanner:
         """CAT's planner, the stall detector, the IK search and RRT-Connect."""
         spec = scenario.spec.method
         self.settings = spec.settings(HybridSettings)
-        self.cat_settings = spec.settings(CatSettings)
+        # CAT steps until its budget is spent: the stall detector reads the
+        # end of the path, and a path cut where it is long enough to follow
+        # (``reach_periods``) ends before the local minimum it runs into.
+        self.cat_settings = replace(spec.settings(CatSettings), reach_periods=0.0)
         self.cat = CatPlanner(scenario, self.cat_settings)
         self.robot = scenario.robot
         planner = self.settings.planner

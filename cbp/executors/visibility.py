@@ -26,7 +26,7 @@ from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray, IntArray
 
-__all__ = ["UNSEEN_DEPTH", "CellStates", "visibility"]
+__all__ = ["UNSEEN_DEPTH", "CellStates", "in_view", "visibility"]
 
 #: The length of unseen space a line of sight crosses with a chance 1/e [m].
 UNSEEN_DEPTH = 0.05
@@ -73,17 +73,7 @@ def visibility(
         grow: how much the shapes are grown [m] (0: as they are).
     """
     points = np.ascontiguousarray(points, dtype=float).reshape(-1, 3)
-    local = (points - camera.translation) @ camera.rotation  # into the camera
-    z = local[:, 2]
-    half = np.tan(np.deg2rad(spec.fov_deg) / 2.0)
-    aspect = spec.width / spec.height
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inside = (
-            (z > spec.near)
-            & (z < spec.far)
-            & (np.abs(local[:, 1] / z) < half)
-            & (np.abs(local[:, 0] / z) < half * aspect)
-        )
+    inside = in_view(camera, spec, points)
     out = np.zeros(len(points))
     if not inside.any():
         return out
@@ -110,6 +100,26 @@ def visibility(
     )
     out[inside] = chance
     return out
+
+
+def in_view(camera: pin.SE3, spec: CameraSpec, points: FloatArray) -> np.ndarray:
+    """Whether each of ``points`` (n, 3) is in the camera's field of view and range.
+
+    Within the spec's vertical angle and its image's aspect, and between its
+    ``near`` and ``far`` along the axis, from ``camera`` (the optical pose,
+    +z along its axis); nothing on the way is asked.
+    """
+    local = (points - camera.translation) @ camera.rotation  # into the camera
+    z = local[:, 2]
+    half = np.tan(np.deg2rad(spec.fov_deg) / 2.0)
+    aspect = spec.width / spec.height
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.asarray(
+            (z > spec.near)
+            & (z < spec.far)
+            & (np.abs(local[:, 1] / z) < half)
+            & (np.abs(local[:, 0] / z) < half * aspect)
+        )
 
 
 _NO_BODY = WorldShapes(

@@ -159,14 +159,28 @@ class CatSettings:
     distance."""
     max_steps: int = 2000
     """At most this many QP steps per period (the time budget usually ends it)."""
-    converged_step: float = 1e-5
+    converged_step: float = 5e-5
     """A step whose largest joint change is below this [rad] counts as still;
-    three in a row end the period's computation (time was spare)."""
+    three in a row end the period's computation (time was spare). An arm
+    held by a board crept on for a hundred steps of 1-3e-5 rad a period at
+    1e-5; at 5e-5 the paper's scenes reach their goals within 15 ms of the
+    time they did, with a third of the steps (docs/cat_scenes.md)."""
     max_rejections: int = 3
     """Consecutive rejected steps that end the period's path."""
+    reach_periods: float = 4.0
+    """The path is long enough, and the period's computation ends, once some
+    joint travels along it as far as it could at the timing's velocity limit
+    over this many command periods and then brake to a stop: the next
+    period's plan replaces the path long before the arm could follow it
+    further. 0: steps until the budget is spent or the motion converges (the
+    CAT paper). At 2 a free reach took 30 ms longer (the path is timed to
+    stop at its end); at 4 the paper's scenes move as at 0. The hybrid's CAT
+    always steps until its budget is spent: its stall detector reads the end
+    of the path, which must run into the local minimum."""
 
     def __post_init__(self) -> None:
         """Positive values."""
+        require_between(self, 0.0, 100.0, "periods", "reach_periods")
         require_between(self, MIN_DT, MAX_DT, "s", "step_dt")
         require_between(self, 1, 100_000, "steps", "max_steps")
         require_between(self, 1.0, 10.0, "", "max_step_stretch")

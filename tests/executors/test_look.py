@@ -13,7 +13,7 @@ from cbp.errors import ConfigError, ScenarioError
 from cbp.executors import load_executor
 from cbp.executors.aiming import looking_at, solve_camera
 from cbp.executors.clock import VirtualBudget, VirtualCosts
-from cbp.executors.visibility import UNSEEN_DEPTH, CellStates, visibility
+from cbp.executors.visibility import UNSEEN_DEPTH, CellStates, in_view, visibility
 from cbp.methods.settings import LookSettings
 from cbp.metrics import run_metrics
 from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
@@ -91,17 +91,7 @@ def test_unseen_space_on_the_line_makes_a_point_less_likely_seen() -> None:
 
 def _visibility_by_numpy(camera, spec, points, grid, body):  # type: ignore[no-untyped-def]
     """The prediction as first written, in numpy: every line sampled whole."""
-    local = (points - camera.translation) @ camera.rotation
-    z = local[:, 2]
-    half = np.tan(np.deg2rad(spec.fov_deg) / 2.0)
-    aspect = spec.width / spec.height
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inside = (
-            (z > spec.near)
-            & (z < spec.far)
-            & (np.abs(local[:, 1] / z) < half)
-            & (np.abs(local[:, 0] / z) < half * aspect)
-        )
+    inside = in_view(camera, spec, points)  # the field of view as the library's
     out = np.zeros(len(points))
     eye = camera.translation
     d = points[inside] - eye

@@ -22,7 +22,12 @@ BOARDS = Path(__file__).resolve().parents[2] / "scenarios" / "cat_boards.yaml"
 def _virtual_run(duration: float = 3.0) -> tuple[dict[str, Any], np.ndarray]:
     scenario = load_scenario(
         BOARDS,
-        overrides={"method.cat.timing.clock": "virtual", "duration": str(duration)},
+        overrides={
+            "method.cat.timing.clock": "virtual",
+            "duration": str(duration),
+            # Steps until the budget is spent, so that full periods are counted.
+            "method.cat.reach_periods": "0",
+        },
     )
     trace = run_cat(scenario)
     return run_metrics(trace, scenario.robot), trace.q
