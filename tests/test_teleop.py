@@ -103,7 +103,7 @@ def test_a_scripted_session_is_recorded_and_replays(tmp_path: Path) -> None:
         session.set_goal(np.array([np.nan, 0.0, 0.0]), np.eye(3))
         time.sleep(0.3)
         session.switch("ik")
-        assert wait_until(lambda: session.snapshot().method == "ik", 2)
+        assert wait_until(lambda: session.snapshot().method == "ik", 10)
         session.jog("z", 0.05)
         time.sleep(1.5)
     finally:
@@ -179,21 +179,22 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         assert drawn is not None
         np.testing.assert_allclose(drawn[:7], snap.q[:7], atol=0.05)
 
-        # A jog button moves the simulated hand by the step within a second.
+        # A jog button moves the simulated hand by the step (how soon is the
+        # latency benchmark's: here it must only happen, on a loaded machine too).
         before = session.snapshot().hand.copy()
         step = float(page.step.value)
         button("+x").click()
         assert wait_until(
-            lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 1.0
-        ), f"the hand moved {session.snapshot().hand - before} in 1 s"
-        assert wait_until(lambda: not page.unreachable, 2.0)  # a goal within reach
+            lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 10.0
+        ), f"the hand moved {session.snapshot().hand - before} in 10 s"
+        assert wait_until(lambda: not page.unreachable, 10.0)  # a goal within reach
 
         # The keyboard: "w" presses +x (a shortcut in the page).
         assert "keys: w +x" in browser.page_source
         before = session.snapshot().hand.copy()
         browser.find_element(By.TAG_NAME, "body").send_keys("w")
         assert wait_until(
-            lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 1.0
+            lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 10.0
         ), "the w key did not move the hand"
 
         # The method selector hands control to IK at the next period.
@@ -208,7 +209,7 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
             By.XPATH, "//*[@role='option'][normalize-space()='ik']"
         )
         option.click()
-        assert wait_until(lambda: session.snapshot().method == "ik", 3)
+        assert wait_until(lambda: session.snapshot().method == "ik", 10)
 
         # A goal inside a board, sent from elsewhere (a script): the gizmo
         # follows it; the arm stops short, and the page draws the goal as a
@@ -218,7 +219,7 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         _, rotation = session.goal.pose()
         inside = np.array([0.55, -0.24, 0.03])  # board_1's centre
         session.set_goal(inside, rotation)
-        assert wait_until(lambda: np.allclose(page.gizmo.position, inside), 1.0)
+        assert wait_until(lambda: np.allclose(page.gizmo.position, inside), 10.0)
         assert page.ghost is not None
         assert wait_until(
             lambda: page.state().gripper_visible and page.state().ghost_visible, 8.0
@@ -326,10 +327,10 @@ def test_the_orbit_page_sends_sliders_and_switches_configurations() -> None:
         assert page.server.get_host() == "127.0.0.1"
         page.sliders["youbot_orbit_case1"]["distance"][0].value = 0.7
         assert wait_until(
-            lambda: session.inputs["youbot_orbit_case1"]["distance"][0] == 0.7, 1
+            lambda: session.inputs["youbot_orbit_case1"]["distance"][0] == 0.7, 10
         )
         page.config.value = "youbot_pan"
-        assert wait_until(lambda: session.active == "youbot_pan", 1)
+        assert wait_until(lambda: session.active == "youbot_pan", 10)
         assert page.folders["youbot_pan"].visible
         assert not page.folders["youbot_orbit_case1"].visible
         page.update()
