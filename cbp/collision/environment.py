@@ -14,7 +14,7 @@ the occupied cell for octrees).
 from __future__ import annotations
 
 import abc
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import coal
 import numpy as np
@@ -25,7 +25,7 @@ from cbp.collision.convex_kernels import RobotTable
 from cbp.collision.geometry import LinkShape, PlacedShapes
 from cbp.robot import FloatArray
 
-__all__ = ["Environment", "NarrowPhase", "signed_distance"]
+__all__ = ["Environment", "NarrowPhase", "WholeQuery", "signed_distance"]
 
 #: How declared objects and the robot's own shape pairs are measured: in one
 #: compiled pass (:mod:`cbp.collision.convex_kernels`) or by coal, called from
@@ -61,6 +61,31 @@ def signed_distance(
     )
 
 
+class WholeQuery(NamedTuple):
+    """The robot's shapes at their frames, asked against the obstacles and each other.
+
+    What :meth:`Environment.query_with_self` measures in one pass.
+    """
+
+    frames: FloatArray
+    """The shapes' world placements (n, 4, 4)."""
+    table: RobotTable
+    """The robot's shapes, bounds and self pairs."""
+    shapes: list[LinkShape]
+    """The shapes themselves."""
+    margin: float
+    """Obstacles nearer than this to a shape are reported [m] (as
+    :meth:`Environment.query`'s)."""
+    per_shape: int
+    """At most this many obstacle contacts per shape."""
+    padding: float
+    """Subtracted from the obstacle distances [m]."""
+    self_margin: float
+    """Self pairs nearer than this are reported [m]."""
+    self_padding: float
+    """Subtracted from the self pairs' distances [m]."""
+
+
 class Environment(abc.ABC):
     """A static snapshot of the obstacles; replaced, never modified, when it changes."""
 
@@ -93,37 +118,17 @@ class Environment(abc.ABC):
             unpadded shapes.
         """
 
-    def query_with_self(
-        self,
-        frames: FloatArray,
-        table: RobotTable,
-        shapes: list[LinkShape],
-        margin: float,
-        per_shape: int,
-        padding: float,
-        self_margin: float,
-        self_padding: float,
-    ) -> ContactSet | None:
+    def query_with_self(self, whole: WholeQuery) -> ContactSet | None:
         """The whole contact query in one compiled pass, if this environment can.
 
         Obstacle contacts (as :meth:`query` with the compiled narrow phase,
-        distances less ``padding``) and the self contacts of the table's pairs
-        within ``self_margin`` (distances less ``self_padding``), stacked as
-        :meth:`ContactSet.stack` does. None (the default): the world queries
-        the environment and the self pairs apart.
-
-        Args:
-            frames: the shapes' world placements (n, 4, 4).
-            table: the robot's shapes, bounds and self pairs.
-            shapes: the shapes themselves.
-            margin: as :meth:`query`'s.
-            per_shape: as :meth:`query`'s.
-            padding: subtracted from the obstacle distances [m].
-            self_margin: self pairs nearer than this are reported [m].
-            self_padding: subtracted from their distances [m].
+        distances less ``whole.padding``) and the self contacts of the table's
+        pairs within ``whole.self_margin`` (distances less
+        ``whole.self_padding``), stacked as :meth:`ContactSet.stack` does.
+        None (the default): the world queries the environment and the self
+        pairs apart.
         """
-        del frames, table, shapes, margin, per_shape, padding
-        del self_margin, self_padding
+        del whole
         return None
 
     def prepare(self, shapes: list[LinkShape], margin: float) -> None:

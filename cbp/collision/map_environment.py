@@ -21,8 +21,8 @@ from scipy.spatial import cKDTree
 from cbp.collision.broad import shape_bounds
 from cbp.collision.cell_index import CellIndex
 from cbp.collision.contacts import ContactSet
-from cbp.collision.convex_kernels import RobotTable, contact_buffers, self_contacts
-from cbp.collision.environment import Environment, NarrowPhase
+from cbp.collision.convex_kernels import contact_buffers, self_contacts
+from cbp.collision.environment import Environment, NarrowPhase, WholeQuery
 from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
 from cbp.collision.shape_table import CellContactQuery, ShapeTable, compile_kernels
 from cbp.robot import FloatArray
@@ -248,21 +248,11 @@ class OccupancyEnvironment(Environment):
         del narrow_phase
         return self._cells(robot.shapes, robot.placements, margin, per_shape)
 
-    def query_with_self(
-        self,
-        frames: FloatArray,
-        table: RobotTable,
-        shapes: list[LinkShape],
-        margin: float,
-        per_shape: int,
-        padding: float,
-        self_margin: float,
-        self_padding: float,
-    ) -> ContactSet | None:
+    def query_with_self(self, whole: WholeQuery) -> ContactSet | None:
         """:meth:`query` and the self pairs from the shapes' frames, no placements.
 
         The cells' compiled pass and the self pairs' (as the declared objects'
-        query measures them) from ``frames`` (n, 4, 4), without the pinocchio
+        query measures them) from ``whole.frames`` (n, 4, 4), without the pinocchio
         placements :meth:`query` takes (building them cost more than the
         cells' pass); see :meth:`Environment.query_with_self`. None for a
         snapshot whose query adds to this one's (moving cells), or when a self
@@ -270,6 +260,7 @@ class OccupancyEnvironment(Environment):
         """
         if type(self).query is not OccupancyEnvironment.query:
             return None
+        frames, table = whole.frames, whole.table
         own = ContactSet.empty()
         if len(table.first):
             centres_local, halves_local, radii, packed = table.bounds
@@ -279,7 +270,7 @@ class OccupancyEnvironment(Environment):
             index, floats, left = contact_buffers(len(table.first))
             count, missed = self_contacts(
                 (centres, halves, radii, frames, packed),
-                table.pairs(float(self_margin), float(self_padding)),
+                table.pairs(float(whole.self_margin), float(whole.self_padding)),
                 index,
                 floats,
                 left,
@@ -287,8 +278,10 @@ class OccupancyEnvironment(Environment):
             if missed:
                 return None
             own = ContactSet.packed(index, floats, 0, count)
-        found = self._cells(shapes, _Frames(frames), margin, per_shape)
-        return ContactSet.stack(found, padding, own)
+        found = self._cells(
+            whole.shapes, _Frames(frames), whole.margin, whole.per_shape
+        )
+        return ContactSet.stack(found, whole.padding, own)
 
     def _cells(
         self,

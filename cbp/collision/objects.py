@@ -23,7 +23,6 @@ from cbp.collision.broad import near_objects
 from cbp.collision.contacts import ContactRow, ContactSet
 from cbp.collision.convex_kernels import (
     Obstacles,
-    RobotTable,
     compile_convex_kernels,
     contact_buffers,
     declared_contacts,
@@ -33,7 +32,12 @@ from cbp.collision.convex_kernels import (
     packed_robot,
     placed_robot,
 )
-from cbp.collision.environment import Environment, NarrowPhase, signed_distance
+from cbp.collision.environment import (
+    Environment,
+    NarrowPhase,
+    WholeQuery,
+    signed_distance,
+)
 from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
 from cbp.collision.shape_table import compile_kernels
 from cbp.errors import ConfigError
@@ -318,23 +322,16 @@ class PrimitiveEnvironment(Environment):
             )
         return out
 
-    def query_with_self(
-        self,
-        frames: FloatArray,
-        table: RobotTable,
-        shapes: list[LinkShape],
-        margin: float,
-        per_shape: int,
-        padding: float,
-        self_margin: float,
-        self_padding: float,
-    ) -> ContactSet | None:
+    def query_with_self(self, whole: WholeQuery) -> ContactSet | None:
         """The whole query in one compiled pass (:func:`declared_contacts`).
 
         None for scenes so large that a k-d tree picks the objects first.
         """
         if len(self.objects) > TREE_MIN_OBJECTS:
             return None
+        frames, table, shapes, margin, per_shape, padding, self_margin, self_padding = (
+            whole
+        )
         candidates = self._all
         capacity = len(frames) * len(candidates) + len(table.first)
         index, floats, left = contact_buffers(capacity)

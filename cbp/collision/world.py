@@ -33,7 +33,7 @@ from cbp.collision.convex_kernels import (
     self_contacts,
     self_overlap,
 )
-from cbp.collision.environment import Environment, signed_distance
+from cbp.collision.environment import Environment, WholeQuery, signed_distance
 from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
 from cbp.collision.map_environment import BlockedGrid
 from cbp.collision.motion import SweepBound
@@ -539,14 +539,16 @@ class CollisionWorld:
         if settings.narrow_phase == "compiled":
             pad2 = 2.0 * self.padding
             found = environment.query_with_self(
-                self.shape_frames(state),
-                self._table,
-                self.geometry.shapes,
-                self.margin(environment),
-                settings.contacts_per_link,
-                self.padding + environment.resolution,
-                settings.activation_distance + pad2,
-                pad2,
+                WholeQuery(
+                    frames=self.shape_frames(state),
+                    table=self._table,
+                    shapes=self.geometry.shapes,
+                    margin=self.margin(environment),
+                    per_shape=settings.contacts_per_link,
+                    padding=self.padding + environment.resolution,
+                    self_margin=settings.activation_distance + pad2,
+                    self_padding=pad2,
+                )
             )
             if found is not None:
                 return found
