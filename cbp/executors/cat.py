@@ -70,11 +70,9 @@ class CatPlanner:
         self._stepper: ValidatedStepper | None = None
         #: The duration of the last step taken [s] (``step_dt``, or stretched).
         self._dt = settings.step_dt
-        robot = scenario.robot
-        self._vmax = robot.velocity_limits * settings.timing.velocity_scale
-        self._stop = self._vmax**2 / (
-            2.0 * robot.acceleration_limits * settings.timing.acceleration_scale
-        )
+        self._vmax, amax = settings.timing.limits(scenario.robot)
+        with np.errstate(divide="ignore", invalid="ignore"):  # unknown limits
+            self._stop = self._vmax**2 / (2.0 * amax)
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts
@@ -123,15 +121,15 @@ class CatPlanner:
             path.append(q)
             covered += dt
             assert step.dq is not None
-            if _largest(step.dq) < s.converged_step:
+            largest, reached = _walk(step.dq, travel, reach)
+            if largest < s.converged_step:
                 still += 1
                 if still >= 3:
                     note = "converged"
                     break
             else:
                 still = 0
-            travel += np.abs(step.dq)
-            if np.any(travel >= reach):
+            if reached:
                 note = REACHED_NOTE
                 break
         else:
@@ -219,15 +217,24 @@ class CatPlanner:
 
 
 @numba.njit(cache=True, nogil=True)
-def _largest(dq: FloatArray) -> float:
-    """The largest magnitude of a step's entries (finite: the step guard's)."""
+def _walk(dq: FloatArray, travel: FloatArray, reach: FloatArray) -> tuple[float, bool]:
+    """A step along the path: its largest entry's magnitude, and whether it arrived.
+
+    Adds each joint's ``|dq|`` to ``travel`` (in place); arrived when some
+    joint's travel is at least its ``reach``. ``dq`` is finite (the step
+    guard's).
+    """
     largest = 0.0
-    for x in dq:
-        largest = max(largest, abs(x))
-    return largest
+    reached = False
+    for i in range(dq.shape[0]):
+        x = abs(dq[i])
+        largest = max(largest, x)
+        travel[i] += x
+        reached = reached or travel[i] >= reach[i]
+    return largest, reached
 
 
-_largest(np.zeros(1))  # compiled (or loaded from numba's cache) on import
+_walk(np.zeros(1), np.zeros(1), np.ones(1))  # compiled (or loaded from the cache)
 
 
 def make_planner(scenario: Scenario, run: RunParts) -> CatPlanner:

@@ -153,9 +153,7 @@ class HybridPlanner:
         self.frame_id = self.robot.frame_id(run.ee_frame)
         self._data = self.robot.model.createData()
         self._rng = np.random.default_rng(self.settings.seed)
-        timing = self.cat_settings.timing
-        self._vmax = self.robot.velocity_limits * timing.velocity_scale
-        self._amax = self.robot.acceleration_limits * timing.acceleration_scale
+        self._vmax, self._amax = self.cat_settings.timing.limits(self.robot)
         self.mode: Mode = "cat"
         self._planned_goal: pin.SE3 | None = None  # the goal last planned for
         self._start: FloatArray | None = None  # where the plan starts (at rest)

@@ -336,13 +336,7 @@ class MpPlanner:
             run.event(run.sim.t, f"mp: {note}; planning again")
             if budget.spent():
                 return Plan(None, self.checks - checks, note)
-        timing = s.timing
-        record_plan(
-            run,
-            points,
-            self.search.robot.velocity_limits * timing.velocity_scale,
-            self.search.robot.acceleration_limits * timing.acceleration_scale,
-        )
+        record_plan(run, points, *s.timing.limits(self.search.robot))
         return Plan(points, self.checks - checks, note)
 
 

@@ -224,8 +224,7 @@ def run_trajectory_executor(
             for a page that draws it).
     """
     robot = run.robot
-    vmax = robot.velocity_limits * timing.velocity_scale
-    amax = robot.acceleration_limits * timing.acceleration_scale
+    vmax, amax = timing.limits(robot)
     lo, hi = timing.bounds()
     period = timing.period
     stop_time = robot.stopping_time(vmax, amax)

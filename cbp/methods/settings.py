@@ -7,9 +7,12 @@ Plain data: the executors that run them live in :mod:`cbp.executors`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from cbp.errors import ConfigError, require, require_between
+
+if TYPE_CHECKING:
+    from cbp.robot import FloatArray, RobotModel
 
 __all__ = [
     "CatSettings",
@@ -116,6 +119,16 @@ class ExecutorTiming:
         for name in ("time_budget", "velocity_scale", "acceleration_scale"):
             if not 0 < getattr(self, name) <= 1:
                 raise ConfigError(f"must be in (0, 1], got {getattr(self, name)}", name)
+
+    def limits(self, robot: RobotModel) -> tuple[FloatArray, FloatArray]:
+        """The robot's velocity and acceleration limits as trajectories use them.
+
+        Each scaled by ``velocity_scale`` and ``acceleration_scale``.
+        """
+        return (
+            robot.velocity_limits * self.velocity_scale,
+            robot.acceleration_limits * self.acceleration_scale,
+        )
 
     def bounds(self) -> tuple[float, float]:
         """Shortest and longest period [s]."""
