@@ -41,9 +41,14 @@ def main() -> None:
     for scene, source in CASES:
         scenario = load_scenario(
             ROOT / "scenarios" / f"{scene}.yaml",
-            # Steps until the budget is spent, as the paper's CAT: by default
-            # a period ends once its path is long enough (``reach_periods``).
-            overrides={"perception.source": source, "method.cat.reach_periods": "0"},
+            # Steps until the budget is spent or the motion is still, as the
+            # paper's CAT: by default a period ends once its path is long
+            # enough (``reach_periods``) or its steps fall below 5e-5 rad.
+            overrides={
+                "perception.source": source,
+                "method.cat.reach_periods": "0",
+                "method.cat.converged_step": "1e-5",
+            },
         )
         trace = run_cat(scenario)
         full = [p for p in trace.periods if p.note == FULL_PERIOD_NOTE]
