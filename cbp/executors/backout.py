@@ -22,7 +22,7 @@ from cbp.collision.world import CollisionWorld
 from cbp.robot import FloatArray
 from cbp.state import RobotState
 
-__all__ = ["CLEAR", "MAX_POINTS", "back_out", "contact_depth"]
+__all__ = ["CLEAR", "MAX_POINTS", "back_out", "clear_padding", "contact_depth"]
 
 #: The padded shapes are clear of the obstacles by this much at the path's end [m].
 CLEAR = 5e-4
@@ -64,9 +64,8 @@ def back_out(
         The path (its first point is ``q``; None when the unpadded robot
         touches no obstacle there), and the depth at ``q`` [m].
     """
-    robot = world.geometry.robot
     if state is None:
-        state = RobotState(robot, q)
+        state = RobotState(world.geometry.robot, q)
     else:
         state.update(q)
     # The contacts there as they are: ``query``, not ``check``, so that the
@@ -76,6 +75,61 @@ def back_out(
     depth = contact_depth(world, contacts)
     if depth <= 0.0:
         return None, 0.0
+    return _leave(world, q, contacts, step_bound, state), depth
+
+
+def clear_padding(
+    world: CollisionWorld,
+    q: FloatArray,
+    step_bound: FloatArray,
+    state: RobotState | None = None,
+) -> FloatArray | None:
+    """A path from ``q`` until the padded shapes clear the obstacles.
+
+    A planner that needs a start free of contact cannot start where CAT
+    rests: its contact rows hold the padded shapes at the obstacles' surface,
+    a rounding error inside them. This path moves them out along the contact
+    normals, as :func:`back_out` moves the unpadded robot out, by
+    :data:`CLEAR`.
+
+    Args:
+        world: the collision world (its current environment).
+        q: where the robot is.
+        step_bound: the largest change of each joint between two points of the
+            path (nv) [rad or m].
+        state: a state of the world's robot to work in; None: a new one.
+
+    Returns:
+        The path (its first point is ``q``), ending where the padded shapes
+        are clear of every obstacle; None when ``q`` is clear already or no
+        such path was found within :data:`MAX_POINTS` points.
+    """
+    if state is None:
+        state = RobotState(world.geometry.robot, q)
+    else:
+        state.update(q)
+    contacts = world.query(state)
+    if not np.any(contacts.environment_part().distance < 0.0):
+        return None
+    path = _leave(world, q, contacts, step_bound, state)
+    state.update(path[-1])
+    left = world.query(state).environment_part()
+    return path if not np.any(left.distance < 0.0) else None
+
+
+def _leave(
+    world: CollisionWorld,
+    q: FloatArray,
+    contacts: ContactSet,
+    step_bound: FloatArray,
+    state: RobotState,
+) -> FloatArray:
+    """Steps from ``q`` (where ``state`` is) out along the contacts' normals.
+
+    Until the padded shapes are :data:`CLEAR` of the obstacles, at most
+    :data:`MAX_POINTS` points; the first point is ``q``.
+    """
+    robot = world.geometry.robot
     joints = np.array([s.joint_id for s in world.geometry.shapes], dtype=np.intp)
     support = robot.support[joints]
     lower, upper = robot.lower_limits, robot.upper_limits
@@ -109,4 +163,4 @@ def back_out(
         path.append(following)
         state.update(following)
         contacts = world.query(state)
-    return np.array(path), depth
+    return np.array(path)

@@ -53,12 +53,13 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.engine import Engine
+from cbp.executors.backout import clear_padding
 from cbp.executors.cat import CatPlanner
 from cbp.executors.clock import Budget
-from cbp.executors.ik_search import IkSearch
+from cbp.executors.ik_search import IkSearch, check_work
 from cbp.executors.look import Looker
 from cbp.executors.mp import RrtConnect, plan_size, record_plan
-from cbp.executors.trajectory import Plan, run_periodic
+from cbp.executors.trajectory import BACK_OUT_DT, Plan, run_periodic
 from cbp.methods.settings import CatSettings, HybridSettings
 from cbp.robot import FloatArray
 from cbp.run.parts import RunParts
@@ -320,8 +321,8 @@ class HybridPlanner:
             if self._from is None:
                 run.event(
                     run.sim.t,
-                    "hybrid: the arm rests in contact and its way in is not free "
-                    "either; no plan from here",
+                    "hybrid: the arm rests within the planner's padding of an "
+                    "obstacle and no way out of it is free; no plan from here",
                 )
                 self._give_up(run.sim.t)
                 return
@@ -400,6 +401,15 @@ class HybridPlanner:
         for k in range(1, min(len(came), MAX_BACKTRACK)):
             if self.search.collision_free(came[k], budget):
                 return np.vstack([self._start[None], came[1 : k + 1]])
+        # An arm at rest has no way back along its trajectory: out along the
+        # contact normals, until the padded shapes clear the obstacles.
+        world = run.world
+        if world is None:
+            return None
+        budget.charge(check_work(world))
+        out = clear_padding(world, self._start, self._vmax * BACK_OUT_DT)
+        if out is not None and self.search.collision_free(out[-1], budget):
+            return out
         return None
 
     def _splice(self, points: FloatArray, note: str, t: float, run: RunParts) -> Plan:
