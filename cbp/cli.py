@@ -11,7 +11,7 @@ import typing
 from collections.abc import Sequence
 from pathlib import Path
 
-from cbp.errors import CbpError
+from cbp.errors import CbpError, ConfigError
 from cbp.methods import COMPARABLE, METHODS
 from cbp.registry import Registry
 from cbp.schema import type_name
@@ -537,6 +537,10 @@ def _run(
     try:
         with run_progress(f"{scenario.spec.name} ({name})"):
             trace = executor(scenario, gui)
+    except ConfigError as exc:  # found as the run starts (a URDF PyBullet refuses)
+        claim.release(remove=True)
+        print(exc, file=sys.stderr)
+        return 2
     except BaseException:
         claim.release(remove=True)
         raise

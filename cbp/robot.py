@@ -31,6 +31,7 @@ from cbp.errors import (
     close_matches,
 )
 from cbp.schema import Document, value_node
+from cbp.urdf_files import missing_meshes
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -273,6 +274,12 @@ class RobotModel:
             doc.report(value_node(doc.root, "urdf"), "urdf", exc.message)
             doc.raise_if_problems()
             raise  # unreachable: the problem was reported
+        for mesh in missing_meshes(path, [folder]):
+            doc.report(
+                value_node(doc.root, "urdf"),
+                "urdf",
+                f"{description.urdf}, line {mesh.line}: {mesh.missing}",
+            )
         _check_names(
             doc, description, cls(model, name=description.name, urdf_path=path)
         )
