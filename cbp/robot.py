@@ -48,6 +48,10 @@ Approximation = Literal["hull", "capsule"]
 #: large as no bound at all.
 _UNBOUNDED = 1e300
 
+#: How far past a joint limit a home or initial position may lie [rad or m]:
+#: a value at the limit, written rounded (robot.yaml keeps 4 decimals), passes.
+LIMIT_TOLERANCE = 1e-4
+
 #: Where robot description folders are looked up, after ``CBP_ROBOT_PATH``:
 #: the robots that ship with cbp (:func:`cbp.data.data_dir`).
 ROBOTS_DIR = data_dir("robots")
@@ -386,6 +390,39 @@ class RobotModel:
         joint = self.model.joints[self.joint_id(name)]
         return slice(joint.idx_q, joint.idx_q + joint.nq)
 
+    def joint_range(self, name: str) -> tuple[float, float, str] | None:
+        """(lower, upper, unit) of joint ``name``'s position; None when unbounded.
+
+        Continuous joints, planar and floating bases have no range; the unit is
+        ``m`` for a prismatic joint, else ``rad``.
+        """
+        joint = self.model.joints[self.joint_id(name)]
+        if joint.nq != 1 or joint.nv != 1:
+            return None
+        lower, upper = self._lower[joint.idx_q], self._upper[joint.idx_q]
+        if not (np.isfinite(lower) and np.isfinite(upper)):
+            return None
+        kind = joint.shortname()  # JointModelPX/PY/PZ, JointModelPrismatic...
+        prismatic = kind.startswith("JointModelPrismatic") or kind[-2:-1] == "P"
+        unit = "m" if prismatic else "rad"
+        return float(lower), float(upper), unit
+
+    def out_of_range(self, name: str, value: float) -> str | None:
+        """Why ``value`` cannot be joint ``name``'s position, or None when it can.
+
+        A value past a limit by at most :data:`LIMIT_TOLERANCE` is accepted.
+        """
+        limits = self.joint_range(name)
+        if limits is None:
+            return None
+        lower, upper, unit = limits
+        if lower - LIMIT_TOLERANCE <= value <= upper + LIMIT_TOLERANCE:
+            return None
+        return (
+            f"joint '{name}' at {value:g} {unit} is outside its range "
+            f"[{lower:.4g}, {upper:.4g}] {unit} ({self.urdf_name})"
+        )
+
     def joint_v_indices(self, names: Sequence[str]) -> IntArray:
         """Tangent-space indices of the joints ``names``, in the order given."""
         idx: list[int] = []
@@ -645,6 +682,10 @@ def _check_names(
                     f"joint '{joint}' is locked (locked_joints), so it is not in the "
                     "model: remove it here"
                 )
+            elif key in ("locked_joints", "home") and (
+                problem := full.out_of_range(joint, names[joint])
+            ):
+                message = problem
             else:
                 continue
             doc.report(nodes.get(joint), f"{key}.{joint}", message)

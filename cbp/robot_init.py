@@ -104,8 +104,8 @@ def describe_urdf(
         lock_gripper: lock the gripper's joints (found as for the hand).
 
     Raises:
-        ConfigError: the URDF cannot be read, or a named frame or joint is not
-            in it.
+        ConfigError: the URDF cannot be read, a named frame or joint is not
+            in it, or a home position is outside its joint's range.
         ScenarioError: mesh files the URDF names are missing (each at its line).
     """
     check_file(urdf, "URDF", MAX_YAML_BYTES * 8)
@@ -154,6 +154,9 @@ def describe_urdf(
     if home:
         for joint, value in home.items():
             robot.joint_id(joint)
+            problem = robot.out_of_range(joint, value)
+            if problem:
+                raise ConfigError(problem, f"home.{joint}")
             posture[joint] = float(value)
     else:
         notes.append("home: the middle of every joint's range")

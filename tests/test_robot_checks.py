@@ -9,8 +9,9 @@ import pytest
 
 import cbp.robot
 from cbp.cli import main
-from cbp.errors import ConfigError
-from cbp.robot import RobotModel
+from cbp.errors import ConfigError, ScenarioError
+from cbp.robot import LIMIT_TOLERANCE, RobotModel
+from cbp.scenario import load_scenario
 from cbp.sim.scene import PybulletScene
 from cbp.urdf_files import mesh_uses, missing_meshes
 
@@ -151,3 +152,69 @@ def test_a_urdf_pybullet_refuses_is_a_located_error(
     assert "PyBullet cannot load robot 'xarm6'" in err
     assert "Traceback" not in err
     assert not out.exists()
+
+
+def test_robot_init_refuses_a_home_outside_the_joint_range(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`--home joint2=5.0` is refused naming the joint, the value and its range."""
+    command = ["-q", "robot", "init", str(XARM), "--out", str(tmp_path / "arm")]
+    assert main([*command, "--samples", "0", "--home", "joint2=5.0"]) == 2
+    assert capsys.readouterr().err == (
+        "home.joint2: joint 'joint2' at 5 rad is outside its range "
+        "[-2.059, 2.094] rad (xarm6_robot.urdf)\n"
+    )
+    assert not (tmp_path / "arm" / "robot.yaml").exists()
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "shown"),
+    [("robot.initial.joint2", "5.0", "5"), ("robot.initial", "{joint2: -3.0}", "-3")],
+)
+def test_an_initial_position_outside_the_range_is_located(
+    tmp_path: Path, key: str, value: str, shown: str
+) -> None:
+    """robot.initial beyond a limit, from --set or in the file, names joint, value and range."""
+    _xarm(tmp_path)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(tmp_path / "s.yaml", overrides={key: value})
+    (problem,) = info.value.problems
+    assert problem.endswith(
+        f"robot.initial.joint2: joint 'joint2' at {shown} rad is outside its range "
+        "[-2.059, 2.094] rad (robot.urdf)"
+    )
+    text = SCENARIO.replace("{name: arm}", "{name: arm, initial: {joint2: 5.0}}")
+    (tmp_path / "s.yaml").write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(tmp_path / "s.yaml")
+    assert info.value.problems == [
+        "line 3: robot.initial.joint2: joint 'joint2' at 5 rad is outside its "
+        "range [-2.059, 2.094] rad (robot.urdf)"
+    ]
+
+
+def test_a_position_at_a_limit_passes(tmp_path: Path) -> None:
+    """A value at a limit, or rounded just past it, is within the range."""
+    arm = _xarm(tmp_path)
+    robot = RobotModel.load(str(arm))
+    lower, upper, unit = robot.joint_range("joint2") or (0.0, 0.0, "")
+    assert unit == "rad"
+    for value in (lower, upper, upper + 0.5 * LIMIT_TOLERANCE):
+        load_scenario(
+            tmp_path / "s.yaml", overrides={"robot.initial.joint2": repr(value)}
+        )
+    assert robot.out_of_range("joint2", upper + 2 * LIMIT_TOLERANCE)
+
+
+def test_prismatic_ranges_are_in_metres_and_continuous_joints_have_none(
+    tmp_path: Path,
+) -> None:
+    """A prismatic joint's range is in m; a continuous joint takes any angle."""
+    (tmp_path / "toy.urdf").write_text(TOY_URDF)
+    robot = RobotModel.from_urdf(tmp_path / "toy.urdf")
+    assert robot.joint_range("slide") == (0.0, 0.2, "m")
+    assert robot.out_of_range("slide", 0.3) == (
+        "joint 'slide' at 0.3 m is outside its range [0, 0.2] m (toy.urdf)"
+    )
+    assert robot.joint_range("spin") is None
+    assert robot.out_of_range("spin", 100.0) is None
