@@ -11,6 +11,7 @@ every change of configuration goes through :meth:`RobotModel.integrate` and
 from __future__ import annotations
 
 import os
+import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +31,7 @@ from cbp.errors import (
     RobotNotFoundError,
     close_matches,
 )
-from cbp.schema import Document, value_node
+from cbp.schema import INVALID, Document, value_node
 from cbp.urdf_files import missing_meshes
 
 FloatArray = npt.NDArray[np.float64]
@@ -269,7 +270,13 @@ class RobotModel:
         folder = find_robot_folder(name, relative_to)
         doc = Document.from_file(folder / "robot.yaml")
         description = doc.build(RobotDescription, doc.root, "")
-        doc.raise_if_problems()
+        if description is INVALID:
+            # The keys that were read are still checked against the URDF, so
+            # that one pass reports every problem of the file.
+            description = _readable_description(doc)
+            if description is None:
+                doc.raise_if_problems()
+                raise AssertionError("unreachable: the problems were reported")
         base = base or description.base
         path = folder / description.urdf
         try:
@@ -653,6 +660,30 @@ def _key_nodes(root: Node | None, *keys: str) -> dict[str, Node]:
     if not isinstance(node, yaml.MappingNode):
         return {}
     return {k.value: k for k, _ in node.value if isinstance(k, yaml.ScalarNode)}
+
+
+def _readable_description(doc: Document) -> RobotDescription | None:
+    """robot.yaml's keys that can be read, with defaults for the others.
+
+    None when a required key (``name``, ``urdf``, ``end_effector``, ``home``)
+    cannot be read. The problems of the keys left out are already in ``doc``.
+    """
+    root = doc.root
+    if not isinstance(root, yaml.MappingNode):
+        return None
+    scratch = Document("", doc.path)  # the problems were reported in doc
+    fields = typing.get_type_hints(RobotDescription)
+    values: dict[str, object] = {}
+    for key_node, node in root.value:
+        key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
+        if key in fields:
+            value = scratch.build(fields[key], node, key)
+            if value is not INVALID:
+                values[key] = value
+    try:
+        return RobotDescription(**values)  # type: ignore[arg-type]
+    except (TypeError, ConfigError):
+        return None
 
 
 def _check_names(

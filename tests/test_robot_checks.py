@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pybullet_data
 import pytest
+import yaml
 
 import cbp.robot
 from cbp.cli import main
@@ -218,3 +219,33 @@ def test_prismatic_ranges_are_in_metres_and_continuous_joints_have_none(
     )
     assert robot.joint_range("spin") is None
     assert robot.out_of_range("spin", 100.0) is None
+
+
+def test_robot_yaml_problems_are_reported_together(tmp_path: Path) -> None:
+    """A key typo, a bad end effector and a home out of range: all three at once."""
+    arm = _xarm(tmp_path)
+    path = arm / "robot.yaml"
+    document = yaml.safe_load(path.read_text())
+    document["end_effector"] = "link7"
+    document["home"]["joint2"] = 5.0
+    document["acceleration_limit"] = document.pop("acceleration_limits")
+    path.write_text(yaml.safe_dump(document, sort_keys=False))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(tmp_path / "s.yaml")
+    lines = {
+        key: _line_of(path, key)
+        for key in ("acceleration_limit:", "end_effector:", "  joint2:")
+    }
+    assert sorted(info.value.problems) == sorted(
+        [
+            # An unknown key is located at its value (a mapping: the next line).
+            f"{path}, line {lines['acceleration_limit:'] + 1}: acceleration_limit: "
+            "unknown key 'acceleration_limit'; did you mean 'acceleration_limits'? "
+            "Accepted: name, urdf, end_effector, home, base, wrist_link, "
+            "locked_joints, velocity_limits, acceleration_limits, collision.",
+            f"{path}, line {lines['end_effector:']}: end_effector: no frame 'link7' "
+            "in robot.urdf; close matches: link6, link5, link4",
+            f"{path}, line {lines['  joint2:']}: home.joint2: joint 'joint2' at 5 "
+            "rad is outside its range [-2.059, 2.094] rad (robot.urdf)",
+        ]
+    )
