@@ -114,13 +114,14 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
     (os.pathsep-separated) then the robots that ship with cbp.
 
     Raises:
-        RobotNotFoundError: listing the robots available.
+        RobotNotFoundError: saying where it looked, with the nearest robot
+            folders' names (beside the scenario, in the current folder, on the
+            search path).
     """
-    for direct in ([relative_to / name] if relative_to is not None else []) + [
-        Path(name)
-    ]:
-        if is_file(direct / "robot.yaml"):
-            return direct
+    direct = ([relative_to / name] if relative_to is not None else []) + [Path(name)]
+    for folder in direct:
+        if is_file(folder / "robot.yaml"):
+            return folder
     roots = [
         Path(p) for p in os.environ.get("CBP_ROBOT_PATH", "").split(os.pathsep) if p
     ]
@@ -128,6 +129,17 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
     for root in roots:
         if is_file(root / name / "robot.yaml"):
             return root / name
+    # Robot folders beside the one named (written as the scenario would name
+    # them), then those on the search path (by name).
+    parent = Path(name).parent
+    local = sorted(
+        {
+            str(parent / p.parent.name) if str(parent) != "." else p.parent.name
+            for folder in direct
+            if folder.parent.is_dir()
+            for p in folder.parent.glob("*/robot.yaml")
+        }
+    )
     available = sorted(
         {
             p.parent.name
@@ -136,10 +148,25 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
             for p in root.glob("*/robot.yaml")
         }
     )
-    hint = close_matches(name, available, n=1)
-    did_you_mean = f"; did you mean '{hint[0]}'?" if hint else ""
-    listing = ", ".join(available) or "(none)"
-    raise RobotNotFoundError(f"no robot '{name}'{did_you_mean} Available: {listing}.")
+    hint = close_matches(name, [*local, *available], n=1)
+    did_you_mean = f" Did you mean '{hint[0]}'?" if hint else ""
+    places: dict[Path, str] = {}
+    for folder, label in zip(
+        direct,
+        ["beside the scenario", "the current folder"][-len(direct) :],
+        strict=True,
+    ):
+        places.setdefault(folder.parent.resolve(), label)
+    for root in roots:
+        places.setdefault(
+            root, "shipped robots" if root == ROBOTS_DIR else "CBP_ROBOT_PATH"
+        )
+    looked = ", ".join(f"{place} ({label})" for place, label in places.items())
+    listing = ", ".join(available) or "none"
+    raise RobotNotFoundError(
+        f"no robot '{name}': no folder '{Path(name).name}' with a robot.yaml in "
+        f"{looked}.{did_you_mean} Robots on the search path: {listing}."
+    )
 
 
 class RobotModel:

@@ -10,8 +10,8 @@ import yaml
 
 import cbp.robot
 from cbp.cli import main
-from cbp.errors import ConfigError, ScenarioError
-from cbp.robot import LIMIT_TOLERANCE, RobotModel
+from cbp.errors import ConfigError, RobotNotFoundError, ScenarioError
+from cbp.robot import LIMIT_TOLERANCE, RobotModel, find_robot_folder
 from cbp.scenario import load_scenario
 from cbp.sim.scene import PybulletScene
 from cbp.urdf_files import mesh_uses, missing_meshes
@@ -249,3 +249,24 @@ def test_robot_yaml_problems_are_reported_together(tmp_path: Path) -> None:
             "rad is outside its range [-2.059, 2.094] rad (robot.urdf)",
         ]
     )
+
+
+def test_robot_not_found_says_where_it_looked_and_suggests_local_folders(
+    tmp_path: Path,
+) -> None:
+    """A misspelt robot folder beside the scenario is suggested; the folders searched are named."""
+    (tmp_path / "my_xarm").mkdir()
+    (tmp_path / "my_xarm" / "robot.yaml").write_text("name: x\n")
+    with pytest.raises(RobotNotFoundError) as info:
+        find_robot_folder("my_xram", tmp_path)
+    message = str(info.value)
+    assert message.startswith(
+        f"no robot 'my_xram': no folder 'my_xram' with a robot.yaml in {tmp_path} "
+        f"(beside the scenario), "
+    )
+    assert f"{cbp.robot.ROBOTS_DIR} (shipped robots). Did you mean 'my_xarm'? " in (
+        message
+    )
+    assert message.endswith("Robots on the search path: franka_panda, kuka_youbot.")
+    with pytest.raises(RobotNotFoundError, match=f"Did you mean '{tmp_path}/my_xarm'"):
+        find_robot_folder(str(tmp_path / "my_xram"), tmp_path)
