@@ -128,7 +128,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     init.add_argument(
         "--end-effector",
         default=None,
-        help="default: the hand (where the fingers attach), else the last link",
+        help="default: the hand (where the fingers attach), else the last link of "
+        "the longest chain",
     )
     init.add_argument(
         "--control-gripper",
