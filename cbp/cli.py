@@ -11,7 +11,7 @@ import typing
 from collections.abc import Sequence
 from pathlib import Path
 
-from cbp.errors import CbpError
+from cbp.errors import CbpError, ConfigError
 from cbp.methods import COMPARABLE, METHODS
 from cbp.registry import Registry
 from cbp.schema import type_name
@@ -128,7 +128,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     init.add_argument(
         "--end-effector",
         default=None,
-        help="default: the hand (where the fingers attach), else the last link",
+        help="default: the hand (where the fingers attach), else the last link of "
+        "the longest chain",
     )
     init.add_argument(
         "--control-gripper",
@@ -537,6 +538,10 @@ def _run(
     try:
         with run_progress(f"{scenario.spec.name} ({name})"):
             trace = executor(scenario, gui)
+    except ConfigError as exc:  # found as the run starts (a URDF PyBullet refuses)
+        claim.release(remove=True)
+        print(exc, file=sys.stderr)
+        return 2
     except BaseException:
         claim.release(remove=True)
         raise

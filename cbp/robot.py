@@ -11,6 +11,7 @@ every change of configuration goes through :meth:`RobotModel.integrate` and
 from __future__ import annotations
 
 import os
+import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +31,8 @@ from cbp.errors import (
     RobotNotFoundError,
     close_matches,
 )
-from cbp.schema import Document, value_node
+from cbp.schema import INVALID, Document, value_node
+from cbp.urdf_files import missing_meshes
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -46,6 +48,10 @@ Approximation = Literal["hull", "capsule"]
 #: Pinocchio marks an unbounded coordinate with the largest double; treat anything this
 #: large as no bound at all.
 _UNBOUNDED = 1e300
+
+#: How far past a joint limit a home or initial position may lie [rad or m]:
+#: a value at the limit, written rounded (robot.yaml keeps 4 decimals), passes.
+LIMIT_TOLERANCE = 1e-4
 
 #: Where robot description folders are looked up, after ``CBP_ROBOT_PATH``:
 #: the robots that ship with cbp (:func:`cbp.data.data_dir`).
@@ -108,13 +114,14 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
     (os.pathsep-separated) then the robots that ship with cbp.
 
     Raises:
-        RobotNotFoundError: listing the robots available.
+        RobotNotFoundError: saying where it looked, with the nearest robot
+            folders' names (beside the scenario, in the current folder, on the
+            search path).
     """
-    for direct in ([relative_to / name] if relative_to is not None else []) + [
-        Path(name)
-    ]:
-        if is_file(direct / "robot.yaml"):
-            return direct
+    direct = ([relative_to / name] if relative_to is not None else []) + [Path(name)]
+    for folder in direct:
+        if is_file(folder / "robot.yaml"):
+            return folder
     roots = [
         Path(p) for p in os.environ.get("CBP_ROBOT_PATH", "").split(os.pathsep) if p
     ]
@@ -122,6 +129,17 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
     for root in roots:
         if is_file(root / name / "robot.yaml"):
             return root / name
+    # Robot folders beside the one named (written as the scenario would name
+    # them), then those on the search path (by name).
+    parent = Path(name).parent
+    local = sorted(
+        {
+            str(parent / p.parent.name) if str(parent) != "." else p.parent.name
+            for folder in direct
+            if folder.parent.is_dir()
+            for p in folder.parent.glob("*/robot.yaml")
+        }
+    )
     available = sorted(
         {
             p.parent.name
@@ -130,10 +148,25 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
             for p in root.glob("*/robot.yaml")
         }
     )
-    hint = close_matches(name, available, n=1)
-    did_you_mean = f"; did you mean '{hint[0]}'?" if hint else ""
-    listing = ", ".join(available) or "(none)"
-    raise RobotNotFoundError(f"no robot '{name}'{did_you_mean} Available: {listing}.")
+    hint = close_matches(name, [*local, *available], n=1)
+    did_you_mean = f" Did you mean '{hint[0]}'?" if hint else ""
+    places: dict[Path, str] = {}
+    for folder, label in zip(
+        direct,
+        ["beside the scenario", "the current folder"][-len(direct) :],
+        strict=True,
+    ):
+        places.setdefault(folder.parent.resolve(), label)
+    for root in roots:
+        places.setdefault(
+            root, "shipped robots" if root == ROBOTS_DIR else "CBP_ROBOT_PATH"
+        )
+    looked = ", ".join(f"{place} ({label})" for place, label in places.items())
+    listing = ", ".join(available) or "none"
+    raise RobotNotFoundError(
+        f"no robot '{name}': no folder '{Path(name).name}' with a robot.yaml in "
+        f"{looked}.{did_you_mean} Robots on the search path: {listing}."
+    )
 
 
 class RobotModel:
@@ -264,7 +297,13 @@ class RobotModel:
         folder = find_robot_folder(name, relative_to)
         doc = Document.from_file(folder / "robot.yaml")
         description = doc.build(RobotDescription, doc.root, "")
-        doc.raise_if_problems()
+        if description is INVALID:
+            # The keys that were read are still checked against the URDF, so
+            # that one pass reports every problem of the file.
+            description = _readable_description(doc)
+            if description is None:
+                doc.raise_if_problems()
+                raise AssertionError("unreachable: the problems were reported")
         base = base or description.base
         path = folder / description.urdf
         try:
@@ -273,6 +312,12 @@ class RobotModel:
             doc.report(value_node(doc.root, "urdf"), "urdf", exc.message)
             doc.raise_if_problems()
             raise  # unreachable: the problem was reported
+        for mesh in missing_meshes(path, [folder]):
+            doc.report(
+                value_node(doc.root, "urdf"),
+                "urdf",
+                f"{description.urdf}, line {mesh.line}: {mesh.missing}",
+            )
         _check_names(
             doc, description, cls(model, name=description.name, urdf_path=path)
         )
@@ -378,6 +423,39 @@ class RobotModel:
         """Configuration indices of joint ``name``."""
         joint = self.model.joints[self.joint_id(name)]
         return slice(joint.idx_q, joint.idx_q + joint.nq)
+
+    def joint_range(self, name: str) -> tuple[float, float, str] | None:
+        """(lower, upper, unit) of joint ``name``'s position; None when unbounded.
+
+        Continuous joints, planar and floating bases have no range; the unit is
+        ``m`` for a prismatic joint, else ``rad``.
+        """
+        joint = self.model.joints[self.joint_id(name)]
+        if joint.nq != 1 or joint.nv != 1:
+            return None
+        lower, upper = self._lower[joint.idx_q], self._upper[joint.idx_q]
+        if not (np.isfinite(lower) and np.isfinite(upper)):
+            return None
+        kind = joint.shortname()  # JointModelPX/PY/PZ, JointModelPrismatic...
+        prismatic = kind.startswith("JointModelPrismatic") or kind[-2:-1] == "P"
+        unit = "m" if prismatic else "rad"
+        return float(lower), float(upper), unit
+
+    def out_of_range(self, name: str, value: float) -> str | None:
+        """Why ``value`` cannot be joint ``name``'s position, or None when it can.
+
+        A value past a limit by at most :data:`LIMIT_TOLERANCE` is accepted.
+        """
+        limits = self.joint_range(name)
+        if limits is None:
+            return None
+        lower, upper, unit = limits
+        if lower - LIMIT_TOLERANCE <= value <= upper + LIMIT_TOLERANCE:
+            return None
+        return (
+            f"joint '{name}' at {value:g} {unit} is outside its range "
+            f"[{lower:.4g}, {upper:.4g}] {unit} ({self.urdf_name})"
+        )
 
     def joint_v_indices(self, names: Sequence[str]) -> IntArray:
         """Tangent-space indices of the joints ``names``, in the order given."""
@@ -611,6 +689,30 @@ def _key_nodes(root: Node | None, *keys: str) -> dict[str, Node]:
     return {k.value: k for k, _ in node.value if isinstance(k, yaml.ScalarNode)}
 
 
+def _readable_description(doc: Document) -> RobotDescription | None:
+    """robot.yaml's keys that can be read, with defaults for the others.
+
+    None when a required key (``name``, ``urdf``, ``end_effector``, ``home``)
+    cannot be read. The problems of the keys left out are already in ``doc``.
+    """
+    root = doc.root
+    if not isinstance(root, yaml.MappingNode):
+        return None
+    scratch = Document("", doc.path)  # the problems were reported in doc
+    fields = typing.get_type_hints(RobotDescription)
+    values: dict[str, object] = {}
+    for key_node, node in root.value:
+        key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
+        if key in fields:
+            value = scratch.build(fields[key], node, key)
+            if value is not INVALID:
+                values[key] = value
+    try:
+        return RobotDescription(**values)  # type: ignore[arg-type]
+    except (TypeError, ConfigError):
+        return None
+
+
 def _check_names(
     doc: Document, description: RobotDescription, full: RobotModel
 ) -> None:
@@ -638,6 +740,10 @@ def _check_names(
                     f"joint '{joint}' is locked (locked_joints), so it is not in the "
                     "model: remove it here"
                 )
+            elif key in ("locked_joints", "home") and (
+                problem := full.out_of_range(joint, names[joint])
+            ):
+                message = problem
             else:
                 continue
             doc.report(nodes.get(joint), f"{key}.{joint}", message)

@@ -38,11 +38,12 @@ import pinocchio as pin
 import yaml
 
 from cbp.data import is_file
-from cbp.errors import ConfigError, RobotNotFoundError
+from cbp.errors import ConfigError, RobotNotFoundError, ScenarioError
 from cbp.files import MAX_YAML_BYTES, check_file
 from cbp.hand import find_hand, mimic_joints
 from cbp.robot import BaseType, RobotDescription, RobotModel
 from cbp.schema import from_plain
+from cbp.urdf_files import missing_meshes
 
 if TYPE_CHECKING:
     from cbp.collision.geometry import RobotGeometry
@@ -103,14 +104,20 @@ def describe_urdf(
         lock_gripper: lock the gripper's joints (found as for the hand).
 
     Raises:
-        ConfigError: the URDF cannot be read, or a named frame or joint is not
-            in it.
+        ConfigError: the URDF cannot be read, a named frame or joint is not
+            in it, or a home position is outside its joint's range.
+        ScenarioError: mesh files the URDF names are missing (each at its line).
     """
     check_file(urdf, "URDF", MAX_YAML_BYTES * 8)
     try:
         model = pin.buildModelFromUrdf(str(urdf))
     except (RuntimeError, ValueError) as exc:
         raise ConfigError(f"cannot load URDF {urdf}: {exc}") from None
+    missing = missing_meshes(urdf)
+    if missing:
+        raise ScenarioError(
+            str(urdf), [f"line {mesh.line}: {mesh.missing}" for mesh in missing]
+        )
     if model.njoints < 2:
         raise ConfigError(f"URDF {urdf} has no movable joint")
     notes: list[str] = []
@@ -147,6 +154,9 @@ def describe_urdf(
     if home:
         for joint, value in home.items():
             robot.joint_id(joint)
+            problem = robot.out_of_range(joint, value)
+            if problem:
+                raise ConfigError(problem, f"home.{joint}")
             posture[joint] = float(value)
     else:
         notes.append("home: the middle of every joint's range")
@@ -186,9 +196,11 @@ def describe_urdf(
             f"self-collision: {len(pairs)} link pairs never (or always) collide in "
             f"{samples} random configurations (seed {seed}) and are skipped"
         )
+    warnings = margin_warnings(robot)
     if geometry is not None and geometry.shapes:
-        notes.append(_visual_note(geometry))
-    return RobotSetup(document, notes, margin_warnings(robot))
+        measured, note = _visual_note(geometry)
+        (notes if measured else warnings).append(note)
+    return RobotSetup(document, notes, warnings)
 
 
 def margin_warnings(robot: RobotModel) -> list[str]:
@@ -297,11 +309,24 @@ def _geometry(robot: RobotModel, required: bool) -> RobotGeometry | None:
         return None  # said where the geometry is loaded for a run
 
 
-def _visual_note(geometry: RobotGeometry) -> str:
-    """How far the links look larger than their collision shapes, for depth cameras."""
+def _visual_note(geometry: RobotGeometry) -> tuple[bool, str]:
+    """How far the links look larger than their collision shapes, for depth cameras.
+
+    Returns:
+        Whether it was measured (False: the visual geometry could not be read
+        and every link takes the fallback), and the sentence to print.
+    """
+    from cbp.collision.geometry import UNREAD_VISUAL_EXCESS
+
     excess = geometry.visual_excess
+    if np.all(excess == UNREAD_VISUAL_EXCESS):
+        return False, (
+            "depth cameras: the visual meshes could not be read (see the message "
+            f"above); the self-filter takes every link to look "
+            f"{1000 * UNREAD_VISUAL_EXCESS:.0f} mm larger than its collision shapes"
+        )
     worst = int(np.argmax(excess))
-    return (
+    return True, (
         "depth cameras: the visual meshes reach up to "
         f"{1000 * excess[worst]:.1f} mm past the collision shapes "
         f"({geometry.shapes[worst].link}); the self-filter grows each link by "

@@ -9,6 +9,10 @@ relative to the copy. A mesh is found the way ROS tools and pinocchio find it:
 it, a relative path under the URDF's folder, ``file://`` or an absolute path
 as it is. An ``.obj`` mesh's material files (``mtllib``) and their textures
 are copied with it, and so is a licence file beside the URDF.
+
+:func:`missing_meshes` finds, the same way, every mesh a URDF names that no
+file answers, with its link and line, so that a robot with a missing mesh is
+refused when it is loaded rather than when PyBullet or pinocchio reads it.
 """
 
 from __future__ import annotations
@@ -16,13 +20,22 @@ from __future__ import annotations
 import re
 import shutil
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from xml.parsers import expat
 
 from cbp.errors import ConfigError
 from cbp.files import MAX_YAML_BYTES, read_text
 
-__all__ = ["CopiedUrdf", "copy_urdf", "resolve_mesh"]
+__all__ = [
+    "CopiedUrdf",
+    "MeshUse",
+    "copy_urdf",
+    "mesh_uses",
+    "missing_meshes",
+    "resolve_mesh",
+]
 
 #: Folders above the URDF's searched for ``package://`` meshes (a ROS tree).
 PACKAGE_LEVELS = 3
@@ -44,15 +57,48 @@ class CopiedUrdf:
     missing: list[str]
 
 
-def resolve_mesh(name: str, urdf_folder: Path) -> tuple[Path, str] | None:
+@dataclass(frozen=True)
+class MeshUse:
+    """A ``<mesh filename=...>`` of a URDF, where it stands.
+
+    Attributes:
+        link: the ``<link>`` it belongs to.
+        element: ``visual`` or ``collision``.
+        filename: the file name as the URDF writes it.
+        line: its line in the URDF (1-based).
+    """
+
+    link: str
+    element: str
+    filename: str
+    line: int
+
+    @property
+    def missing(self) -> str:
+        """What to say when no file answers it (the caller adds the URDF and line)."""
+        return (
+            f"link '{self.link}': cannot find its {self.element} mesh '{self.filename}'"
+        )
+
+
+def resolve_mesh(
+    name: str, urdf_folder: Path, package_dirs: Sequence[Path] = ()
+) -> tuple[Path, str] | None:
     """The file a URDF mesh name points to, and its path inside a robot folder.
+
+    Args:
+        name: the mesh's file name as the URDF writes it.
+        urdf_folder: the URDF's folder.
+        package_dirs: more folders a ``package://`` name is looked up under
+            (after the URDF's folder and the folders above it).
 
     Returns:
         (file, relative destination), or None when no file answers the name.
     """
     if name.startswith("package://"):
         rest = name[len("package://") :]
-        for folder in [urdf_folder, *list(urdf_folder.parents)[:PACKAGE_LEVELS]]:
+        folders = [urdf_folder, *list(urdf_folder.parents)[:PACKAGE_LEVELS]]
+        for folder in [*folders, *package_dirs]:
             if (folder / rest).is_file():
                 return folder / rest, _inside(rest)
         return None
@@ -62,6 +108,55 @@ def resolve_mesh(name: str, urdf_folder: Path) -> tuple[Path, str] | None:
     return (
         (urdf_folder / path, _inside(name)) if (urdf_folder / path).is_file() else None
     )
+
+
+def mesh_uses(urdf: Path) -> list[MeshUse]:
+    """Every ``<mesh>`` of a link's ``<visual>`` or ``<collision>``, with its line.
+
+    Raises:
+        ConfigError: the URDF cannot be read or parsed.
+    """
+    text = read_text(urdf, "URDF", MAX_YAML_BYTES * 8)
+    parser = expat.ParserCreate()
+    uses: list[MeshUse] = []
+    stack: list[tuple[str, str]] = []  # (tag, name) of the open elements
+
+    def start(tag: str, attributes: dict[str, str]) -> None:
+        stack.append((tag, attributes.get("name", "")))
+        filename = attributes.get("filename", "")
+        if tag != "mesh" or not filename:
+            return
+        tags = [t for t, _ in stack]
+        element = next((t for t in reversed(tags) if t in _ELEMENTS), None)
+        link = next((n for t, n in reversed(stack) if t == "link"), None)
+        if element is not None and link is not None:
+            uses.append(MeshUse(link, element, filename, parser.CurrentLineNumber))
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = lambda tag: stack.pop()
+    try:
+        parser.Parse(text, True)
+    except expat.ExpatError as exc:
+        raise ConfigError(f"cannot parse URDF {urdf}: {exc}") from None
+    return uses
+
+
+#: The elements of a link whose meshes are loaded.
+_ELEMENTS = ("visual", "collision")
+
+
+def missing_meshes(urdf: Path, package_dirs: Sequence[Path] = ()) -> list[MeshUse]:
+    """The meshes of ``urdf`` that no file answers (:func:`resolve_mesh`), in order.
+
+    Raises:
+        ConfigError: the URDF cannot be read or parsed.
+    """
+    folder = urdf.resolve().parent
+    return [
+        use
+        for use in mesh_uses(urdf)
+        if resolve_mesh(use.filename, folder, package_dirs) is None
+    ]
 
 
 def _inside(relative: str) -> str:

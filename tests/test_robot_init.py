@@ -103,11 +103,16 @@ def test_every_known_arm_is_enumerated() -> None:
 def test_an_arm_without_its_meshes_is_refused_naming_the_mesh(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """`cbp robot init` on a URDF whose collision meshes are missing says which, and writes nothing."""
+    """`cbp robot init` on a URDF whose collision meshes are missing lists them all, and writes nothing."""
     urdf = DATA / "kuka_iiwa" / "model_for_sdf.urdf"
     status = main(["-q", "robot", "init", str(urdf), "--out", str(tmp_path / "arm")])
     assert status == 2
-    assert "Mesh meshes/coarse/link_0.stl could not be found" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err.startswith(f"{urdf}: 8 problems:\n")
+    assert (
+        "  line 76: link 'lbr_iiwa_link_0': cannot find its collision mesh "
+        "'meshes/coarse/link_0.stl'\n"
+    ) in err
     assert not (tmp_path / "arm").exists()
 
 

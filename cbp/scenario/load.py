@@ -413,11 +413,14 @@ def _initial_configuration(
     for joint, value in spec.initial.items():
         try:
             q0[robot.joint_q_slice(joint)] = value
+            problem = robot.out_of_range(joint, value)
         except ConfigError as exc:
+            problem = exc.message
+        if problem:
             doc.report(
                 value_node(root, "robot", "initial", joint),
                 f"robot.initial.{joint}",
-                exc.message,
+                problem,
             )
     return q0
 

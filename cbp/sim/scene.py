@@ -15,9 +15,11 @@ from typing import TYPE_CHECKING, TypeVar
 import numpy as np
 import pinocchio as pin
 
+from cbp.errors import ConfigError
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.sim.bullet import pb
+from cbp.urdf_files import missing_meshes
 
 if TYPE_CHECKING:
     from cbp.scenario.runtime import Scenario
@@ -25,6 +27,21 @@ if TYPE_CHECKING:
 __all__ = ["PybulletScene", "simulate"]
 
 S = TypeVar("S")
+
+
+def _unloadable(robot: RobotModel, urdf: Path) -> ConfigError:
+    """The error for a URDF PyBullet refuses: its missing meshes, else its log."""
+    try:
+        reasons = [
+            f"line {mesh.line}: {mesh.missing}"
+            for mesh in missing_meshes(urdf, [robot.folder] if robot.folder else [])
+        ]
+    except ConfigError as exc:
+        reasons = [exc.message]
+    because = "; ".join(reasons) or "its reason is the line PyBullet printed above"
+    return ConfigError(
+        f"PyBullet cannot load robot '{robot.name}' ({because})", str(urdf)
+    )
 
 
 def simulate(
@@ -82,13 +99,17 @@ class PybulletScene:
             raise ValueError(f"robot '{robot.name}' has no URDF")
         self.robot = robot
         self.client = pb.connect(pb.GUI if gui else pb.DIRECT)
-        self.robot_id = pb.loadURDF(
-            str(robot.urdf_path),
-            useFixedBase=True,
-            flags=pb.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS
-            | pb.URDF_USE_INERTIA_FROM_FILE,
-            physicsClientId=self.client,
-        )
+        try:
+            self.robot_id = pb.loadURDF(
+                str(robot.urdf_path),
+                useFixedBase=True,
+                flags=pb.URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS
+                | pb.URDF_USE_INERTIA_FROM_FILE,
+                physicsClientId=self.client,
+            )
+        except pb.error:
+            pb.disconnect(physicsClientId=self.client)
+            raise _unloadable(robot, robot.urdf_path) from None
         self._joint_index: dict[str, int] = {}
         for j in range(pb.getNumJoints(self.robot_id, physicsClientId=self.client)):
             info = pb.getJointInfo(self.robot_id, j, physicsClientId=self.client)
