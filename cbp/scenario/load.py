@@ -36,7 +36,14 @@ from cbp.robot import FloatArray, RobotModel
 from cbp.robot_init import load_robot
 from cbp.scenario.runtime import Scenario, goal_receivers
 from cbp.scenario.spec import RobotSpec, ScenarioSpec
-from cbp.schema import INVALID, Document, join_path, mapping_items, value_node
+from cbp.schema import (
+    INVALID,
+    Document,
+    join_path,
+    key_nodes,
+    mapping_items,
+    value_node,
+)
 from cbp.state import RobotState
 
 __all__ = ["load_scenario"]
@@ -354,10 +361,11 @@ def _bind_entry(
     items = mapping_items(doc, node, where)
     if items is None:
         return None
+    keys = key_nodes(node)
     for key, value in items.items():
         if key not in _ENTRY_KEYS:
             doc.report(
-                value,
+                keys.get(key, value),
                 join_path(where, key),
                 f"unknown key '{key}'{suggestion(key, _ENTRY_KEYS)} Entry keys: "
                 f"{', '.join(_ENTRY_KEYS)} (plugin parameters go under 'params').",

@@ -286,3 +286,75 @@ def test_a_section_given_in_part_keeps_its_defaults_in_the_parent() -> None:
     assert after.clock == "virtual"
     assert (after.period, after.max_period) == (before.period, before.max_period)
     assert after.period == 0.25
+
+
+def test_unknown_keys_are_reported_at_their_own_line(tmp_path: Path) -> None:
+    """A misspelt key is on its own line whatever its value: block, flow or plain."""
+    error = _load(
+        tmp_path,
+        """\
+        keyframe:              # line 4: top level, block list
+          - {t: 0.0}
+        wrold:                 # line 6: top level, block mapping
+          objects: []
+        duraton: 5.0           # line 8: top level, plain
+        objetcs: {a: 1}        # line 9: top level, flow
+        goal:
+          type: keyframes
+          keyframes:
+            - {t: 0.0, pose: {position: [0.3, 0.0, 0.5]}}
+          parmas:              # line 14: nested, block
+            a: 1
+          rat_hz: 30.0         # line 16: nested, plain
+        tasks:
+          - type: posture
+            parmas:            # line 19: in a plugin entry, block
+              joints: []
+            wieght: [1.0]      # line 21: in a plugin entry, flow
+            params:
+              gian:            # line 23: plugin parameter, block
+                - 1.0
+        """,
+    )
+    lines = {p.split(": ", 2)[1]: p.split(":", 1)[0] for p in error.problems}
+    assert lines == {
+        "keyframe": "line 4",
+        "wrold": "line 6",
+        "duraton": "line 8",
+        "objetcs": "line 9",
+        "goal.parmas": "line 14",
+        "goal.rat_hz": "line 16",
+        "tasks[0].parmas": "line 19",
+        "tasks[0].wieght": "line 21",
+        "tasks[0].params.gian": "line 23",
+    }
+
+
+def test_bad_values_are_reported_at_the_value(tmp_path: Path) -> None:
+    """A wrong value points at the value, also when it starts below its key."""
+    error = _load(
+        tmp_path,
+        """\
+        goal:
+          type: keyframes
+          rate_hz:
+            - 30.0
+          keyframes:
+            - {t: 0.0, pose: {position: [0.3, 0.0, 0.5]}}
+        tasks:
+          - type: posture
+            weight:
+              a: 1.0
+        """,
+    )
+    lines = {p.split(": ", 2)[1]: p.split(":", 1)[0] for p in error.problems}
+    assert lines == {"goal.rate_hz": "line 7", "tasks[0].weight": "line 13"}
+
+
+def test_unknown_key_from_set_is_reported_against_set(tmp_path: Path) -> None:
+    """A key made by ``--set`` is located at the ``--set`` option, not at no line."""
+    path = tmp_path / "s.yaml"
+    path.write_text(HEADER)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path, overrides={"wrold.objects": "[]"})
+    assert info.value.problems[0].startswith("--set wrold.objects: wrold: unknown key")
