@@ -102,6 +102,13 @@ class Document:
 
     def report(self, node: Node | None, where: str, message: str) -> None:
         """Record a problem at ``where`` (a document path), with the node's line."""
+        self.problems.append(self.located(node, where, message))
+
+    def located(self, node: Node | None, where: str, message: str) -> str:
+        """``message`` at ``where`` (a document path), after the node's line.
+
+        The form of every problem :meth:`report` records, for a warning too.
+        """
         line = ""
         mark = node.start_mark if node is not None else None
         if mark is not None:  # nodes made by --set have none
@@ -117,7 +124,7 @@ class Document:
                 name, include = self._included_by[name]
                 at = include if name == self.path else f"{name}, {include}"
                 line = f"{at} -> {line}"
-        self.problems.append(f"{line}{where or '<document>'}: {message}")
+        return f"{line}{where or '<document>'}: {message}"
 
     def raise_if_problems(self) -> None:
         """Raise one ScenarioError that lists every problem recorded, once each.

@@ -6,7 +6,9 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
 from cbp.errors import ScenarioError
@@ -358,3 +360,77 @@ def test_unknown_key_from_set_is_reported_against_set(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError) as info:
         load_scenario(path, overrides={"wrold.objects": "[]"})
     assert info.value.problems[0].startswith("--set wrold.objects: wrold: unknown key")
+
+
+def test_a_keyframe_beyond_the_arms_reach_is_warned_of(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A goal beyond the links' lengths: a warning at its keyframe; others: none."""
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        HEADER
+        + textwrap.dedent(
+            """\
+            goal:
+              type: keyframes
+              keyframes:
+                - {t: 0.0, pose: {position: [0.45, 0.0, 0.40]}}
+                - t: 1.0
+                  pose: {position: [1.5, 0.0, 0.3]}
+                - {t: 2.0, pose: {position: [0.0, 0.0, 1.30]}}
+            tasks:
+              - type: goal_pose
+            """
+        )
+    )
+    with caplog.at_level("WARNING", logger="cbp.scenario.load"):
+        load_scenario(path)
+    warnings = [r.getMessage() for r in caplog.records]
+    assert warnings == [
+        f"{path}, line 8: goal.keyframes[1].pose.position: the goal [1.5, 0.0, 0.3] "
+        "at t = 1 s is out of reach of panda_hand: 1.50 m from the arm's first "
+        "joint, beyond its reach (0.99 m, its links' lengths added up); the arm "
+        "stops short of it"
+    ]
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_shipped_scenarios_warn_only_of_goals_out_of_reach(
+    path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """No reachable goal is warned of; cat_unreachable's goal leaves the reach."""
+    with caplog.at_level("WARNING", logger="cbp.scenario.load"):
+        load_scenario(path)
+    said = [r.getMessage() for r in caplog.records if "out of reach" in r.getMessage()]
+    if path.stem == "cat_unreachable":
+        assert [m.split(": ")[1] for m in said] == [
+            "goal.keyframes[1].pose.position",
+            "goal.keyframes[2].pose.position",
+        ]
+    else:
+        assert said == []
+
+
+def test_the_reach_bounds_every_configuration(robots: dict[str, Any]) -> None:
+    """No configuration puts the hand farther from the first joint than the reach."""
+    from cbp.scenario.reach import arm_reach
+    from cbp.state import RobotState
+
+    robot = robots["panda"]
+    reach = arm_reach(robot, robot.neutral(), "panda_hand")
+    assert reach is not None
+    rng = np.random.default_rng(7)
+    frame = robot.frame_id("panda_hand")
+    farthest = 0.0
+    for _ in range(2000):
+        q = rng.uniform(robot.lower_limits, robot.upper_limits)
+        farthest = max(
+            farthest, reach.distance(RobotState(robot, q).frame_position(frame))
+        )
+    assert 0.8 * reach.radius < farthest <= reach.radius
+    assert (
+        arm_reach(
+            robots["panda_planar"], robots["panda_planar"].neutral(), "panda_hand"
+        )
+        is None
+    )
