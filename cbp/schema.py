@@ -102,6 +102,13 @@ class Document:
 
     def report(self, node: Node | None, where: str, message: str) -> None:
         """Record a problem at ``where`` (a document path), with the node's line."""
+        self.problems.append(self.located(node, where, message))
+
+    def located(self, node: Node | None, where: str, message: str) -> str:
+        """``message`` at ``where`` (a document path), after the node's line.
+
+        The form of every problem :meth:`report` records, for a warning too.
+        """
         line = ""
         mark = node.start_mark if node is not None else None
         if mark is not None:  # nodes made by --set have none
@@ -117,7 +124,7 @@ class Document:
                 name, include = self._included_by[name]
                 at = include if name == self.path else f"{name}, {include}"
                 line = f"{at} -> {line}"
-        self.problems.append(f"{line}{where or '<document>'}: {message}")
+        return f"{line}{where or '<document>'}: {message}"
 
     def raise_if_problems(self) -> None:
         """Raise one ScenarioError that lists every problem recorded, once each.
@@ -218,6 +225,12 @@ class Document:
             self.problems += [f"{label}: {p}" for p in problems]
             return
         keys = dotted.split(".")
+
+        def made_key(key: str) -> yaml.ScalarNode:
+            # A key made here is reported, like its value, against ``--set``.
+            mark = value.start_mark
+            return yaml.ScalarNode("tag:yaml.org,2002:str", key, mark, mark)
+
         if self.root is None:
             self.root = yaml.MappingNode("tag:yaml.org,2002:map", [])
         node = self.root
@@ -248,15 +261,11 @@ class Document:
             if i == len(keys) - 1:
                 if entry is not None:
                     node.value.remove(entry)
-                node.value.append(
-                    (yaml.ScalarNode("tag:yaml.org,2002:str", key), value)
-                )
+                node.value.append((made_key(key), value))
                 return
             if entry is None:
                 child = yaml.MappingNode("tag:yaml.org,2002:map", [])
-                node.value.append(
-                    (yaml.ScalarNode("tag:yaml.org,2002:str", key), child)
-                )
+                node.value.append((made_key(key), child))
                 node = child
             else:
                 node = entry[1]
@@ -521,6 +530,22 @@ def mapping_items(doc: Document, node: Node, where: str) -> dict[str, Node] | No
     return items
 
 
+def key_nodes(node: Node) -> dict[str, Node]:
+    """A mapping node's key nodes by key, to report a problem with the key itself.
+
+    A key's own line is its node's; its value's node may start on a later line
+    (a block value) or at another column (a flow value). Keys without a mark
+    are left out: their problems are reported at the value.
+    """
+    if not isinstance(node, yaml.MappingNode):
+        return {}
+    return {
+        str(key_node.value): key_node
+        for key_node, _ in node.value
+        if isinstance(key_node, yaml.ScalarNode) and key_node.start_mark is not None
+    }
+
+
 def type_name(tp: Any) -> str:
     """Describe an annotation in words a YAML author understands."""
     origin = typing.get_origin(tp)
@@ -710,11 +735,12 @@ def _build_dataclass(
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     ok = True
+    keys = key_nodes(node) if node is not None else {}
     for key, value_node in items.items():
         if key not in fields:
             accepted = ", ".join(fields) or "(none)"
             doc.report(
-                value_node,
+                keys.get(key, value_node),
                 join_path(where, key),
                 f"unknown key '{key}'{suggestion(key, fields)} Accepted: {accepted}.",
             )

@@ -49,6 +49,8 @@ class IkPlanner:
         target = self.search.solution_for(goal, q, budget)
         if target is None:
             self.events.failed(run, goal, exhausted=not budget.spent())
+            if self.events.beyond_reach(run, goal) is not None:
+                return Plan(None, 0, "goal out of reach, no IK solution: the arm stops")
             return Plan(None, 0, "no collision-free IK solution: the arm stops")
         self.events.solved(run)
         guard_solution(self.search.robot, target)
@@ -57,7 +59,8 @@ class IkPlanner:
         )
 
     def close(self) -> None:
-        """Nothing to release."""
+        """The run ends: a failure still going on says how long it lasted."""
+        self.events.close()
 
 
 def guard_solution(robot: RobotModel, target: FloatArray) -> None:

@@ -27,6 +27,7 @@ from cbp.robot import FloatArray, RobotModel
 
 if TYPE_CHECKING:
     from cbp.run.parts import RunParts
+    from cbp.scenario.reach import Reach
 
 __all__ = ["IkSearch", "SearchEvents", "check_work", "dls_step", "solve_pose"]
 
@@ -400,15 +401,19 @@ REPORT_AFTER = 1.0
 
 
 class SearchEvents:
-    """The run's events for a planner's IK search: once per goal it fails, and again.
+    """The run's events for a planner's IK search: once per episode of failure.
 
     A planner that needs a collision-free configuration for the goal (IK, MP)
     holds the arm while the search finds none, and asks again every period (the
-    map may change). Without an event the run would only show an arm that does
-    not move; this says so once per goal (as soon as a search ends without a
+    map may change, the goal may move). Without an event the run would only
+    show an arm that does not move; this says so once per episode of failure,
+    however often the goal moves during it: as soon as a search ends without a
     solution, or after :data:`REPORT_AFTER` of searches cut short by the
-    budget), with the likely reason when space no camera has seen counts as an
-    obstacle, and says when a solution is found.
+    budget, or at once for a goal beyond the arm's reach
+    (:mod:`cbp.scenario.reach`). It names the likely reason: out of reach, or
+    space no camera has seen counting as an obstacle. The reason changing
+    during the episode is said again; when a solution is found (or the run
+    ends first), an event says so with the number of periods without one.
 
     Args:
         method: the planner's name, for the messages.
@@ -417,40 +422,85 @@ class SearchEvents:
     def __init__(self, method: str) -> None:
         """No failure reported yet."""
         self.method = method
-        self._goal: pin.SE3 | None = None  # the goal not solved yet
-        self._since = 0.0  # since when [s]
-        self._reported = False
+        self._since: float | None = None  # the episode's first failure [s]
+        self._periods = 0  # periods without a solution in the episode
+        self._said: str | None = None  # the reason said in the episode
+        self._run: RunParts | None = None  # the run the episode is in
+        self._reach: tuple[RunParts, Reach | None] | None = None  # per run
 
     def failed(self, run: RunParts, goal: pin.SE3, exhausted: bool) -> None:
         """No solution for ``goal`` this period; ``exhausted``: every start tried."""
         t = run.sim.t
-        if self._goal is None or not goal.isApprox(self._goal, 1e-9):
-            self._goal, self._since, self._reported = goal, t, False
-        if self._reported or not (exhausted or t - self._since >= REPORT_AFTER):
-            return
-        self._reported = True
-        how = (
-            ""
-            if exhausted
-            else f" in {t - self._since:.1f} s of searches cut short by the "
-            "period's budget"
-        )
+        if self._since is None or self._run is not run:
+            self._since, self._periods, self._said, self._run = t, 0, None, run
+        self._periods += 1
+        beyond = self.beyond_reach(run, goal)
         perception = run.scenario.spec.perception
-        why = (
-            "; space no camera has seen counts as an obstacle "
-            "(perception.unknown: occupied), and the goal's configurations may "
-            "pass through it until a camera sees that space"
-            if perception.source == "depth_camera" and perception.unknown_blocks
-            else ""
-        )
+        unseen = perception.source == "depth_camera" and perception.unknown_blocks
+        # The kind of reason, not its numbers: a goal that moves out of reach
+        # is said once, not once per distance.
+        reason = "reach" if beyond is not None else "unseen" if unseen else ""
+        if reason == self._said:
+            return  # said already in this episode
+        waited = t - self._since
+        if self._said is None and not (
+            beyond is not None or exhausted or waited >= REPORT_AFTER
+        ):
+            return
+        self._said = reason
+        if beyond is not None:
+            what = f"no IK solution for the goal, out of reach: {beyond}"
+        else:
+            how = (
+                ""
+                if exhausted
+                else f" in {waited:.1f} s of searches cut short by the period's budget"
+            )
+            why = (
+                "; space no camera has seen counts as an obstacle "
+                "(perception.unknown: occupied), and the goal's configurations "
+                "may pass through it until a camera sees that space"
+                if unseen
+                else ""
+            )
+            what = f"no collision-free IK solution for the goal{how}{why}"
         run.event(
             t,
-            f"{self.method}: no collision-free IK solution for the goal{how}{why}; "
-            "the arm holds, and the search is tried again each period",
+            f"{self.method}: {what}; the arm holds, and the search is tried again "
+            "each period (said once until a solution is found)",
         )
+
+    def beyond_reach(self, run: RunParts, goal: pin.SE3) -> str | None:
+        """Why ``goal`` is beyond the arm's reach, or None when it may be within it."""
+        if self._reach is None or self._reach[0] is not run:
+            self._reach = (run, run.scenario.reach())
+        reach = self._reach[1]
+        return None if reach is None else reach.beyond(goal.translation)
 
     def solved(self, run: RunParts) -> None:
         """The search found a solution (after a reported failure: say so)."""
-        if self._reported:
-            run.event(run.sim.t, f"{self.method}: a collision-free IK solution found")
-        self._goal, self._reported = None, False
+        if self._said is not None and self._run is run:
+            run.event(
+                run.sim.t,
+                f"{self.method}: a collision-free IK solution found, after "
+                f"{self._failures()} without one",
+            )
+        self._since, self._periods, self._said, self._run = None, 0, None, None
+
+    def close(self) -> None:
+        """The run ends: a reported failure that lasts to the end says how long."""
+        run = self._run
+        if self._said is not None and run is not None:
+            run.event(
+                run.sim.t,
+                f"{self.method}: still no IK solution at the end of the run, after "
+                f"{self._failures()} without one",
+            )
+        self._since, self._periods, self._said, self._run = None, 0, None, None
+
+    def _failures(self) -> str:
+        """The episode's length: its periods without a solution and its time."""
+        run, since = self._run, self._since
+        seconds = 0.0 if run is None or since is None else run.sim.t - since
+        periods = "period" if self._periods == 1 else "periods"
+        return f"{self._periods} {periods} ({seconds:.1f} s)"

@@ -17,7 +17,6 @@ is clamped onto them; each change is an event.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -32,7 +31,6 @@ from cbp.robot import FloatArray
 from cbp.run.events import RunLog
 from cbp.scenario.runtime import Scenario
 from cbp.spatial import checked_se3
-from cbp.state import RobotState
 
 __all__ = ["ABSURD", "GoalBounds", "GoalInput"]
 
@@ -50,7 +48,8 @@ class GoalBounds:
         centre: the arm's first joint, where its reach is measured from (3,)
             [m]; None for a robot whose base moves (no fixed reach).
         reach: how far the goal's frame can be from ``centre`` at most: the
-            lengths of the chain's links added up (an upper bound) [m].
+            lengths of the chain's links added up (an upper bound,
+            :mod:`cbp.scenario.reach`) [m].
     """
 
     lower: FloatArray
@@ -64,16 +63,10 @@ class GoalBounds:
         lower, upper = (
             np.asarray(c, dtype=float) for c in scenario.spec.perception.bounds
         )
-        robot = scenario.robot
-        if robot.base != "fixed":
+        reach = scenario.reach()
+        if reach is None:
             return cls(lower, upper, None, np.inf)
-        state = RobotState(robot, scenario.q0)
-        frame = robot.frame_id(scenario.ee_frame)
-        chain = list(robot.model.supports[robot.model.frames[frame].parentJoint])[1:]
-        points = [state.data.oMi[j].translation for j in chain]
-        points.append(state.frame_position(frame))
-        reach = float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(points)))
-        return cls(lower, upper, np.array(points[0]), reach)
+        return cls(lower, upper, reach.centre, reach.radius)
 
     def clamp(self, position: FloatArray) -> tuple[FloatArray, str | None]:
         """``position`` moved into the bounds, and what was done (None: nothing)."""

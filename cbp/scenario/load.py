@@ -36,7 +36,14 @@ from cbp.robot import FloatArray, RobotModel
 from cbp.robot_init import load_robot
 from cbp.scenario.runtime import Scenario, goal_receivers
 from cbp.scenario.spec import RobotSpec, ScenarioSpec
-from cbp.schema import INVALID, Document, join_path, mapping_items, value_node
+from cbp.schema import (
+    INVALID,
+    Document,
+    join_path,
+    key_nodes,
+    mapping_items,
+    value_node,
+)
 from cbp.state import RobotState
 
 __all__ = ["load_scenario"]
@@ -142,7 +149,44 @@ def load_scenario(
     if not spec.robot.allow_initial_contact:
         _check_initial_contact(doc, scenario, root)
         doc.raise_if_problems()
+    for warning in goal_reach_warnings(doc, scenario, root):
+        log.warning("%s, %s", doc.path, warning)
     return scenario
+
+
+def goal_reach_warnings(
+    doc: Document, scenario: Scenario, root: yaml.Node
+) -> list[str]:
+    """A located warning for each keyframe whose goal lies beyond the arm's reach.
+
+    The reach is an upper bound (:mod:`cbp.scenario.reach`): a goal beyond it
+    is certainly out of reach, so the arm stops short of it, and no reachable
+    goal is warned of. Warnings, not errors: the goal may come back within
+    reach at a later keyframe (the arm follows along the reach's edge).
+    """
+    goal = scenario.spec.goal
+    if goal is None or goal.type not in ("keyframes", "step"):
+        return []
+    reach = scenario.reach()
+    if reach is None:
+        return []
+    nodes = value_node(root, "goal", "keyframes")
+    items = nodes.value if isinstance(nodes, yaml.SequenceNode) else []
+    warnings = []
+    for i, keyframe in enumerate(goal.keyframes):
+        why = reach.beyond(np.asarray(keyframe.pose.position, dtype=float))
+        if why is not None:
+            node = items[i] if i < len(items) else nodes
+            warnings.append(
+                doc.located(
+                    node,
+                    f"goal.keyframes[{i}].pose.position",
+                    f"the goal {list(keyframe.pose.position)} at t = {keyframe.t:g} s "
+                    f"is out of reach of {scenario.ee_frame}: {why}; the arm stops "
+                    "short of it",
+                )
+            )
+    return warnings
 
 
 #: A start deeper than this in a declared object is refused [m].
@@ -354,10 +398,11 @@ def _bind_entry(
     items = mapping_items(doc, node, where)
     if items is None:
         return None
+    keys = key_nodes(node)
     for key, value in items.items():
         if key not in _ENTRY_KEYS:
             doc.report(
-                value,
+                keys.get(key, value),
                 join_path(where, key),
                 f"unknown key '{key}'{suggestion(key, _ENTRY_KEYS)} Entry keys: "
                 f"{', '.join(_ENTRY_KEYS)} (plugin parameters go under 'params').",

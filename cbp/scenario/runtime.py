@@ -32,6 +32,7 @@ from cbp.perception.frame import camera_parent
 from cbp.plugin import GoalReceiver, TakesInput, Task, UsesCollisionWorld
 from cbp.qp import Entry
 from cbp.robot import FloatArray, RobotModel
+from cbp.scenario.reach import Reach, arm_reach
 from cbp.scenario.spec import ScenarioSpec
 
 __all__ = ["Scenario", "goal_receivers"]
@@ -189,6 +190,14 @@ class Scenario:
         if task is not None:
             return task.goal_frame
         return self.robot.end_effector
+
+    def reach(self) -> Reach | None:
+        """How far the goal's frame can get from the arm's first joint.
+
+        None for a robot whose base moves or with a prismatic joint on the
+        chain (:func:`~cbp.scenario.reach.arm_reach`).
+        """
+        return arm_reach(self.robot, self.q0, self.ee_frame)
 
 
 def goal_receivers(entries: Sequence[Entry], name: str | None) -> list[Any]:

@@ -6,7 +6,9 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
 from cbp.errors import ScenarioError
@@ -286,3 +288,149 @@ def test_a_section_given_in_part_keeps_its_defaults_in_the_parent() -> None:
     assert after.clock == "virtual"
     assert (after.period, after.max_period) == (before.period, before.max_period)
     assert after.period == 0.25
+
+
+def test_unknown_keys_are_reported_at_their_own_line(tmp_path: Path) -> None:
+    """A misspelt key is on its own line whatever its value: block, flow or plain."""
+    error = _load(
+        tmp_path,
+        """\
+        keyframe:              # line 4: top level, block list
+          - {t: 0.0}
+        wrold:                 # line 6: top level, block mapping
+          objects: []
+        duraton: 5.0           # line 8: top level, plain
+        objetcs: {a: 1}        # line 9: top level, flow
+        goal:
+          type: keyframes
+          keyframes:
+            - {t: 0.0, pose: {position: [0.3, 0.0, 0.5]}}
+          parmas:              # line 14: nested, block
+            a: 1
+          rat_hz: 30.0         # line 16: nested, plain
+        tasks:
+          - type: posture
+            parmas:            # line 19: in a plugin entry, block
+              joints: []
+            wieght: [1.0]      # line 21: in a plugin entry, flow
+            params:
+              gian:            # line 23: plugin parameter, block
+                - 1.0
+        """,
+    )
+    lines = {p.split(": ", 2)[1]: p.split(":", 1)[0] for p in error.problems}
+    assert lines == {
+        "keyframe": "line 4",
+        "wrold": "line 6",
+        "duraton": "line 8",
+        "objetcs": "line 9",
+        "goal.parmas": "line 14",
+        "goal.rat_hz": "line 16",
+        "tasks[0].parmas": "line 19",
+        "tasks[0].wieght": "line 21",
+        "tasks[0].params.gian": "line 23",
+    }
+
+
+def test_bad_values_are_reported_at_the_value(tmp_path: Path) -> None:
+    """A wrong value points at the value, also when it starts below its key."""
+    error = _load(
+        tmp_path,
+        """\
+        goal:
+          type: keyframes
+          rate_hz:
+            - 30.0
+          keyframes:
+            - {t: 0.0, pose: {position: [0.3, 0.0, 0.5]}}
+        tasks:
+          - type: posture
+            weight:
+              a: 1.0
+        """,
+    )
+    lines = {p.split(": ", 2)[1]: p.split(":", 1)[0] for p in error.problems}
+    assert lines == {"goal.rate_hz": "line 7", "tasks[0].weight": "line 13"}
+
+
+def test_unknown_key_from_set_is_reported_against_set(tmp_path: Path) -> None:
+    """A key made by ``--set`` is located at the ``--set`` option, not at no line."""
+    path = tmp_path / "s.yaml"
+    path.write_text(HEADER)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path, overrides={"wrold.objects": "[]"})
+    assert info.value.problems[0].startswith("--set wrold.objects: wrold: unknown key")
+
+
+def test_a_keyframe_beyond_the_arms_reach_is_warned_of(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A goal beyond the links' lengths: a warning at its keyframe; others: none."""
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        HEADER
+        + textwrap.dedent(
+            """\
+            goal:
+              type: keyframes
+              keyframes:
+                - {t: 0.0, pose: {position: [0.45, 0.0, 0.40]}}
+                - t: 1.0
+                  pose: {position: [1.5, 0.0, 0.3]}
+                - {t: 2.0, pose: {position: [0.0, 0.0, 1.30]}}
+            tasks:
+              - type: goal_pose
+            """
+        )
+    )
+    with caplog.at_level("WARNING", logger="cbp.scenario.load"):
+        load_scenario(path)
+    warnings = [r.getMessage() for r in caplog.records]
+    assert warnings == [
+        f"{path}, line 8: goal.keyframes[1].pose.position: the goal [1.5, 0.0, 0.3] "
+        "at t = 1 s is out of reach of panda_hand: 1.50 m from the arm's first "
+        "joint, beyond its reach (0.99 m, its links' lengths added up); the arm "
+        "stops short of it"
+    ]
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_shipped_scenarios_warn_only_of_goals_out_of_reach(
+    path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """No reachable goal is warned of; cat_unreachable's goal leaves the reach."""
+    with caplog.at_level("WARNING", logger="cbp.scenario.load"):
+        load_scenario(path)
+    said = [r.getMessage() for r in caplog.records if "out of reach" in r.getMessage()]
+    if path.stem == "cat_unreachable":
+        assert [m.split(": ")[1] for m in said] == [
+            "goal.keyframes[1].pose.position",
+            "goal.keyframes[2].pose.position",
+        ]
+    else:
+        assert said == []
+
+
+def test_the_reach_bounds_every_configuration(robots: dict[str, Any]) -> None:
+    """No configuration puts the hand farther from the first joint than the reach."""
+    from cbp.scenario.reach import arm_reach
+    from cbp.state import RobotState
+
+    robot = robots["panda"]
+    reach = arm_reach(robot, robot.neutral(), "panda_hand")
+    assert reach is not None
+    rng = np.random.default_rng(7)
+    frame = robot.frame_id("panda_hand")
+    farthest = 0.0
+    for _ in range(2000):
+        q = rng.uniform(robot.lower_limits, robot.upper_limits)
+        farthest = max(
+            farthest, reach.distance(RobotState(robot, q).frame_position(frame))
+        )
+    assert 0.8 * reach.radius < farthest <= reach.radius
+    assert (
+        arm_reach(
+            robots["panda_planar"], robots["panda_planar"].neutral(), "panda_hand"
+        )
+        is None
+    )
