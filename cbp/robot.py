@@ -10,6 +10,7 @@ every change of configuration goes through :meth:`RobotModel.integrate` and
 
 from __future__ import annotations
 
+import math
 import os
 import typing
 from collections.abc import Mapping, Sequence
@@ -424,6 +425,34 @@ class RobotModel:
         joint = self.model.joints[self.joint_id(name)]
         return slice(joint.idx_q, joint.idx_q + joint.nq)
 
+    def set_joint_position(self, q: FloatArray, name: str, value: float) -> None:
+        """Write joint ``name``'s position ``value`` [rad or m] into ``q``.
+
+        A continuous joint keeps its angle as (cos, sin) in two coordinates.
+
+        Raises:
+            ConfigError: the joint has more than one degree of freedom (a
+                planar or floating base), so one value does not place it.
+        """
+        joint = self.model.joints[self.joint_id(name)]
+        iq = joint.idx_q
+        if joint.nq == 1:
+            q[iq] = value
+        elif joint.nq == 2 and joint.nv == 1:
+            q[iq], q[iq + 1] = math.cos(value), math.sin(value)
+        else:
+            raise ConfigError(
+                f"joint {name!r} has {joint.nv} degrees of freedom: one value "
+                "does not place it"
+            )
+
+    def joint_position(self, q: FloatArray, name: str) -> float:
+        """Joint ``name``'s position in ``q`` [rad or m]; a continuous joint's angle."""
+        joint = self.model.joints[self.joint_id(name)]
+        if joint.nq == 2 and joint.nv == 1:
+            return float(np.arctan2(q[joint.idx_q + 1], q[joint.idx_q]))
+        return float(q[joint.idx_q])
+
     def joint_range(self, name: str) -> tuple[float, float, str] | None:
         """(lower, upper, unit) of joint ``name``'s position; None when unbounded.
 
@@ -520,7 +549,7 @@ class RobotModel:
         q = self.neutral()
         if self.description is not None:
             for joint, value in self.description.home.items():
-                q[self.joint_q_slice(joint)] = value
+                self.set_joint_position(q, joint, value)
         return q
 
     def middle(self) -> FloatArray:
@@ -677,7 +706,7 @@ def _reduced(
     ids = [full.joint_id(j) for j in locked_joints]
     q_ref = pin.neutral(model)
     for joint, value in locked_joints.items():
-        q_ref[model.joints[full.joint_id(joint)].idx_q] = value
+        full.set_joint_position(q_ref, joint, value)
     return pin.buildReducedModel(model, ids, q_ref)
 
 

@@ -127,8 +127,7 @@ def describe_urdf(
         full = RobotModel(model)
         middle = full.middle()
         locked = {
-            j: round(float(middle[full.joint_q_slice(j)][0]), 4)
-            for j in hand.gripper_joints
+            j: round(full.joint_position(middle, j), 4) for j in hand.gripper_joints
         }
         for joint, (driver, factor, offset) in mimic_joints(urdf).items():
             if joint in locked and driver in locked:  # where the driver puts it
@@ -150,7 +149,7 @@ def describe_urdf(
     posture: dict[str, float] = {}
     middle = robot.middle()
     for joint in joints:
-        posture[joint] = round(float(middle[robot.joint_q_slice(joint)][0]), 4)
+        posture[joint] = round(robot.joint_position(middle, joint), 4)
     if home:
         for joint, value in home.items():
             robot.joint_id(joint)

@@ -17,6 +17,7 @@ refused when it is loaded rather than when PyBullet or pinocchio reads it.
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import xml.etree.ElementTree as ET
@@ -81,6 +82,19 @@ class MeshUse:
         )
 
 
+def ros_package_dirs() -> list[Path]:
+    """The folders ROS looks up ``package://`` names under, from the environment.
+
+    ``ROS_PACKAGE_PATH`` (ROS 1) and each ``AMENT_PREFIX_PATH`` prefix's
+    ``share`` folder (ROS 2), as pinocchio and the ROS tools read them; none
+    when neither is set.
+    """
+    dirs = [Path(d) for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep)]
+    prefixes = os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)
+    dirs += [Path(p) / "share" for p in prefixes if p]
+    return [d for d in dirs if str(d) not in ("", ".")]
+
+
 def resolve_mesh(
     name: str, urdf_folder: Path, package_dirs: Sequence[Path] = ()
 ) -> tuple[Path, str] | None:
@@ -98,7 +112,7 @@ def resolve_mesh(
     if name.startswith("package://"):
         rest = name[len("package://") :]
         folders = [urdf_folder, *list(urdf_folder.parents)[:PACKAGE_LEVELS]]
-        for folder in [*folders, *package_dirs]:
+        for folder in [*folders, *package_dirs, *ros_package_dirs()]:
             if (folder / rest).is_file():
                 return folder / rest, _inside(rest)
         return None

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
+import numpy as np
 import pybullet_data
 import pytest
 import yaml
@@ -83,6 +85,28 @@ def test_mesh_uses_name_their_link_element_and_line(tmp_path: Path) -> None:
     assert missing_meshes(urdf) == uses[1:]
     (tmp_path / "toy").mkdir()  # a ROS tree: the package beside the URDF's folder
     (tmp_path / "toy" / "wheel.stl").write_text("solid")
+    assert missing_meshes(urdf) == []
+
+
+def test_package_meshes_are_found_where_ros_looks(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A package:// mesh under ROS_PACKAGE_PATH or an ament prefix's share is found."""
+    urdf = tmp_path / "robot" / "toy.urdf"
+    urdf.parent.mkdir()
+    urdf.write_text(TOY_URDF.replace("meshes/slider.stl", "package://toy/slider.stl"))
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    assert len(missing_meshes(urdf)) == 2
+    ros1 = tmp_path / "ros1" / "toy"
+    ros1.mkdir(parents=True)
+    (ros1 / "slider.stl").write_text("solid")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", f"/nowhere{os.pathsep}{ros1.parent}")
+    assert [u.filename for u in missing_meshes(urdf)] == ["package://toy/wheel.stl"]
+    ros2 = tmp_path / "install" / "share" / "toy"
+    ros2.mkdir(parents=True)
+    (ros2 / "wheel.stl").write_text("solid")
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(tmp_path / "install"))
     assert missing_meshes(urdf) == []
 
 
@@ -221,6 +245,22 @@ def test_prismatic_ranges_are_in_metres_and_continuous_joints_have_none(
     assert robot.out_of_range("spin", 100.0) is None
 
 
+def test_a_continuous_joint_is_placed_by_its_angle(tmp_path: Path) -> None:
+    """A position for a continuous joint is written as (cos, sin), also when locked."""
+    (tmp_path / "toy.urdf").write_text(TOY_URDF)
+    robot = RobotModel.from_urdf(tmp_path / "toy.urdf")
+    q = robot.neutral()
+    robot.set_joint_position(q, "spin", 2.5)
+    robot.set_joint_position(q, "slide", 0.1)
+    np.testing.assert_allclose(q, [0.1, np.cos(2.5), np.sin(2.5)])
+    assert robot.joint_position(q, "spin") == pytest.approx(2.5)
+    assert robot.joint_position(q, "slide") == pytest.approx(0.1)
+    locked = RobotModel.from_urdf(tmp_path / "toy.urdf", locked_joints={"spin": 2.5})
+    wheel = locked.model.frames[locked.model.getFrameId("wheel")].placement
+    angle = np.arctan2(wheel.rotation[1, 0], wheel.rotation[0, 0])
+    assert angle == pytest.approx(2.5)
+
+
 def test_robot_yaml_problems_are_reported_together(tmp_path: Path) -> None:
     """A key typo, a bad end effector and a home out of range: all three at once."""
     arm = _xarm(tmp_path)
@@ -238,8 +278,8 @@ def test_robot_yaml_problems_are_reported_together(tmp_path: Path) -> None:
     }
     assert sorted(info.value.problems) == sorted(
         [
-            # An unknown key is located at its value (a mapping: the next line).
-            f"{path}, line {lines['acceleration_limit:'] + 1}: acceleration_limit: "
+            # An unknown key is located at its own line.
+            f"{path}, line {lines['acceleration_limit:']}: acceleration_limit: "
             "unknown key 'acceleration_limit'; did you mean 'acceleration_limits'? "
             "Accepted: name, urdf, end_effector, home, base, wrist_link, "
             "locked_joints, velocity_limits, acceleration_limits, collision.",

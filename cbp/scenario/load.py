@@ -457,7 +457,7 @@ def _initial_configuration(
     q0 = robot.home()
     for joint, value in spec.initial.items():
         try:
-            q0[robot.joint_q_slice(joint)] = value
+            robot.set_joint_position(q0, joint, value)
             problem = robot.out_of_range(joint, value)
         except ConfigError as exc:
             problem = exc.message
