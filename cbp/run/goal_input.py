@@ -29,6 +29,7 @@ from cbp.goals import GoalSource, LiveGoalSource
 from cbp.plugin import GoalReceiver
 from cbp.robot import FloatArray
 from cbp.run.events import RunLog
+from cbp.scenario.reach import Reach
 from cbp.scenario.runtime import Scenario
 from cbp.spatial import checked_se3
 
@@ -109,6 +110,9 @@ class GoalInput:
             names unseen space as a possible reason).
         bounds: where the goal may be (an operator's live goal); None: any
             finite goal is taken as it is (a scenario's stream).
+        reach: the arm's reach; a goal beyond it is said to be out of reach
+            (an event when it leaves and when it comes back), as the goal
+            is taken. Bounds clamp such a goal instead.
     """
 
     def __init__(
@@ -119,6 +123,7 @@ class GoalInput:
         world: CollisionWorld | None = None,
         perceived: bool = False,
         bounds: GoalBounds | None = None,
+        reach: Reach | None = None,
     ) -> None:
         """Nothing sampled yet."""
         self.source = source
@@ -134,6 +139,8 @@ class GoalInput:
         self._blocked = False
         self._bounds = bounds
         self._clamped: str | None = None
+        self._reach = reach if bounds is None else None
+        self._beyond: str | None = None
 
     @property
     def changes(self) -> list[tuple[float, pin.SE3]]:
@@ -220,12 +227,28 @@ class GoalInput:
             if self.task is not None:
                 self.task.set_target(pose.translation, pose.rotation)
             self._check_space(t, pose)
+            self._check_reach(t, pose)
         return pose
 
     def resend(self, t: float) -> pin.SE3 | None:
         """Sample the source again now (not waiting for its rate) and send."""
         self._sampled.t = -math.inf
         return self.send(t)
+
+    def _check_reach(self, t: float, pose: pin.SE3) -> None:
+        """Say when the goal leaves the arm's reach, and when it is back."""
+        if self._reach is None:
+            return
+        beyond = self._reach.beyond(pose.translation)
+        if (beyond is None) == (self._beyond is None):
+            return
+        self._beyond = beyond
+        self._log.event(
+            t,
+            "goal within the arm's reach again"
+            if beyond is None
+            else f"goal out of reach: {beyond}; the arm stops short of it",
+        )
 
     def _check_space(self, t: float, pose: pin.SE3) -> None:
         """Say when the goal enters or leaves an obstacle (or unseen space)."""

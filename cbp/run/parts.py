@@ -248,6 +248,7 @@ def build_run(
             world,
             perceived=cameras is not None,
             bounds=None if goal is None else GoalBounds.of(scenario),
+            reach=scenario.reach(),
         ),
         cameras=cameras,
         declared=declared,
