@@ -425,6 +425,23 @@ class RobotModel:
         joint = self.model.joints[self.joint_id(name)]
         return slice(joint.idx_q, joint.idx_q + joint.nq)
 
+    def fixed_links(self) -> frozenset[str]:
+        """The links of a fixed-base robot that no joint moves (its base).
+
+        No motion changes their distance to an obstacle, so the scenario's
+        objects are not checked against them (a floor under the base, a wall
+        it is mounted on touch it); the robot's other links still are. Empty
+        for a robot whose base moves.
+        """
+        if self.base != "fixed":
+            return frozenset()
+        model = self.model
+        return frozenset(
+            f.name
+            for f in model.frames
+            if f.parentJoint == 0 and f.type == pin.FrameType.BODY
+        )
+
     def set_joint_position(self, q: FloatArray, name: str, value: float) -> None:
         """Write joint ``name``'s position ``value`` [rad or m] into ``q``.
 

@@ -173,6 +173,11 @@ class CollisionWorld:
         self._free_space: FreeSpaceChecker | None = None
         #: The planners' check against a map (:meth:`is_free`), per snapshot.
         self._map_check: _MapCheck | None = None
+        #: The shapes no joint moves (a fixed base), left out of the map's
+        #: contacts: a floor under the base touches it, and no motion can
+        #: change that. (Declared objects leave them out by ``allow_contact``:
+        #: :meth:`~cbp.scenario.runtime.Scenario.environment_objects`.)
+        self._fixed = np.array([s.joint_id == 0 for s in geometry.shapes], dtype=bool)
         self._geometry_model = geometry.geometry_model()
         self._geometry_data = pin.GeometryData(self._geometry_model)
         # Bounding-sphere (and box) centres in the shapes' own frames, (n, 3).
@@ -423,7 +428,9 @@ class CollisionWorld:
                 blocked_cells(blocked),
                 ShapeTable.for_shapes(self.geometry.shapes, nearer + blocked.cell),
                 nearer,
-                np.arange(len(self.geometry.shapes), dtype=np.intp)
+                # Shapes no joint moves (a fixed base) are not tried: a floor
+                # under the base touches it, and no motion can change that.
+                np.flatnonzero(~self._fixed).astype(np.intp)
                 if check is None
                 else check.order,
             )
@@ -551,7 +558,7 @@ class CollisionWorld:
                 )
             )
             if found is not None:
-                return found
+                return self._moving_part(found, environment)
         robot = self.placed(state)
         margin, per_shape = self.margin(environment), settings.contacts_per_link
         # The default is not passed: an environment written before the setting
@@ -564,7 +571,19 @@ class CollisionWorld:
         own = self.self_set(robot) if settings.self_collision else []
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles
         # are inflated by that much (and step validation tolerates as much more).
-        return ContactSet.stack(obstacles, self.padding + environment.resolution, own)
+        return self._moving_part(
+            ContactSet.stack(obstacles, self.padding + environment.resolution, own),
+            environment,
+        )
+
+    def _moving_part(
+        self, contacts: ContactSet, environment: Environment
+    ) -> ContactSet:
+        """``contacts`` without a map's contacts on shapes no joint moves."""
+        if environment.resolution <= 0.0 or not len(contacts) or not self._fixed.any():
+            return contacts
+        drop = self._fixed[contacts.shape] & (contacts.other_shape < 0)
+        return contacts.select(~drop) if drop.any() else contacts
 
     def placed(self, state: RobotState) -> PlacedShapes:
         """The robot's shapes at ``state``: world placements and bounds."""

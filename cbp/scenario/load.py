@@ -211,7 +211,10 @@ def _check_initial_contact(doc: Document, scenario: Scenario, root: yaml.Node) -
     request, result = coal.DistanceRequest(), coal.DistanceResult()
     deepest: dict[tuple[str, str], float] = {}
     centres, radii = geometry.world_spheres(state)
+    fixed = scenario.robot.fixed_links()
     for shape, centre, radius in zip(geometry.shapes, centres, radii, strict=True):
+        if shape.link in fixed:
+            continue  # no motion leaves it: not checked against obstacles
         placement = shape.world_placement(state)
         for obj in objects:
             if shape.link in obj.allow_contact:

@@ -77,6 +77,7 @@ class Scenario:
         velocity then (``appear_at``, ``motion``).
         """
         objects = []
+        fixed = self.robot.fixed_links()
         for obj in self.spec.world.objects:
             if not obj.present(t):
                 continue
@@ -92,10 +93,9 @@ class Scenario:
                 made = EnvironmentObject.primitive(
                     obj.name, obj.shape, obj.size, placement
                 )
-            if obj.allow_contact:
-                made = dataclasses.replace(
-                    made, allow_contact=frozenset(obj.allow_contact)
-                )
+            allowed = frozenset(obj.allow_contact) | fixed
+            if allowed:
+                made = dataclasses.replace(made, allow_contact=allowed)
             if obj.motion is not None:
                 made = dataclasses.replace(made, velocity=obj.velocity_at(t))
             objects.append(made)
