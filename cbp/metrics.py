@@ -148,7 +148,22 @@ def _contact(trace: Trace) -> dict[str, Any]:
         "physical_penetration_m": (
             float(np.max(penetration)) if penetration is not None else None
         ),
+        "max_joint_tracking_error": _tracking_error(trace),
     }
+
+
+def _tracking_error(trace: Trace) -> float | None:
+    """The largest gap between a measured and a commanded coordinate [rad or m].
+
+    The joint controller keeps it within a few hundredths of a radian, also
+    in contact; far more means something forced the arm off its command (an
+    obstacle that pressed it, a crush against another one). None without
+    commands.
+    """
+    if trace.q_cmd is None or trace.q_cmd.shape != trace.q.shape:
+        return None
+    gap = np.abs(trace.q - trace.q_cmd)
+    return float(np.nanmax(gap)) if gap.size else None
 
 
 def _periods(trace: Trace) -> dict[str, Any]:

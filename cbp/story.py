@@ -27,6 +27,9 @@ __all__ = ["SCENE_FIGURE", "plot_scene", "run_sentence"]
 
 #: The picture of the scene with the hand paths, in the output folder.
 SCENE_FIGURE = "scene.png"
+#: A joint this far from its command [rad] was forced there by what it touched
+#: (its controller tracks within a few hundredths in contact too).
+FORCED_OFF = 0.1
 #: The last periods looked at for why a run stopped short.
 LAST_PERIODS = 30
 
@@ -48,6 +51,12 @@ def run_sentence(name: str, trace: Trace, metrics: Mapping[str, Any]) -> str:
         if peak is not None
         else ""
     )
+    forced = metrics.get("max_joint_tracking_error")
+    if touching and forced is not None and forced > FORCED_OFF:
+        contact += (
+            f", forced up to {forced:.2f} rad off its command (an obstacle pressed "
+            "the arm harder than its joints could hold)"
+        )
     if metrics.get("aborted"):
         return f"**{name}** was aborted: {metrics['aborted']}."
     if metrics["reached"]:

@@ -117,3 +117,18 @@ def test_the_demo_report_tells_each_methods_story(tmp_path: Path) -> None:
         report
     )
     assert (out / "scene.png").is_file()
+
+
+def test_an_arm_forced_off_its_command_is_said_to_be() -> None:
+    """Pressed 0.3 rad off its command: the sentence says so; 0.02 rad is tracking."""
+    pressed = _trace((0.5, 0.0, 0.15), force=120.0)
+    pressed.q_cmd = np.where(pressed.t[:, None] > 3.0, 0.3, 0.0)
+    metrics = run_metrics(pressed)
+    assert metrics["max_joint_tracking_error"] == pytest.approx(0.3)
+    assert ", forced up to 0.30 rad off its command (an obstacle pressed the arm" in (
+        run_sentence("m", pressed, metrics)
+    )
+    tracked = _trace((0.5, 0.0, 0.15), force=120.0)
+    tracked.q_cmd = np.full_like(tracked.q, 0.02)
+    assert "forced" not in _sentence(tracked)
+    assert run_metrics(_trace((0.5, 0.4, 0.15)))["max_joint_tracking_error"] is None
