@@ -283,8 +283,11 @@ class MpPlanner:
         return self.rrt.check_step
 
     def close(self) -> None:
-        """Release OMPL's reference to the validity checker."""
-        self.rrt.close()
+        """Release OMPL's reference to the validity checker; say a failure going on."""
+        try:
+            self.rrt.close()
+        finally:
+            self.events.close()
 
     def plan(
         self, q: FloatArray, goal: pin.SE3 | None, budget: Budget, run: RunParts

@@ -127,3 +127,24 @@ def test_a_failure_to_the_end_of_the_run_is_counted(reach_scenario: Scenario) ->
     )
     events.close()  # nothing more
     assert len(run.events) == 2
+
+
+def test_mp_says_a_failure_still_going_on_when_it_closes(
+    reach_scenario: Scenario,
+) -> None:
+    """MP's planner, closed at the run's end, counts the failure as IK's does."""
+    from cbp.executors import make_planner
+    from cbp.run import build_run
+
+    parts = build_run(reach_scenario, method="mp", clock="virtual")
+    try:
+        planner = make_planner("mp", reach_scenario, parts)
+        run = FakeRun(reach_scenario)
+        _fail(planner.events, run, [_goal(1.5)] * 30, exhausted=True)
+        planner.close()
+    finally:
+        parts.close()
+    assert run.messages()[-1] == (
+        "mp: still no IK solution at the end of the run, after 30 periods (1.0 s) "
+        "without one"
+    )
