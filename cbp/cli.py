@@ -526,7 +526,7 @@ def _run(
     out = out or Path("out") / scenario.spec.name
     from cbp.files import claim_output_folder
     from cbp.report import summary_line, write_outputs
-    from cbp.run.faults import EXIT_ABORTED, EXIT_INCOMPLETE
+    from cbp.run.faults import EXIT_ABORTED, EXIT_INCOMPLETE, stop_on_signals
 
     try:
         claim = claim_output_folder(out)  # refused if a live run writes there
@@ -536,7 +536,8 @@ def _run(
     from cbp.progress import run_progress
 
     try:
-        with run_progress(f"{scenario.spec.name} ({name})"):
+        # SIGINT, SIGTERM, SIGHUP: the run brakes and its outputs are written.
+        with run_progress(f"{scenario.spec.name} ({name})"), stop_on_signals():
             trace = executor(scenario, gui)
     except ConfigError as exc:  # found as the run starts (a URDF PyBullet refuses)
         claim.release(remove=True)

@@ -381,7 +381,14 @@ def run_trajectory_executor(
         if faults.aborted is None and not stop_requested():
             run.advance(run.duration)
         else:
-            # Let the robot come to rest on the (stopping) trajectory it is on.
+            # Brake, and let the robot come to rest on that trajectory.
+            current = sim.trajectory
+            i = current.first_point_after(t)
+            braking = (
+                stopping_trajectory(current, i, vmax, amax) if i is not None else None
+            )
+            if braking is not None:
+                sim.follow(current.splice(braking))
             run.advance(min(max(sim.trajectory.end_time, t) + 0.1, run.duration))
     finally:
         compiles.uninstall()

@@ -13,15 +13,22 @@ stopped, the run ends early, and the trace, metrics and report say why
 
 from __future__ import annotations
 
+import contextlib
 import logging
-from collections.abc import Callable
+import signal
+import threading
+from collections.abc import Callable, Iterator
 
 __all__ = [
     "EXIT_ABORTED",
     "EXIT_INCOMPLETE",
     "MAX_FAULTS_IN_A_ROW",
+    "STOPPED_EARLY",
     "Faults",
+    "clear_stop",
     "describe",
+    "request_stop",
+    "stop_on_signals",
 ]
 
 log = logging.getLogger(__name__)
@@ -36,6 +43,62 @@ EXIT_ABORTED = 3
 #: outputs are written without it, and an event and ``incomplete`` in
 #: ``metrics.json`` name it.
 EXIT_INCOMPLETE = 4
+
+
+#: How the reason of a run stopped on request begins (``aborted``).
+STOPPED_EARLY = "stopped early"
+#: A stop asked of every run in this process (``cbp run`` on SIGINT, SIGTERM
+#: or SIGHUP), and why.
+_STOP = threading.Event()
+_STOP_REASON = [""]
+
+
+def request_stop(reason: str) -> None:
+    """Ask every run of this process to stop at its next control cycle.
+
+    The run ends as an aborted one does: the robot brakes to rest, and the
+    trace, metrics and report are written up to there, ``aborted`` saying
+    ``reason``. Safe to call from a signal handler.
+    """
+    _STOP_REASON[0] = reason
+    _STOP.set()
+
+
+def clear_stop() -> None:
+    """Forget a stop asked before (a new run may start)."""
+    _STOP.clear()
+    _STOP_REASON[0] = ""
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """While inside, SIGINT, SIGTERM and SIGHUP stop the runs, which save.
+
+    The first signal asks the runs to stop (:func:`request_stop`): they brake
+    and their outputs are written. A second SIGINT interrupts at once
+    (KeyboardInterrupt), as Ctrl-C does outside. Only from the main thread
+    (elsewhere, nothing is installed).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    names = {signal.SIGINT: "SIGINT (Ctrl-C)", signal.SIGTERM: "SIGTERM"}
+    if hasattr(signal, "SIGHUP"):
+        names[signal.SIGHUP] = "SIGHUP"
+
+    def handler(signum: int, frame: object) -> None:
+        if signum == signal.SIGINT and _STOP.is_set():
+            raise KeyboardInterrupt
+        request_stop(names.get(signal.Signals(signum), f"signal {signum}"))
+
+    before = {sig: signal.signal(sig, handler) for sig in names}
+    clear_stop()
+    try:
+        yield
+    finally:
+        for sig, old in before.items():
+            signal.signal(sig, old)
+        clear_stop()
 
 
 class Faults:
@@ -59,7 +122,14 @@ class Faults:
         self.limit = limit
         self.total = 0
         self.in_a_row = 0
-        self.aborted: str | None = None
+        self._aborted: str | None = None
+
+    @property
+    def aborted(self) -> str | None:
+        """Why the run was aborted (or asked to stop: :func:`request_stop`), or None."""
+        if self._aborted is None and _STOP.is_set():
+            self._aborted = f"{STOPPED_EARLY}: {_STOP_REASON[0]}"
+        return self._aborted
 
     def fault(self, t: float, where: str, exc: BaseException) -> str:
         """Record that ``where`` raised ``exc`` at ``t``; return the message.
@@ -73,8 +143,8 @@ class Faults:
         log.debug("%s at t=%.3f s", where, t, exc_info=exc)
         self._event(t, message)
         if self.in_a_row >= self.limit and self.aborted is None:
-            self.aborted = f"{where} failed {self.in_a_row} times in a row ({what})"
-            self._event(t, f"run aborted: {self.aborted}")
+            self._aborted = f"{where} failed {self.in_a_row} times in a row ({what})"
+            self._event(t, f"run aborted: {self._aborted}")
         return message
 
     def ok(self) -> None:

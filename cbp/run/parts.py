@@ -26,7 +26,7 @@ from cbp.robot import FloatArray, RobotModel
 from cbp.run.cameras import Cameras
 from cbp.run.declared import DeclaredObjects
 from cbp.run.events import RunLog
-from cbp.run.faults import Faults
+from cbp.run.faults import STOPPED_EARLY, Faults
 from cbp.run.goal_input import GoalBounds, GoalInput
 from cbp.run.recording import make_trace
 from cbp.scenario.runtime import Scenario
@@ -144,6 +144,9 @@ class RunParts:
 
     def finish(self) -> Trace:
         """Stop the map and the simulator; return the trace."""
+        aborted = self.faults.aborted
+        if aborted is not None and aborted.startswith(STOPPED_EARLY):
+            self.event(self.sim.t, f"run {aborted}: the outputs hold it up to here")
         if self.cameras is not None:
             self.cameras.close()
         recording = self.sim.recording()
@@ -153,7 +156,7 @@ class RunParts:
             recording,
             self.goal.changes,
             self.log,
-            self.faults.aborted,
+            aborted,
             self.ee_frame,
         )
 
