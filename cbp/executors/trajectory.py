@@ -306,6 +306,13 @@ def run_trajectory_executor(
             if (failed or hold is not None or plan.stop) and i is not None:
                 new = stopping_trajectory(current, i, vmax, amax)
             compute = budget.elapsed()
+            if world_pacer is not None and t == 0.0 and compiles.count > compiled:
+                # The world waits for the controller's start-up compilation
+                # (numba, on a machine's first run): nothing has moved yet.
+                # A world that then caught up at once handed the map a burst
+                # of frames, and the map was behind its cameras (the robot
+                # stopped) for the next two seconds.
+                world_pacer.start(t)
             timed_out, steps = plan.timed_out, plan.steps
             # A live goal taken at the period's start or by the planner between
             # its steps (CAT) is commanded by this plan only after t_f.

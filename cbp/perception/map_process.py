@@ -643,17 +643,21 @@ def _warm_up(grid: OccupancyGrid, state: RobotState) -> None:
     with cameras (numba compiling every kernel) the map of the generated
     scene moving_11 was behind its cameras from 0.57 s to 5.16 s, and the
     robot stopped; with the second frame, to 2.96 s (one run each; the rest
-    not traced).
+    not traced). Frames of 8 x 8 pixels were one tile, so the changed
+    frame's windowed pass compiled at the first real frame (0.9 s).
     """
     fixed = [c for c in grid.spec.all_cameras if c.parent is None]
     if not fixed:
         return
-    spec = replace(fixed[0], width=8, height=8)
+    # Three tiles across (``perception.kernels``' 16-pixel tiles), so that a
+    # change in one corner is a window of the frame, not all of it.
+    size = 48
+    spec = replace(fixed[0], width=size, height=size)
     near = min(spec.near, RENDER_NEAR_FRACTION * spec.far)
     assert spec.position is not None  # a fixed camera has both
     assert spec.target is not None
     frame = DepthFrame(
-        np.full((8, 8), 0.999),
+        np.full((size, size), 0.999),
         look_at(spec.position, spec.target, spec.up),
         perspective(spec.fov_deg, 1.0, near, spec.far),
         near,
@@ -663,7 +667,7 @@ def _warm_up(grid: OccupancyGrid, state: RobotState) -> None:
     )
     scratch = grid.scratch()
     scratch.integrate(frame, state, 0.0)
-    nearer = np.full((8, 8), 0.999)
+    nearer = np.full((size, size), 0.999)
     nearer[2:6, 2:6] = 0.9  # something came between
     scratch.integrate(replace(frame, depth=nearer), state, 0.1)
     scratch.moving_centres(0.1)
