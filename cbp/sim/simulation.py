@@ -155,6 +155,7 @@ class Simulation:
                 physicsClientId=c,
             )
         self._hand_links = self._links_beyond_wrist()
+        self._fixed_links = self._links_fixed_to_world()
         self._data = model.createData()
         self.t = 0.0
         self.steps = 0
@@ -291,14 +292,40 @@ class Simulation:
         robot = self.scene.robot_id
         points = pb.getContactPoints(bodyA=robot, physicsClientId=self.client)
         force = depth = hand = 0.0
+        fixed = self._fixed_links
         for p in points:
             if p[2] == robot:  # self-contact is not contact with the scene
+                continue
+            if p[3] in fixed:  # a fixed base on the floor: no motion of the arm
                 continue
             force += p[9]
             depth = max(depth, -p[8])
             if p[3] in self._hand_links:
                 hand += p[9]
         return force, depth, hand
+
+    def _links_fixed_to_world(self) -> frozenset[int]:
+        """PyBullet's indices of a fixed-base robot's links no joint moves.
+
+        The base (-1) and the links fixed to it: the floor they stand on is
+        not a contact of the arm (as :meth:`cbp.robot.RobotModel.fixed_links`).
+        """
+        if self.robot.base != "fixed":
+            return frozenset()
+        c, body = self.client, self.scene.robot_id
+        links = {-1}
+        infos = [
+            pb.getJointInfo(body, j, physicsClientId=c)
+            for j in range(pb.getNumJoints(body, physicsClientId=c))
+        ]
+        changed = True
+        while changed:
+            changed = False
+            for j, info in enumerate(infos):
+                if info[2] == pb.JOINT_FIXED and info[16] in links and j not in links:
+                    links.add(j)
+                    changed = True
+        return frozenset(links)
 
     def _links_beyond_wrist(self) -> frozenset[int]:
         description = self.robot.description
