@@ -43,7 +43,7 @@ from cbp.executors.backout import back_out
 from cbp.executors.clock import Budget, make_budget
 from cbp.executors.periods import DeadlineMisses, LeadAdapter, PeriodAdapter
 from cbp.methods.settings import ExecutorTiming
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, RobotModel
 from cbp.run.pacing import Pacer, WallClockPacer
 from cbp.run.parts import RunParts, build_run
 from cbp.scenario.runtime import Scenario
@@ -173,6 +173,63 @@ class _LeavingContact:
         return Plan(path, len(path) - 1, "backing out of contact")
 
 
+#: A joint measured this far from its command [rad or m] was forced there by
+#: what the arm touches: its controller tracks within about 0.02 rad, also in
+#: contact (the generated moving scenes' declared runs).
+FORCED_OFF = 0.1
+
+
+class _ForcedOff:
+    """Says when something forces the arm off its command, and when it follows again.
+
+    An arm pressed harder than its joints hold (an obstacle it cannot get
+    away from; two that close on it) leaves its command; past that the
+    contact forces are a crush's.
+    """
+
+    def __init__(self, run: RunParts) -> None:
+        self.run = run
+        self.since: float | None = None
+        self._names = run.robot.coordinate_names("v")
+        self._units = _tangent_units(run.robot)
+
+    def check(self, t: float, current: JointTrajectory) -> None:
+        """Compare the measured configuration with the command at ``t``."""
+        run = self.run
+        off = np.abs(run.robot.difference(current.sample(t)[0], run.sim.q))
+        k = int(np.argmax(off))
+        if self.since is None and off[k] > FORCED_OFF:
+            self.since = t
+            run.event(
+                t,
+                f"the arm is forced {off[k]:.2f} {self._units[k]} off its command "
+                f"at {self._names[k]} by what it touches: pressed harder than its "
+                "joints hold",
+            )
+        elif self.since is not None and off[k] <= 0.5 * FORCED_OFF:
+            run.event(
+                t, f"the arm follows its command again after {t - self.since:.2f} s"
+            )
+            self.since = None
+
+
+def _tangent_units(robot: RobotModel) -> list[str]:
+    """The unit of each velocity coordinate's displacement: ``m`` or ``rad``."""
+    units: list[str] = []
+    for j in range(1, robot.model.njoints):
+        joint = robot.model.joints[j]
+        kind = joint.shortname()  # JointModelPX/PY/PZ, JointModelPrismatic...
+        if kind == "JointModelPlanar":
+            units += ["m", "m", "rad"]
+        elif kind == "JointModelFreeFlyer":
+            units += ["m"] * 3 + ["rad"] * 3
+        elif kind.startswith("JointModelPrismatic") or kind[-2:-1] == "P":
+            units += ["m"] * joint.nv
+        else:
+            units += ["rad"] * joint.nv
+    return units
+
+
 def held(world: CollisionWorld | None) -> contextlib.AbstractContextManager[object]:
     """``world``'s snapshot held while a plan is made (nothing without a world)."""
     return contextlib.nullcontext() if world is None else world.holding()
@@ -236,6 +293,7 @@ def run_trajectory_executor(
         COMMAND_LEAD * lo, COMMAND_LEAD * hi, timing.growth, timing.shrink
     )
     leaving = _LeavingContact(run, vmax * BACK_OUT_DT)
+    forced = _ForcedOff(run)
     misses = DeadlineMisses(run.event)
     compiles = CompileCounter.install()
     # With cameras on the wall clock the map works beside the loop in real
@@ -263,6 +321,7 @@ def run_trajectory_executor(
                 v_s = a_s = np.zeros_like(q_s)
             else:
                 t_s, q_s, v_s, a_s = current.point(i)
+            forced.check(t, current)
             budget = make_budget(
                 timing.clock,
                 _planning_time(timing.time_budget * period, pacer or world_pacer, t),
