@@ -479,22 +479,18 @@ class SearchEvents:
 
     def solved(self, run: RunParts) -> None:
         """The search found a solution (after a reported failure: say so)."""
-        if self._said is not None and self._run is run:
-            run.event(
-                run.sim.t,
-                f"{self.method}: a collision-free IK solution found, after "
-                f"{self._failures()} without one",
-            )
-        self._since, self._periods, self._said, self._run = None, 0, None, None
+        self._end(run, "a collision-free IK solution found")
 
     def close(self) -> None:
         """The run ends: a reported failure that lasts to the end says how long."""
-        run = self._run
-        if self._said is not None and run is not None:
+        self._end(self._run, "still no IK solution at the end of the run")
+
+    def _end(self, run: RunParts | None, what: str) -> None:
+        """End the episode; one reported in ``run`` is said to end with ``what``."""
+        if self._said is not None and run is not None and self._run is run:
             run.event(
                 run.sim.t,
-                f"{self.method}: still no IK solution at the end of the run, after "
-                f"{self._failures()} without one",
+                f"{self.method}: {what}, after {self._failures()} without one",
             )
         self._since, self._periods, self._said, self._run = None, 0, None, None
 
