@@ -715,3 +715,23 @@ def test_a_robot_pose_sends_only_the_joints_that_moved() -> None:
         np.testing.assert_array_equal(frame.wxyz, (0.0, 1.0, 0.0, 0.0))
     finally:
         server.stop()
+
+
+def test_a_second_session_with_the_same_output_folder_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A live session (or run) holds its folder: another one is refused, exit 2."""
+    from cbp.cli import main
+    from cbp.files import claim_output_folder
+
+    out = tmp_path / "session"
+    live = claim_output_folder(out)  # as a session still going holds it
+    try:
+        code = main(
+            ["teleop", str(ROOT / "scenarios" / "cat_boards.yaml"), "--out", str(out)]
+        )
+    finally:
+        live.release(remove=True)
+    assert code == 2
+    assert "is in use by a run still going" in capsys.readouterr().err
+    assert not any(out.parent.glob(".session.part-*"))

@@ -26,6 +26,7 @@ import pinocchio as pin
 from cbp.collision.contacts import ContactSet
 from cbp.errors import ConfigError, require_choice
 from cbp.executors.trajectory import run_trajectory_executor
+from cbp.files import OutputClaim
 from cbp.goals import write_recorded
 from cbp.methods import PERIODIC
 from cbp.robot import FloatArray
@@ -326,8 +327,12 @@ class TeleopSession:
             raise RuntimeError("the session was not started")
         return self.trace
 
-    def write(self, out: Path) -> Path:
-        """Write the outputs of ``cbp run`` and the operator's goal stream."""
+    def write(self, out: Path, claim: OutputClaim | None = None) -> Path:
+        """Write the outputs of ``cbp run`` and the operator's goal stream.
+
+        ``claim``: the folder claimed for ``out`` when the session began
+        (:func:`cbp.files.claim_output_folder`); None: claimed now.
+        """
         from cbp.report import write_outputs
 
         if self.trace is None:
@@ -348,6 +353,7 @@ class TeleopSession:
                 {self.trace.method: self.trace},
                 out,
                 extra_files={GOAL_FILE: goal_file},
+                claim=claim,
             )
         return out / GOAL_FILE
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from cbp.errors import ConfigError, require_choice
+from cbp.files import OutputClaim
 from cbp.methods import METHODS
 from cbp.robot import FloatArray
 from cbp.run import WallClockPacer
@@ -228,8 +229,14 @@ class InputSession:
         self.sim.close()
         return traces
 
-    def write(self, traces: dict[str, Trace], out: Path) -> None:
-        """Write each configuration's run as ``cbp run`` would, in one folder."""
+    def write(
+        self, traces: dict[str, Trace], out: Path, claim: OutputClaim | None = None
+    ) -> None:
+        """Write each configuration's run as ``cbp run`` would, in one folder.
+
+        ``claim``: the folder claimed for ``out`` when the session began
+        (:func:`cbp.files.claim_output_folder`); None: claimed now.
+        """
         from cbp.report import write_outputs
 
-        write_outputs(self.scenarios[0], traces, out)
+        write_outputs(self.scenarios[0], traces, out, claim=claim)

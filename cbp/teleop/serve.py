@@ -121,10 +121,11 @@ def serve_teleop(
     (``--hid``), this process reads the 6-DOF mouse instead
     (:mod:`cbp.teleop.hid_reader`).
     """
-    from cbp.files import check_output_folder
+    from cbp.files import OutputClaim, claim_output_folder
     from cbp.scenario import load_scenario
 
     page: TeleopPage | InputsPage
+    claim: OutputClaim | None = None
     try:
         opened = None
         if hid:
@@ -142,7 +143,10 @@ def serve_teleop(
                 "to switch between; a goal session takes one"
             )
         out = out or Path("out") / f"{first.spec.name}_teleop"
-        check_output_folder(out)
+        # Claimed for the whole session: a second session (or run) with the
+        # same folder is refused while this one lives, instead of one saving
+        # over the other.
+        claim = claim_output_folder(out)
         if velocity:
             inputs = InputSession(scenarios, overrides)
             page = InputsPage(inputs, host=host, port=port)
@@ -152,6 +156,8 @@ def serve_teleop(
             page = TeleopPage(session, host=host, port=port)
             session.start()
     except CbpError as exc:
+        if claim is not None:
+            claim.release(remove=True)
         print(exc, file=sys.stderr)
         return 2
     device = None
@@ -170,13 +176,13 @@ def serve_teleop(
             device()
         page.say("**Stopping**: the arm brakes to rest, then the session is saved.")
         if velocity:
-            inputs.write(inputs.stop(), out)
+            inputs.write(inputs.stop(), out, claim)
             page.say(f"**Saved** to `{out}`.")
             print(f"wrote {out}")
             _let_the_page_show_it()
             return 0
         session.stop()
-        goal_file = session.write(out)
+        goal_file = session.write(out, claim)
         replay = f"cbp compare {scenarios[0]} --goal {goal_file}"
         page.say(f"**Saved** to `{out}`. Replay to every method: `{replay}`")
         _let_the_page_show_it()
