@@ -390,6 +390,29 @@ class RobotModel:
             names += [name] if n == 1 else [f"{name}_{k}" for k in range(n)]
         return names
 
+    def coordinate_units(self, space: Literal["q", "v"] = "q") -> list[str]:
+        """The unit of each coordinate of :meth:`coordinate_names`: ``m`` or ``rad``.
+
+        A prismatic joint's coordinate is in metres, a revolute or continuous
+        joint's in radians (a continuous joint's cosine and sine count as
+        radians); a planar base's are x, y [m] then its heading, a floating
+        base's a position [m] then a rotation.
+        """
+        units: list[str] = []
+        for i in range(1, self.model.njoints):
+            joint = self.model.joints[i]
+            n = int(joint.nq if space == "q" else joint.nv)
+            kind = joint.shortname()  # JointModelPX/PY/PZ, JointModelPrismatic...
+            if kind == "JointModelPlanar":
+                units += ["m", "m"] + ["rad"] * (n - 2)
+            elif kind == "JointModelFreeFlyer":
+                units += ["m"] * 3 + ["rad"] * (n - 3)
+            elif kind.startswith("JointModelPrismatic") or kind[-2:-1] == "P":
+                units += ["m"] * n
+            else:
+                units += ["rad"] * n
+        return units
+
     @property
     def frame_names(self) -> list[str]:
         """Names of every frame of the model."""
@@ -482,10 +505,7 @@ class RobotModel:
         lower, upper = self._lower[joint.idx_q], self._upper[joint.idx_q]
         if not (np.isfinite(lower) and np.isfinite(upper)):
             return None
-        kind = joint.shortname()  # JointModelPX/PY/PZ, JointModelPrismatic...
-        prismatic = kind.startswith("JointModelPrismatic") or kind[-2:-1] == "P"
-        unit = "m" if prismatic else "rad"
-        return float(lower), float(upper), unit
+        return float(lower), float(upper), self.coordinate_units()[joint.idx_q]
 
     def out_of_range(self, name: str, value: float) -> str | None:
         """Why ``value`` cannot be joint ``name``'s position, or None when it can.

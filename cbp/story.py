@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from cbp.metrics import CONTACT_FORCE
+from cbp.metrics import CONTACT_FORCE, FORCED_OFF
 from cbp.plots import colour, readable_axes
 from cbp.robot import FloatArray
 from cbp.scenario.scene import ObjectSpec
@@ -27,9 +27,6 @@ __all__ = ["SCENE_FIGURE", "plot_scene", "run_sentence"]
 
 #: The picture of the scene with the hand paths, in the output folder.
 SCENE_FIGURE = "scene.png"
-#: A joint this far from its command [rad] was forced there by what it touched
-#: (its controller tracks within a few hundredths in contact too).
-FORCED_OFF = 0.1
 #: The last periods looked at for why a run stopped short.
 LAST_PERIODS = 30
 

@@ -63,6 +63,12 @@ def _xarm(tmp_path: Path) -> Path:
     return tmp_path / "arm"
 
 
+def _without_link3(arm: Path) -> int:
+    """Delete the robot folder ``arm``'s visual mesh of link3; its URDF line."""
+    (arm / LINK3).unlink()
+    return _line_of(arm / "robot.urdf", LINK3)
+
+
 def _line_of(path: Path, text: str) -> int:
     """The 1-based line of ``path`` holding ``text``."""
     lines = path.read_text().splitlines()
@@ -115,8 +121,7 @@ def test_check_and_run_refuse_a_missing_visual_mesh_at_its_line(
 ) -> None:
     """`cbp check` and `cbp run` exit 2 naming robot.yaml, the URDF's line, the link and the file."""
     arm = _xarm(tmp_path)
-    (arm / LINK3).unlink()
-    line = _line_of(arm / "robot.urdf", LINK3)
+    line = _without_link3(arm)
     urdf_line = _line_of(arm / "robot.yaml", "urdf: robot.urdf")
     expected = (
         f"  {arm / 'robot.yaml'}, line {urdf_line}: urdf: robot.urdf, line {line}: "
@@ -138,8 +143,7 @@ def test_robot_init_refuses_a_urdf_with_a_missing_mesh(
 ) -> None:
     """`cbp robot init` on a URDF missing a visual mesh exits 2 at its line, writing nothing."""
     arm = _xarm(tmp_path)
-    (arm / LINK3).unlink()
-    line = _line_of(arm / "robot.urdf", LINK3)
+    line = _without_link3(arm)
     capsys.readouterr()
     command = ["robot", "init", str(arm / "robot.urdf"), "--out", str(tmp_path / "b")]
     assert main(["-q", *command, "--samples", "0"]) == 2
@@ -158,8 +162,7 @@ def test_a_urdf_pybullet_refuses_is_a_located_error(
     """PyBullet's failure to load the robot is a ConfigError naming the URDF and why."""
     arm = _xarm(tmp_path)
     robot = RobotModel.load(str(arm))
-    (arm / LINK3).unlink()
-    line = _line_of(arm / "robot.urdf", LINK3)
+    line = _without_link3(arm)
     with pytest.raises(ConfigError) as info:
         PybulletScene(robot, [])
     assert str(info.value) == (

@@ -177,7 +177,8 @@ class CollisionWorld:
         #: contacts: a floor under the base touches it, and no motion can
         #: change that. (Declared objects leave them out by ``allow_contact``:
         #: :meth:`~cbp.scenario.runtime.Scenario.environment_objects`.)
-        self._fixed = np.array([s.joint_id == 0 for s in geometry.shapes], dtype=bool)
+        fixed = geometry.robot.fixed_links()
+        self._fixed = np.array([s.link in fixed for s in geometry.shapes], dtype=bool)
         self._geometry_model = geometry.geometry_model()
         self._geometry_data = pin.GeometryData(self._geometry_model)
         # Bounding-sphere (and box) centres in the shapes' own frames, (n, 3).

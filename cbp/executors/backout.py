@@ -75,7 +75,7 @@ def back_out(
     depth = contact_depth(world, contacts)
     if depth <= 0.0:
         return None, 0.0
-    return _leave(world, q, contacts, step_bound, state), depth
+    return _leave(world, q, contacts, step_bound, state)[0], depth
 
 
 def clear_padding(
@@ -111,10 +111,8 @@ def clear_padding(
     contacts = world.query(state)
     if not np.any(contacts.environment_part().distance < 0.0):
         return None
-    path = _leave(world, q, contacts, step_bound, state)
-    state.update(path[-1])
-    left = world.query(state).environment_part()
-    return path if not np.any(left.distance < 0.0) else None
+    path, left = _leave(world, q, contacts, step_bound, state)
+    return path if not np.any(left.environment_part().distance < 0.0) else None
 
 
 def _leave(
@@ -123,11 +121,12 @@ def _leave(
     contacts: ContactSet,
     step_bound: FloatArray,
     state: RobotState,
-) -> FloatArray:
+) -> tuple[FloatArray, ContactSet]:
     """Steps from ``q`` (where ``state`` is) out along the contacts' normals.
 
     Until the padded shapes are :data:`CLEAR` of the obstacles, at most
-    :data:`MAX_POINTS` points; the first point is ``q``.
+    :data:`MAX_POINTS` points; the first point is ``q``. Returns the path and
+    the contacts at its last point.
     """
     robot = world.geometry.robot
     joints = np.array([s.joint_id for s in world.geometry.shapes], dtype=np.intp)
@@ -163,4 +162,4 @@ def _leave(
         path.append(following)
         state.update(following)
         contacts = world.query(state)
-    return np.array(path)
+    return np.array(path), contacts

@@ -43,7 +43,8 @@ from cbp.executors.backout import back_out
 from cbp.executors.clock import Budget, make_budget
 from cbp.executors.periods import DeadlineMisses, LeadAdapter, PeriodAdapter
 from cbp.methods.settings import ExecutorTiming
-from cbp.robot import FloatArray, RobotModel
+from cbp.metrics import FORCED_OFF
+from cbp.robot import FloatArray
 from cbp.run.pacing import Pacer, WallClockPacer
 from cbp.run.parts import RunParts, build_run
 from cbp.scenario.runtime import Scenario
@@ -173,12 +174,6 @@ class _LeavingContact:
         return Plan(path, len(path) - 1, "backing out of contact")
 
 
-#: A joint measured this far from its command [rad or m] was forced there by
-#: what the arm touches: its controller tracks within about 0.02 rad, also in
-#: contact (the generated moving scenes' declared runs).
-FORCED_OFF = 0.1
-
-
 class _ForcedOff:
     """Says when something forces the arm off its command, and when it follows again.
 
@@ -191,7 +186,7 @@ class _ForcedOff:
         self.run = run
         self.since: float | None = None
         self._names = run.robot.coordinate_names("v")
-        self._units = _tangent_units(run.robot)
+        self._units = run.robot.coordinate_units("v")
 
     def check(self, t: float, current: JointTrajectory) -> None:
         """Compare the measured configuration with the command at ``t``."""
@@ -211,23 +206,6 @@ class _ForcedOff:
                 t, f"the arm follows its command again after {t - self.since:.2f} s"
             )
             self.since = None
-
-
-def _tangent_units(robot: RobotModel) -> list[str]:
-    """The unit of each velocity coordinate's displacement: ``m`` or ``rad``."""
-    units: list[str] = []
-    for j in range(1, robot.model.njoints):
-        joint = robot.model.joints[j]
-        kind = joint.shortname()  # JointModelPX/PY/PZ, JointModelPrismatic...
-        if kind == "JointModelPlanar":
-            units += ["m", "m", "rad"]
-        elif kind == "JointModelFreeFlyer":
-            units += ["m"] * 3 + ["rad"] * 3
-        elif kind.startswith("JointModelPrismatic") or kind[-2:-1] == "P":
-            units += ["m"] * joint.nv
-        else:
-            units += ["rad"] * joint.nv
-    return units
 
 
 def held(world: CollisionWorld | None) -> contextlib.AbstractContextManager[object]:

@@ -140,7 +140,7 @@ class GoalInput:
         self._bounds = bounds
         self._clamped: str | None = None
         self._reach = reach if bounds is None else None
-        self._beyond: str | None = None
+        self._out_of_reach = False
 
     @property
     def changes(self) -> list[tuple[float, pin.SE3]]:
@@ -240,9 +240,9 @@ class GoalInput:
         if self._reach is None:
             return
         beyond = self._reach.beyond(pose.translation)
-        if (beyond is None) == (self._beyond is None):
+        if (beyond is not None) == self._out_of_reach:
             return
-        self._beyond = beyond
+        self._out_of_reach = beyond is not None
         self._log.event(
             t,
             "goal within the arm's reach again"

@@ -305,27 +305,22 @@ class Simulation:
         return force, depth, hand
 
     def _links_fixed_to_world(self) -> frozenset[int]:
-        """PyBullet's indices of a fixed-base robot's links no joint moves.
+        """PyBullet's indices of the links no joint moves (the base: -1).
 
-        The base (-1) and the links fixed to it: the floor they stand on is
-        not a contact of the arm (as :meth:`cbp.robot.RobotModel.fixed_links`).
+        :meth:`cbp.robot.RobotModel.fixed_links`, by name: the floor they
+        stand on is not a contact of the arm.
         """
-        if self.robot.base != "fixed":
+        fixed = self.robot.fixed_links()
+        if not fixed:
             return frozenset()
         c, body = self.client, self.scene.robot_id
-        links = {-1}
-        infos = [
-            pb.getJointInfo(body, j, physicsClientId=c)
+        base = pb.getBodyInfo(body, physicsClientId=c)[0].decode()
+        links = {
+            j
             for j in range(pb.getNumJoints(body, physicsClientId=c))
-        ]
-        changed = True
-        while changed:
-            changed = False
-            for j, info in enumerate(infos):
-                if info[2] == pb.JOINT_FIXED and info[16] in links and j not in links:
-                    links.add(j)
-                    changed = True
-        return frozenset(links)
+            if pb.getJointInfo(body, j, physicsClientId=c)[12].decode() in fixed
+        }
+        return frozenset(links | ({-1} if base in fixed else set()))
 
     def _links_beyond_wrist(self) -> frozenset[int]:
         description = self.robot.description
