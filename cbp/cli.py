@@ -117,6 +117,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="obstacles that come at a still hand at 2-20 cm/s instead of clutter",
     )
+    scenes.add_argument(
+        "--mbm", type=Path, help="MotionBenchMaker's Panda problems from this checkout"
+    )
+    scenes.add_argument("--family", action="append", help="with --mbm: only these")
     robot = sub.add_parser("robot", help="bring your own robot")
     robot_sub = robot.add_subparsers(dest="robot_command", required=True)
     init = robot_sub.add_parser(
@@ -307,6 +311,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _examples(args.out)
     if args.command == "robot-pairs":
         return _robot_pairs(args.robot, args.samples, args.seed)
+    if args.command == "scenes" and args.mbm is not None:
+        from cbp.mbm import scenes_command
+
+        return scenes_command(args.mbm, args.out, args.count, args.seed, args.family)
     if args.command == "scenes":
         from cbp.scenes import write_scenes
 
