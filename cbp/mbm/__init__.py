@@ -8,7 +8,8 @@ named objects, and depth sensors. This package reads those files from a
 MotionBenchMaker checkout (:mod:`.files`), samples scenes and queries as its
 generator does (:mod:`.sampling`) and writes the valid problems as CAT
 scenarios with the declared objects and two camera placements
-(:mod:`.problems`): ``cbp scenes --mbm DIR``.
+and two camera placements (:mod:`.problems`, :mod:`.cameras`):
+``cbp scenes --mbm DIR``.
 """
 
 from cbp.mbm.files import Family, family_names, read_family

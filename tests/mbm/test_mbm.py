@@ -14,8 +14,8 @@ import yaml
 
 from cbp.errors import ConfigError
 from cbp.mbm import family_names, make_problem, read_family, write_problems
+from cbp.mbm.cameras import mbm_cameras
 from cbp.mbm.files import transform
-from cbp.mbm.problems import mbm_cameras
 from cbp.mbm.sampling import query_pose, sample_scene, variation_transform
 from cbp.scenario import load_scenario
 
