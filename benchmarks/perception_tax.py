@@ -198,7 +198,7 @@ def run_all(args: argparse.Namespace, log: Path) -> None:
 
     With ``--noise-check SOURCES`` (``cameras``, ``mbm_cameras``), a run of
     those that stops short where the declared run reached is made again with
-    the cameras' noise off (:data:`QUIET`).
+    the cameras' noise at 0.1 mm (:data:`QUIET`).
     """
     records = read(log)
     done = {(r["scene"], r["method"], r["source"], r["noise"]): r for r in records}
@@ -288,7 +288,7 @@ def append(log: Path, record: dict[str, Any]) -> None:
         f.write(json.dumps(record) + "\n")
     print(
         f"{record['scene']} {record['method']} {record['source']}"
-        f"{'' if record['noise'] else ' (noise off)'}: "
+        f"{'' if record['noise'] else ' (0.1 mm noise)'}: "
         f"{'reached' if record['reached'] else 'not reached'} "
         f"{record.get('wall_s', '-')} s {record['reason']}",
         file=sys.stderr,
@@ -333,9 +333,7 @@ def table(records: Iterable[dict[str, Any]]) -> str:
             quiet = rechecked.get((scene, method, s))
             if quiet is not None:
                 said = "noise" if quiet and not text else ""
-                said = (
-                    said or ("reaches" if quiet else "stops short") + " with noise off"
-                )
+                said = said or ("reaches" if quiet else "stops short") + " at 0.1 mm"
                 text = f"{text}; {said}" if text else said
             declared = by.get("declared")
             if declared is not None and not declared["reached"]:
@@ -394,7 +392,7 @@ def main() -> None:
     )
     parser.add_argument(
         "--noise-check",
-        help="camera sources whose runs that stop short are made again, noise off",
+        help="camera sources whose runs that stop short are made again at 0.1 mm",
     )
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "perception_tax")
     parser.add_argument("--from-log", type=Path, help="tabulate these runs only")

@@ -55,5 +55,5 @@ def test_the_tax_is_the_camera_reach_rate_over_the_declared_one() -> None:
     assert (
         "| b | cat | yes; 2.0 s; 0 N | no; 80 mm; 0 N | cameras: unseen space; " in text
     )
-    assert "reaches with noise off" in text
+    assert "reaches at 0.1 mm" in text
     assert "reached 1 of 2 with cameras / 2 of 2 with declared objects = 0.50" in text
