@@ -57,7 +57,7 @@ def run_scene(
     timing = scenario.spec.method.timing("cat")
     parts = build_run(scenario, method="cat", clock=timing.clock)
     try:
-        planner = make_planner("cat", scenario, parts)
+        planner = make_planner("cat", parts)
     except BaseException:
         parts.close()
         raise

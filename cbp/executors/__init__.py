@@ -47,8 +47,11 @@ def load_executor(name: str, choices: tuple[str, ...] | None = None) -> Executor
     return executor
 
 
-def make_planner(name: str, scenario: Scenario, parts: RunParts) -> Planner:
+def make_planner(name: str, parts: RunParts) -> Planner:
     """Method ``name``'s per-period planner for the run made of ``parts``.
+
+    It plans with the run's own plugins and world (``parts.scenario``, bound
+    for this run by :func:`~cbp.run.build_run`).
 
     Raises:
         ConfigError: ``name`` is not a method.
@@ -58,5 +61,5 @@ def make_planner(name: str, scenario: Scenario, parts: RunParts) -> Planner:
     if not row.periodic:
         raise ValueError(f"the {name} executor has no per-period planner")
     module = importlib.import_module(f"cbp.executors.{row.module}")
-    planner: Planner = module.make_planner(scenario, parts)
+    planner: Planner = module.make_planner(parts.scenario, parts)
     return planner

@@ -28,7 +28,7 @@ from cbp.errors import InvalidTargetError
 from cbp.executors.stepping import Step, ValidatedStepper
 from cbp.methods import METHODS
 from cbp.methods.settings import KinematicSettings
-from cbp.progress import report_time
+from cbp.run.events import RunLog
 from cbp.run.faults import Faults
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
@@ -49,6 +49,7 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
     METHODS["kinematic"].refuse_source(
         scenario.spec.perception.source, f"{scenario.path}: perception.source"
     )
+    scenario = scenario.bound()  # this run's own plugins and world
     robot = scenario.robot
     engine = scenario.make_engine()
     stream = scenario.goal_stream()
@@ -57,11 +58,11 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
     steps = math.ceil(scenario.spec.duration / dt) + 1
     frame_id = robot.frame_id(scenario.ee_frame)
     q = scenario.q0.copy()
-    events: list[tuple[float, str]] = []
+    run_log = RunLog("kinematic", scenario.spec.duration)
     t = 0.0
     world = scenario.world
-    stepper = ValidatedStepper(engine, world, lambda m: events.append((t, m)))
-    faults = Faults(lambda at, m: events.append((at, m)))
+    stepper = ValidatedStepper(engine, world, lambda m: run_log.event(t, m))
+    faults = Faults(run_log.event)
     stepper.start(q)
     n = steps
     qs = np.empty((n, robot.nq))
@@ -87,7 +88,7 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
                 try:
                     goal_task.set_target(candidate.translation, candidate.rotation)
                 except InvalidTargetError as exc:
-                    events.append((t, f"goal rejected, previous goal kept: {exc}"))
+                    run_log.event(t, f"goal rejected, previous goal kept: {exc}")
                 else:
                     if (
                         change_time is None
@@ -113,14 +114,14 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
             goal_p[k] = goal.translation
             goal_R[k] = goal.rotation
         if step.outcome == "failed" and step.reason:
-            events.append((t, f"step not solved, robot held: {step.reason}"))
+            run_log.event(t, f"step not solved, robot held: {step.reason}")
             log.warning("t=%.3f s: %s", t, step.reason)
         elif step.outcome == "rejected":
             rejected += 1
-            events.append((t, f"step rejected: {step.reason}"))
+            run_log.event(t, f"step rejected: {step.reason}")
         depth[k] = stepper.depth
         q = step.q
-        report_time(t, scenario.spec.duration)
+        run_log.progress(t)
         if faults.aborted is not None:
             n = k + 1
             break
@@ -135,7 +136,7 @@ def run_kinematic(scenario: Scenario, gui: bool = False) -> Trace:
         goal_change_time=change_time,
         q_names=robot.coordinate_names("q"),
         v_names=robot.coordinate_names("v"),
-        events=events,
+        events=run_log.events,
         compute_s=compute[:n],
         step_penetration=depth[:n] if world is not None else None,
         rejected_steps=rejected,

@@ -43,14 +43,13 @@ from cbp.executors.backout import back_out
 from cbp.executors.clock import Budget, make_budget
 from cbp.executors.periods import DeadlineMisses, LeadAdapter, PeriodAdapter
 from cbp.methods.settings import ExecutorTiming
-from cbp.metrics import FORCED_OFF
 from cbp.robot import FloatArray
 from cbp.run.pacing import Pacer, WallClockPacer
 from cbp.run.parts import RunParts, build_run
 from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import JointTrajectory, time_parameterize
 from cbp.state import RobotState
-from cbp.trace import PeriodRecord, Trace
+from cbp.trace import FORCED_OFF, PeriodRecord, Trace
 
 __all__ = [
     "Plan",
@@ -124,7 +123,7 @@ def run_periodic(scenario: Scenario, method: str, gui: bool = False) -> Trace:
     timing = scenario.spec.method.timing(method)
     parts = build_run(scenario, method=method, gui=gui, clock=timing.clock)
     try:
-        planner = make_planner(method, scenario, parts)
+        planner = make_planner(method, parts)
     except BaseException:
         parts.close()
         raise

@@ -40,10 +40,10 @@ from cbp.expressions import TimeFunction
 from cbp.methods import METHODS
 from cbp.methods.settings import VelocitySettings
 from cbp.plugin import Constraint, ReportsSignals, TakesInput, UsesCollisionWorld
-from cbp.progress import report_time
 from cbp.qp import Entry
 from cbp.robot import FloatArray
 from cbp.run.declared import DeclaredObjects
+from cbp.run.events import RunLog
 from cbp.run.faults import Faults
 from cbp.scenario.runtime import Scenario
 from cbp.sim.mobile import MobileSimulation
@@ -65,17 +65,19 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
     METHODS["velocity"].refuse_source(
         scenario.spec.perception.source, f"{scenario.path}: perception.source"
     )
+    scenario = scenario.bound()  # this run's own plugins and world
     settings = scenario.spec.method.settings(VelocitySettings)
     sim = simulate(MobileSimulation, scenario, gui)
     loop = VelocityLoop(scenario, sim)
     inputs = scenario.inputs()
+    run_log = RunLog("velocity", scenario.spec.duration)
     try:
         for k in range(math.ceil(scenario.spec.duration / settings.dt)):
             t = k * settings.dt
             for plugin, functions in inputs:
                 loop.set_input(plugin, t, functools.partial(_evaluate, functions, t))
             loop.tick(t)
-            report_time(t + settings.dt, scenario.spec.duration)
+            run_log.progress(t + settings.dt)
             if loop.faults.aborted is not None:
                 break
     finally:

@@ -139,6 +139,27 @@ class Scenario:
         environment = PrimitiveEnvironment(self.environment_objects())
         return CollisionWorld(geometry, environment, self.spec.collision)
 
+    def bound(self) -> Scenario:
+        """This scenario with fresh plugins and a fresh collision world, for one run.
+
+        The scenario is data: each run binds its own plugin instances (their
+        targets and latches) from the same parameters, and its own world, so
+        one :class:`Scenario` runs any number of times with the same result.
+        """
+        entries = tuple(
+            dataclasses.replace(
+                e, plugin=type(e.plugin)(e.plugin.params, self.robot, e.plugin.name)
+            )
+            for e in self.entries
+        )
+        world = None
+        if self.world is not None:
+            world = self.new_world()
+            for entry in entries:
+                if isinstance(entry.plugin, UsesCollisionWorld):
+                    entry.plugin.attach_world(world)
+        return dataclasses.replace(self, entries=entries, world=world)
+
     def make_engine(self) -> Engine:
         """A new engine for these entries.
 

@@ -60,7 +60,7 @@ class SwitchingPlanner:
         """Method ``method``'s planner (made on first use)."""
         planner = self._planners.get(method)
         if planner is None:
-            planner = make_planner(method, self.scenario, self.parts)
+            planner = make_planner(method, self.parts)
             self._planners[method] = planner
         return planner
 

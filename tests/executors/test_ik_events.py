@@ -138,7 +138,7 @@ def test_mp_says_a_failure_still_going_on_when_it_closes(
 
     parts = build_run(reach_scenario, method="mp", clock="virtual")
     try:
-        planner = make_planner("mp", reach_scenario, parts)
+        planner = make_planner("mp", parts)
         run = FakeRun(reach_scenario)
         _fail(planner.events, run, [_goal(1.5)] * 30, exhausted=True)
         planner.close()
