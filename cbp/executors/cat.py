@@ -2,7 +2,7 @@
 """The CAT executor: many validated QP steps per command period (CAT Sec. IV).
 
 Each command period, from the starting point chosen by the trajectory loop
-(:mod:`cbp.executors.trajectory`), the engine takes QP steps toward the current
+(:mod:`cbp.run.loop`), the engine takes QP steps toward the current
 goal until the period's time budget is spent, the motion has converged, the
 path reaches past what the arm could follow before the next period's plan
 replaces it (``reach_periods``), or a step cannot be made. Every step is
@@ -22,13 +22,14 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.errors import CbpError
-from cbp.executors.clock import Budget
+from cbp.executors import run_periodic
 from cbp.executors.stepping import ValidatedStepper
-from cbp.executors.trajectory import Plan, run_periodic
 from cbp.methods.settings import CatSettings
 from cbp.plugin import HoldsContacts
 from cbp.robot import FloatArray
+from cbp.run.budget import Budget
 from cbp.run.parts import RunParts
+from cbp.run.plan import Plan
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 

@@ -53,16 +53,17 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.engine import Engine
-from cbp.executors.backout import clear_padding
+from cbp.executors import run_periodic
 from cbp.executors.cat import CatPlanner
-from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch, check_work
 from cbp.executors.look import Looker
 from cbp.executors.mp import RrtConnect, plan_size, record_plan
-from cbp.executors.trajectory import BACK_OUT_DT, Plan, run_periodic
 from cbp.methods.settings import CatSettings, HybridSettings
 from cbp.robot import FloatArray
+from cbp.run.backout import BACK_OUT_DT, clear_padding
+from cbp.run.budget import Budget
 from cbp.run.parts import RunParts
+from cbp.run.plan import Plan
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
 

@@ -21,9 +21,9 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.collision.world import CollisionWorld
-from cbp.executors.clock import Budget
 from cbp.methods.settings import IkSearchSettings, Work
 from cbp.robot import FloatArray, RobotModel
+from cbp.run.budget import Budget
 
 if TYPE_CHECKING:
     from cbp.run.parts import RunParts

@@ -25,12 +25,14 @@ import pinocchio as pin
 
 from cbp.collision.contacts import ContactSet
 from cbp.errors import ConfigError, require_choice
-from cbp.executors.trajectory import run_trajectory_executor
 from cbp.files import OutputClaim
 from cbp.goals import write_recorded
 from cbp.methods import PERIODIC
 from cbp.robot import FloatArray
 from cbp.run import RunParts, WallClockPacer, build_run
+from cbp.run.events import RunListener
+from cbp.run.loop import run_loop
+from cbp.run.pacing import LoopClock
 from cbp.scenario import load_scenario
 from cbp.sim.trajectory import JointTrajectory
 from cbp.state import RobotState
@@ -133,7 +135,7 @@ class Snapshot:
     recent_misses: int = 0
 
 
-class TeleopSession:
+class TeleopSession(RunListener):
     """A scenario driven live: the simulation, the executor and the goal.
 
     Args:
@@ -175,12 +177,14 @@ class TeleopSession:
         self.parts: RunParts = build_run(
             self.scenario, method=method, goal=self.goal, needs_world=True
         )
+        self.scenario = self.parts.scenario  # the run's own binding of it
         try:
             self.planner = SwitchingPlanner(self.scenario, self.parts, method)
         except BaseException:
             self.parts.close()
             raise
         self.timing = self.scenario.spec.method.timing("cat")
+        self.parts.log.listeners.append(self)  # told of commands and motion
         self._stopping = threading.Event()
         #: Told at each change a page shows: a command period's end (the
         #: arm's state at it is now), a new goal, a new trajectory.
@@ -206,14 +210,11 @@ class TeleopSession:
 
     def _loop(self) -> None:
         try:
-            self.trace = run_trajectory_executor(
+            self.trace = run_loop(
                 self.parts,
                 self.planner,
                 self.timing,
-                pacer=self._pacer,
-                stop_requested=self._stop_requested,
-                commanded=self._commanded,
-                reached=self._reached,
+                LoopClock.paced(self._pacer, self._stop_requested),
             )
         except BaseException as exc:  # kept for stop() to raise in the caller
             self.error = exc
@@ -223,17 +224,17 @@ class TeleopSession:
         sim = self.parts.sim
         return self._stopping.is_set() and sim.trajectory.end_time <= sim.t
 
-    def _reached(self, t: float) -> None:
+    def reached(self, t: float) -> None:
         """The arm's motion is simulated up to now (a period's end): tell."""
         self.changes.notify()
 
-    def _commanded(self, t_start: float) -> None:
+    def commanded(self, t: float) -> None:
         """Measure the latency of the goal this trajectory was planned for."""
         taken = self.goal.take_sampled()
         self.changes.notify()
         if not self._pacer.started:
             return
-        starts = max(time.perf_counter(), self._pacer.wall_time(t_start))
+        starts = max(time.perf_counter(), self._pacer.wall_time(t))
         planned = self.planner.planned_at
         if taken is None:
             # Planned for again, for the same goal (taken by the period's

@@ -12,13 +12,13 @@ from cbp.collision.geometry import WorldShapes
 from cbp.errors import ConfigError, ScenarioError
 from cbp.executors import load_executor
 from cbp.executors.aiming import looking_at, solve_camera
-from cbp.executors.clock import VirtualBudget, VirtualCosts
 from cbp.executors.visibility import UNSEEN_DEPTH, CellStates, in_view, visibility
 from cbp.methods.settings import LookSettings
 from cbp.metrics import run_metrics
 from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.spec import CameraSpec
 from cbp.robot import RobotModel
+from cbp.run.budget import VirtualBudget, VirtualCosts
 from cbp.scenario import load_scenario
 from tests.conftest import VIRTUAL_CLOCK
 

@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cbp.executors import clock
 from cbp.executors.cat import run_cat
-from cbp.executors.clock import VirtualBudget, WallBudget
 from cbp.methods.settings import VirtualCosts
 from cbp.metrics import run_metrics
+from cbp.run import budget as clock
+from cbp.run.budget import VirtualBudget, WallBudget
 from cbp.scenario import load_scenario
 
 BOARDS = Path(__file__).resolve().parents[2] / "scenarios" / "cat_boards.yaml"

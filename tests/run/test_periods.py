@@ -8,18 +8,27 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cbp.executors.periods import (
+from cbp.run import build_run
+from cbp.run.events import RunListener
+from cbp.run.loop import run_loop
+from cbp.run.periods import (
     FLOOR_HOLD,
     DeadlineMisses,
     LeadAdapter,
     PeriodAdapter,
 )
-from cbp.executors.trajectory import Plan, run_trajectory_executor
-from cbp.run import build_run
+from cbp.run.plan import Plan
 from cbp.scenario import load_scenario
 from cbp.sim.trajectory import time_parameterize
 
 BOARDS = Path(__file__).resolve().parents[2] / "scenarios" / "cat_boards.yaml"
+
+
+class _Starts(RunListener, list[float]):
+    """The start times of the trajectories commanded."""
+
+    def commanded(self, t: float) -> None:
+        self.append(t)
 
 
 def _misses(adapter: PeriodAdapter, seconds: float) -> int:
@@ -47,7 +56,7 @@ def test_the_period_does_not_shrink_back_below_a_missed_one() -> None:
 
 def test_without_the_floor_the_period_oscillates(monkeypatch) -> None:
     """The same loop with no hold misses in most working periods."""
-    from cbp.executors import periods
+    from cbp.run import periods
 
     monkeypatch.setattr(periods, "FLOOR_HOLD", 0.0)
     oscillating = _misses(PeriodAdapter(0.015, 0.133, growth=1.5, shrink=0.9), 30.0)
@@ -161,8 +170,9 @@ def test_a_late_plan_from_rest_is_commanded_when_ready_not_discarded(moving) -> 
             )
         )
     planner = _SlowPlanner(0.3, timing.period)
-    starts: list[float] = []
-    trace = run_trajectory_executor(parts, planner, timing, commanded=starts.append)
+    starts = _Starts()
+    parts.log.listeners.append(starts)
+    trace = run_loop(parts, planner, timing)
     events = "\n".join(message for _, message in trace.events)
     assert planner.calls == [pytest.approx(0.3)], events
     assert "deadline missed" in events

@@ -5,11 +5,11 @@ A robot can find itself inside an obstacle: a start the scenario allows
 (``robot.allow_initial_contact``), or an obstacle that came at it. No method
 should plan from there as if it were free: a planner's yes-or-no checks find no
 free configuration near it, and CAT's rows ask for more motion than the limits
-give. So before any method plans, the trajectory loop backs the robot out
-(:func:`back_out`): small steps that move every penetrating witness point out
-along its contact normal, by damped least squares on the contact rows
-n^T J dq, within the velocity and joint limits, until the padded shapes clear
-the obstacles.
+give. So before any method plans, the run's loop backs the robot out
+(:class:`LeavingContact`, :func:`back_out`): small steps that move every
+penetrating witness point out along its contact normal, by damped least
+squares on the contact rows n^T J dq, within the velocity and joint limits,
+until the padded shapes clear the obstacles.
 """
 
 from __future__ import annotations
@@ -20,9 +20,22 @@ from cbp.collision.contacts import ContactSet
 from cbp.collision.rows import contact_jacobian_rows
 from cbp.collision.world import CollisionWorld
 from cbp.robot import FloatArray
+from cbp.run.parts import RunParts
+from cbp.run.plan import Plan
 from cbp.state import RobotState
 
-__all__ = ["CLEAR", "MAX_POINTS", "back_out", "clear_padding", "contact_depth"]
+__all__ = [
+    "BACK_OUT_DT",
+    "CLEAR",
+    "MAX_POINTS",
+    "LeavingContact",
+    "back_out",
+    "clear_padding",
+    "contact_depth",
+]
+
+#: The back-out path's points are at most this far apart in time at full speed [s].
+BACK_OUT_DT = 0.02
 
 #: The padded shapes are clear of the obstacles by this much at the path's end [m].
 CLEAR = 5e-4
@@ -163,3 +176,43 @@ def _leave(
         state.update(following)
         contacts = world.query(state)
     return np.array(path), contacts
+
+
+class LeavingContact:
+    """Backs the robot out of an obstacle before any method plans.
+
+    Against declared objects only: in an occupancy map, contact with cells is
+    not contact with a surface (the map holds it to half a cell, and unseen
+    space counts as an obstacle), and the methods' own rules handle it.
+    """
+
+    def __init__(self, run: RunParts, step_bound: FloatArray) -> None:
+        """For ``run``; ``step_bound``: how far a joint moves between points."""
+        self.run = run
+        self.step_bound = step_bound
+        self.since: float | None = None
+        self._state: RobotState | None = None  # one for every period's check
+
+    def plan(self, t: float, q: FloatArray) -> Plan | None:
+        """A back-out plan from ``q``, or None when the robot touches nothing."""
+        world = self.run.world
+        if world is None or world.environment.resolution > 0.0:
+            return None
+        if self._state is None or self._state.robot is not world.geometry.robot:
+            self._state = RobotState(world.geometry.robot)
+        path, depth = back_out(world, q, self.step_bound, self._state)
+        if path is None:
+            if self.since is not None:
+                self.run.event(
+                    t, f"out of contact after {t - self.since:.2f} s of backing out"
+                )
+                self.since = None
+            return None
+        if self.since is None:
+            self.since = t
+            self.run.event(
+                t,
+                f"in contact with an obstacle, {depth * 1e3:.1f} mm deep: backing "
+                "out along the contact normals before planning",
+            )
+        return Plan(path, len(path) - 1, "backing out of contact", final=True)

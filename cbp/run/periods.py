@@ -100,7 +100,7 @@ class LeadAdapter(_Scaled):
     """How long before its first command a goal that arrives mid-period is planned.
 
     A live loop plans for such a goal within a lead and commands it at the
-    lead's end (:func:`cbp.executors.trajectory._command_while_waiting`): a
+    lead's end (:func:`cbp.run.live.wait_out`): a
     short lead is a short latency, but a plan that takes longer than its
     lead cannot start where it was meant to and is made again. So the lead
     grows by ``growth`` after a plan made too late, and shrinks by

@@ -16,7 +16,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cbp.executors.trajectory import COMMAND_LEAD, REPLAN_SHARE, run_trajectory_executor
+from cbp.run.events import RunListener
+from cbp.run.live import COMMAND_LEAD, REPLAN_SHARE, SHOW_STEP, advance_in_step
+from cbp.run.loop import run_loop
+from cbp.run.pacing import MIN_BUDGET_SHARE, LoopClock
 from cbp.sim.trajectory import JointTrajectory
 from cbp.state import RobotState
 from cbp.teleop import TeleopSession
@@ -62,6 +65,25 @@ class VirtualPacer:
         return t - self.now
 
 
+class _Told(RunListener):
+    """Hands what the run's log tells to the callables given."""
+
+    def __init__(
+        self,
+        commanded: Callable[[float], object] | None = None,
+        reached: Callable[[float], object] | None = None,
+    ) -> None:
+        self.on_commanded, self.on_reached = commanded, reached
+
+    def commanded(self, t: float) -> None:
+        if self.on_commanded is not None:
+            self.on_commanded(t)
+
+    def reached(self, t: float) -> None:
+        if self.on_reached is not None:
+            self.on_reached(t)
+
+
 def _fixed_period_session(**more: str) -> TeleopSession:
     period = str(PERIOD)
     return TeleopSession(
@@ -103,13 +125,10 @@ def _run_with_arrival(
     sim.follow = watched  # type: ignore[method-assign]
     pacer = VirtualPacer(session.goal.arrived, [(at, lambda: session.jog("x", 0.02))])
     starts: list[tuple[float, float]] = []
-    run_trajectory_executor(
-        session.parts,
-        session.planner,
-        session.timing,
-        pacer=pacer,
-        commanded=lambda t_start: starts.append((pacer.now, t_start)),
+    session.parts.log.listeners.append(
+        _Told(commanded=lambda t_start: starts.append((pacer.now, t_start)))
     )
+    run_loop(session.parts, session.planner, session.timing, LoopClock.paced(pacer))
     return session, starts, changes
 
 
@@ -182,9 +201,8 @@ def test_unpaced_every_splice_starts_after_its_period_s_end() -> None:
     """Without a pacer the loop simulates while it plans: splices start at t_f or later."""
     session = _fixed_period_session()
     starts: list[float] = []
-    run_trajectory_executor(
-        session.parts, session.planner, session.timing, commanded=starts.append
-    )
+    session.parts.log.listeners.append(_Told(commanded=starts.append))
+    run_loop(session.parts, session.planner, session.timing)
     ends = [p.t + p.period for p in session.parts.log.periods if p.spliced]
     assert len(ends) == len(starts)
     assert all(s >= e - 1e-9 for s, e in zip(starts, ends, strict=True))
@@ -214,12 +232,14 @@ def test_a_goal_taken_while_the_period_is_planned_is_commanded_a_lead_later() ->
     session = _fixed_period_session()
     pacer = VirtualPacer(session.goal.arrived, [])
     starts: list[tuple[float, float]] = []
-    run_trajectory_executor(
+    session.parts.log.listeners.append(
+        _Told(commanded=lambda t_start: starts.append((pacer.now, t_start)))
+    )
+    run_loop(
         session.parts,
         _OperatorDuringPlanning(session, 10 * PERIOD),
         session.timing,
-        pacer=pacer,
-        commanded=lambda t_start: starts.append((pacer.now, t_start)),
+        LoopClock.paced(pacer),
     )
     t_c = 10 * PERIOD + COMMAND_LEAD * PERIOD
     assert any(abs(start - t_c) < 1e-9 for _, start in starts), starts
@@ -227,18 +247,13 @@ def test_a_goal_taken_while_the_period_is_planned_is_commanded_a_lead_later() ->
 
 def test_a_paced_loop_shows_the_robot_while_it_waits_never_past_a_lead() -> None:
     """``reached`` is told every SHOW_STEP of the wait, a lead ahead of now at most."""
-    from cbp.executors.trajectory import SHOW_STEP
-
     session = _fixed_period_session()
     pacer = VirtualPacer(session.goal.arrived, [(0.1, lambda: session.jog("x", 0.02))])
     shown: list[tuple[float, float]] = []
-    run_trajectory_executor(
-        session.parts,
-        session.planner,
-        session.timing,
-        pacer=pacer,
-        reached=lambda t: shown.append((pacer.now, t)),
+    session.parts.log.listeners.append(
+        _Told(reached=lambda t: shown.append((pacer.now, t)))
     )
+    run_loop(session.parts, session.planner, session.timing, LoopClock.paced(pacer))
     times = np.array([t for _, t in shown])
     assert np.all(np.diff(times) > -1e-12)  # the robot's time only goes on
     lead = COMMAND_LEAD * PERIOD
@@ -269,29 +284,26 @@ class _World:
 
 def test_a_world_beside_its_cameras_is_simulated_no_faster_than_the_clock() -> None:
     """Each advance reaches at most the clock's time; a late world catches up."""
-    from cbp.executors.trajectory import SHOW_STEP, _advance_in_step
-
     pacer = VirtualPacer(threading.Event(), [])
     world = _World(pacer, cost=0.2)
-    _advance_in_step(pacer, world, 0.1, 0.3, 0.1)  # type: ignore[arg-type]
+    advance_in_step(pacer, world, 0.1, 0.3, 0.1)  # type: ignore[arg-type]
     assert world.t == 0.1
     for reached, now in world.advances[:-1]:
         assert reached <= now - 0.2 * SHOW_STEP + 1e-9  # begun at or before now
     assert len(world.advances) >= 0.1 / SHOW_STEP / 2
     # Behind the clock (a plan took 0.15 s): the world is simulated at once.
     pacer.now = 0.25
-    _advance_in_step(pacer, world, 0.2, 0.3, 0.1)  # type: ignore[arg-type]
+    advance_in_step(pacer, world, 0.2, 0.3, 0.1)  # type: ignore[arg-type]
     assert world.t == 0.2
     assert world.advances[-1][1] == pytest.approx(0.25 + 0.2 * 0.1)
 
 
 def test_a_period_that_starts_late_plans_less() -> None:
     """The budget shrinks by the lateness, to a quarter of it at least."""
-    from cbp.executors.trajectory import MIN_BUDGET_SHARE, _planning_time
-
     pacer = VirtualPacer(threading.Event(), [])
     pacer.now = 1.0
-    assert _planning_time(0.024, None, 0.5) == 0.024  # unpaced: as configured
-    assert _planning_time(0.024, pacer, 1.0) == 0.024  # on time
-    assert _planning_time(0.024, pacer, 0.99) == pytest.approx(0.014)
-    assert _planning_time(0.024, pacer, 0.5) == pytest.approx(MIN_BUDGET_SHARE * 0.024)
+    assert LoopClock().planning_time(0.024, 0.5) == 0.024  # unpaced: as configured
+    paced = LoopClock.paced(pacer)
+    assert paced.planning_time(0.024, 1.0) == 0.024  # on time
+    assert paced.planning_time(0.024, 0.99) == pytest.approx(0.014)
+    assert paced.planning_time(0.024, 0.5) == pytest.approx(MIN_BUDGET_SHARE * 0.024)

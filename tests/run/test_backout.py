@@ -19,7 +19,7 @@ from cbp.collision import (
     PrimitiveEnvironment,
     RobotGeometry,
 )
-from cbp.executors.backout import CLEAR, back_out, clear_padding
+from cbp.run.backout import CLEAR, back_out, clear_padding
 from cbp.scenario import load_scenario
 from cbp.state import RobotState
 
