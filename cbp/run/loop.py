@@ -28,12 +28,17 @@ to the low-level follower (CAT, and the IK and MP methods):
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
+from typing import Protocol
+
 import numpy as np
 
 from cbp.compilation import CompileCounter
 from cbp.methods.settings import ExecutorTiming
 from cbp.run.backout import BACK_OUT_DT, LeavingContact
 from cbp.run.budget import make_budget
+from cbp.run.events import RunLog
+from cbp.run.faults import Faults
 from cbp.run.live import COMMAND_LEAD, Waiting, advance_in_step, held, wait_out
 from cbp.run.pacing import LoopClock
 from cbp.run.parts import RunParts
@@ -42,7 +47,7 @@ from cbp.run.plan import Plan, Planner
 from cbp.sim.trajectory import JointTrajectory, stopping_trajectory, time_parameterize
 from cbp.trace import FORCED_OFF, PeriodRecord, Trace
 
-__all__ = ["run_loop"]
+__all__ = ["Stepper", "run_loop", "run_ticks"]
 
 
 class _ForcedOff:
@@ -289,3 +294,47 @@ def run_loop(
         finally:
             trace = run.finish()
     return trace
+
+
+class Stepper(Protocol):
+    """A controller called once per control tick (kinematic, velocity, JT)."""
+
+    def tick(self, t: float) -> None:
+        """Control the tick at ``t`` [s] (its start; JT: its end); raise on failure."""
+        ...
+
+    def hold(self, t: float) -> None:
+        """The tick at ``t`` failed: hold (brake) the robot."""
+        ...
+
+
+def _never() -> bool:
+    return False
+
+
+def run_ticks(
+    stepper: Stepper,
+    times: Iterable[float],
+    log: RunLog,
+    faults: Faults,
+    what: str,
+    stop: Callable[[], bool] = _never,
+) -> None:
+    """Drive ``stepper`` at each of ``times``: the tick loop of every stepper.
+
+    A tick that raises holds the robot (:meth:`Stepper.hold`) and is a fault
+    (``what`` names it in the event); after
+    :data:`~cbp.run.faults.MAX_FAULTS_IN_A_ROW` in a row the run is aborted
+    and the loop ends. Each tick's time is told to the log's listeners.
+    """
+    for t in times:
+        if faults.aborted is not None or stop():
+            return
+        try:
+            stepper.tick(t)
+        except Exception as exc:  # any failure: hold the robot, say so
+            faults.fault(t, what, exc)
+            stepper.hold(t)
+        else:
+            faults.ok()
+        log.progress(t)

@@ -147,9 +147,7 @@ class Scenario:
         one :class:`Scenario` runs any number of times with the same result.
         """
         entries = tuple(
-            dataclasses.replace(
-                e, plugin=type(e.plugin)(e.plugin.params, self.robot, e.plugin.name)
-            )
+            dataclasses.replace(e, plugin=_rebound(e.plugin, self.robot))
             for e in self.entries
         )
         world = None
@@ -219,6 +217,18 @@ class Scenario:
         chain (:func:`~cbp.scenario.reach.arm_reach`).
         """
         return arm_reach(self.robot, self.q0, self.ee_frame)
+
+
+def _rebound(plugin: Any, robot: RobotModel) -> Any:
+    """A new instance of ``plugin``, bound from the same parameters.
+
+    What the loader said of an entry it added (``added_because``) stays.
+    """
+    fresh = type(plugin)(plugin.params, robot, plugin.name)
+    added = getattr(plugin, "added_because", None)
+    if added is not None:
+        fresh.added_because = added
+    return fresh
 
 
 def goal_receivers(entries: Sequence[Entry], name: str | None) -> list[Any]:
