@@ -46,7 +46,7 @@ def main() -> None:
     assert stream is not None
     goal = stream.pose(3.0)
     goal_task.set_target(goal.translation, goal.rotation)
-    stepper = ValidatedStepper(engine, world, lambda message: None)
+    stepper = ValidatedStepper(engine, world, lambda t, message: None, lambda: 0.0)
     q = scenario.q0.copy()
     stepper.start(q)
     for _ in range(50):  # into the boards, where the steps have contacts

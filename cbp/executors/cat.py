@@ -83,10 +83,10 @@ class CatPlanner:
         if goal is None:
             return Plan(None, 0, "no goal yet")
         stepper = self._stepper
-        if stepper is None:  # one per run: an easing is said once per change
+        if stepper is None:  # one per run: easings are said once per episode
             world = run.world if self.scenario.needs_collision_world else None
             stepper = self._stepper = ValidatedStepper(
-                self.engine, world, lambda message: run.event(run.sim.t, message)
+                self.engine, world, run.event, lambda: run.sim.t
             )
         # A step is kept if it penetrates no deeper than the tolerance, or than
         # where it started (so a robot that starts in collision can leave it).
@@ -172,7 +172,9 @@ class CatPlanner:
         return self._dt
 
     def close(self) -> None:
-        """Nothing to release (the engine is the scenario's)."""
+        """Say the easing episode under way (the engine is the run's)."""
+        if self._stepper is not None:
+            self._stepper.eased.flush()
 
     def _say_if_unseen_space_holds(self, run: RunParts) -> None:
         """An event when contacts with space no camera has seen hold the arm.

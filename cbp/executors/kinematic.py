@@ -85,7 +85,7 @@ class KinematicStepper:
         self.q = scenario.q0.copy()
         self.t = 0.0
         self.stepper = ValidatedStepper(
-            self.engine, scenario.world, lambda m: run_log.event(self.t, m)
+            self.engine, scenario.world, run_log.event, lambda: self.t
         )
         self.stepper.start(self.q)
         self.frame_id = robot.frame_id(scenario.ee_frame)
@@ -128,6 +128,7 @@ class KinematicStepper:
 
     def trace(self, aborted: str | None) -> Trace:
         """The samples so far as a trace (``aborted``: why the run ended early)."""
+        self.stepper.eased.flush()
         robot, rows = self.robot, self.rows
         n = len(rows["t"])
         t = np.array(rows["t"], dtype=float).reshape(n)

@@ -11,14 +11,14 @@ inside :func:`listening`, so the library never formats a report itself.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field
 
 from cbp.trace import PeriodRecord
 
-__all__ = ["RunListener", "RunLog", "listening"]
+__all__ = ["EPISODE_GAP", "Repeating", "RunListener", "RunLog", "listening"]
 
 log = logging.getLogger("cbp.run")
 
@@ -105,3 +105,50 @@ class RunLog:
         """The robot's motion is simulated up to ``t`` [s]."""
         for listener in self.listeners:
             listener.reached(t)
+
+
+#: Occurrences of a repeating event closer than this [s] are one episode.
+EPISODE_GAP = 1.0
+
+
+class Repeating:
+    """An event that repeats, said once per episode with a count.
+
+    The first occurrence of an episode is said at once, with its detail;
+    later ones less than :data:`EPISODE_GAP` after the one before are
+    counted, and said as one line when the episode ends (the next
+    occurrence after a quiet gap, or :meth:`flush` at the run's end).
+
+    Args:
+        event: records a message at a time (the run's events).
+        what: what happens ("QP eased").
+    """
+
+    def __init__(self, event: Callable[[float, str], None], what: str) -> None:
+        """No episode yet."""
+        self._event, self.what = event, what
+        self.total = 0
+        self._since: float | None = None
+        self._last = 0.0
+        self._more = 0
+
+    def happened(self, t: float, detail: str) -> None:
+        """It happened at ``t`` [s]; ``detail`` says how."""
+        self.total += 1
+        if self._since is not None and t - self._last < EPISODE_GAP:
+            self._more += 1
+            self._last = t
+            return
+        self.flush()
+        self._event(t, f"{self.what}: {detail}")
+        self._since = self._last = t
+
+    def flush(self) -> None:
+        """Say how often the episode under way repeated, if it did; end it."""
+        if self._since is not None and self._more:
+            self._event(
+                self._last,
+                f"{self.what} {self._more} more time(s) from {self._since:.2f} "
+                f"to {self._last:.2f} s",
+            )
+        self._since, self._more = None, 0

@@ -66,7 +66,8 @@ def test_conflicting_hard_entries_hold_what_they_conflict_on(tmp_path: Path) -> 
     trace = run_kinematic(scenario)
     assert [e for _, e in trace.events] == [
         "QP eased: 2 row(s) of left, right asked for more motion than the limits "
-        "allow together: held (k = 0: no further, no change)"
+        "allow together: held (k = 0: no further, no change)",
+        "QP eased 600 more time(s) from 0.00 to 6.00 s",
     ]
     np.testing.assert_allclose(trace.q[:, 0], trace.q[0, 0], atol=1e-12)
     assert np.ptp(trace.q[:, 1:], axis=0).max() > 0.1

@@ -22,7 +22,7 @@ def test_one_scenario_runs_twice_with_identical_traces(file: str, method: str) -
     """Each run binds its own plugins and world: nothing leaks from the first."""
     scenario = load_scenario(
         SCENARIOS / file,
-        overrides={"duration": "3.0", "method.cat.timing.clock": "virtual"},
+        overrides={"duration": "2.0", "method.cat.timing.clock": "virtual"},
     )
     run = load_executor(method)
     first, second = run(scenario, False), run(scenario, False)
