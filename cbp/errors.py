@@ -113,6 +113,24 @@ class ScenarioError(CbpError):
         super().__init__(f"{path}: {count} {noun}:\n{lines}")
 
 
+class DataFileError(ConfigError):
+    """A data file a scenario names (a recorded goal) has problems, each located.
+
+    Attributes:
+        path: the file.
+        problems: every problem, each with its place in the file (``row 3,
+            column 5 (qx): ...``).
+    """
+
+    def __init__(self, path: str, problems: Sequence[str], location: str = "") -> None:
+        """Collect the problems of the file at ``path``, named at ``location``."""
+        self.path = path
+        self.problems = list(problems)
+        lines = "\n".join(f"  {p}" for p in self.problems)
+        noun = "problem" if len(self.problems) == 1 else "problems"
+        super().__init__(f"{path}: {len(self.problems)} {noun}:\n{lines}", location)
+
+
 class UnknownPluginError(ConfigError):
     """A plugin type name is not registered."""
 

@@ -16,17 +16,17 @@ import yaml
 
 from cbp.collision.environment import signed_distance
 from cbp.collision.geometry import RobotGeometry
-from cbp.errors import ConfigError, suggestion
+from cbp.errors import ConfigError, DataFileError, suggestion
 from cbp.expressions import check_over, compile_time_function, run_times
 from cbp.files import load_mesh
-from cbp.goals import GoalStream
+from cbp.goals import KeyframesGoalSpec, goal_stream
 from cbp.perception.frame import camera_parent
 from cbp.plugin import TakesInput
 from cbp.qp import Entry
 from cbp.robot import RobotModel
 from cbp.scenario.runtime import Scenario, goal_receivers
 from cbp.scenario.spec import ScenarioSpec
-from cbp.schema import Document, join_path, value_node
+from cbp.schema import Document, join_path, node_at, value_node
 from cbp.state import RobotState
 
 __all__ = [
@@ -52,7 +52,7 @@ def goal_reach_warnings(
     reach at a later keyframe (the arm follows along the reach's edge).
     """
     goal = scenario.spec.goal
-    if goal is None or goal.type not in ("keyframes", "step"):
+    if not isinstance(goal, KeyframesGoalSpec):  # keyframes and step
         return []
     reach = scenario.reach()
     if reach is None:
@@ -200,22 +200,19 @@ def check_goal(
     goal = spec.goal
     if goal is None:
         return
-    if goal.type == "recorded":
-        try:
-            GoalStream(goal, folder)
-        except ConfigError as exc:
-            doc.report(value_node(root, "goal", "file"), "goal.file", exc.message)
-    if goal.function is not None:
-        # Evaluated at every sample the run will take.
-        times = run_times(spec.duration, goal.rate_hz)
-        for name in ("position", "rpy_deg"):
-            for i, text in enumerate(getattr(goal.function, name)):
-                where = f"goal.function.{name}[{i}]"
-                try:
-                    check_over(compile_time_function(text, where), times, where)
-                except ConfigError as exc:
-                    node = value_node(root, "goal", "function", name)
-                    doc.report(node, where, exc.message)
+    try:
+        failures = goal_stream(goal, folder).problems(spec.duration)
+    except ConfigError as exc:
+        failures = [exc]
+    for failure in failures:
+        at = join_path("goal", failure.location)
+        said = (  # a file's problems, each at its row and column there
+            [f"{failure.path}, {problem}" for problem in failure.problems]
+            if isinstance(failure, DataFileError)
+            else [failure.message]
+        )
+        for message in said:
+            doc.report(node_at(root, at), at, message)
     receivers = goal_receivers(entries, goal.task)
     if len(receivers) != 1:
         tasks = [e.name for e in goal_receivers(entries, None)]

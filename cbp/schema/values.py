@@ -13,6 +13,7 @@ import dataclasses
 import inspect
 import itertools
 import math
+import re
 import textwrap
 import types
 import typing
@@ -30,11 +31,13 @@ if TYPE_CHECKING:
 __all__ = [
     "INVALID",
     "MAX_MAGNITUDE",
+    "Tagged",
     "build_value",
     "field_docs",
     "join_path",
     "key_nodes",
     "mapping_items",
+    "node_at",
     "to_plain",
     "type_name",
     "value_node",
@@ -273,6 +276,39 @@ def _build_dict(doc: Document, value_tp: Any, node: Node | None, where: str) -> 
     return INVALID if any(v is INVALID for v in built.values()) else built
 
 
+@typing.runtime_checkable
+class Tagged(typing.Protocol):
+    """A section whose ``type:`` key names which of its variants it is.
+
+    :meth:`variants` maps each type name to the dataclass (a subclass) that
+    reads such a section: the section is built as the one its ``type`` names,
+    with that one's keys, defaults and checks (a goal's kinds,
+    :class:`cbp.goals.GoalSpec`).
+    """
+
+    @classmethod
+    def variants(cls) -> Mapping[str, type]:
+        """The dataclass of each variant, by type name."""
+        ...
+
+
+def _variant(
+    doc: Document,
+    variants: Mapping[str, type],
+    items: dict[str, Node],
+    node: Node | None,
+    where: str,
+) -> type | None:
+    """The variant the section's ``type`` names; None (a problem recorded) if none."""
+    kinds = Literal[tuple(variants)]  # type: ignore[valid-type]
+    at = join_path(where, "type")
+    if "type" not in items:
+        doc.report(node, at, f"missing required key 'type' ({type_name(kinds)})")
+        return None
+    name = build_value(doc, kinds, items["type"], at)
+    return None if name is INVALID else variants[name]
+
+
 def _build_dataclass(
     doc: Document, cls: type, node: Node | None, where: str, base: Any = None
 ) -> Any:
@@ -289,6 +325,13 @@ def _build_dataclass(
         items = mapping_items(doc, node, where)
     if items is None:
         return INVALID
+    if isinstance(cls, Tagged) and base is None:
+        variants = cls.variants()
+        if cls not in variants.values():
+            variant = _variant(doc, variants, items, node, where)
+            if variant is None:
+                return INVALID
+            cls = variant
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     ok = True
@@ -386,6 +429,21 @@ def field_docs(cls: type) -> dict[str, str]:
             ):
                 docs[prev.target.id] = " ".join(node.value.value.split())
     return docs
+
+
+def node_at(root: Node | None, path: str) -> Node | None:
+    """The node at a document path (``goal.function.position[1]``), or None."""
+    node = root
+    for key in re.findall(r"\[\d+\]|[^.\[\]]+", path):
+        if not key.startswith("["):
+            node = value_node(node, key)
+        elif isinstance(node, yaml.SequenceNode) and int(key[1:-1]) < len(node.value):
+            node = node.value[int(key[1:-1])]
+        else:
+            node = None
+        if node is None:
+            return None
+    return node
 
 
 def value_node(root: Node | None, *keys: str) -> Node | None:

@@ -1,5 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The operator's live goal: set from any thread, sampled by the control loop."""
+"""The operator's live goal: set from any thread, sampled by the control loop.
+
+A goal source of its own kind (not a scenario's ``goal:`` section): the
+teleoperation page and the devices set it, and a run's parts take it
+(:func:`cbp.run.build_run`'s ``goal``).
+"""
 
 from __future__ import annotations
 
