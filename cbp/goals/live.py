@@ -22,7 +22,8 @@ class LiveGoal:
     """The operator's goal: set from any thread, sampled by the control loop.
 
     Nothing is checked here: the run checks every sample as it does a
-    scenario's stream (a malformed goal is rejected with an event).
+    scenario's stream (a malformed goal is rejected and the previous one kept,
+    said once per episode with a count).
 
     Args:
         position: the starting goal position (3,) [m].
