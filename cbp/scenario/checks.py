@@ -2,8 +2,8 @@
 """What a scenario is checked for once its robot and entries are there.
 
 Each check records its problems in the document, located at the key they are
-about; the warnings (a goal beyond the arm's reach) are returned, located, for
-the loader to log.
+about; the warnings (a goal beyond the arm's reach, an object faster than the
+arm can retreat from) are returned, located, for the loader to log.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from cbp.goals import KeyframesGoalSpec, goal_stream
 from cbp.perception.frame import camera_parent
 from cbp.plugin import TakesInput
 from cbp.qp import Entry
-from cbp.robot import RobotModel
+from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.runtime import Scenario, goal_receivers
 from cbp.scenario.spec import ScenarioSpec
 from cbp.schema import Document, join_path, node_at, value_node
@@ -38,6 +38,7 @@ __all__ = [
     "check_inputs",
     "check_meshes",
     "goal_reach_warnings",
+    "object_speed_warnings",
 ]
 
 
@@ -74,6 +75,85 @@ def goal_reach_warnings(
                 )
             )
     return warnings
+
+
+def object_speed_warnings(
+    doc: Document, scenario: Scenario, root: yaml.Node
+) -> list[str]:
+    """A located warning for each moving object the arm cannot retreat from.
+
+    The bound of speed and separation monitoring, as the run measures it as
+    objects come (:class:`cbp.run.separation.DeclaredSeparationMonitor`): the
+    arm, retreating along the object's path u at its joints' velocity limits,
+    moves a point p at most sum_j |u . J_j(p)| v_max,j (J: the point's
+    Jacobian). Taken at the arm's part nearest the path in the initial
+    configuration: an object faster than that meets the arm there whatever it
+    does. Warnings, not errors: a scenario may want an arm pressed (the run
+    says so, and measures the force).
+    """
+    moving = [
+        (i, obj)
+        for i, obj in enumerate(scenario.spec.world.objects)
+        if obj.motion is not None and any(obj.motion.velocity)
+    ]
+    robot = scenario.robot
+    geometry = (
+        scenario.world.geometry
+        if scenario.world is not None
+        else RobotGeometry(robot)
+        if moving
+        else None
+    )
+    if geometry is None:
+        return []
+    state = RobotState(robot, scenario.q0)
+    centres, radii = geometry.world_spheres(state)
+    fixed = robot.fixed_links()
+    parts = [k for k, shape in enumerate(geometry.shapes) if shape.link not in fixed]
+    nodes = value_node(root, "world", "objects")
+    warnings = []
+    for i, obj in moving:
+        assert obj.motion is not None
+        velocity = np.asarray(obj.motion.velocity, dtype=float)
+        speed = float(np.linalg.norm(velocity))
+        start = obj.placement_at(obj.motion.start).translation
+        end = obj.placement_at(obj.motion.stop).translation
+        k = min(
+            parts,
+            key=lambda k: _segment_distance(centres[k], start, end) - radii[k],
+            default=None,
+        )
+        if k is None:
+            continue
+        link = geometry.shapes[k].link
+        J = state.point_jacobian(robot.frame_id(link), centres[k])
+        along = np.abs((velocity / speed) @ J)
+        # A joint that does not move the point counts 0, whatever its limit.
+        rates = np.multiply(
+            along, robot.velocity_limits, out=np.zeros_like(along), where=along > 0.0
+        )
+        top = float(np.sum(rates))
+        if speed <= top:
+            continue
+        item = nodes.value[i] if isinstance(nodes, yaml.SequenceNode) else None
+        warnings.append(
+            doc.located(
+                node_at(item, "motion.velocity") or item,
+                f"world.objects[{i}].motion.velocity",
+                f"'{obj.name}' moves at {speed:.3g} m/s, faster than the arm can "
+                f"retreat along its path (at most {top:.3g} m/s at {link}, the "
+                "arm's part nearest the path at the start, at the joints' "
+                "velocity limits): where it meets the arm, contact is possible",
+            )
+        )
+    return warnings
+
+
+def _segment_distance(point: FloatArray, a: FloatArray, b: FloatArray) -> float:
+    """Distance from ``point`` to the segment from ``a`` to ``b`` [m]."""
+    ab = b - a
+    s = float(np.clip((point - a) @ ab / max(float(ab @ ab), 1e-18), 0.0, 1.0))
+    return float(np.linalg.norm(point - (a + s * ab)))
 
 
 #: A start deeper than this in a declared object is refused [m].

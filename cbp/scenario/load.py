@@ -38,6 +38,7 @@ from cbp.scenario.checks import (
     check_inputs,
     check_meshes,
     goal_reach_warnings,
+    object_speed_warnings,
 )
 from cbp.scenario.entries import (
     acceleration_rows,
@@ -152,7 +153,9 @@ def load_scenario(
     if not spec.robot.allow_initial_contact:
         check_initial_contact(doc, scenario, root)
         doc.raise_if_problems()
-    for warning in goal_reach_warnings(doc, scenario, root):
+    for warning in goal_reach_warnings(doc, scenario, root) + object_speed_warnings(
+        doc, scenario, root
+    ):
         log.warning("%s, %s", doc.path, warning)
     return scenario
 
