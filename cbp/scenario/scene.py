@@ -37,7 +37,8 @@ class ObjectMotion:
     """
 
     velocity: tuple[float, float, float]
-    """World-frame velocity [m/s]."""
+    """World-frame velocity [m/s]; its speed at most 20 m/s
+    (:data:`MAX_OBJECT_SPEED`)."""
     start: float = 0.0
     """When it starts moving [s]."""
     stop: float
