@@ -107,10 +107,14 @@ class ScenarioError(CbpError):
         """Collect every problem found in the file at ``path``."""
         self.path = path
         self.problems = list(problems)
-        lines = "\n".join(f"  {p}" for p in self.problems)
-        count = len(self.problems)
-        noun = "problem" if count == 1 else "problems"
-        super().__init__(f"{path}: {count} {noun}:\n{lines}")
+        super().__init__(_listed(path, self.problems))
+
+
+def _listed(path: str, problems: Sequence[str]) -> str:
+    """``path: N problems:`` and the problems, one an indented line."""
+    noun = "problem" if len(problems) == 1 else "problems"
+    lines = "\n".join(f"  {p}" for p in problems)
+    return f"{path}: {len(problems)} {noun}:\n{lines}"
 
 
 class DataFileError(ConfigError):
@@ -126,9 +130,7 @@ class DataFileError(ConfigError):
         """Collect the problems of the file at ``path``, named at ``location``."""
         self.path = path
         self.problems = list(problems)
-        lines = "\n".join(f"  {p}" for p in self.problems)
-        noun = "problem" if len(self.problems) == 1 else "problems"
-        super().__init__(f"{path}: {len(self.problems)} {noun}:\n{lines}", location)
+        super().__init__(_listed(path, self.problems), location)
 
 
 class UnknownPluginError(ConfigError):

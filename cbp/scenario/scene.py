@@ -45,15 +45,17 @@ class ObjectMotion:
     """When it stops [s]."""
 
     def __post_init__(self) -> None:
-        """Times are ordered and finite; the speed at most :data:`MAX_OBJECT_SPEED`."""
+        """Times are ordered; the speed finite and at most :data:`MAX_OBJECT_SPEED`."""
         if not 0.0 <= self.start < self.stop < math.inf:
             raise ConfigError(
                 f"needs 0 <= start < stop < inf, got start {self.start}, "
                 f"stop {self.stop}",
                 "stop",
             )
+        if not all(math.isfinite(v) for v in self.velocity):
+            raise ConfigError(f"must be finite, got {list(self.velocity)}", "velocity")
         speed = math.hypot(*self.velocity)
-        if not speed <= MAX_OBJECT_SPEED:  # NaN and infinities too
+        if speed > MAX_OBJECT_SPEED:
             raise ConfigError(
                 f"{speed:.3g} m/s is faster than any obstacle tracked near an arm "
                 f"(at most {MAX_OBJECT_SPEED:g} m/s; a tool dropped from 3 m lands "
