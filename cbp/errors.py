@@ -107,10 +107,30 @@ class ScenarioError(CbpError):
         """Collect every problem found in the file at ``path``."""
         self.path = path
         self.problems = list(problems)
-        lines = "\n".join(f"  {p}" for p in self.problems)
-        count = len(self.problems)
-        noun = "problem" if count == 1 else "problems"
-        super().__init__(f"{path}: {count} {noun}:\n{lines}")
+        super().__init__(_listed(path, self.problems))
+
+
+def _listed(path: str, problems: Sequence[str]) -> str:
+    """``path: N problems:`` and the problems, one an indented line."""
+    noun = "problem" if len(problems) == 1 else "problems"
+    lines = "\n".join(f"  {p}" for p in problems)
+    return f"{path}: {len(problems)} {noun}:\n{lines}"
+
+
+class DataFileError(ConfigError):
+    """A data file a scenario names (a recorded goal) has problems, each located.
+
+    Attributes:
+        path: the file.
+        problems: every problem, each with its place in the file (``row 3,
+            column 5 (qx): ...``).
+    """
+
+    def __init__(self, path: str, problems: Sequence[str], location: str = "") -> None:
+        """Collect the problems of the file at ``path``, named at ``location``."""
+        self.path = path
+        self.problems = list(problems)
+        super().__init__(_listed(path, self.problems), location)
 
 
 class UnknownPluginError(ConfigError):

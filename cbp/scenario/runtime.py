@@ -27,7 +27,7 @@ from cbp.collision.objects import EnvironmentObject, PrimitiveEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.engine import Engine
 from cbp.expressions import TimeFunction, compile_time_function
-from cbp.goals import GoalStream
+from cbp.goals import GoalStream, goal_stream
 from cbp.perception.frame import camera_parent
 from cbp.plugin import GoalReceiver, TakesInput, Task, UsesCollisionWorld
 from cbp.qp import Entry
@@ -176,7 +176,7 @@ class Scenario:
         """The goal stream, if the scenario has one."""
         if self.spec.goal is None:
             return None
-        return GoalStream(self.spec.goal, self.path.parent)
+        return goal_stream(self.spec.goal, self.path.parent)
 
     def inputs(self) -> list[tuple[TakesInput, list[TimeFunction]]]:
         """Each input's plugin and its compiled functions of time."""

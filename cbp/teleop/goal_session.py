@@ -2,7 +2,7 @@
 """A goal session: a scenario driven live toward the operator's goal.
 
 The run is assembled like every other (:func:`cbp.run.build_run`) with the
-operator's :class:`~cbp.teleop.live_goal.LiveGoal` as its goal source, driven
+operator's :class:`~cbp.goals.LiveGoal` as its goal source, driven
 by the trajectory loop paced to the wall clock, with a
 :class:`~cbp.teleop.switching.SwitchingPlanner` that hands control between
 methods at a period's start. :meth:`TeleopSession.snapshot` is what a page
@@ -26,7 +26,7 @@ import pinocchio as pin
 from cbp.collision.contacts import ContactSet
 from cbp.errors import ConfigError, require_choice
 from cbp.files import OutputClaim
-from cbp.goals import write_recorded
+from cbp.goals import LiveGoal, write_recorded
 from cbp.methods import PERIODIC
 from cbp.robot import FloatArray
 from cbp.run import RunParts, WallClockPacer, build_run
@@ -37,7 +37,6 @@ from cbp.scenario import load_scenario
 from cbp.sim.trajectory import JointTrajectory
 from cbp.state import RobotState
 from cbp.teleop.changes import Changes
-from cbp.teleop.live_goal import LiveGoal
 from cbp.teleop.switching import SwitchingPlanner
 from cbp.trace import Trace
 

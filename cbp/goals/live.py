@@ -1,5 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The operator's live goal: set from any thread, sampled by the control loop."""
+"""The operator's live goal: set from any thread, sampled by the control loop.
+
+A goal source of its own kind (not a scenario's ``goal:`` section): the
+teleoperation page and the devices set it, and a run's parts take it
+(:func:`cbp.run.build_run`'s ``goal``).
+"""
 
 from __future__ import annotations
 
@@ -17,7 +22,8 @@ class LiveGoal:
     """The operator's goal: set from any thread, sampled by the control loop.
 
     Nothing is checked here: the run checks every sample as it does a
-    scenario's stream (a malformed goal is rejected with an event).
+    scenario's stream (a malformed goal is rejected and the previous one kept,
+    said once per episode with a count).
 
     Args:
         position: the starting goal position (3,) [m].
