@@ -12,10 +12,9 @@ from cbp.engine import Engine
 from cbp.errors import SolveError
 from cbp.executors import make_planner
 from cbp.executors.cat import REACHED_NOTE, run_cat
-from cbp.executors.trajectory import run_trajectory_executor
 from cbp.goals import LiveGoal, write_recorded
 from cbp.metrics import run_metrics
-from cbp.run import build_run
+from cbp.run import RunListener, build_run, run_loop
 from tests.conftest import load_virtual, run_cbp
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -97,11 +96,13 @@ def test_nan_goal_keeps_the_previous_goal_and_says_so_once() -> None:
         elif t >= 0.5:
             live.set(np.array([0.45, 0.15, 0.45]), DOWN)
 
-    trace = run_trajectory_executor(
-        parts,
-        make_planner("cat", scenario, parts),
-        scenario.spec.method.timing("cat"),
-        commanded=operator,
+    class Operator(RunListener):
+        def commanded(self, t: float) -> None:
+            operator(t)
+
+    parts.log.listeners.append(Operator())
+    trace = run_loop(
+        parts, make_planner("cat", parts), scenario.spec.method.timing("cat")
     )
     rejected = [m for _, m in trace.events if m.startswith("goal rejected")]
     assert len(rejected) == 1
