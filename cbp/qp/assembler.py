@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from cbp.errors import PluginOutputError
 from cbp.plugin import AnyPlugin, Constraint, Task
@@ -99,9 +100,25 @@ class QPAssembler:
         )
         block = _Block(hard, nv, arena)
         self._rows = block
+        self._take_problem(arena, m, ns)
+        self._floats = arena.full()
+        self._layout = self._lay_out(arena, m_const)
+        # Compile the pass, or load it from numba's cache, here rather than in the
+        # first control step; on the zero buffers it writes the initial problem.
+        self._fill()
+
+    def _take_problem(self, arena: _Arena, m: int, ns: int) -> None:
+        """The problem's arrays, cut from ``arena``, with what never changes set.
+
+        H with the slacks' weights and the regularization on its diagonal, g,
+        A with the slacks' columns, and the bounds (``m`` rows, ``ns``
+        slacks).
+        """
+        nv, n, block = self.nv, self.n, self._rows
+        rows = m + 2 * ns
         self._H_base = arena.take((n, n))
         self._H_base[nv:, nv:] = np.diag(block.weights[self._slack_rows])
-        self._H_base[np.diag_indices(n)] += regularization
+        self._H_base[np.diag_indices(n)] += self.regularization
         self._H = arena.take((n, n))
         self._H[...] = self._H_base
         self._g = arena.take((n,))
@@ -127,9 +144,14 @@ class QPAssembler:
             entry_names=self.entry_names,
             nv=nv,
         )
-        self._floats = arena.full()
-        # Where the compiled pass finds its arrays in that buffer, and the
-        # integer arrays it reads (see fill_qp).
+
+    def _lay_out(self, arena: _Arena, m_const: int) -> npt.NDArray[np.int64]:
+        """The layout :func:`~cbp.qp.kernel.fill_qp` reads.
+
+        The sizes, where each float array lies in the buffer, then the
+        integer arrays (the task rows, the slack rows).
+        """
+        block = self._rows
         constant_step, constant_scale = self._constant_step
         in_order = (
             self._H_base,
@@ -151,10 +173,11 @@ class QPAssembler:
             self._lower,
             self._upper,
         )
-        sizes = [nv, n, self._soft.m, m_const, m, ns]
+        ns = int(self._slack_rows.size)
+        sizes = [self.nv, self.n, self._soft.m, m_const, block.m, ns]
         assert len(sizes) == SIZES
         assert len(in_order) == ROW_KINDS - SIZES
-        self._layout = np.concatenate(
+        layout: npt.NDArray[np.int64] = np.concatenate(
             [
                 sizes,
                 [arena.offset(a) for a in in_order],
@@ -162,9 +185,7 @@ class QPAssembler:
                 self._slack_rows,
             ]
         ).astype(np.int64)
-        # Compile the pass, or load it from numba's cache, here rather than in the
-        # first control step; on the zero buffers it writes the initial problem.
-        self._fill()
+        return layout
 
     @property
     def values(self) -> FloatArray:

@@ -101,6 +101,14 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
     for root in roots:
         if is_file(root / name / "robot.yaml"):
             return root / name
+    raise _not_found(name, direct, roots)
+
+
+def _not_found(name: str, direct: list[Path], roots: list[Path]) -> RobotNotFoundError:
+    """The error for robot ``name``: where it looked and the nearest folders' names.
+
+    ``direct``: the paths ``name`` was taken as; ``roots``: the search path.
+    """
     # Robot folders beside the one named (written as the scenario would name
     # them), then those on the search path (by name).
     parent = Path(name).parent
@@ -135,7 +143,7 @@ def find_robot_folder(name: str, relative_to: Path | None = None) -> Path:
         )
     looked = ", ".join(f"{place} ({label})" for place, label in places.items())
     listing = ", ".join(available) or "none"
-    raise RobotNotFoundError(
+    return RobotNotFoundError(
         f"no robot '{name}': no folder '{Path(name).name}' with a robot.yaml in "
         f"{looked}.{did_you_mean} Robots on the search path: {listing}."
     )
