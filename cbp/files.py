@@ -38,7 +38,6 @@ __all__ = [
     "check_output_folder",
     "claim_output_folder",
     "load_mesh",
-    "publish_folder",
     "read_text",
 ]
 
@@ -183,11 +182,18 @@ def check_output_folder(out: Path) -> None:
 class OutputClaim:
     """A staging folder beside an output folder, locked while this process lives.
 
-    Outputs are written into :attr:`staging` and put in place by
-    :func:`publish_folder`. The folder is locked (``flock``) for as long as
-    :attr:`staging` is open here: the kernel drops the lock when the process
-    ends, however it ends, so a staging folder nobody holds is the remains of a
-    dead process and the next claim on the same output removes it.
+    Outputs are written into :attr:`staging`; :meth:`publish` puts the folder
+    in place as :attr:`out`, and :meth:`put` adds files to it one by one
+    afterwards. The staging folder is locked (``flock``) for as long as it is
+    open here: the kernel drops the lock when the process ends, however it
+    ends, so a staging folder nobody holds is the remains of a dead process
+    and the next claim on the same output removes it. After :meth:`publish`
+    a fresh staging folder is held, so the output stays claimed until
+    :meth:`release`.
+
+    Attributes:
+        out: the output folder.
+        staging: the folder files are written into before they are put in place.
     """
 
     def __init__(self, out: Path, staging: Path, descriptor: int) -> None:
@@ -195,6 +201,7 @@ class OutputClaim:
         self.out = out
         self.staging = staging
         self._descriptor: int | None = descriptor
+        self._published: tuple[int, int] | None = None  # (device, inode) of out
 
     @property
     def released(self) -> bool:
@@ -211,6 +218,64 @@ class OutputClaim:
         if self._descriptor is not None:
             os.close(self._descriptor)
             self._descriptor = None
+
+    def publish(self) -> None:
+        """Put the staging folder in place as :attr:`out`, as a whole.
+
+        An earlier output at ``out`` is replaced as a whole: under a lock on
+        the folder that holds ``out``, it is renamed aside and the staging
+        folder renamed into its place (both renames are atomic on one file
+        system), so concurrent writers leave exactly one complete output
+        there, and a reader never sees a mixture. A fresh staging folder is
+        then held for the files :meth:`put` adds.
+
+        Raises:
+            ConfigError: ``out`` is not a cbp output; the staging folder is
+                kept and the message names it.
+        """
+        out, old = self.out, None
+        with _locked(out.parent):
+            try:
+                check_output_folder(out)
+            except ConfigError as exc:
+                raise ConfigError(
+                    f"{exc.message}; the outputs are in {self.staging}"
+                ) from None
+            if out.exists():
+                old = out.parent / f".{out.name}.old-{secrets.token_hex(4)}"
+                os.replace(out, old)
+            os.replace(self.staging, out)
+            published = out.stat()
+            self._published = (published.st_dev, published.st_ino)
+            staging, descriptor = _staging_folder(out)
+            if self._descriptor is not None:
+                os.close(self._descriptor)
+            self.staging, self._descriptor = staging, descriptor
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+    def put(self, name: str) -> bool:
+        """Move the file ``name`` of the staging folder into the published output.
+
+        One rename on one file system: the file appears whole or not at all.
+        When a later output has replaced this one meanwhile (a run that
+        claimed the folder without refusing live ones), the file is dropped:
+        outputs never mix.
+
+        Returns:
+            Whether the file was put in place.
+        """
+        source = self.staging / name
+        with _locked(self.out.parent):
+            try:
+                now = self.out.stat()
+            except OSError:
+                now = None
+            if now is not None and (now.st_dev, now.st_ino) == self._published:
+                os.replace(source, self.out / name)
+                return True
+        source.unlink(missing_ok=True)
+        return False
 
 
 def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
@@ -248,11 +313,17 @@ def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
                 )
         if out.name and (out.parent / f".{out.name}.lock").is_file():
             (out.parent / f".{out.name}.lock").unlink()  # left by earlier versions
-        staging = out.parent / f".{out.name}.part-{os.getpid()}-{secrets.token_hex(4)}"
-        staging.mkdir()
-        descriptor = os.open(staging, os.O_RDONLY)
-        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        staging, descriptor = _staging_folder(out)
     return OutputClaim(out, staging, descriptor)
+
+
+def _staging_folder(out: Path) -> tuple[Path, int]:
+    """A new staging folder beside ``out``, and the descriptor that locks it."""
+    staging = out.parent / f".{out.name}.part-{os.getpid()}-{secrets.token_hex(4)}"
+    staging.mkdir()
+    descriptor = os.open(staging, os.O_RDONLY)
+    fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return staging, descriptor
 
 
 def _held(folder: Path) -> bool:
@@ -279,30 +350,3 @@ def _locked(folder: Path) -> Iterator[None]:
         yield
     finally:
         os.close(descriptor)
-
-
-def publish_folder(staging: Path, out: Path) -> None:
-    """Put the complete folder ``staging`` in place as ``out``.
-
-    An earlier output at ``out`` is replaced as a whole: under a lock on the
-    folder that holds ``out``, it is renamed aside and ``staging`` renamed into
-    its place (both renames are atomic on one file system), so concurrent
-    writers leave exactly one complete output there, and a reader never sees a
-    mixture.
-
-    Raises:
-        ConfigError: ``out`` is not a cbp output (:func:`check_output_folder`);
-            ``staging`` is kept and the message names it.
-    """
-    old: Path | None = None
-    with _locked(out.parent):
-        try:
-            check_output_folder(out)
-        except ConfigError as exc:
-            raise ConfigError(f"{exc.message}; the outputs are in {staging}") from None
-        if out.exists():
-            old = out.parent / f".{out.name}.old-{secrets.token_hex(4)}"
-            os.replace(out, old)
-        os.replace(staging, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)

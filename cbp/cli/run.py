@@ -6,10 +6,17 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from cbp.cli.command import Command, add_set, read_overrides
 from cbp.errors import CbpError, ConfigError
 from cbp.methods import COMPARABLE, METHODS
+
+if TYPE_CHECKING:
+    from cbp.executors import Executor
+    from cbp.files import OutputClaim
+    from cbp.scenario import Scenario
+    from cbp.trace import Trace
 
 __all__ = ["COMPARE", "RUN"]
 
@@ -50,33 +57,89 @@ def _run(args: argparse.Namespace) -> int:
         return 2
     out = args.out or Path("out") / scenario.spec.name
     from cbp.files import claim_output_folder
-    from cbp.report import summary_line, write_outputs
-    from cbp.run.faults import EXIT_ABORTED, EXIT_INCOMPLETE, stop_on_signals
 
     try:
         claim = claim_output_folder(out)  # refused if a live run writes there
     except CbpError as exc:
         print(exc, file=sys.stderr)
         return 2
-    from cbp.progress import run_progress
+    return _run_and_write(scenario, name, executor, args.gui, claim)
 
+
+def _run_and_write(
+    scenario: Scenario,
+    name: str,
+    executor: Executor,
+    gui: bool,
+    claim: OutputClaim,
+) -> int:
+    """Run, write the outputs into ``claim``'s folder; the exit status.
+
+    SIGINT, SIGTERM and SIGHUP never lose what ran: the first stops the run,
+    which brakes and writes all its outputs (exit 3, aborted); a later one, or
+    one while the outputs are written, leaves the figures and the report out
+    (exit 130); the trace and the metrics are always written.
+    """
+    from cbp.interrupts import SignalGuard
+    from cbp.progress import run_progress
+    from cbp.report import write_outputs
+    from cbp.run.faults import STOPPED_EARLY, clear_stop, request_stop
+
+    def stop_the_run(signal_name: str) -> None:
+        if len(guard.received) == 1:
+            request_stop(signal_name)
+
+    out = claim.out
+    guard = SignalGuard(stop_the_run)
+    clear_stop()
     try:
-        # SIGINT, SIGTERM, SIGHUP: the run brakes and its outputs are written.
-        with run_progress(f"{scenario.spec.name} ({name})"), stop_on_signals():
-            trace = executor(scenario, args.gui)
-    except ConfigError as exc:  # found as the run starts (a URDF PyBullet refuses)
-        claim.release(remove=True)
-        print(exc, file=sys.stderr)
-        return 2
-    except BaseException:
-        claim.release(remove=True)
-        raise
-    try:
-        metrics = write_outputs(scenario, {name: trace}, out, claim=claim)[name]
-    except CbpError as exc:  # the folder changed during the run; outputs kept
-        print(exc, file=sys.stderr)
-        return 1
+        with guard:
+            try:
+                with run_progress(f"{scenario.spec.name} ({name})"):
+                    trace = executor(scenario, gui)
+            except ConfigError as exc:  # as the run starts (a URDF PyBullet refuses)
+                claim.release(remove=True)
+                print(exc, file=sys.stderr)
+                return 2
+            except BaseException:
+                claim.release(remove=True)
+                raise
+            stopped = (trace.aborted or "").startswith(STOPPED_EARLY)
+            guard.answered = min(len(guard.received), int(stopped))
+            try:
+                metrics = write_outputs(
+                    scenario, {name: trace}, out, claim=claim, guard=guard
+                )[name]
+            except CbpError as exc:  # the folder changed during the run
+                print(exc, file=sys.stderr)
+                return 1
+    finally:
+        clear_stop()
+    return _said(scenario, name, trace, metrics, out, guard.unanswered)
+
+
+def _said(
+    scenario: Scenario,
+    name: str,
+    trace: Trace,
+    metrics: dict[str, Any],
+    out: Path,
+    interrupted_by: list[str],
+) -> int:
+    """Say how the run and its outputs went; the exit status."""
+    from cbp.report import summary_line
+    from cbp.run.faults import EXIT_ABORTED, EXIT_INCOMPLETE
+
     print(summary_line(scenario, name, metrics))
+    if interrupted_by:
+        print(f"wrote {out}/metrics.json and trace.csv")
+        print(
+            f"{interrupted_by[0]}: not written: "
+            f"{', '.join(metrics.get('incomplete', []))} (see the events in "
+            f"{out}/metrics.json)",
+            file=sys.stderr,
+        )
+        return 130
     print(f"wrote {out}/report.md, metrics.json, trace.csv and plots")
     if trace.aborted:
         return EXIT_ABORTED
