@@ -36,6 +36,7 @@ __all__ = [
     "check_file",
     "check_folder_name",
     "check_output_folder",
+    "claim_new_output_folder",
     "claim_output_folder",
     "load_mesh",
     "read_text",
@@ -159,20 +160,29 @@ def check_folder_name(name: str, location: str = "name") -> None:
         )
 
 
-def check_output_folder(out: Path) -> None:
+def check_output_folder(out: Path, replace: bool = True) -> None:
     """Check that ``out`` may receive a run's outputs (before the run starts).
 
-    It may be missing, empty, or an earlier output (it holds ``metrics.json``
-    or ``report.md``); anything else is refused rather than replaced.
+    It may be missing, empty, or (with ``replace``) an earlier output: it
+    holds ``metrics.json`` or ``report.md``. Anything else is refused rather
+    than replaced.
 
     Raises:
-        ConfigError: ``out`` is a file, or a folder of something else.
+        ConfigError: ``out`` is a file, a folder of something else, or not
+            empty when nothing may be replaced.
     """
     if not out.exists():
         return
     if not out.is_dir():
         raise ConfigError(f"output folder {out} is a file")
-    if any(out.iterdir()) and not any((out / m).exists() for m in OUTPUT_MARKERS):
+    if not any(out.iterdir()):
+        return
+    if not replace:
+        raise ConfigError(
+            f"output folder {out} is not empty; choose a new or empty folder "
+            "(these outputs never replace earlier ones)"
+        )
+    if not any((out / m).exists() for m in OUTPUT_MARKERS):
         raise ConfigError(
             f"output folder {out} holds files that are not a cbp output; choose an "
             "empty or new folder (cbp replaces its own outputs only)"
@@ -194,12 +204,16 @@ class OutputClaim:
     Attributes:
         out: the output folder.
         staging: the folder files are written into before they are put in place.
+        replace: whether an earlier output at :attr:`out` may be replaced.
     """
 
-    def __init__(self, out: Path, staging: Path, descriptor: int) -> None:
+    def __init__(
+        self, out: Path, staging: Path, descriptor: int, replace: bool = True
+    ) -> None:
         """Hold ``staging`` (locked through ``descriptor``) for ``out``."""
         self.out = out
         self.staging = staging
+        self.replace = replace
         self._descriptor: int | None = descriptor
         self._published: tuple[int, int] | None = None  # (device, inode) of out
 
@@ -230,13 +244,14 @@ class OutputClaim:
         then held for the files :meth:`put` adds.
 
         Raises:
-            ConfigError: ``out`` is not a cbp output; the staging folder is
-                kept and the message names it.
+            ConfigError: ``out`` is not a cbp output, or (without
+                :attr:`replace`) not empty; the staging folder is kept and
+                the message names it.
         """
         out, old = self.out, None
         with _locked(out.parent):
             try:
-                check_output_folder(out)
+                check_output_folder(out, self.replace)
             except ConfigError as exc:
                 raise ConfigError(
                     f"{exc.message}; the outputs are in {self.staging}"
@@ -278,7 +293,9 @@ class OutputClaim:
         return False
 
 
-def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
+def claim_output_folder(
+    out: Path, refuse_live: bool = True, replace: bool = True
+) -> OutputClaim:
     """Check ``out`` (:func:`check_output_folder`) and claim it for this process.
 
     Staging folders beside ``out`` (``.NAME.part-PID-HEX``) that no live
@@ -289,12 +306,15 @@ def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
         out: the output folder.
         refuse_live: refuse when another live run holds a staging folder for
             ``out`` (else both write and the last to finish replaces the other).
+        replace: whether an earlier output at ``out`` may be replaced (else a
+            folder that is not empty is refused, now and when publishing).
 
     Raises:
-        ConfigError: ``out`` is not a cbp output, or is in use by a live run
-            (the message names its process).
+        ConfigError: ``out`` is not a cbp output, not empty without
+            ``replace``, or in use by a live run (the message names its
+            process).
     """
-    check_output_folder(out)
+    check_output_folder(out, replace)
     out.parent.mkdir(parents=True, exist_ok=True)
     prefix = f".{out.name}."
     with _locked(out.parent):
@@ -314,7 +334,26 @@ def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
         if out.name and (out.parent / f".{out.name}.lock").is_file():
             (out.parent / f".{out.name}.lock").unlink()  # left by earlier versions
         staging, descriptor = _staging_folder(out)
-    return OutputClaim(out, staging, descriptor)
+    return OutputClaim(out, staging, descriptor, replace)
+
+
+def claim_new_output_folder(out: Path, attempts: int = 1000) -> OutputClaim:
+    """Claim ``out``, or ``out_2``, ``out_3``...: the first that nothing occupies.
+
+    A folder is taken when it is not empty or a live run claims it; the one
+    claimed is never replaced when published (a new folder per session).
+
+    Raises:
+        ConfigError: the last refusal, when ``attempts`` folders are taken.
+    """
+    for k in range(1, attempts + 1):
+        folder = out if k == 1 else out.with_name(f"{out.name}_{k}")
+        try:
+            return claim_output_folder(folder, replace=False)
+        except ConfigError:
+            if k == attempts:
+                raise
+    raise AssertionError("unreachable: the loop returns or raises")
 
 
 def _staging_folder(out: Path) -> tuple[Path, int]:

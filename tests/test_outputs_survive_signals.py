@@ -1,4 +1,4 @@
-"""A run's trace and metrics survive every stop; outputs never mix."""
+"""A run's trace and metrics survive every stop; a session never replaces another."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cbp.files import claim_output_folder
+from cbp.errors import ConfigError
+from cbp.files import claim_new_output_folder, claim_output_folder
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 #: What ``cbp -v run`` logs once the trace and metrics are in place.
@@ -90,6 +91,32 @@ def test_a_signal_while_outputs_are_written_keeps_trace_and_metrics(
     assert not (out / "report.md").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # nothing staged
     assert "not written: plots, scene figure, report" in said
+
+
+def test_a_session_folder_is_never_replaced(tmp_path: Path) -> None:
+    """Refused when given (exit 2, untouched); a fresh one when left to choose."""
+    from cbp.cli import main
+
+    earlier = tmp_path / "boards_teleop"
+    earlier.mkdir()
+    (earlier / "metrics.json").write_text("{}")
+    (earlier / "operator_goal.csv").write_text("t,x\n")
+    boards = str(SCENARIOS / "cat_boards.yaml")
+    assert main(["teleop", boards, "--out", str(earlier)]) == 2
+    assert sorted(p.name for p in earlier.iterdir()) == [
+        "metrics.json",
+        "operator_goal.csv",
+    ]
+    with pytest.raises(ConfigError, match="is not empty; choose a new or empty"):
+        claim_output_folder(earlier, replace=False)
+    fresh = claim_new_output_folder(earlier)
+    try:
+        assert fresh.out == tmp_path / "boards_teleop_2"
+        third = claim_new_output_folder(earlier)  # _2 is claimed by a live session
+        assert third.out == tmp_path / "boards_teleop_3"
+        third.release(remove=True)
+    finally:
+        fresh.release(remove=True)
 
 
 def test_a_published_output_replaced_meanwhile_takes_no_more_files(
