@@ -22,6 +22,12 @@ def suggestion(name: str, choices: Iterable[str]) -> str:
     return f"; did you mean '{matches[0]}'?" if matches else ""
 
 
+def close_matches_hint(name: str, choices: Iterable[str]) -> str:
+    """Return "; close matches: a, b" for the choices like ``name``, or ""."""
+    matches = close_matches(name, choices)
+    return f"; close matches: {', '.join(matches)}" if matches else ""
+
+
 class CbpError(Exception):
     """Base class of every error raised by cbp."""
 

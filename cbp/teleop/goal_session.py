@@ -25,7 +25,7 @@ import pinocchio as pin
 
 from cbp.collision.contacts import ContactSet
 from cbp.errors import ConfigError, require_choice
-from cbp.files import OutputClaim
+from cbp.files import OutputClaim, claim_output_folder
 from cbp.goals import LiveGoal, write_recorded
 from cbp.methods import PERIODIC
 from cbp.robot import FloatArray
@@ -331,12 +331,18 @@ class TeleopSession(RunListener):
         """Write the outputs of ``cbp run`` and the operator's goal stream.
 
         ``claim``: the folder claimed for ``out`` when the session began
-        (:func:`cbp.files.claim_output_folder`); None: claimed now.
+        (:func:`cbp.files.claim_output_folder`); None: claimed now. A
+        session never replaces another's outputs: ``out`` must be new or
+        empty.
+
+        Raises:
+            ConfigError: ``out`` is not empty.
         """
         from cbp.report import write_outputs
 
         if self.trace is None:
             raise RuntimeError("stop the session before writing it")
+        claim = claim or claim_output_folder(out, refuse_live=False, replace=False)
         changes = self.parts.goal.changes
         if not changes:
             changes = [(0.0, pin.SE3(self.home[1], self.home[0]))]

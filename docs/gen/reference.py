@@ -434,30 +434,11 @@ def plugins_page() -> str:
     return "\n".join(lines)
 
 
-class _CapturedError(Exception):
-    """Carries the parser out of ``cbp.cli.main``."""
-
-    def __init__(self, parser: argparse.ArgumentParser) -> None:
-        super().__init__("parser captured")
-        self.parser = parser
-
-
 def cli_parser() -> argparse.ArgumentParser:
-    """The parser ``cbp`` builds, taken from ``cbp.cli.main`` as it parses."""
-    from cbp import cli
+    """The parser ``cbp`` builds (``cbp.cli.build_parser``)."""
+    from cbp.cli import build_parser
 
-    def capture(self: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> Any:
-        raise _CapturedError(self)
-
-    original = argparse.ArgumentParser.parse_args
-    argparse.ArgumentParser.parse_args = capture  # type: ignore[assignment]
-    try:
-        cli.main([])
-    except _CapturedError as captured:
-        return captured.parser
-    finally:
-        argparse.ArgumentParser.parse_args = original  # type: ignore[method-assign]
-    raise RuntimeError("cbp.cli.main returned without parsing its arguments")
+    return build_parser()
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:

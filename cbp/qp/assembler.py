@@ -1,177 +1,36 @@
 # SPDX-License-Identifier: Apache-2.0
-r"""Stacking plugin outputs into one dense QP, in buffers allocated once.
+"""QPAssembler: the QP of a fixed list of entries, in buffers allocated once.
 
-The problem handed to a solver is
-
-.. math::
-
-    \min_x \tfrac12 x^T H x + g^T x \quad \text{s.t.} \quad
-    l \le A x \le u,
-
-with equality rows marked where :math:`l = u`. The first ``nv`` entries of x are
-the joint displacement :math:`\Delta q`; any further entries are the slacks of soft
-constraints. Rows whose two bounds are infinite are dropped before the solver sees
-them.
-
-This module runs hundreds of times per command period, so it avoids per-step
-allocation and per-step numpy calls: each plugin's rows are copied into
-preallocated blocks, and one compiled pass (numba) applies the weights, feedback
-gains and bounds to all rows and checks them for NaN. On the 7-joint reaching
-step, that pass replaced some 25 numpy calls and cut the step from 45 to 30 us.
+Each plugin's rows are copied into preallocated blocks (:class:`_Block`), cut
+from one float buffer (:class:`_Arena`), and one compiled pass
+(:func:`~cbp.qp.kernel.fill_qp`) applies the weights, gains and bounds.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import math
 from collections.abc import Sequence
-from typing import Any, Literal
+from typing import Any
 
-import numba
 import numpy as np
 import numpy.typing as npt
 
-from cbp.errors import ConfigError, PluginOutputError
+from cbp.errors import PluginOutputError
 from cbp.plugin import AnyPlugin, Constraint, Task
-from cbp.robot import FloatArray, IntArray
+from cbp.qp.kernel import (
+    BOUNDS_NAN,
+    COST_NOT_FINITE,
+    ROW_KINDS,
+    ROWS_NOT_FINITE,
+    SIZES,
+    fill_qp,
+)
+from cbp.qp.problem import Entry, QPProblem
+from cbp.robot import FloatArray
 from cbp.state import RobotState
 
-Priority = Literal["soft", "hard"]
-BoolArray = npt.NDArray[np.bool_]
-
-
-@dataclasses.dataclass(frozen=True)
-class Entry:
-    r"""A plugin with the engine-level settings of its scenario entry.
-
-    Attributes:
-        plugin: the bound plugin.
-        priority: ``soft`` (weighted objective term) or ``hard`` (QP constraint).
-        weight: per-row weights of a soft entry, shape (dim,). For a soft task the
-            cost is :math:`\sum_i w_i (J_i \Delta q + k f_i)^2`; for a soft
-            constraint, :math:`\sum_i w_i s_i^2` over its slacks.
-        gain: feedback gain k per step, in [0, 1].
-    """
-
-    plugin: AnyPlugin
-    priority: Priority
-    weight: FloatArray
-    gain: float
-
-    @classmethod
-    def make(
-        cls,
-        plugin: AnyPlugin,
-        *,
-        priority: Priority | None = None,
-        weight: float | Sequence[float] | FloatArray = 1.0,
-        gain: float | None = None,
-    ) -> Entry:
-        """Check the settings against the plugin and build the entry.
-
-        Defaults: tasks are soft and constraints hard; the gain is the plugin's
-        ``default_gain``.
-
-        Raises:
-            ConfigError: with ``location`` naming the bad setting.
-        """
-        if priority is None:
-            priority = "soft" if isinstance(plugin, Task) else "hard"
-        if priority not in ("soft", "hard"):
-            raise ConfigError(
-                f"priority '{priority}' is not one of soft, hard", location="priority"
-            )
-        dim = plugin.dim
-        w = np.array(weight, dtype=float).reshape(-1)
-        if w.size == 1:
-            w = np.full(dim, float(w[0]))
-        elif w.size != dim:
-            raise ConfigError(
-                f"weight has {w.size} entries, expected 1 or {dim} "
-                f"(dim of {plugin.type_name})",
-                location="weight",
-            )
-        if not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise ConfigError(
-                f"weight must be finite and >= 0, got {w.tolist()}", location="weight"
-            )
-        k = plugin.default_gain if gain is None else float(gain)
-        if not (0.0 <= k <= 1.0):
-            raise ConfigError(
-                f"gain {k} is outside [0, 1] (the fraction of the error removed "
-                "per step)",
-                location="gain",
-            )
-        w.flags.writeable = False
-        return cls(plugin, priority, w, k)
-
-    @property
-    def name(self) -> str:
-        """The plugin instance's name."""
-        return self.plugin.name
-
-
-@dataclasses.dataclass
-class QPProblem:
-    r"""One assembled QP: :math:`\min \frac12 x^T H x + g^T x`, :math:`l \le Ax \le u`.
-
-    Attributes:
-        H: cost matrix (n, n), symmetric positive definite.
-        g: cost vector (n,).
-        A: constraint rows (m, n).
-        lower: lower bounds (m,), -inf allowed.
-        upper: upper bounds (m,), +inf allowed.
-        equality: mask (m,) of rows with lower == upper.
-        row_entry: index of the entry each row came from (m,).
-        entry_names: names of the entries, indexed by ``row_entry``.
-        nv: number of joint-displacement variables (the first nv of x).
-    """
-
-    H: FloatArray
-    g: FloatArray
-    A: FloatArray
-    lower: FloatArray
-    upper: FloatArray
-    equality: BoolArray
-    row_entry: IntArray
-    entry_names: list[str]
-    nv: int
-
-    @property
-    def n(self) -> int:
-        """Number of variables."""
-        return int(self.H.shape[0])
-
-    def cost(self, x: FloatArray) -> float:
-        """Objective value at ``x``."""
-        return float(0.5 * x.dot(self.H).dot(x) + self.g.dot(x))
-
-    def violation(self, x: FloatArray) -> float:
-        """Largest bound violation of the rows at ``x`` (0 when feasible)."""
-        if self.A.shape[0] == 0:
-            return 0.0
-        Ax = self.A.dot(x)
-        return float(max(np.max(self.lower - Ax), np.max(Ax - self.upper), 0.0))
-
-    def active_entries(self, dq: FloatArray, tolerance: float = 1e-6) -> set[str]:
-        """Names of the entries with a row at one of its bounds at step ``dq``.
-
-        ``dq`` is the joint displacement (the first ``nv`` variables); a row is
-        active within ``tolerance`` (absolute, plus relative to the bound).
-        """
-        if self.A.shape[0] == 0:
-            return set()
-        Ax = self.A[:, : self.nv].dot(dq)
-        with np.errstate(invalid="ignore"):
-            low = np.isfinite(self.lower) & (
-                np.abs(Ax - self.lower) <= tolerance * (1.0 + np.abs(self.lower))
-            )
-            high = np.isfinite(self.upper) & (
-                np.abs(self.upper - Ax) <= tolerance * (1.0 + np.abs(self.upper))
-            )
-        rows = np.flatnonzero(low | high)
-        return {self.entry_names[i] for i in self.row_entry[rows].tolist()}
+__all__ = ["QPAssembler"]
 
 
 class QPAssembler:
@@ -241,9 +100,25 @@ class QPAssembler:
         )
         block = _Block(hard, nv, arena)
         self._rows = block
+        self._take_problem(arena, m, ns)
+        self._floats = arena.full()
+        self._layout = self._lay_out(arena, m_const)
+        # Compile the pass, or load it from numba's cache, here rather than in the
+        # first control step; on the zero buffers it writes the initial problem.
+        self._fill()
+
+    def _take_problem(self, arena: _Arena, m: int, ns: int) -> None:
+        """The problem's arrays, cut from ``arena``, with what never changes set.
+
+        H with the slacks' weights and the regularization on its diagonal, g,
+        A with the slacks' columns, and the bounds (``m`` rows, ``ns``
+        slacks).
+        """
+        nv, n, block = self.nv, self.n, self._rows
+        rows = m + 2 * ns
         self._H_base = arena.take((n, n))
         self._H_base[nv:, nv:] = np.diag(block.weights[self._slack_rows])
-        self._H_base[np.diag_indices(n)] += regularization
+        self._H_base[np.diag_indices(n)] += self.regularization
         self._H = arena.take((n, n))
         self._H[...] = self._H_base
         self._g = arena.take((n,))
@@ -269,9 +144,14 @@ class QPAssembler:
             entry_names=self.entry_names,
             nv=nv,
         )
-        self._floats = arena.full()
-        # Where the compiled pass finds its arrays in that buffer, and the
-        # integer arrays it reads (see fill_qp).
+
+    def _lay_out(self, arena: _Arena, m_const: int) -> npt.NDArray[np.int64]:
+        """The layout :func:`~cbp.qp.kernel.fill_qp` reads.
+
+        The sizes, where each float array lies in the buffer, then the
+        integer arrays (the task rows, the slack rows).
+        """
+        block = self._rows
         constant_step, constant_scale = self._constant_step
         in_order = (
             self._H_base,
@@ -293,10 +173,11 @@ class QPAssembler:
             self._lower,
             self._upper,
         )
-        sizes = [nv, n, self._soft.m, m_const, m, ns]
-        assert len(sizes) == _SIZES
-        assert len(in_order) == _ROW_KINDS - _SIZES
-        self._layout = np.concatenate(
+        ns = int(self._slack_rows.size)
+        sizes = [self.nv, self.n, self._soft.m, m_const, block.m, ns]
+        assert len(sizes) == SIZES
+        assert len(in_order) == ROW_KINDS - SIZES
+        layout: npt.NDArray[np.int64] = np.concatenate(
             [
                 sizes,
                 [arena.offset(a) for a in in_order],
@@ -304,9 +185,7 @@ class QPAssembler:
                 self._slack_rows,
             ]
         ).astype(np.int64)
-        # Compile the pass, or load it from numba's cache, here rather than in the
-        # first control step; on the zero buffers it writes the initial problem.
-        self._fill()
+        return layout
 
     @property
     def values(self) -> FloatArray:
@@ -349,12 +228,12 @@ class QPAssembler:
 
     def _raise(self, status: int) -> None:
         """Name the entry behind a non-finite output that :func:`fill_qp` found."""
-        if status & _COST_NOT_FINITE:
+        if status & COST_NOT_FINITE:
             self._soft.raise_non_finite()
             self._constant.raise_non_finite()
-        if status & _ROWS_NOT_FINITE:
+        if status & ROWS_NOT_FINITE:
             self._rows.raise_non_finite()
-        if status & _BOUNDS_NAN:
+        if status & BOUNDS_NAN:
             self._rows.raise_bad_bounds()
         # Finite outputs, yet a non-finite step asked for: a task's limit_step.
         raise PluginOutputError(
@@ -566,154 +445,3 @@ def _fixed(bounds: object) -> bool:
         and bounds.base is None
         and not bounds.flags.writeable
     )
-
-
-# The layout read by fill_qp: 6 sizes, then 18 offsets, then the rows' kinds.
-_SIZES = 6
-_ROW_KINDS = _SIZES + 18
-
-# Bits of the status returned by fill_qp.
-_COST_NOT_FINITE = 1
-_ROWS_NOT_FINITE = 2
-_BOUNDS_NAN = 4
-
-
-@numba.njit(cache=True, nogil=True)
-def fill_qp(floats: FloatArray, layout: IntArray, equality: BoolArray) -> int:
-    r"""Turn the stacked plugin outputs into the QP, in place; return a status.
-
-    The arrays are cut from two buffers made once per problem shape by
-    :class:`QPAssembler`: ``floats`` holds every float array, ``layout`` the
-    sizes (nv, n, soft rows, constant soft rows, rows m, slacks), the offset
-    of each float array in ``floats`` (in :func:`_fill_arrays`'s order), then
-    the task rows (m, 0 or 1) and the slack rows. Three arguments rather than
-    twenty-two: numba's dispatch costs about 50 ns per array argument.
-    See :func:`_fill_arrays` for what is computed.
-    """
-    nv, n, ms, mc = layout[0], layout[1], layout[2], layout[3]
-    m, ns = layout[4], layout[5]
-    at = layout[_SIZES:_ROW_KINDS]  # the float arrays' offsets
-    rows = m + 2 * ns
-    return _fill_arrays(
-        nv,
-        _cut(floats, at[0], n, n),
-        _cut(floats, at[1], n, n),
-        floats[at[2] : at[2] + n],
-        _cut(floats, at[3], ms, nv),
-        floats[at[4] : at[4] + ms],
-        floats[at[5] : at[5] + ms],
-        _cut(floats, at[6], nv, mc),
-        floats[at[7] : at[7] + mc],
-        floats[at[8] : at[8] + mc],
-        _cut(floats, at[9], m, nv),
-        floats[at[10] : at[10] + m],
-        floats[at[11] : at[11] + m],
-        floats[at[12] : at[12] + m],
-        floats[at[13] : at[13] + m],
-        layout[_ROW_KINDS : _ROW_KINDS + m],
-        floats[at[14] : at[14] + m],
-        layout[_ROW_KINDS + m : _ROW_KINDS + m + ns],
-        _cut(floats, at[15], rows, n),
-        floats[at[16] : at[16] + rows],
-        floats[at[17] : at[17] + rows],
-        equality,
-    )
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _cut(floats: FloatArray, start: int, rows: int, cols: int) -> FloatArray:
-    """The (rows, cols) matrix at ``start`` of the buffer (a view)."""
-    return floats[start : start + rows * cols].reshape((rows, cols))
-
-
-@numba.njit(cache=True, nogil=True)
-def _fill_arrays(
-    nv: int,
-    H_base: FloatArray,
-    H: FloatArray,
-    g: FloatArray,
-    soft_J: FloatArray,
-    soft_weights: FloatArray,
-    soft_desired: FloatArray,
-    constant_JtW: FloatArray,
-    constant_step: FloatArray,
-    constant_scale: FloatArray,
-    J: FloatArray,
-    f: FloatArray,
-    given_lower: FloatArray,
-    given_upper: FloatArray,
-    gains: FloatArray,
-    task_rows: IntArray,
-    desired: FloatArray,
-    slack_rows: IntArray,
-    A: FloatArray,
-    lower: FloatArray,
-    upper: FloatArray,
-    equality: BoolArray,
-) -> int:
-    r"""The arithmetic of :func:`fill_qp`, on its arrays.
-
-    Cost, over the joint block: :math:`H = H_0 + J_s^T W J_s` and
-    :math:`g = -(J_s^T W d_s + (J_c^T W_c) d_c)`, with :math:`d = -k f` after the
-    tasks' step limits (soft tasks s, constant-Jacobian soft tasks c, whose
-    :math:`J_c^T W_c J_c` is already in :math:`H_0`); :math:`d_c` is
-    ``constant_step * constant_scale``: f and -k, or (when a task there limits
-    its step) the limited step and ones.
-
-    Rows: A = J; a constraint row's bounds are :math:`k (l - f)` and
-    :math:`k (u - f)`, except that an infinite bound stays infinite when k = 0;
-    a hard task's are :math:`d` on both sides. Each soft constraint row's upper
-    side moves to its own row (``slack_rows``, laid out by the assembler).
-
-    The status is 0, or a sum of bits: ``_COST_NOT_FINITE`` (a soft task's
-    Jacobian or step), ``_ROWS_NOT_FINITE`` (a row's value or Jacobian),
-    ``_BOUNDS_NAN`` (a constraint's bound).
-    """
-    status = 0
-    for a in range(nv):
-        for b in range(nv):
-            H[a, b] = H_base[a, b]
-        g[a] = 0.0
-    for i in range(soft_J.shape[0]):
-        w, d = soft_weights[i], soft_desired[i]
-        if not math.isfinite(d):
-            status |= _COST_NOT_FINITE
-        for a in range(nv):
-            wa = w * soft_J[i, a]
-            if not math.isfinite(wa):
-                status |= _COST_NOT_FINITE
-            g[a] -= wa * d
-            for b in range(nv):
-                H[a, b] += wa * soft_J[i, b]
-    for i in range(constant_step.size):
-        d = constant_step[i] * constant_scale[i]
-        if not math.isfinite(d):
-            status |= _COST_NOT_FINITE
-        for a in range(nv):
-            g[a] -= constant_JtW[a, i] * d
-    m = f.size
-    for r in range(m):
-        if not math.isfinite(f[r]):
-            status |= _ROWS_NOT_FINITE
-        for c in range(nv):
-            v = J[r, c]
-            if not math.isfinite(v):
-                status |= _ROWS_NOT_FINITE
-            A[r, c] = v
-        if task_rows[r]:
-            lower[r] = upper[r] = desired[r]
-            continue
-        k, lo, up = gains[r], given_lower[r], given_upper[r]
-        if math.isnan(lo) or math.isnan(up):
-            status |= _BOUNDS_NAN
-        lower[r] = lo if k == 0.0 and math.isinf(lo) else k * (lo - f[r])
-        upper[r] = up if k == 0.0 and math.isinf(up) else k * (up - f[r])
-    for j in range(slack_rows.size):
-        r = slack_rows[j]
-        for c in range(nv):
-            A[m + j, c] = J[r, c]
-        upper[m + j] = upper[r]
-        upper[r] = math.inf
-    for r in range(lower.size):
-        equality[r] = lower[r] == upper[r]
-    return status
