@@ -150,9 +150,8 @@ def load_scenario(
             if isinstance(entry.plugin, UsesCollisionWorld):
                 entry.plugin.attach_world(world)
         scenario = dataclasses.replace(scenario, world=world)
-    if not spec.robot.allow_initial_contact:
-        check_initial_contact(doc, scenario, root)
-        doc.raise_if_problems()
+    check_initial_contact(doc, scenario, root)
+    doc.raise_if_problems()
     for warning in goal_reach_warnings(doc, scenario, root) + object_speed_warnings(
         doc, scenario, root
     ):
