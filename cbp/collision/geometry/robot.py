@@ -1,13 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The robot's collision geometry: one convex shape per URDF collision element.
+"""A robot's collision shapes from its URDF, and the pairs checked against each other.
 
-Each ``<collision>`` element of the URDF becomes a :class:`LinkShape`: a coal shape
-(URDF primitives as they are, meshes replaced by their convex hull, built with
-trimesh since the coal wheel has no qhull), its placement on a frame of the model,
-a bounding sphere for the broad phase, and the hull's half-spaces for filtering the
-robot out of depth images. Padding is not baked into the shapes: every query
-subtracts it from the distances, which is exactly the distance to the shape grown
-by a sphere of that radius.
+Each ``<collision>`` element becomes a :class:`~cbp.collision.geometry.LinkShape`
+(meshes replaced by their convex hull, :mod:`cbp.collision.geometry.hulls`);
+attachments add shapes the URDF does not hold. Self-collision pairs leave out
+shapes on one body, on adjacent bodies, and robot.yaml's ``ignore_pairs``
+(:func:`find_ignorable_pairs` finds candidates).
 """
 
 from __future__ import annotations
@@ -16,36 +14,29 @@ import functools
 import itertools
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import coal
-import numba
 import numpy as np
-import numpy.typing as npt
 import pinocchio as pin
 import trimesh
-from scipy.optimize import minimize
 
 from cbp.collision.broad import near_pairs
+from cbp.collision.geometry.hulls import (
+    beyond_planes,
+    face_planes,
+    fit_capsule,
+    hull_shape,
+    primitive_mesh,
+    transform_planes,
+)
+from cbp.collision.geometry.inside import place_shapes, points_inside
+from cbp.collision.geometry.shapes import Attachment, LinkShape, WorldShapes
 from cbp.errors import ConfigError, FrameNotFoundError, suggestion
-from cbp.files import load_mesh
 from cbp.robot import Approximation, FloatArray, IntArray, RobotModel
 from cbp.state import RobotState
 
-__all__ = [
-    "UNREAD_VISUAL_EXCESS",
-    "Attachment",
-    "LinkShape",
-    "RobotGeometry",
-    "ShapePlacements",
-    "WorldShapes",
-    "find_ignorable_pairs",
-    "fit_capsule",
-    "inside_any",
-    "inside_convex",
-    "points_inside",
-]
+__all__ = ["UNREAD_VISUAL_EXCESS", "RobotGeometry", "find_ignorable_pairs"]
 
 
 log = logging.getLogger(__name__)
@@ -54,243 +45,6 @@ log = logging.getLogger(__name__)
 #: visual meshes cannot be read [m] (the self-filter's reach before it was
 #: measured from the shapes).
 UNREAD_VISUAL_EXCESS = 0.03
-
-
-class ShapePlacements(list[pin.SE3]):
-    """The robot shapes' world placements, in shape order, also stacked.
-
-    A list of pinocchio SE3 (what coal's distance calls take) that keeps their
-    homogeneous matrices in one array, ``homogeneous`` (n, 4, 4), made once per
-    query for the compiled loops that read them all.
-    """
-
-    def __init__(self, placements: list[pin.SE3]) -> None:
-        """Keep the placements and stack their matrices."""
-        super().__init__(placements)
-        self.homogeneous: FloatArray = np.array(
-            [M.homogeneous for M in placements]
-        ).reshape(-1, 4, 4)
-
-
-@dataclass(frozen=True)
-class PlacedShapes:
-    """A robot's shapes at one configuration, as environments query them.
-
-    Attributes:
-        shapes: the shapes (:attr:`RobotGeometry.shapes`).
-        placements: their world placements, also stacked.
-        centres: their bounding-sphere centres in the world (n, 3) [m].
-        radii: their bounding-sphere radii (n,) [m].
-        halves: half extents of world-aligned boxes around the shapes about
-            ``centres`` (n, 3) [m], for a tighter broad phase.
-    """
-
-    shapes: list[LinkShape]
-    placements: ShapePlacements
-    centres: FloatArray
-    radii: FloatArray
-    halves: FloatArray
-
-
-@dataclass(frozen=True)
-class LinkShape:
-    """One convex collision shape fixed on a frame of the robot.
-
-    Attributes:
-        name: the geometry's name (``<link>_<index>``).
-        link: the link (frame) name that carries it.
-        frame_id: index of that frame in the model.
-        joint_id: the joint that moves the frame.
-        placement: the shape's pose in the frame.
-        shape: the coal shape.
-        centre: bounding-sphere centre in the frame [m], shape (3,).
-        radius: bounding-sphere radius [m].
-        planes: hull half-spaces in the frame, (F, 4): ``n . x <= d`` as (n, d).
-        lower: the hull's bounding-box corner, axes of the frame [m], shape (3,).
-        upper: the opposite corner [m], shape (3,).
-    """
-
-    name: str
-    link: str
-    frame_id: int
-    joint_id: int
-    placement: pin.SE3
-    shape: coal.ShapeBase
-    centre: FloatArray
-    radius: float
-    planes: FloatArray
-    lower: FloatArray
-    upper: FloatArray
-
-    @classmethod
-    def probe(cls, name: str, shape: coal.ShapeBase) -> LinkShape:
-        """A primitive on the world frame (frame 0), for studies and tests."""
-        mesh = _primitive_mesh(shape)
-        vertices = np.asarray(mesh.vertices)
-        lower, upper = vertices.min(axis=0), vertices.max(axis=0)
-        centre = 0.5 * (lower + upper)
-        return cls(
-            name=name,
-            link=name,
-            frame_id=0,
-            joint_id=0,
-            placement=pin.SE3.Identity(),
-            shape=shape,
-            centre=centre,
-            radius=float(np.linalg.norm(vertices - centre, axis=1).max()),
-            planes=_planes(mesh),
-            lower=lower,
-            upper=upper,
-        )
-
-    @functools.cached_property
-    def plane_normals_t(self) -> npt.NDArray[np.float32]:
-        """The face planes' normals as contiguous float32 columns, (3, F).
-
-        For matrix products with many points: a strided slice of ``planes`` makes
-        numpy skip BLAS (10x slower), and float32 is exact to 0.1 um here.
-        """
-        return np.ascontiguousarray(self.planes[:, :3].T, dtype=np.float32)
-
-    @functools.cached_property
-    def plane_offsets(self) -> npt.NDArray[np.float32]:
-        """The face planes' offsets d (n . x <= d), float32, (F,)."""
-        return np.ascontiguousarray(self.planes[:, 3], dtype=np.float32)
-
-    def world_placement(self, state: RobotState) -> pin.SE3:
-        """The shape's placement in the world at ``state``."""
-        return state.data.oMf[self.frame_id] * self.placement
-
-
-@dataclass(frozen=True)
-class Attachment:
-    """A rigid body fixed on a robot frame that the URDF does not hold.
-
-    A mounted camera's housing, a tool: checked like the URDF's collision shapes
-    (padding, contacts, self-collision with non-adjacent bodies, the depth
-    images' self-filter).
-
-    Attributes:
-        name: the shape's name.
-        frame: the robot frame that carries it.
-        placement: its pose in that frame.
-        shape: a coal primitive (box, sphere, cylinder or capsule).
-    """
-
-    name: str
-    frame: str
-    placement: pin.SE3
-    shape: coal.ShapeBase
-
-
-def _hull_shape(path: Path, scale: FloatArray) -> tuple[coal.Convex, trimesh.Trimesh]:
-    mesh = load_mesh(path, "collision mesh")
-    mesh.apply_scale(scale)
-    hull = mesh.convex_hull
-    points = coal.StdVec_Vec3s()
-    for v in np.asarray(hull.vertices, dtype=float):
-        points.append(v)
-    triangles = coal.StdVec_Triangle()
-    for a, b, c in np.asarray(hull.faces):
-        triangles.append(coal.Triangle(int(a), int(b), int(c)))
-    return coal.Convex(points, triangles), hull
-
-
-def _beyond_planes(points: FloatArray, planes: list[FloatArray]) -> float:
-    """How far the farthest of ``points`` lies outside the nearest of some hulls.
-
-    Per point, the distance beyond a hull's faces is its largest plane excess
-    (n . x - d); the point is counted against the hull it is least beyond. 0
-    when every point is inside a hull.
-    """
-    worst = 0.0
-    for start in range(0, len(points), 4096):
-        chunk = points[start : start + 4096]
-        least = np.full(len(chunk), np.inf)
-        for p in planes:
-            least = np.minimum(least, (chunk.dot(p[:, :3].T) - p[:, 3]).max(axis=1))
-        worst = max(worst, float(least.max()))
-    return worst
-
-
-def _segment_distances(points: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-    ab = b - a
-    t = np.clip((points - a).dot(ab) / max(float(ab.dot(ab)), 1e-12), 0.0, 1.0)
-    return np.asarray(np.linalg.norm(points - (a + t[:, None] * ab), axis=1))
-
-
-def fit_capsule(points: FloatArray) -> tuple[pin.SE3, float, float]:
-    """The capsule of least volume (found locally) that contains ``points`` (n, 3).
-
-    The axis starts on the points' principal axis; its ends and an offset of the
-    axis are optimised (Nelder-Mead), with the radius set to the farthest point.
-
-    Returns:
-        (placement of the capsule's centre with its axis along local z, radius,
-        full length of the axis segment).
-    """
-    centre = points.mean(axis=0)
-    axis = np.linalg.svd(points - centre)[2][0]
-    along = (points - centre).dot(axis)
-
-    def ends(x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return centre + x[2:] + axis * x[0], centre + x[2:] + axis * x[1]
-
-    def volume(x: FloatArray) -> float:
-        a, b = ends(x)
-        r = float(_segment_distances(points, a, b).max())
-        return float(np.pi * r * r * np.linalg.norm(b - a) + 4.0 / 3.0 * np.pi * r**3)
-
-    x0 = np.array([0.7 * along.min(), 0.7 * along.max(), 0.0, 0.0, 0.0])
-    x = minimize(volume, x0, method="Nelder-Mead", options={"maxiter": 3000}).x
-    a, b = ends(x)
-    radius = float(_segment_distances(points, a, b).max())
-    length = float(np.linalg.norm(b - a))
-    z = (b - a) / length if length > 1e-9 else np.array([0.0, 0.0, 1.0])
-    rotation = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), z).matrix()
-    return pin.SE3(rotation, 0.5 * (a + b)), radius, length
-
-
-def _primitive_mesh(shape: coal.ShapeBase) -> trimesh.Trimesh:
-    if isinstance(shape, coal.Box):
-        return trimesh.creation.box(extents=2.0 * np.asarray(shape.halfSide))
-    if isinstance(shape, coal.Sphere):
-        return trimesh.creation.icosphere(subdivisions=2, radius=shape.radius)
-    if isinstance(shape, coal.Cylinder):
-        return trimesh.creation.cylinder(
-            radius=shape.radius, height=2.0 * shape.halfLength
-        )
-    if isinstance(shape, coal.Capsule):
-        return trimesh.creation.capsule(
-            radius=shape.radius, height=2.0 * shape.halfLength
-        )
-    raise ConfigError(f"unsupported collision primitive {type(shape).__name__}")
-
-
-def _planes(hull: trimesh.Trimesh) -> FloatArray:
-    normals = np.asarray(hull.face_normals, dtype=float)
-    offsets = np.einsum("ij,ij->i", normals, hull.triangles[:, 0, :])
-    planes = np.hstack([normals, offsets[:, None]])
-    # Coplanar triangles repeat a plane: keep one of each.
-    planes = np.unique(np.round(planes, 9), axis=0)
-    return planes[_spread_order(planes[:, :3])]
-
-
-def _spread_order(normals: FloatArray) -> IntArray:
-    """An order of the faces in which each next normal is the least like those before.
-
-    Point-inside tests stop at the first plane a point lies beyond; with the
-    normals spread this way, a point outside the hull is usually rejected within
-    the first few planes (in sorted order, neighbouring planes face alike).
-    """
-    order = [0]
-    likeness = normals.dot(normals[0])
-    for _ in range(len(normals) - 1):
-        likeness[order[-1]] = np.inf
-        k = int(np.argmin(likeness))
-        order.append(k)
-        likeness = np.maximum(likeness, normals.dot(normals[k]))
-    return np.asarray(order, dtype=np.int64)
 
 
 class RobotGeometry:
@@ -366,15 +120,15 @@ class RobotGeometry:
                 continue
             placement = frame.placement.inverse() * obj.placement
             if obj.meshPath and isinstance(obj.geometry, coal.BVHModelBase):
-                shape, hull = _hull_shape(Path(obj.meshPath), np.asarray(obj.meshScale))
+                shape, hull = hull_shape(Path(obj.meshPath), np.asarray(obj.meshScale))
                 if self.approximation == "capsule":
                     offset, radius, length = fit_capsule(np.asarray(hull.vertices))
                     shape = coal.Capsule(radius, length)
-                    hull = _primitive_mesh(shape)
+                    hull = primitive_mesh(shape)
                     placement = placement * offset
             else:
                 shape = obj.geometry
-                hull = _primitive_mesh(shape)
+                hull = primitive_mesh(shape)
             self._add(obj.name, int(obj.parentFrame), placement, shape, hull, halves)
         for attached in attachments:
             try:
@@ -386,7 +140,7 @@ class RobotGeometry:
                 frame_id,
                 attached.placement,
                 attached.shape,
-                _primitive_mesh(attached.shape),
+                primitive_mesh(attached.shape),
                 halves,
             )
         self.radii = np.array([s.radius for s in self.shapes])
@@ -426,7 +180,7 @@ class RobotGeometry:
                 shape=shape,
                 centre=placement.act(centre_local),
                 radius=float(np.linalg.norm(vertices - centre_local, axis=1).max()),
-                planes=_transform_planes(_planes(hull), placement),
+                planes=transform_planes(face_planes(hull), placement),
                 lower=in_frame.min(axis=0),
                 upper=in_frame.max(axis=0),
             )
@@ -483,11 +237,11 @@ class RobotGeometry:
             if isinstance(obj.geometry, coal.BVHModelBase):  # a mesh, scaled
                 vertices = np.asarray(obj.geometry.vertices(), dtype=float)
             else:
-                vertices = np.asarray(_primitive_mesh(obj.geometry).vertices)
+                vertices = np.asarray(primitive_mesh(obj.geometry).vertices)
             frame = model.frames[obj.parentFrame]
             placement = frame.placement.inverse() * obj.placement
             in_frame = vertices.dot(placement.rotation.T) + placement.translation
-            beyond = _beyond_planes(in_frame, [own[s].planes for s in on_link])
+            beyond = beyond_planes(in_frame, [own[s].planes for s in on_link])
             excess[on_link] = np.maximum(excess[on_link], beyond)
         if unfiltered:
             log.warning(
@@ -588,7 +342,7 @@ class RobotGeometry:
         )
         planes = np.empty_like(self._local_planes)
         centres = np.empty((len(self.shapes), 3))
-        _place_shapes(
+        place_shapes(
             self._local_planes,
             self._plane_start,
             self._local_centres,
@@ -649,146 +403,6 @@ class RobotGeometry:
             f"RobotGeometry({self.robot.name!r}, shapes={len(self.shapes)}, "
             f"self_pairs={len(self.self_pairs)}, padding={self.padding})"
         )
-
-
-@dataclass(frozen=True)
-class WorldShapes:
-    """A robot's convex shapes placed in the world, packed for compiled loops.
-
-    Attributes:
-        planes: half-spaces ``n . x <= d`` of every shape as rows (n, d), stacked,
-            (P, 4).
-        plane_start: shape s's planes are rows ``plane_start[s]`` to
-            ``plane_start[s + 1]``, (shapes + 1,).
-        centres: bounding-sphere centres (shapes, 3) [m].
-        radii: bounding-sphere radii (shapes,) [m].
-        frames: the frames that carry the shapes, as homogeneous matrices
-            (shapes, 4, 4).
-    """
-
-    planes: FloatArray
-    plane_start: IntArray
-    centres: FloatArray
-    radii: FloatArray
-    frames: FloatArray
-
-
-@numba.njit(cache=True, nogil=True)
-def _place_shapes(
-    local_planes: FloatArray,
-    plane_start: IntArray,
-    local_centres: FloatArray,
-    frames: FloatArray,
-    planes: FloatArray,
-    centres: FloatArray,
-) -> None:
-    """Write each shape's planes and sphere centre placed by its frame (S, 4, 4)."""
-    for s in range(frames.shape[0]):
-        R = frames[s, :3, :3]
-        t = frames[s, :3, 3]
-        for p in range(plane_start[s], plane_start[s + 1]):
-            d = local_planes[p, 3]
-            for a in range(3):
-                n = (
-                    R[a, 0] * local_planes[p, 0]
-                    + R[a, 1] * local_planes[p, 1]
-                    + R[a, 2] * local_planes[p, 2]
-                )
-                planes[p, a] = n
-                d += n * t[a]
-            planes[p, 3] = d
-        for a in range(3):
-            centres[s, a] = (
-                R[a, 0] * local_centres[s, 0]
-                + R[a, 1] * local_centres[s, 1]
-                + R[a, 2] * local_centres[s, 2]
-                + t[a]
-            )
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def inside_convex(
-    x: float,
-    y: float,
-    z: float,
-    planes: FloatArray,
-    start: int,
-    stop: int,
-    grow: float,
-) -> bool:
-    """Whether (x, y, z) is within ``grow`` of every plane of rows [start, stop)."""
-    for p in range(start, stop):
-        if planes[p, 0] * x + planes[p, 1] * y + planes[p, 2] * z - planes[p, 3] > grow:
-            return False
-    return True
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def inside_any(
-    x: float,
-    y: float,
-    z: float,
-    planes: FloatArray,
-    plane_start: IntArray,
-    centres: FloatArray,
-    radii: FloatArray,
-    grow: FloatArray,
-    extra: float = 0.0,
-) -> bool:
-    """Whether (x, y, z) is inside some shape s grown by ``grow[s] + extra``.
-
-    The shapes as :class:`WorldShapes` gives them: each bounding sphere first,
-    then the planes of the shapes whose grown sphere holds the point.
-    """
-    for s in range(radii.size):
-        grown = grow[s] + extra
-        dx, dy, dz = x - centres[s, 0], y - centres[s, 1], z - centres[s, 2]
-        reach = radii[s] + grown
-        if dx * dx + dy * dy + dz * dz > reach * reach:
-            continue
-        if inside_convex(x, y, z, planes, plane_start[s], plane_start[s + 1], grown):
-            return True
-    return False
-
-
-@numba.njit(cache=True, nogil=True)
-def points_inside(
-    points: FloatArray,
-    planes: FloatArray,
-    plane_start: IntArray,
-    centres: FloatArray,
-    radii: FloatArray,
-    grow: FloatArray,
-    out: np.ndarray,
-) -> int:
-    """Flag the points (n, 3) inside some shape s grown by ``grow[s]``; count them.
-
-    The shapes as :class:`WorldShapes` gives them; a point within ``grow[s]`` of
-    every face plane of shape s counts as inside (exact on faces, a little
-    generous at edges and corners).
-    """
-    count = 0
-    for n in range(points.shape[0]):
-        out[n] = inside_any(
-            points[n, 0],
-            points[n, 1],
-            points[n, 2],
-            planes,
-            plane_start,
-            centres,
-            radii,
-            grow,
-        )
-        if out[n]:
-            count += 1
-    return count
-
-
-def _transform_planes(planes: FloatArray, placement: pin.SE3) -> FloatArray:
-    """Half-spaces n.x <= d of a shape, moved from its own frame by ``placement``."""
-    normals = planes[:, :3].dot(placement.rotation.T)
-    offsets = planes[:, 3] + normals.dot(placement.translation)
-    return np.hstack([normals, offsets[:, None]])
 
 
 def find_ignorable_pairs(
