@@ -17,7 +17,8 @@ import pinocchio as pin
 
 from cbp.errors import UnsafeStepError
 from cbp.executors import run_periodic
-from cbp.executors.ik_search import IkSearch, SearchEvents
+from cbp.executors.ik_search import IkSearch
+from cbp.executors.search_events import SearchEvents
 from cbp.methods.settings import IkSettings
 from cbp.robot import FloatArray, RobotModel
 from cbp.run.budget import Budget

@@ -33,8 +33,9 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.executors import run_periodic
-from cbp.executors.ik_search import IkSearch, SearchEvents
+from cbp.executors.ik_search import IkSearch
 from cbp.executors.look import Looker
+from cbp.executors.search_events import SearchEvents
 from cbp.methods.settings import MpSettings, PlannerSettings
 from cbp.robot import FloatArray, RobotModel
 from cbp.run.budget import Budget

@@ -10,7 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from cbp.executors.ik_search import REPORT_AFTER, SearchEvents
+from cbp.executors.search_events import REPORT_AFTER, SearchEvents
 from cbp.scenario import Scenario, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
