@@ -16,7 +16,7 @@ counter) as one frozen :class:`RunParts`. :func:`run_loop` drives a
 from cbp.run.events import RunListener, RunLog, listening
 from cbp.run.faults import EXIT_ABORTED, MAX_FAULTS_IN_A_ROW, Faults
 from cbp.run.goal_input import GoalInput
-from cbp.run.loop import run_loop
+from cbp.run.loop import Stepper, run_loop, run_ticks
 from cbp.run.pacing import LoopClock, WallClockPacer
 from cbp.run.parts import RunParts, build_run
 from cbp.run.plan import Plan, Planner
@@ -32,8 +32,10 @@ __all__ = [
     "RunListener",
     "RunLog",
     "RunParts",
+    "Stepper",
     "WallClockPacer",
     "build_run",
     "listening",
     "run_loop",
+    "run_ticks",
 ]
