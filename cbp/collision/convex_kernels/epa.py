@@ -30,19 +30,27 @@ _EPA_EDGES = 3 * _EPA_FACES
 
 
 @numba.njit(cache=True, nogil=True)
-def _face_plane(P: FloatArray, faces: IntArray, f: int, plane: FloatArray) -> bool:
-    """Face f's unit normal and offset into ``plane[f]``; False if degenerate."""
-    a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+def _triangle_plane(
+    P: FloatArray, a: int, b: int, c: int
+) -> tuple[bool, float, float, float, float]:
+    """Triangle (a, b, c)'s unit normal and offset; False first if degenerate."""
     ex, ey, ez = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
     fx, fy, fz = P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2]
     nx, ny, nz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
     length = math.sqrt(nx * nx + ny * ny + nz * nz)
     if length <= 1e-30:
-        return False
+        return False, 0.0, 0.0, 0.0, 0.0
     nx, ny, nz = nx / length, ny / length, nz / length
-    plane[f, 0], plane[f, 1], plane[f, 2] = nx, ny, nz
-    plane[f, 3] = nx * P[a, 0] + ny * P[a, 1] + nz * P[a, 2]
-    return True
+    return True, nx, ny, nz, nx * P[a, 0] + ny * P[a, 1] + nz * P[a, 2]
+
+
+@numba.njit(cache=True, nogil=True)
+def _face_plane(P: FloatArray, faces: IntArray, f: int, plane: FloatArray) -> bool:
+    """Face f's unit normal and offset into ``plane[f]``; False if degenerate."""
+    ok, nx, ny, nz, d = _triangle_plane(P, faces[f, 0], faces[f, 1], faces[f, 2])
+    if ok:
+        plane[f, 0], plane[f, 1], plane[f, 2], plane[f, 3] = nx, ny, nz, d
+    return ok
 
 
 @numba.njit(cache=True, nogil=True)
@@ -68,6 +76,13 @@ def epa(
     PB = np.empty((V, 3))
     faces = np.empty((_EPA_FACES, 3), dtype=np.int64)
     plane = np.empty((_EPA_FACES, 4))
+    # The slots of faces gone, for new ones (a polytope of n vertices has 2n - 4
+    # faces); a step's faces seen, and its horizon's edges with their planes.
+    free = np.empty(_EPA_FACES, dtype=np.int64)
+    n_free = 0
+    seeing = np.empty(_EPA_FACES, dtype=np.int64)
+    horizon = np.empty((_EPA_EDGES, 2), dtype=np.int64)
+    trial = np.empty((_EPA_EDGES, 4))
     alive = np.zeros(_EPA_FACES, dtype=np.bool_)
     edges = np.empty((_EPA_EDGES, 2), dtype=np.int64)
     for i in range(n):
@@ -140,7 +155,7 @@ def epa(
         alive[f] = True
     face_count = 4
     nearest = 0
-    for _ in range(_EPA_VERTICES - 4):
+    while True:  # until the nearest face is on the boundary, or no room is left
         nearest = -1
         least = np.inf
         for f in range(face_count):
@@ -155,25 +170,33 @@ def epa(
         wx, wy, wz = pax - pbx, pay - pby, paz - pbz
         if dx * wx + dy * wy + dz * wz - least <= EPA_TOLERANCE:
             break  # the nearest face is on the boundary
-        if n == _EPA_VERTICES or face_count + 3 * n > _EPA_FACES:
+        if n == _EPA_VERTICES:
             break  # out of room: the nearest face so far
         P[n, 0], P[n, 1], P[n, 2] = wx, wy, wz
         PA[n, 0], PA[n, 1], PA[n, 2] = pax, pay, paz
         PB[n, 0], PB[n, 1], PB[n, 2] = pbx, pby, pbz
         # The faces the new point sees go; their edges seen once are the horizon.
+        gone = 0
         count = 0
         for f in range(face_count):
             if not alive[f]:
                 continue
             seen = plane[f, 0] * wx + plane[f, 1] * wy + plane[f, 2] * wz
             if seen - plane[f, 3] > 1e-14 * max(1.0, abs(plane[f, 3])):
-                alive[f] = False
+                seeing[gone] = f
+                gone += 1
                 for e in range(3):
                     if count < _EPA_EDGES:
                         edges[count, 0] = faces[f, e]
                         edges[count, 1] = faces[f, (e + 1) % 3]
                         count += 1
+        # A step that would not keep the polytope convex around the origin (a
+        # horizon of other than one loop, a new face flat or nearer than the
+        # nearest) is round-off, as support points crowd on a curved side: it
+        # broke the polytope once: a sphere in a cylinder came 1.2 cm short
+        # of its depth. Stop at the nearest face instead.
         added = 0
+        intact = True
         for e in range(count):
             a, b = edges[e, 0], edges[e, 1]
             shared = False
@@ -183,17 +206,40 @@ def epa(
                     break
             if shared:
                 continue
-            f = face_count
-            faces[f, 0], faces[f, 1], faces[f, 2] = a, b, n
-            alive[f] = _face_plane(P, faces, f, plane)
-            face_count += 1
+            ok, nx, ny, nz, d = _triangle_plane(P, a, b, n)
+            if not ok or d < least - EPA_TOLERANCE:
+                intact = False
+                break
+            horizon[added, 0], horizon[added, 1] = a, b
+            trial[added, 0], trial[added, 1], trial[added, 2] = nx, ny, nz
+            trial[added, 3] = d
             added += 1
-        if added == 0:
-            return FAILED
+        room = n_free + gone + _EPA_FACES - face_count
+        if not intact or added != gone + 2 or added > room:
+            break
+        for k in range(gone):
+            alive[seeing[k]] = False
+            free[n_free] = seeing[k]
+            n_free += 1
+        for k in range(added):
+            if n_free > 0:
+                n_free -= 1
+                f = free[n_free]
+            else:
+                f = face_count
+                face_count += 1
+            faces[f, 0], faces[f, 1], faces[f, 2] = horizon[k, 0], horizon[k, 1], n
+            for j in range(4):
+                plane[f, j] = trial[k, j]
+            alive[f] = True
         n += 1
     # The origin's projection on the nearest face, in barycentric weights.
     # Faces in one plane (a face of A - B cut in triangles) are equally near:
-    # the one the projection falls in gives the witness points.
+    # the one the projection falls in gives the witness points. So are faces
+    # whose planes pass within the tolerance of it: near a curved side they
+    # turn by 1e-4 rad from one to the next, and the projection on the
+    # nearest (by 1e-14 m) fell outside it, in its neighbour (witnesses 14 um
+    # apart across the normal, clipped to the nearest face).
     depth = plane[nearest, 3]
     px, py, pz = (
         depth * plane[nearest, 0],
@@ -201,22 +247,16 @@ def epa(
         depth * plane[nearest, 2],
     )
     f = nearest
-    u, v, w = _barycentric(P, faces[f, 0], faces[f, 1], faces[f, 2], px, py, pz)
+    u, v, w = _barycentric(P, faces, plane, f, px, py, pz)
     worst = min(u, v, w)
     if worst < 0.0:
         for g in range(face_count):
-            if not alive[g] or g == nearest or plane[g, 3] > depth + EPA_TOLERANCE:
+            if not alive[g] or g == nearest:
                 continue
-            if (
-                plane[g, 0] * plane[nearest, 0]
-                + plane[g, 1] * plane[nearest, 1]
-                + plane[g, 2] * plane[nearest, 2]
-                < 1.0 - 1e-9
-            ):
+            off = plane[g, 0] * px + plane[g, 1] * py + plane[g, 2] * pz - plane[g, 3]
+            if abs(off) > EPA_TOLERANCE:
                 continue
-            gu, gv, gw = _barycentric(
-                P, faces[g, 0], faces[g, 1], faces[g, 2], px, py, pz
-            )
+            gu, gv, gw = _barycentric(P, faces, plane, g, px, py, pz)
             if min(gu, gv, gw) > worst:
                 f, u, v, w, worst = g, gu, gv, gw, min(gu, gv, gw)
     # What round-off leaves outside the face is clipped back to it.
@@ -253,20 +293,31 @@ def _off_span(P: FloatArray, n: int) -> float:
 
 @numba.njit(cache=True, nogil=True)
 def _barycentric(
-    P: FloatArray, a: int, b: int, c: int, px: float, py: float, pz: float
+    P: FloatArray,
+    faces: IntArray,
+    plane: FloatArray,
+    f: int,
+    px: float,
+    py: float,
+    pz: float,
 ) -> tuple[float, float, float]:
-    """Barycentric weights of p in the plane of triangle a, b, c (negative outside)."""
-    e0x, e0y, e0z = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
-    e1x, e1y, e1z = P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2]
-    e2x, e2y, e2z = px - P[a, 0], py - P[a, 1], pz - P[a, 2]
-    d00 = e0x * e0x + e0y * e0y + e0z * e0z
-    d01 = e0x * e1x + e0y * e1y + e0z * e1z
-    d11 = e1x * e1x + e1y * e1y + e1z * e1z
-    d20 = e2x * e0x + e2y * e0y + e2z * e0z
-    d21 = e2x * e1x + e2y * e1y + e2z * e1z
-    denominator = d00 * d11 - d01 * d01
-    if denominator <= 0.0:
+    """Barycentric weights of p in face f's plane (negative outside the face).
+
+    From the signed areas p makes with the face's edges, along its unit normal:
+    on a long, thin face (two support points a few um apart on a curved side,
+    the third far off) these keep the weights to rounding, where weights from
+    the normal equations of its edges lost 1e-4 of the far vertex's (a witness
+    10 um off along a box's edge).
+    """
+    a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+    nx, ny, nz = plane[f, 0], plane[f, 1], plane[f, 2]
+    ax, ay, az = P[a, 0] - px, P[a, 1] - py, P[a, 2] - pz
+    bx, by, bz = P[b, 0] - px, P[b, 1] - py, P[b, 2] - pz
+    cx, cy, cz = P[c, 0] - px, P[c, 1] - py, P[c, 2] - pz
+    u = nx * (by * cz - bz * cy) + ny * (bz * cx - bx * cz) + nz * (bx * cy - by * cx)
+    v = nx * (cy * az - cz * ay) + ny * (cz * ax - cx * az) + nz * (cx * ay - cy * ax)
+    w = nx * (ay * bz - az * by) + ny * (az * bx - ax * bz) + nz * (ax * by - ay * bx)
+    total = u + v + w  # twice the face's area
+    if total <= 0.0:
         return 1.0, 0.0, 0.0
-    v = (d11 * d20 - d01 * d21) / denominator
-    w = (d00 * d21 - d01 * d20) / denominator
-    return 1.0 - v - w, v, w
+    return u / total, v / total, w / total
