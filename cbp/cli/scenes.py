@@ -20,9 +20,17 @@ def _arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="obstacles that come at a still hand at 2-20 cm/s instead of clutter",
     )
+    parser.add_argument(
+        "--mbm", type=Path, help="MotionBenchMaker's Panda problems from this checkout"
+    )
+    parser.add_argument("--family", action="append", help="with --mbm: only these")
 
 
 def _scenes(args: argparse.Namespace) -> int:
+    if args.mbm is not None:
+        from cbp.mbm import scenes_command
+
+        return scenes_command(args.mbm, args.out, args.count, args.seed, args.family)
     from cbp.scenes import write_scenes
 
     for path in write_scenes(args.out, args.count, args.seed, args.moving):

@@ -102,7 +102,7 @@ class _Sampled:
 class _Rejections:
     """Rejected goal samples, said once per episode with their count.
 
-    As deadline misses are (:class:`cbp.executors.periods.DeadlineMisses`):
+    As deadline misses are (:class:`cbp.run.periods.DeadlineMisses`):
     the first with its reason, at once; the count when a valid goal is taken
     again. The run's counter ``rejected_goal_samples`` holds the total.
     """
