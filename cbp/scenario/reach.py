@@ -27,9 +27,14 @@ import numpy as np
 import pinocchio as pin
 from scipy.optimize import minimize
 
+from cbp.collision.geometry import RobotGeometry
 from cbp.robot import FloatArray, RobotModel
+from cbp.state import RobotState
 
-__all__ = ["Reach", "arm_reach"]
+__all__ = ["Bounds", "Reach", "arm_reach", "point_reach", "reach_box"]
+
+Bounds = tuple[FloatArray, FloatArray]
+"""A box's lower and upper corners (3,) each [m]."""
 
 
 @dataclass(frozen=True)
@@ -70,19 +75,40 @@ def arm_reach(robot: RobotModel, q: FloatArray, frame: str) -> Reach | None:
         frame: the frame that tracks the goal.
 
     Returns:
-        None where no such bound holds: a base that moves, or a joint on the
-        chain that is not revolute (a prismatic one changes its link's length).
+        None where no such bound holds: a base that moves, a frame on the base
+        (no joint moves it), or a joint on the chain that is not revolute (a
+        prismatic one changes its link's length).
+    """
+    model = robot.model
+    frame_id = robot.frame_id(frame)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    position = data.oMf[frame_id].translation
+    return point_reach(robot, q, model.frames[frame_id].parentJoint, position)
+
+
+def point_reach(
+    robot: RobotModel, q: FloatArray, joint: int, point: FloatArray
+) -> Reach | None:
+    """The reach of a point fixed on the link that ``joint`` moves.
+
+    Args:
+        robot: the robot model.
+        q: the configuration at which ``point`` is given.
+        joint: the joint that moves the point's link (its index in the model).
+        point: where the point is at ``q``, world frame (3,) [m].
+
+    Returns:
+        None as :func:`arm_reach` says.
     """
     if robot.base != "fixed":
         return None
     model = robot.model
-    frame_id = robot.frame_id(frame)
-    chain = list(model.supports[model.frames[frame_id].parentJoint])[1:]
+    chain = list(model.supports[joint])[1:]
     if not chain or any(model.joints[j].nv != 1 for j in chain):
         return None
     data = model.createData()
     pin.computeJointJacobians(model, data, q)
-    pin.updateFramePlacements(model, data)
     origins, axes = [], []
     for j in chain:
         jacobian = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.WORLD)
@@ -91,11 +117,44 @@ def arm_reach(robot: RobotModel, q: FloatArray, frame: str) -> Reach | None:
             return None
         origins.append(data.oMi[j].translation.copy())
         axes.append(column[3:] / np.linalg.norm(column[3:]))
-    end = data.oMf[frame_id].translation.copy()
+    end = np.asarray(point, dtype=float)
     along = _points_on_axes(np.array(origins), np.array(axes), end)
     points = np.array(origins) + along[:, None] * np.array(axes)
     legs = np.vstack([np.diff(points, axis=0), end - points[-1]])
     return Reach(points[0].copy(), float(np.sum(np.linalg.norm(legs, axis=1))))
+
+
+def reach_box(geometry: RobotGeometry, q: FloatArray) -> Bounds | None:
+    """The box every robot shape stays in, whatever the configuration.
+
+    Each shape's bounding sphere, about the reach of its centre
+    (:func:`point_reach`; a shape on the base, where it is at ``q``), grown by
+    the shapes' padding: the space the padded robot can ever hold. None for a
+    robot whose base moves (or with a joint that is not revolute).
+
+    Args:
+        geometry: the robot's shapes (camera housings included, when mounted).
+        q: any configuration.
+
+    Returns:
+        The lower and upper corners (3,) [m].
+    """
+    state = RobotState(geometry.robot, q)
+    placed = geometry.world_shapes(state)
+    lower = np.full(3, np.inf)
+    upper = np.full(3, -np.inf)
+    for s, shape in enumerate(geometry.shapes):
+        centre, radius = placed.centres[s], float(placed.radii[s])
+        if shape.joint_id > 0:
+            reach = point_reach(geometry.robot, q, shape.joint_id, centre)
+            if reach is None:
+                return None
+            centre, radius = reach.centre, radius + reach.radius
+        lower = np.minimum(lower, centre - radius - geometry.padding)
+        upper = np.maximum(upper, centre + radius + geometry.padding)
+    if not geometry.shapes:
+        return None
+    return lower, upper
 
 
 def _points_on_axes(
