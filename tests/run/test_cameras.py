@@ -62,7 +62,7 @@ duration: 1.0
 goal: {type: keyframes, keyframes: [{t: 0.5, pose: {position: [0.5, 0.0, 0.07]}}]}
 world:
   objects:
-    - {name: box, shape: box, size: [0.2, 0.2, 0.1], pose: {position: [0.5, 0.0, -0.1]}}
+    - {name: box, shape: box, size: [0.2, 0.2, 0.1], pose: {position: [0.5, 0.0, -0.15]}}
 """
 
 
@@ -95,9 +95,9 @@ def test_surfaces_outside_the_bounds_are_said_and_the_default_covers_the_reach(
         lower, upper = grid.bounds
         assert np.all(lower <= [-0.97, -0.97, -0.64])
         assert np.all(upper >= [0.97, 0.97, 1.30])
-        assert grid.state_at(np.array([[0.5, 0.0, -0.049]]))[0] == OCCUPIED
+        assert grid.state_at(np.array([[0.5, 0.0, -0.099]]))[0] == OCCUPIED
         return
     cameras = {m.split("'")[1] for m in said}
     assert len(said) == len(cameras) >= 3  # once per camera that sees it
-    assert all("[-1.0, -1.0, -0.015]" in m for m in said)
-    assert grid.state_at(np.array([[0.5, 0.0, -0.049]]))[0] == UNKNOWN
+    assert all("[-1.0, -1.0, -0.05]" in m for m in said)
+    assert grid.state_at(np.array([[0.5, 0.0, -0.099]]))[0] == UNKNOWN
