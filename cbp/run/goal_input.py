@@ -63,8 +63,10 @@ class GoalBounds:
     @classmethod
     def of(cls, scenario: Scenario) -> GoalBounds:
         """The bounds of ``scenario``'s robot and world (``perception.bounds``)."""
+        bounds = scenario.spec.perception.bounds  # None: the reach bounds it
         lower, upper = (
-            np.asarray(c, dtype=float) for c in scenario.spec.perception.bounds
+            np.asarray(c, dtype=float)
+            for c in (bounds if bounds is not None else (-np.inf, np.inf))
         )
         reach = scenario.reach()
         if reach is None:
