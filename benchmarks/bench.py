@@ -875,9 +875,9 @@ def _run_query_rows(cfg: BenchConfig) -> list[Row]:
 
 def _near_board(scenario: Any) -> np.ndarray:
     """A configuration of the boards scene with the hand 2 cm above board 1."""
-    from cbp.executors.clock import WallBudget
     from cbp.executors.ik_search import IkSearch
     from cbp.methods.settings import IkSearchSettings
+    from cbp.run.budget import WallBudget
 
     search = IkSearch(scenario.robot, "panda_hand", None, IkSearchSettings())
     goal = pin.SE3(
@@ -1019,10 +1019,10 @@ def _world_scaling_rows(cfg: BenchConfig) -> list[Row]:
 def _mp_row(cfg: BenchConfig) -> list[Row]:
     import ompl.util as ou
 
-    from cbp.executors.clock import WallBudget
     from cbp.executors.mp import MpPlanner
     from cbp.methods.settings import MpSettings
     from cbp.run import build_run
+    from cbp.run.budget import WallBudget
     from cbp.scenario import load_scenario
 
     ou.RNG.setSeed(1)  # once, before any sampling: the runs differ, reproducibly

@@ -52,10 +52,10 @@ def breakdown(repetitions: int) -> dict[str, Any]:
     import pinocchio as pin
 
     from benchmarks.bench import GOALS, SCENARIOS, HandWritten, measure_interleaved
-    from cbp.executors.clock import WallBudget
     from cbp.executors.ik_search import IkSearch
     from cbp.methods.settings import IkSearchSettings
     from cbp.robot import RobotModel
+    from cbp.run.budget import WallBudget
     from cbp.scenario import load_scenario
 
     robot = RobotModel.load("franka_panda")

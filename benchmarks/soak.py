@@ -34,11 +34,11 @@ import yaml
 from results_file import publish  # this folder: scripts run from it
 
 from cbp.executors.cat import CatPlanner
-from cbp.executors.trajectory import run_trajectory_executor
 from cbp.goals import write_recorded
 from cbp.methods.settings import CatSettings
 from cbp.metrics import run_metrics
 from cbp.run import build_run
+from cbp.run.loop import run_loop
 from cbp.scenario import load_scenario
 from cbp.scenes import HAND_DOWN, REGION, generate_scene
 from cbp.trace import FULL_PERIOD_NOTE
@@ -95,9 +95,7 @@ def soak(minutes: float, source: str, seed: int, folder: Path) -> dict[str, Any]
     start = time.perf_counter()
     watcher.start()
     try:
-        trace = run_trajectory_executor(
-            run, CatPlanner(scenario, settings), settings.timing
-        )
+        trace = run_loop(run, CatPlanner(run.scenario, settings), settings.timing)
     finally:
         done.set()
         watcher.join()

@@ -14,7 +14,7 @@ samples the goal at the start of a period; a goal that arrives later (while
 CAT plans, or while the loop waits for the period's end) is planned for at
 once from where the arm is commanded to be a lead later (0.4 of the shortest
 period to start with), and commanded then
-(:func:`cbp.executors.trajectory._command_while_waiting`). Two rows: the
+(:func:`cbp.run.live.wait_out`). Two rows: the
 nominal 33 ms period throughout, and the session's default, which lets the
 period shrink to 15 ms while planning leaves time to spare.
 

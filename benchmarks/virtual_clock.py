@@ -1,6 +1,6 @@
 """The virtual clock's costs, measured again on this machine.
 
-Times each kind of work :class:`cbp.executors.clock.VirtualCosts` charges, on
+Times each kind of work :class:`cbp.run.budget.VirtualCosts` charges, on
 the boards scene: a CAT step (engine step, integration and step validation,
 with the hand near the boards' goal), a yes-or-no collision check, one
 iteration of the IK search, and timing one point of a trajectory. Prints each
@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cbp.executors.clock import WallBudget
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.stepping import ValidatedStepper
 from cbp.methods.settings import IkSettings, VirtualCosts
+from cbp.run.budget import WallBudget
 from cbp.scenario import load_scenario
 from cbp.sim.trajectory import time_parameterize
 
@@ -46,7 +46,7 @@ def main() -> None:
     assert stream is not None
     goal = stream.pose(3.0)
     goal_task.set_target(goal.translation, goal.rotation)
-    stepper = ValidatedStepper(engine, world, lambda message: None)
+    stepper = ValidatedStepper(engine, world, lambda t, message: None, lambda: 0.0)
     q = scenario.q0.copy()
     stepper.start(q)
     for _ in range(50):  # into the boards, where the steps have contacts

@@ -22,6 +22,12 @@ def suggestion(name: str, choices: Iterable[str]) -> str:
     return f"; did you mean '{matches[0]}'?" if matches else ""
 
 
+def close_matches_hint(name: str, choices: Iterable[str]) -> str:
+    """Return "; close matches: a, b" for the choices like ``name``, or ""."""
+    matches = close_matches(name, choices)
+    return f"; close matches: {', '.join(matches)}" if matches else ""
+
+
 class CbpError(Exception):
     """Base class of every error raised by cbp."""
 
@@ -107,10 +113,30 @@ class ScenarioError(CbpError):
         """Collect every problem found in the file at ``path``."""
         self.path = path
         self.problems = list(problems)
-        lines = "\n".join(f"  {p}" for p in self.problems)
-        count = len(self.problems)
-        noun = "problem" if count == 1 else "problems"
-        super().__init__(f"{path}: {count} {noun}:\n{lines}")
+        super().__init__(_listed(path, self.problems))
+
+
+def _listed(path: str, problems: Sequence[str]) -> str:
+    """``path: N problems:`` and the problems, one an indented line."""
+    noun = "problem" if len(problems) == 1 else "problems"
+    lines = "\n".join(f"  {p}" for p in problems)
+    return f"{path}: {len(problems)} {noun}:\n{lines}"
+
+
+class DataFileError(ConfigError):
+    """A data file a scenario names (a recorded goal) has problems, each located.
+
+    Attributes:
+        path: the file.
+        problems: every problem, each with its place in the file (``row 3,
+            column 5 (qx): ...``).
+    """
+
+    def __init__(self, path: str, problems: Sequence[str], location: str = "") -> None:
+        """Collect the problems of the file at ``path``, named at ``location``."""
+        self.path = path
+        self.problems = list(problems)
+        super().__init__(_listed(path, self.problems), location)
 
 
 class UnknownPluginError(ConfigError):

@@ -36,9 +36,9 @@ __all__ = [
     "check_file",
     "check_folder_name",
     "check_output_folder",
+    "claim_new_output_folder",
     "claim_output_folder",
     "load_mesh",
-    "publish_folder",
     "read_text",
 ]
 
@@ -160,20 +160,29 @@ def check_folder_name(name: str, location: str = "name") -> None:
         )
 
 
-def check_output_folder(out: Path) -> None:
+def check_output_folder(out: Path, replace: bool = True) -> None:
     """Check that ``out`` may receive a run's outputs (before the run starts).
 
-    It may be missing, empty, or an earlier output (it holds ``metrics.json``
-    or ``report.md``); anything else is refused rather than replaced.
+    It may be missing, empty, or (with ``replace``) an earlier output: it
+    holds ``metrics.json`` or ``report.md``. Anything else is refused rather
+    than replaced.
 
     Raises:
-        ConfigError: ``out`` is a file, or a folder of something else.
+        ConfigError: ``out`` is a file, a folder of something else, or not
+            empty when nothing may be replaced.
     """
     if not out.exists():
         return
     if not out.is_dir():
         raise ConfigError(f"output folder {out} is a file")
-    if any(out.iterdir()) and not any((out / m).exists() for m in OUTPUT_MARKERS):
+    if not any(out.iterdir()):
+        return
+    if not replace:
+        raise ConfigError(
+            f"output folder {out} is not empty; choose a new or empty folder "
+            "(these outputs never replace earlier ones)"
+        )
+    if not any((out / m).exists() for m in OUTPUT_MARKERS):
         raise ConfigError(
             f"output folder {out} holds files that are not a cbp output; choose an "
             "empty or new folder (cbp replaces its own outputs only)"
@@ -183,18 +192,30 @@ def check_output_folder(out: Path) -> None:
 class OutputClaim:
     """A staging folder beside an output folder, locked while this process lives.
 
-    Outputs are written into :attr:`staging` and put in place by
-    :func:`publish_folder`. The folder is locked (``flock``) for as long as
-    :attr:`staging` is open here: the kernel drops the lock when the process
-    ends, however it ends, so a staging folder nobody holds is the remains of a
-    dead process and the next claim on the same output removes it.
+    Outputs are written into :attr:`staging`; :meth:`publish` puts the folder
+    in place as :attr:`out`, and :meth:`put` adds files to it one by one
+    afterwards. The staging folder is locked (``flock``) for as long as it is
+    open here: the kernel drops the lock when the process ends, however it
+    ends, so a staging folder nobody holds is the remains of a dead process
+    and the next claim on the same output removes it. After :meth:`publish`
+    a fresh staging folder is held, so the output stays claimed until
+    :meth:`release`.
+
+    Attributes:
+        out: the output folder.
+        staging: the folder files are written into before they are put in place.
+        replace: whether an earlier output at :attr:`out` may be replaced.
     """
 
-    def __init__(self, out: Path, staging: Path, descriptor: int) -> None:
+    def __init__(
+        self, out: Path, staging: Path, descriptor: int, replace: bool = True
+    ) -> None:
         """Hold ``staging`` (locked through ``descriptor``) for ``out``."""
         self.out = out
         self.staging = staging
+        self.replace = replace
         self._descriptor: int | None = descriptor
+        self._published: tuple[int, int] | None = None  # (device, inode) of out
 
     @property
     def released(self) -> bool:
@@ -212,8 +233,69 @@ class OutputClaim:
             os.close(self._descriptor)
             self._descriptor = None
 
+    def publish(self) -> None:
+        """Put the staging folder in place as :attr:`out`, as a whole.
 
-def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
+        An earlier output at ``out`` is replaced as a whole: under a lock on
+        the folder that holds ``out``, it is renamed aside and the staging
+        folder renamed into its place (both renames are atomic on one file
+        system), so concurrent writers leave exactly one complete output
+        there, and a reader never sees a mixture. A fresh staging folder is
+        then held for the files :meth:`put` adds.
+
+        Raises:
+            ConfigError: ``out`` is not a cbp output, or (without
+                :attr:`replace`) not empty; the staging folder is kept and
+                the message names it.
+        """
+        out, old = self.out, None
+        with _locked(out.parent):
+            try:
+                check_output_folder(out, self.replace)
+            except ConfigError as exc:
+                raise ConfigError(
+                    f"{exc.message}; the outputs are in {self.staging}"
+                ) from None
+            if out.exists():
+                old = out.parent / f".{out.name}.old-{secrets.token_hex(4)}"
+                os.replace(out, old)
+            os.replace(self.staging, out)
+            published = out.stat()
+            self._published = (published.st_dev, published.st_ino)
+            staging, descriptor = _staging_folder(out)
+            if self._descriptor is not None:
+                os.close(self._descriptor)
+            self.staging, self._descriptor = staging, descriptor
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+    def put(self, name: str) -> bool:
+        """Move the file ``name`` of the staging folder into the published output.
+
+        One rename on one file system: the file appears whole or not at all.
+        When a later output has replaced this one meanwhile (a run that
+        claimed the folder without refusing live ones), the file is dropped:
+        outputs never mix.
+
+        Returns:
+            Whether the file was put in place.
+        """
+        source = self.staging / name
+        with _locked(self.out.parent):
+            try:
+                now = self.out.stat()
+            except OSError:
+                now = None
+            if now is not None and (now.st_dev, now.st_ino) == self._published:
+                os.replace(source, self.out / name)
+                return True
+        source.unlink(missing_ok=True)
+        return False
+
+
+def claim_output_folder(
+    out: Path, refuse_live: bool = True, replace: bool = True
+) -> OutputClaim:
     """Check ``out`` (:func:`check_output_folder`) and claim it for this process.
 
     Staging folders beside ``out`` (``.NAME.part-PID-HEX``) that no live
@@ -224,12 +306,15 @@ def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
         out: the output folder.
         refuse_live: refuse when another live run holds a staging folder for
             ``out`` (else both write and the last to finish replaces the other).
+        replace: whether an earlier output at ``out`` may be replaced (else a
+            folder that is not empty is refused, now and when publishing).
 
     Raises:
-        ConfigError: ``out`` is not a cbp output, or is in use by a live run
-            (the message names its process).
+        ConfigError: ``out`` is not a cbp output, not empty without
+            ``replace``, or in use by a live run (the message names its
+            process).
     """
-    check_output_folder(out)
+    check_output_folder(out, replace)
     out.parent.mkdir(parents=True, exist_ok=True)
     prefix = f".{out.name}."
     with _locked(out.parent):
@@ -248,11 +333,36 @@ def claim_output_folder(out: Path, refuse_live: bool = True) -> OutputClaim:
                 )
         if out.name and (out.parent / f".{out.name}.lock").is_file():
             (out.parent / f".{out.name}.lock").unlink()  # left by earlier versions
-        staging = out.parent / f".{out.name}.part-{os.getpid()}-{secrets.token_hex(4)}"
-        staging.mkdir()
-        descriptor = os.open(staging, os.O_RDONLY)
-        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    return OutputClaim(out, staging, descriptor)
+        staging, descriptor = _staging_folder(out)
+    return OutputClaim(out, staging, descriptor, replace)
+
+
+def claim_new_output_folder(out: Path, attempts: int = 1000) -> OutputClaim:
+    """Claim ``out``, or ``out_2``, ``out_3``...: the first that nothing occupies.
+
+    A folder is taken when it is not empty or a live run claims it; the one
+    claimed is never replaced when published (a new folder per session).
+
+    Raises:
+        ConfigError: the last refusal, when ``attempts`` folders are taken.
+    """
+    for k in range(1, attempts + 1):
+        folder = out if k == 1 else out.with_name(f"{out.name}_{k}")
+        try:
+            return claim_output_folder(folder, replace=False)
+        except ConfigError:
+            if k == attempts:
+                raise
+    raise AssertionError("unreachable: the loop returns or raises")
+
+
+def _staging_folder(out: Path) -> tuple[Path, int]:
+    """A new staging folder beside ``out``, and the descriptor that locks it."""
+    staging = out.parent / f".{out.name}.part-{os.getpid()}-{secrets.token_hex(4)}"
+    staging.mkdir()
+    descriptor = os.open(staging, os.O_RDONLY)
+    fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return staging, descriptor
 
 
 def _held(folder: Path) -> bool:
@@ -279,30 +389,3 @@ def _locked(folder: Path) -> Iterator[None]:
         yield
     finally:
         os.close(descriptor)
-
-
-def publish_folder(staging: Path, out: Path) -> None:
-    """Put the complete folder ``staging`` in place as ``out``.
-
-    An earlier output at ``out`` is replaced as a whole: under a lock on the
-    folder that holds ``out``, it is renamed aside and ``staging`` renamed into
-    its place (both renames are atomic on one file system), so concurrent
-    writers leave exactly one complete output there, and a reader never sees a
-    mixture.
-
-    Raises:
-        ConfigError: ``out`` is not a cbp output (:func:`check_output_folder`);
-            ``staging`` is kept and the message names it.
-    """
-    old: Path | None = None
-    with _locked(out.parent):
-        try:
-            check_output_folder(out)
-        except ConfigError as exc:
-            raise ConfigError(f"{exc.message}; the outputs are in {staging}") from None
-        if out.exists():
-            old = out.parent / f".{out.name}.old-{secrets.token_hex(4)}"
-            os.replace(out, old)
-        os.replace(staging, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)

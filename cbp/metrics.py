@@ -152,12 +152,6 @@ def _contact(trace: Trace) -> dict[str, Any]:
     }
 
 
-#: A joint this far from its command [rad or m] was forced there by what the
-#: arm touches: the joint controller tracks within about 0.02 rad, also in
-#: contact (the generated moving scenes' declared runs).
-FORCED_OFF = 0.1
-
-
 def _tracking_error(trace: Trace) -> float | None:
     """The largest gap between a measured and a commanded coordinate [rad or m].
 

@@ -59,9 +59,9 @@ with the same rules whether it is then used from Python or from a scenario:
 * the constructor takes ``(params, robot, name="")``;
 * :meth:`Plugin.prepare` is the only method that may change the plugin.
 
-Optional capabilities are the protocols below (:class:`GoalReceiver`,
-:class:`TakesInput`, :class:`DescribesInput`, :class:`UsesCollisionWorld`,
-:class:`HoldsContacts`, :class:`ReportsSignals`): a
+Optional capabilities are the protocols of :mod:`cbp.capabilities`, exported
+here too (:class:`GoalReceiver`, :class:`TakesInput`, :class:`DescribesInput`,
+:class:`UsesCollisionWorld`, :class:`HoldsContacts`, :class:`ReportsSignals`): a
 plugin has one by defining its methods, and executors test for it with
 ``isinstance``. Writing rows in place (:meth:`Plugin.linearize_into`,
 :meth:`Plugin.value_into`) is an optional speed-up, not part of the contract;
@@ -75,22 +75,27 @@ import dataclasses
 import inspect
 import re
 import typing
-from collections.abc import Mapping
 from typing import (
-    TYPE_CHECKING,
     Any,
     ClassVar,
     Generic,
     Literal,
     NamedTuple,
-    Protocol,
     TypeVar,
-    runtime_checkable,
 )
 
 import numpy as np
-import numpy.typing as npt
 
+from cbp.capabilities import (
+    DescribesInput,
+    GoalReceiver,
+    HoldsContacts,
+    InputValue,
+    MovingBounds,
+    ReportsSignals,
+    TakesInput,
+    UsesCollisionWorld,
+)
 from cbp.errors import (
     ConfigError,
     PluginDefinitionError,
@@ -99,10 +104,6 @@ from cbp.errors import (
 )
 from cbp.robot import FloatArray, RobotModel
 from cbp.state import RobotState
-
-if TYPE_CHECKING:
-    from cbp.collision.contacts import ContactSet
-    from cbp.collision.world import CollisionWorld
 
 __all__ = [
     "Constraint",
@@ -184,34 +185,7 @@ def _check_definition(cls: type[Plugin[Any]]) -> None:
     generic = _generic_params(cls)
     if any(isinstance(arg, TypeVar) for arg in generic):
         return  # a generic base such as Task[ParamsT]: its subclasses are checked
-    declared = cls.__dict__.get("Params")
-    params = generic[0] if generic else declared or getattr(cls, "Params", None)
-    how = (
-        f"declare its parameters as the generic argument: class {cls.__name__}"
-        f"(Task[{cls.__name__}Params]) or (Constraint[...]), where "
-        f"{cls.__name__}Params is a @dataclass(frozen=True, kw_only=True) "
-        "subclass of cbp.PluginParams (PluginParams itself when there are none)"
-    )
-    if params is None:
-        raise PluginDefinitionError(f"plugin {name} has no parameter schema: {how}")
-    named = {p for p in (*generic, declared) if p is not None}
-    if len(named) > 1:
-        names = sorted(getattr(p, "__name__", repr(p)) for p in named)
-        raise PluginDefinitionError(
-            f"plugin {name} names two parameter schemas ({', '.join(names)}): "
-            f"{how}; a Params attribute is not needed"
-        )
-    if not (
-        isinstance(params, type)
-        and issubclass(params, PluginParams)
-        and "__dataclass_params__" in vars(params)  # a dataclass of its own
-        and params.__dataclass_params__.frozen  # type: ignore[attr-defined]
-    ):
-        raise PluginDefinitionError(
-            f"plugin {name}: {getattr(params, '__name__', params)!s} is not a "
-            f"frozen PluginParams dataclass: {how}"
-        )
-    cls.Params = params
+    cls.Params = _params_schema(cls, generic)
     if "type_name" not in cls.__dict__:
         cls.type_name = default_type_name(cls.__name__)
     if not isinstance(cls.type_name, str) or not _SNAKE.match(cls.type_name):
@@ -253,6 +227,44 @@ def _check_definition(cls: type[Plugin[Any]]) -> None:
             f"plugin {name}: the constructor must accept (params, robot, name=''), "
             f"got {cls.__name__}{inspect.signature(cls.__init__)}"
         ) from None
+
+
+def _params_schema(cls: type[Plugin[Any]], generic: list[object]) -> type[PluginParams]:
+    """The parameter schema a plugin class names (its generic argument).
+
+    Raises:
+        PluginDefinitionError: none, two, or one that is not a frozen
+            PluginParams dataclass; the message says how to declare it.
+    """
+    name = cls.__qualname__
+    declared = cls.__dict__.get("Params")
+    params = generic[0] if generic else declared or getattr(cls, "Params", None)
+    how = (
+        f"declare its parameters as the generic argument: class {cls.__name__}"
+        f"(Task[{cls.__name__}Params]) or (Constraint[...]), where "
+        f"{cls.__name__}Params is a @dataclass(frozen=True, kw_only=True) "
+        "subclass of cbp.PluginParams (PluginParams itself when there are none)"
+    )
+    if params is None:
+        raise PluginDefinitionError(f"plugin {name} has no parameter schema: {how}")
+    named = {p for p in (*generic, declared) if p is not None}
+    if len(named) > 1:
+        names = sorted(getattr(p, "__name__", repr(p)) for p in named)
+        raise PluginDefinitionError(
+            f"plugin {name} names two parameter schemas ({', '.join(names)}): "
+            f"{how}; a Params attribute is not needed"
+        )
+    if not (
+        isinstance(params, type)
+        and issubclass(params, PluginParams)
+        and "__dataclass_params__" in vars(params)  # a dataclass of its own
+        and params.__dataclass_params__.frozen  # type: ignore[attr-defined]
+    ):
+        raise PluginDefinitionError(
+            f"plugin {name}: {getattr(params, '__name__', params)!s} is not a "
+            f"frozen PluginParams dataclass: {how}"
+        )
+    return params
 
 
 _REQUIRED = (
@@ -460,130 +472,3 @@ class Constraint(Plugin[ParamsT]):
 AnyTask = Task[Any]
 AnyConstraint = Constraint[Any]
 AnyPlugin = Plugin[Any]
-
-
-# ---------------------------------------------------------------------- capabilities
-
-
-@runtime_checkable
-class GoalReceiver(Protocol):
-    """A task that drives a frame toward the operator's goal pose.
-
-    The goal stream (``goal:`` in a scenario, the teleoperation page) calls
-    :meth:`set_target` every command period; executors read ``goal_frame`` to
-    measure the tracking error.
-    """
-
-    @property
-    def goal_frame(self) -> str:
-        """Name of the frame moved to the goal."""
-
-    def set_target(self, position: npt.ArrayLike, rotation: npt.ArrayLike) -> None:
-        """Set the goal: position (3,) [m], rotation matrix (3, 3), world frame.
-
-        Raises:
-            InvalidTargetError: the goal is refused (NaN, not a rotation); the
-                previous one is kept.
-        """
-
-
-@runtime_checkable
-class TakesInput(Protocol):
-    """A plugin driven by a live operator input (``inputs:`` in a scenario)."""
-
-    @property
-    def input_size(self) -> int:
-        """Number of input values."""
-
-    def set_input(self, values: npt.ArrayLike) -> None:
-        """Take new input values, shape (input_size,).
-
-        Raises:
-            ValueError: the values are refused; the previous ones are kept.
-        """
-
-
-class InputValue(NamedTuple):
-    """What one value of an operator input means, for a slider or a device.
-
-    Attributes:
-        label: what the value sets, in words ("camera velocity along its y").
-        unit: its unit ("m/s").
-        low: the lowest value an operator would set.
-        high: the highest.
-    """
-
-    label: str
-    unit: str
-    low: float
-    high: float
-
-
-@runtime_checkable
-class DescribesInput(Protocol):
-    """A :class:`TakesInput` plugin that says what each of its input values means.
-
-    Pages name their sliders from it, with units and ranges.
-    """
-
-    def input_values(self) -> tuple[InputValue, ...]:
-        """One description per input value, in the input's order."""
-
-
-@runtime_checkable
-class MovingBounds(Protocol):
-    """A constraint whose bounds move from step to step (an operator's input).
-
-    The feedback form removes a fraction k of the error each step, so bounds
-    that move at a steady rate are followed with a lag of rate / k per step.
-    An engine step given the robot's velocity moves the rows' bounds, after
-    the gain, by :meth:`bound_change` as well (feedforward: no lag).
-    """
-
-    def bound_change(self) -> FloatArray:
-        """How far the bounds are expected to move over the step (dim,).
-
-        Zeros when they are not moving steadily (a single jump is left to
-        the feedback).
-        """
-
-
-@runtime_checkable
-class UsesCollisionWorld(Protocol):
-    """A plugin that reads contacts: the scenario attaches the collision world."""
-
-    def attach_world(self, world: CollisionWorld) -> None:
-        """Use ``world`` for contact queries from now on."""
-
-
-@runtime_checkable
-class HoldsContacts(Protocol):
-    """A constraint with a row per contact with the environment.
-
-    Executors read the contacts latched for the current step, with the world's
-    shapes, to say what holds the arm (``contact_normals``).
-    """
-
-    @property
-    def contacts(self) -> ContactSet:
-        """The contacts latched for the current step.
-
-        Raises:
-            CbpError: nothing is latched yet (no step, no world).
-        """
-
-    @property
-    def world(self) -> CollisionWorld | None:
-        """The collision world the contacts come from."""
-
-
-@runtime_checkable
-class ReportsSignals(Protocol):
-    """A plugin with named quantities worth recording over a run.
-
-    Executors record them at every tick; reports plot and summarise them (the
-    orbit's distance, view error, roll, altitude and their bounds).
-    """
-
-    def signals(self, state: RobotState) -> Mapping[str, float]:
-        """Values at ``state``, by name (the unit in the name: ``_deg``, ``_m``)."""

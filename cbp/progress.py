@@ -2,8 +2,8 @@
 """Progress of long commands: a rich bar on a terminal, plain lines elsewhere.
 
 ``cbp sweep`` and ``cbp compare`` report each finished run, and ``cbp run``
-the simulated time of its run (:func:`run_progress`, which executors feed with
-:func:`report_time`). Attached to a
+the simulated time of its run (:func:`run_progress`, a listener on the run's
+log). Attached to a
 terminal (and with ``rich``, from the sweep extra, installed) a bar shows runs
 done, failures and the time left; otherwise, when asked, one line per finished
 run goes to standard error, which logs and CI keep readably.
@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
-from contextvars import ContextVar
 from typing import Any
 
-__all__ = ["Progress", "report_time", "run_progress"]
+from cbp.run.events import RunListener, listening
+
+__all__ = ["Progress", "run_progress"]
 
 
 class Progress:
@@ -89,17 +90,44 @@ class Progress:
             self._bar.stop()
 
 
-#: Receives (simulated time, duration) as a run advances; set by a command.
-_RUN_PROGRESS: ContextVar[Callable[[float, float], None] | None] = ContextVar(
-    "cbp_run_progress", default=None
-)
+class _RunBar(RunListener):
+    """A run's simulated time: a bar on a terminal, else a line every tenth."""
 
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.bar: Any = None
+        self.task: Any = None
+        self.next = 0.1
+        if sys.stderr.isatty():
+            try:
+                from rich.progress import BarColumn, TextColumn, TimeRemainingColumn
+                from rich.progress import Progress as Bar
+            except ImportError:
+                return
+            self.bar = Bar(
+                TextColumn(label),
+                BarColumn(),
+                TextColumn("{task.completed:.1f}/{task.total:.1f} s"),
+                TimeRemainingColumn(),
+            )
+            self.bar.start()
+            self.task = self.bar.add_task(label, total=1.0)
 
-def report_time(t: float, duration: float) -> None:
-    """An executor's run has reached ``t`` of ``duration`` [s] (cheap when unused)."""
-    callback = _RUN_PROGRESS.get()
-    if callback is not None:
-        callback(t, duration)
+    def progress(self, t: float, duration: float) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, completed=t, total=duration)
+        elif duration > 0 and t / duration >= self.next - 1e-9:
+            print(
+                f"{self.label}: {t:.1f} of {duration:.1f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+            while self.next <= t / duration + 1e-9:
+                self.next += 0.1
+
+    def stop(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
 
 
 @contextmanager
@@ -107,39 +135,11 @@ def run_progress(label: str) -> Iterator[None]:
     """Show the progress of the runs inside.
 
     A bar of simulated time on a terminal, a line every tenth of the run
-    otherwise (on standard error).
+    otherwise (on standard error): a listener on the runs' logs.
     """
-    state: dict[str, Any] = {"bar": None, "next": 0.1}
-    if sys.stderr.isatty():
-        try:
-            from rich.progress import BarColumn, TextColumn, TimeRemainingColumn
-            from rich.progress import Progress as Bar
-
-            bar = Bar(
-                TextColumn(label),
-                BarColumn(),
-                TextColumn("{task.completed:.1f}/{task.total:.1f} s"),
-                TimeRemainingColumn(),
-            )
-            bar.start()
-            state["bar"] = bar
-            state["task"] = bar.add_task(label, total=1.0)
-        except ImportError:
-            pass
-
-    def update(t: float, duration: float) -> None:
-        bar = state["bar"]
-        if bar is not None:
-            bar.update(state["task"], completed=t, total=duration)
-        elif duration > 0 and t / duration >= state["next"] - 1e-9:
-            print(f"{label}: {t:.1f} of {duration:.1f} s", file=sys.stderr, flush=True)
-            while state["next"] <= t / duration + 1e-9:
-                state["next"] += 0.1
-
-    token = _RUN_PROGRESS.set(update)
+    bar = _RunBar(label)
     try:
-        yield
+        with listening(bar):
+            yield
     finally:
-        _RUN_PROGRESS.reset(token)
-        if state["bar"] is not None:
-            state["bar"].stop()
+        bar.stop()

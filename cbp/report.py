@@ -8,8 +8,10 @@ each file holds the columns, metrics and figures the traces have
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
+import logging
 import shutil
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -18,7 +20,9 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from cbp.files import OutputClaim, claim_output_folder, publish_folder
+from cbp.errors import ConfigError
+from cbp.files import OutputClaim, claim_output_folder
+from cbp.interrupts import Interrupted, SignalGuard
 from cbp.metrics import run_metrics
 from cbp.plots import plot_runs
 from cbp.robot import FloatArray
@@ -28,6 +32,8 @@ from cbp.story import SCENE_FIGURE, plot_scene, run_sentence
 from cbp.trace import Trace
 
 __all__ = ["summary_line", "write_outputs"]
+
+log = logging.getLogger(__name__)
 
 #: Events listed in report.md per method (all of them are in metrics.json).
 REPORT_EVENTS = 50
@@ -39,56 +45,161 @@ def write_outputs(
     out: Path,
     extra_files: Mapping[str, Path] | None = None,
     claim: OutputClaim | None = None,
+    guard: SignalGuard | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Write the outputs of one or several runs of ``scenario`` as the folder ``out``.
 
-    ``trace.csv`` (``trace_<method>.csv`` when there are several methods),
-    ``metrics.json`` (one object per method under its name, with its events),
-    the figures of :func:`cbp.plots.plot_runs`, ``report.md``, ``scene.json``
-    (:func:`cbp.scene_file.write_scene`, for ``cbp view``), and copies of
-    ``extra_files`` (by name in the folder). They are written into a folder
-    beside ``out`` and put in its place when complete
-    (:func:`cbp.files.publish_folder`): an earlier output there is replaced as
-    a whole, and concurrent runs never mix their files.
+    First the record, put in place as a whole (an earlier output there is
+    replaced, concurrent runs never mix their files: :meth:`OutputClaim.publish
+    <cbp.files.OutputClaim.publish>`): ``trace.csv`` (``trace_<method>.csv``
+    for several methods), ``metrics.json`` (one object per method, with its
+    events), ``scene.json`` (for ``cbp view``) and copies of ``extra_files``
+    (by name). Then the figures (:func:`cbp.plots.plot_runs`, the scene's)
+    and ``report.md``, each put in place whole, and ``metrics.json`` again.
 
-    Every stage after the control loop is guarded: when the metrics, the
-    plots, the scene description or the report of a method cannot be made, the
-    others are still written, an event names the failure and the stage is
-    listed under ``incomplete`` in ``metrics.json`` (with the trace's own, the
-    clearance for example: :attr:`~cbp.trace.Trace.incomplete`).
+    A stop signal (SIGINT, SIGTERM, SIGHUP) never loses the record: while it
+    is written one is only noted; while the figures and the report are drawn
+    one cuts them short, and ``metrics.json`` lists them as not written.
+    ``guard`` is the caller's :class:`~cbp.interrupts.SignalGuard`, installed
+    around the call; without one, the call installs its own and, once the
+    outputs are safe, delivers what it noted as it would have been (SIGTERM
+    ends the process, Ctrl-C raises KeyboardInterrupt).
+
+    A stage after the control loop that fails (the metrics, the plots, the
+    scene description, the report) leaves the others written, an event names
+    it and ``incomplete`` in ``metrics.json`` lists it (with the trace's own,
+    the clearance for example: :attr:`~cbp.trace.Trace.incomplete`).
 
     ``claim`` is the folder claimed for ``out`` when the run began
-    (:func:`cbp.files.claim_output_folder`, which refuses an output in use by
-    a live run); without one, it is claimed now, removing what dead processes
-    left but refusing nothing (the run is over: its outputs must be kept).
+    (:func:`cbp.files.claim_output_folder`); without one, it is claimed now,
+    removing what dead processes left but refusing nothing (the run is over:
+    its outputs must be kept).
 
     Returns:
         The metrics, by method.
 
     Raises:
         ConfigError: ``out`` holds something other than a cbp output (the
-            outputs are kept beside it; the message says where).
+            record is kept beside it; the message says where).
     """
     claim = claim or claim_output_folder(out, refuse_live=False)
-    staging = claim.staging
-    try:
-        end = max((float(t.t[-1]) for t in traces.values() if t.t.size), default=0.0)
+    own = guard is None
+    guard = guard or SignalGuard()
+    with guard if own else contextlib.nullcontext(guard):
         try:
-            write_scene(staging, scenario, end)
-        except Exception as exc:  # the replay needs it, the rest does not
-            for trace in traces.values():
-                _failed_stage(trace, "scene description", exc)
-        metrics = _write(scenario, traces, staging)
-        for name, source in (extra_files or {}).items():
-            shutil.copyfile(source, staging / name)
-    except BaseException:
-        claim.release(remove=True)
-        raise
-    try:
-        publish_folder(staging, out)
-    finally:
-        claim.release()
+            metrics = _write_record(scenario, traces, claim, extra_files or {})
+        except BaseException:
+            claim.release(remove=not claim.released)
+            raise
+        try:
+            _write_figures(scenario, traces, metrics, claim, guard)
+        finally:
+            claim.release(remove=True)
+    if own:
+        guard.deliver()
     return metrics
+
+
+def _write_record(
+    scenario: Scenario,
+    traces: Mapping[str, Trace],
+    claim: OutputClaim,
+    extra_files: Mapping[str, Path],
+) -> dict[str, dict[str, Any]]:
+    """The traces, metrics, scene description and extra files, put in place whole.
+
+    On a ConfigError from :meth:`~cbp.files.OutputClaim.publish` (``out``
+    changed meanwhile) the claim is released and its folder kept.
+    """
+    staging = claim.staging
+    end = max((float(t.t[-1]) for t in traces.values() if t.t.size), default=0.0)
+    metrics = {name: _metrics(trace, scenario) for name, trace in traces.items()}
+    for name, trace in traces.items():
+        csv_name = "trace.csv" if len(traces) == 1 else f"trace_{name}.csv"
+        _write_csv(trace, staging / csv_name)
+    try:
+        write_scene(staging, scenario, end)
+    except Exception as exc:  # the replay needs it, the rest does not
+        for trace in traces.values():
+            _failed_stage(trace, "scene description", exc)
+    for name, source in extra_files.items():
+        shutil.copyfile(source, staging / name)
+    _settle(metrics, traces)
+    (staging / "metrics.json").write_text(_metrics_document(metrics, traces))
+    try:
+        claim.publish()
+    except ConfigError:
+        claim.release()
+        raise
+    log.info("%s: trace and metrics written; drawing the figures", claim.out)
+    return metrics
+
+
+def _write_figures(
+    scenario: Scenario,
+    traces: Mapping[str, Trace],
+    metrics: dict[str, dict[str, Any]],
+    claim: OutputClaim,
+    guard: SignalGuard,
+) -> None:
+    """The figures and report.md, then metrics.json again; a signal cuts them short.
+
+    The stages a signal leaves undone are listed under ``incomplete``.
+    """
+    staging, title = claim.staging, scenario.spec.name
+    figures: list[Path] = []
+    scene: Path | None = None
+    stages = ["plots", "scene figure", "report"]
+    try:
+        with guard.interruptible():
+            try:
+                figures = plot_runs(traces, staging, title)
+            except Exception as exc:
+                _failed_stages(traces, "plots", exc)
+            stages.remove("plots")
+            try:
+                objects = scenario.spec.world.objects
+                scene = plot_scene(objects, traces, staging / SCENE_FIGURE, title)
+            except Exception as exc:
+                _failed_stages(traces, "scene figure", exc)
+            stages.remove("scene figure")
+            for figure in [*figures, *([scene] if scene else [])]:
+                claim.put(figure.name)
+            _settle(metrics, traces)
+            try:
+                report = _report(scenario, traces, metrics, figures, scene)
+            except Exception as exc:
+                _failed_stages(traces, "report", exc)
+                report = f"# {title}\n\nNo report: see metrics.json.\n"
+            stages.remove("report")
+            (staging / "report.md").write_text(report)
+            claim.put("report.md")
+    except Interrupted as exc:
+        for stage in stages:
+            _failed_stages(traces, stage, exc)
+    _settle(metrics, traces)
+    (staging / "metrics.json").write_text(_metrics_document(metrics, traces))
+    claim.put("metrics.json")
+
+
+def _metrics_document(
+    metrics: Mapping[str, Mapping[str, Any]], traces: Mapping[str, Trace]
+) -> str:
+    """metrics.json: each method's metrics with its events."""
+    document = {
+        name: {
+            **metrics[name],
+            "events": [{"t": t, "message": m} for t, m in trace.events],
+        }
+        for name, trace in traces.items()
+    }
+    return json.dumps(document, indent=2) + "\n"
+
+
+def _failed_stages(traces: Mapping[str, Trace], stage: str, exc: BaseException) -> None:
+    """Record that ``stage`` failed for every trace."""
+    for trace in traces.values():
+        _failed_stage(trace, stage, exc)
 
 
 def _failed_stage(trace: Trace, stage: str, exc: BaseException) -> None:
@@ -111,48 +222,6 @@ def _metrics(trace: Trace, scenario: Scenario) -> dict[str, Any]:
             "events": len(trace.events),
             "aborted": trace.aborted,
         }
-
-
-def _write(
-    scenario: Scenario, traces: Mapping[str, Trace], out: Path
-) -> dict[str, dict[str, Any]]:
-    metrics = {name: _metrics(trace, scenario) for name, trace in traces.items()}
-    for name, trace in traces.items():
-        csv_name = "trace.csv" if len(traces) == 1 else f"trace_{name}.csv"
-        _write_csv(trace, out / csv_name)
-    try:
-        figures = plot_runs(traces, out, scenario.spec.name)
-    except Exception as exc:
-        figures = []
-        for trace in traces.values():
-            _failed_stage(trace, "plots", exc)
-    scene: Path | None
-    try:
-        scene = plot_scene(
-            scenario.spec.world.objects, traces, out / SCENE_FIGURE, scenario.spec.name
-        )
-    except Exception as exc:
-        scene = None
-        for trace in traces.values():
-            _failed_stage(trace, "scene figure", exc)
-    _settle(metrics, traces)
-    try:
-        report = _report(scenario, traces, metrics, figures, scene)
-    except Exception as exc:
-        for trace in traces.values():
-            _failed_stage(trace, "report", exc)
-        report = f"# {scenario.spec.name}\n\nNo report: see metrics.json.\n"
-        _settle(metrics, traces)
-    document = {
-        name: {
-            **metrics[name],
-            "events": [{"t": t, "message": m} for t, m in trace.events],
-        }
-        for name, trace in traces.items()
-    }
-    (out / "metrics.json").write_text(json.dumps(document, indent=2) + "\n")
-    (out / "report.md").write_text(report)
-    return metrics
 
 
 def _settle(metrics: dict[str, dict[str, Any]], traces: Mapping[str, Trace]) -> None:

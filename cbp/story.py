@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from cbp.metrics import CONTACT_FORCE, FORCED_OFF
+from cbp.metrics import CONTACT_FORCE
 from cbp.plots import colour, readable_axes
 from cbp.robot import FloatArray
 from cbp.scenario.scene import ObjectSpec
-from cbp.trace import Trace
+from cbp.trace import FORCED_OFF, Trace
 
 __all__ = ["SCENE_FIGURE", "plot_scene", "run_sentence"]
 

@@ -26,10 +26,16 @@ import numpy as np
 
 from cbp.robot import FloatArray
 
-__all__ = ["FULL_PERIOD_NOTE", "PeriodRecord", "Trace"]
+__all__ = ["FORCED_OFF", "FULL_PERIOD_NOTE", "PeriodRecord", "Trace"]
 
 #: The note of a period whose planner used its whole time budget.
 FULL_PERIOD_NOTE = "time budget spent"
+
+
+#: A joint this far from its command [rad or m] was forced there by what the
+#: arm touches: the joint controller tracks within about 0.02 rad, also in
+#: contact (the generated moving scenes' declared runs).
+FORCED_OFF = 0.1
 
 
 @dataclass(frozen=True)

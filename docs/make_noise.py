@@ -25,9 +25,9 @@ import numpy as np
 from make_cat_scenes import SCENES
 
 from cbp.executors import make_planner
-from cbp.executors.trajectory import run_trajectory_executor
 from cbp.metrics import run_metrics
 from cbp.run import build_run
+from cbp.run.loop import run_loop
 from cbp.scenario import load_scenario
 
 ROOT = Path(__file__).parents[1]
@@ -57,14 +57,14 @@ def run_scene(
     timing = scenario.spec.method.timing("cat")
     parts = build_run(scenario, method="cat", clock=timing.clock)
     try:
-        planner = make_planner("cat", scenario, parts)
+        planner = make_planner("cat", parts)
     except BaseException:
         parts.close()
         raise
     assert parts.cameras is not None
     grid = parts.cameras.grid
     start = time.perf_counter()
-    trace = run_trajectory_executor(parts, planner, timing)
+    trace = run_loop(parts, planner, timing)
     m = run_metrics(trace)
     return {
         "reached": bool(m["reached"]),

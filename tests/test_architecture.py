@@ -205,6 +205,23 @@ def test_the_scenario_package_imports_no_executor() -> None:
     assert "cbp.run" not in graph["cbp.scenario"]
 
 
+#: What reports a run to people: formatting, figures, progress bars.
+REPORTING = ("cbp.report", "cbp.metrics", "cbp.story", "cbp.plots", "cbp.progress")
+
+
+def test_the_control_loop_imports_no_reporting() -> None:
+    """Executors and the run layer tell their log; the command line formats it."""
+    modules = _modules("cbp")
+    for name, path in modules.items():
+        if not name.startswith(("cbp.executors", "cbp.run")):
+            continue
+        for line, module, names in _imports(path, type_checking=True):
+            targets = [module, *(f"{module}.{n}" for n in names)]
+            assert not any(t.startswith(REPORTING) for t in targets), (
+                f"{path.relative_to(ROOT)}:{line} imports {module}"
+            )
+
+
 def test_the_world_model_does_not_import_the_simulator() -> None:
     """Perception and collision import no cbp.sim; loading a scenario no PyBullet."""
     graph = _package_graph()

@@ -10,7 +10,7 @@ import pybullet_data
 import pytest
 import yaml
 
-import cbp.robot
+import cbp.robot.loading
 from cbp.cli import main
 from cbp.errors import ConfigError, RobotNotFoundError, ScenarioError
 from cbp.robot import LIMIT_TOLERANCE, RobotModel, find_robot_folder
@@ -171,7 +171,7 @@ def test_a_urdf_pybullet_refuses_is_a_located_error(
     )
     # Past the load-time check (as if the file went missing after it), `cbp
     # run` says the same and exits 2 rather than show PyBullet's traceback.
-    monkeypatch.setattr(cbp.robot, "missing_meshes", lambda *args: [])
+    monkeypatch.setattr(cbp.robot.loading, "missing_meshes", lambda *args: [])
     capsys.readouterr()
     out = tmp_path / "out"
     command = ["-q", "run", str(tmp_path / "s.yaml"), "--out", str(out)]

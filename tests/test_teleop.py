@@ -187,7 +187,7 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         assert wait_until(
             lambda: session.snapshot().hand[0] - before[0] > 0.9 * step, 10.0
         ), f"the hand moved {session.snapshot().hand - before} in 10 s"
-        assert wait_until(lambda: not page.unreachable, 10.0)  # a goal within reach
+        assert wait_until(lambda: not page.state().unreachable, 10.0)  # within reach
 
         # The keyboard: "w" presses +x (a shortcut in the page).
         assert "keys: w +x" in browser.page_source
@@ -220,7 +220,7 @@ def test_the_page_jogs_the_hand_and_switches_the_method() -> None:
         inside = np.array([0.55, -0.24, 0.03])  # board_1's centre
         session.set_goal(inside, rotation)
         assert wait_until(lambda: np.allclose(page.gizmo.position, inside), 10.0)
-        assert page.ghost is not None
+        assert page.scene.ghost is not None
         assert wait_until(
             lambda: page.state().gripper_visible and page.state().ghost_visible, 8.0
         )
@@ -455,7 +455,11 @@ def test_absurd_or_unreachable_operator_goals_are_refused_or_clamped() -> None:
     finally:
         parts.close()
     events = [m for _, m in parts.log.events]
-    assert sum(m.startswith("goal rejected") for m in events) == 2
+    # The two refused in a row are one episode: said once, counted when the
+    # next goal is taken.
+    assert sum(m.startswith("goal rejected") for m in events) == 1
+    assert "goal accepted again after 2 rejected sample(s) since 0.03 s" in events
+    assert parts.log.counters["rejected_goal_samples"] == 2
     assert any("beyond its reach" in m for m in events)
     assert any("outside the world's bounds" in m for m in events)
     assert "goal within the world's bounds and the arm's reach again" in events
@@ -607,15 +611,15 @@ def test_the_page_sends_a_path_again_only_when_it_looks_different(
     )
     sim.follow(moving)
     page.update()
-    drawn = page._path_lines
+    drawn = page.scene.path_lines
     assert drawn is not None
     assert len(drawn) > 0
     sim.follow(dataclasses.replace(moving))  # a new object, the same path
     page.update()
-    assert page._path_lines is drawn  # not sent again
+    assert page.scene.path_lines is drawn  # not sent again
     sim.follow(dataclasses.replace(moving, positions=np.stack([q0, q0 - 0.2])))
     page.update()
-    assert page._path_lines is not drawn
+    assert page.scene.path_lines is not drawn
 
 
 def _moved_robot(session: TeleopSession, by: float) -> np.ndarray:

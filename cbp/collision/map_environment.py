@@ -38,18 +38,21 @@ class BlockedGrid:
         mask: True for obstacle cells, (nx, ny, nz).
         lower: the grid's lower corner [m].
         cell: cell size [m].
+        outside: whether space outside the grid is an obstacle (a map's: it is
+            unknown, and so counted when unknown space is).
     """
 
     mask: np.ndarray
     lower: FloatArray
     cell: float
+    outside: bool = False
 
     def contains(self, points: FloatArray) -> np.ndarray:
-        """Which points (n, 3) lie in an obstacle cell; outside the grid: none."""
+        """Which points (n, 3) lie in an obstacle cell (outside the grid: outside)."""
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         idx = np.floor((points - self.lower) / self.cell).astype(np.intp)
         inside = np.all((idx >= 0) & (idx < np.array(self.mask.shape)), axis=1)
-        out = np.zeros(len(points), dtype=bool)
+        out = np.full(len(points), self.outside, dtype=bool)
         i = idx[inside]
         out[inside] = self.mask[i[:, 0], i[:, 1], i[:, 2]]
         return out

@@ -11,37 +11,30 @@ constraints of the next one (CAT Sec. IV-C).
 from __future__ import annotations
 
 import contextlib
-import functools
 import math
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
-import coal
 import numpy as np
 import pinocchio as pin
 
 from cbp.collision.broad import shape_bounds
-from cbp.collision.cell_kernels import BlockedCells, any_cell_nearer
-from cbp.collision.checker import FreeSpaceChecker
-from cbp.collision.contacts import ContactRow, ContactSet
+from cbp.collision.contacts import ContactSet
 from cbp.collision.convex_kernels import (
     RobotTable,
     compile_convex_kernels,
     packed_robot,
-    placed_robot,
-    self_contacts,
-    self_overlap,
 )
-from cbp.collision.environment import Environment, WholeQuery, signed_distance
+from cbp.collision.environment import Environment, WholeQuery
+from cbp.collision.free_check import FreeCheck
 from cbp.collision.geometry import PlacedShapes, RobotGeometry, ShapePlacements
-from cbp.collision.map_environment import BlockedGrid
 from cbp.collision.motion import SweepBound
 from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.placements import ShapeKinematics
+from cbp.collision.self_contacts import SelfContacts
 from cbp.collision.settings import CollisionSettings
-from cbp.collision.shape_table import ShapeTable
-from cbp.robot import FloatArray, IntArray
+from cbp.robot import FloatArray
 from cbp.state import RobotState
 
 __all__ = [
@@ -50,10 +43,6 @@ __all__ = [
     "ContactSet",
     "StepCheck",
 ]
-
-
-#: :attr:`CollisionWorld.sweep_step` when the links are not padded [m].
-_UNPADDED_SWEEP_STEP = 0.002
 
 
 @dataclass(frozen=True)
@@ -78,57 +67,6 @@ class _Cache:
     key: bytes = b""
     environment: Environment | None = None
     contacts: ContactSet = field(default_factory=ContactSet.empty)
-
-
-def blocked_cells(blocked: BlockedGrid) -> BlockedCells:
-    """A map's obstacle cells and their shell, for the compiled free check.
-
-    A cell is in the shell unless its six neighbours are all obstacle cells
-    (the grid's border cells always are); a brick of 4 x 4 x 4 cells is
-    marked when it holds one.
-    """
-    solid = np.ascontiguousarray(blocked.mask, dtype=bool)
-    inner = solid.copy()
-    inner[0, :, :] = inner[-1, :, :] = False
-    inner[:, 0, :] = inner[:, -1, :] = False
-    inner[:, :, 0] = inner[:, :, -1] = False
-    middle = inner[1:-1, 1:-1, 1:-1]
-    middle &= solid[:-2, 1:-1, 1:-1]
-    middle &= solid[2:, 1:-1, 1:-1]
-    middle &= solid[1:-1, :-2, 1:-1]
-    middle &= solid[1:-1, 2:, 1:-1]
-    middle &= solid[1:-1, 1:-1, :-2]
-    middle &= solid[1:-1, 1:-1, 2:]
-    shell = solid & ~inner
-    nx, ny, nz = (-(-n // 4) * 4 for n in shell.shape)
-    padded = np.zeros((nx, ny, nz), dtype=bool)
-    padded[: shell.shape[0], : shell.shape[1], : shell.shape[2]] = shell
-    bricks = np.asarray(
-        padded.reshape(nx // 4, 4, ny // 4, 4, nz // 4, 4).any(axis=(1, 3, 5))
-    )
-    return BlockedCells(
-        solid, shell, bricks, np.asarray(blocked.lower, dtype=float), blocked.cell
-    )
-
-
-@dataclass(frozen=True)
-class _MapCheck:
-    """What :meth:`CollisionWorld.is_free` needs against one map snapshot.
-
-    Attributes:
-        blocked: the snapshot's dense grid.
-        cells: its obstacle cells and their shell (:func:`blocked_cells`).
-        table: the robot's shapes as the cell kernels read them.
-        nearer: how near a cell's centre may come to a shape [m].
-        order: the order the shapes are tried in, the last one found too near
-            first (kept from one snapshot to the next).
-    """
-
-    blocked: BlockedGrid
-    cells: BlockedCells
-    table: ShapeTable
-    nearer: float
-    order: IntArray
 
 
 class CollisionWorld:
@@ -164,15 +102,10 @@ class CollisionWorld:
         self._cache = _Cache()
         self._carried = ContactSet.empty()
         self._state = RobotState(geometry.robot)
-        self._request = coal.DistanceRequest()
-        self._result = coal.DistanceResult()
         self.environment_version = 0
         #: Plans in progress (:meth:`holding`), and the snapshot waiting for them.
         self._holds = 0
         self._waiting: Environment | None = None
-        self._free_space: FreeSpaceChecker | None = None
-        #: The planners' check against a map (:meth:`is_free`), per snapshot.
-        self._map_check: _MapCheck | None = None
         #: The shapes no joint moves (a fixed base), left out of the map's
         #: contacts: a floor under the base touches it, and no motion can
         #: change that. (Declared objects leave them out by ``allow_contact``:
@@ -206,11 +139,19 @@ class CollisionWorld:
         )
         if self._kinematics is not None:  # compiled (or loaded) here, not in a loop
             self._kinematics(pin.neutral(geometry.robot.model))
-        #: Where each self pair's GJK starts next (all pairs, for
-        #: :meth:`self_set`; the table's are those it checks).
-        self._self_guess = np.zeros((len(geometry.self_pairs), 5))
-        #: Where the planners' self check starts each pair's GJK.
-        self._free_guess = np.zeros((len(first), 5))
+        #: The robot's own pairs measured apart (all pairs; the table's are
+        #: those the one-pass queries check).
+        self._own = SelfContacts(geometry, self.settings, self.padding)
+        #: The planners' checks (:meth:`is_free`, :meth:`motion_free`).
+        self._free = FreeCheck(
+            geometry,
+            self.settings,
+            self.padding,
+            self._table,
+            self._centres,
+            self._fixed,
+            self.shape_frames,
+        )
         if self.settings.narrow_phase == "compiled":
             compile_convex_kernels()
         self._environment.prepare(geometry.shapes, self.margin(self._environment))
@@ -325,14 +266,14 @@ class CollisionWorld:
         self.reject(check)
         return check
 
-    @functools.cached_property
+    @property
     def sweep(self) -> SweepBound:
         """How far the robot's shapes move along joint-space segments.
 
         Raises ValueError (on first use) for a robot with joints other than
         revolute and prismatic ones.
         """
-        return SweepBound(self.geometry)
+        return self._free.sweep
 
     @property
     def sweep_step(self) -> float:
@@ -342,7 +283,7 @@ class CollisionWorld:
         keeps half of it between them (:mod:`cbp.collision.motion`); 2 mm
         when the links are not padded (then it may touch by up to 1 mm).
         """
-        return self.padding if self.padding > 0 else _UNPADDED_SWEEP_STEP
+        return self._free.sweep_step
 
     def motion_free(
         self,
@@ -363,10 +304,7 @@ class CollisionWorld:
             is_free: the check of one configuration (default :meth:`is_free`;
                 planners pass one that charges their budget).
         """
-        check = is_free or self.is_free
-        if not check(b):
-            return False
-        return all(check(q) for q in self.sweep.between(a, b, self.sweep_step))
+        return self._free.motion_free(a, b, is_free or self.is_free)
 
     @property
     def against_map(self) -> bool:
@@ -377,98 +315,10 @@ class CollisionWorld:
         """Whether ``q`` is collision-free (planners, IK).
 
         Against declared objects, the same answer as ``check(q).penetration ==
-        0``, without the contacts, in one pinocchio call
-        (:class:`~cbp.collision.checker.FreeSpaceChecker`). Against an
-        occupancy map, by the rule CAT's step validation uses: a padded shape
-        may reach ``collision.penetration_tolerance`` plus half a cell into the
-        map's cells inflated by half a cell (that is, the tolerance into the
-        cells themselves). Space no camera has seen hugs the padded shapes of
-        a robot that has held it, so a stricter rule would find no
-        configuration near the arm free, and the planners could not plan where
-        CAT can move. With the compiled narrow phase the map's cells are
-        measured as CAT's step validation measures them, in one compiled pass
-        over the dense grid that stops at the first cell too near
-        (:func:`~cbp.collision.cell_kernels.any_cell_nearer`, the shape last
-        found too near tried first), then the robot's own pairs in another
-        (:func:`~cbp.collision.convex_kernels.self_overlap`).
+        0``; against an occupancy map, by the rule CAT's step validation uses
+        (:meth:`~cbp.collision.free_check.FreeCheck.is_free`).
         """
-        environment = self._environment
-        blocked = getattr(environment, "blocked", None)
-        if blocked is not None and self.settings.narrow_phase == "compiled":
-            return self._free_in_map(np.asarray(q, dtype=float), blocked)
-        checker = self._free_space
-        if checker is None or checker.environment is not environment:
-            checker = self._free_space = FreeSpaceChecker(
-                self.geometry,
-                environment,
-                self.padding,
-                self.settings.self_collision,
-                tolerance=(
-                    self.settings.penetration_tolerance + environment.resolution
-                    if environment.resolution > 0.0
-                    else 0.0
-                ),
-            )
-        return checker.is_free(q)
-
-    def _free_in_map(self, q: FloatArray, blocked: BlockedGrid) -> bool:
-        """:meth:`is_free` against a map's dense grid ``blocked``."""
-        if not math.isfinite(q.dot(q)):
-            return False
-        check = self._map_check
-        if check is None or check.blocked is not blocked:
-            # CAT keeps a step whose cells' distances, less the padding and
-            # half a cell (the query's) and half a cell again (the map's
-            # resolution), are no deeper than the tolerance plus half a cell:
-            # each cell's centre at least this far from the shapes.
-            nearer = (
-                0.5 * blocked.cell + self.padding - self.settings.penetration_tolerance
-            )
-            check = self._map_check = _MapCheck(
-                blocked,
-                blocked_cells(blocked),
-                ShapeTable.for_shapes(self.geometry.shapes, nearer + blocked.cell),
-                nearer,
-                # Shapes no joint moves (a fixed base) are not tried: a floor
-                # under the base touches it, and no motion can change that.
-                np.flatnonzero(~self._fixed).astype(np.intp)
-                if check is None
-                else check.order,
-            )
-        state = self._state
-        state.update(q)
-        frames = self.shape_frames(state)
-        if (
-            any_cell_nearer(
-                check.cells,
-                check.table.arrays,
-                frames,
-                self._centres,
-                check.nearer,
-                check.order,
-            )
-            >= 0
-        ):
-            return False
-        if not self.settings.self_collision:
-            return True
-        table = self._table
-        pad2 = 2.0 * self.padding
-        own = self_overlap(
-            frames,
-            table.bounds,
-            (table.first, table.second, self._free_guess, pad2, pad2),
-        )
-        if own < 0:  # a shape the kernels skip: coal measures the pairs
-            return self._self_free.is_free(q)
-        return own == 0
-
-    @functools.cached_property
-    def _self_free(self) -> FreeSpaceChecker:
-        """The robot's own pairs' check by coal."""
-        return FreeSpaceChecker(
-            self.geometry, PrimitiveEnvironment([]), self.padding, self_collision=True
-        )
+        return self._free.is_free(q, self._environment)
 
     def carry_over(self, contacts: ContactSet) -> None:
         """Add ``contacts`` (from a rejected configuration) to the next query.
@@ -569,7 +419,7 @@ class CollisionWorld:
             if settings.narrow_phase == "compiled"
             else environment.query(robot, margin, per_shape, settings.narrow_phase)
         )
-        own = self.self_set(robot) if settings.self_collision else []
+        own = self._own.measured(robot) if settings.self_collision else []
         # Occupancy maps: the surface is uncertain by half a cell, so obstacles
         # are inflated by that much (and step validation tolerates as much more).
         return self._moving_part(
@@ -616,77 +466,7 @@ class CollisionWorld:
         Args:
             robot: the shapes at a configuration (:meth:`placed`).
         """
-        own = self.self_set(robot)
-        return own if isinstance(own, ContactSet) else ContactSet.from_rows(own)
-
-    def self_set(self, robot: PlacedShapes) -> ContactSet | list[ContactRow]:
-        """:meth:`self_contacts` as the narrow phase gives them, for stacking.
-
-        Compiled (``collision.narrow_phase: compiled``): a set measured in one
-        pass; with coal: rows (:meth:`self_rows`).
-        """
-        if self.settings.narrow_phase == "coal":
-            return self.self_rows(robot)
-        geometry = self.geometry
-        first, second = geometry.pair_arrays
-        guess = self._self_guess
-        n = len(first)
-        if not n:
-            return ContactSet.empty()
-        pad2 = 2.0 * self.padding
-        index = np.empty((2, n), dtype=np.intp)
-        floats = np.empty((4, n, 3))
-        left = np.empty((2, n), dtype=np.intp)
-        count, missed = self_contacts(
-            placed_robot(robot),
-            (first, second, guess, self.settings.activation_distance + pad2, pad2),
-            index,
-            floats,
-            left,
-        )
-        found = ContactSet.packed(index, floats, 0, count)
-        if not missed:
-            return found
-        return ContactSet.concatenate(
-            [found, ContactSet.from_rows(self.self_rows(robot, left[1, :missed]))]
-        )
-
-    def self_rows(
-        self, robot: PlacedShapes, which: IntArray | None = None
-    ) -> list[ContactRow]:
-        """:meth:`self_contacts` measured by coal, as rows, to stack in one call.
-
-        Args:
-            robot: the shapes at a configuration (:meth:`placed`).
-            which: the indices into :attr:`RobotGeometry.self_pairs` to measure
-                (default: those the broad phase keeps).
-        """
-        shapes = self.geometry.shapes
-        placements, centres, halves = robot.placements, robot.centres, robot.halves
-        pad2 = 2.0 * self.padding
-        margin = self.settings.activation_distance + pad2
-        rows = []
-        request, result = self._request, self._result
-        pairs = self.geometry.self_pairs
-        near = (
-            self.geometry.near_self_pairs(centres, margin, halves)
-            if which is None
-            else which.tolist()
-        )
-        for k in near:
-            i, j = pairs[k]
-            # Shape j first: the normal then points from j toward i.
-            d, point, other, normal = signed_distance(
-                shapes[j].shape,
-                placements[j],
-                shapes[i].shape,
-                placements[i],
-                request,
-                result,
-            )
-            if d < margin:
-                rows.append((i, j, point, other, normal, d - pad2))
-        return rows
+        return self._own.contacts(robot)
 
     def __repr__(self) -> str:
         """Geometry, environment and settings."""

@@ -22,12 +22,12 @@ from typing import TYPE_CHECKING
 from cbp.methods import method_info
 
 if TYPE_CHECKING:
-    from cbp.executors.trajectory import Planner
     from cbp.run import RunParts
+    from cbp.run.plan import Planner
     from cbp.scenario.runtime import Scenario
     from cbp.trace import Trace
 
-__all__ = ["Executor", "load_executor", "make_planner"]
+__all__ = ["Executor", "load_executor", "make_planner", "run_periodic"]
 
 
 #: Runs a scenario for its duration (``run(scenario, gui)``; ``gui`` opens the
@@ -47,8 +47,11 @@ def load_executor(name: str, choices: tuple[str, ...] | None = None) -> Executor
     return executor
 
 
-def make_planner(name: str, scenario: Scenario, parts: RunParts) -> Planner:
+def make_planner(name: str, parts: RunParts) -> Planner:
     """Method ``name``'s per-period planner for the run made of ``parts``.
+
+    It plans with the run's own plugins and world (``parts.scenario``, bound
+    for this run by :func:`~cbp.run.build_run`).
 
     Raises:
         ConfigError: ``name`` is not a method.
@@ -58,5 +61,27 @@ def make_planner(name: str, scenario: Scenario, parts: RunParts) -> Planner:
     if not row.periodic:
         raise ValueError(f"the {name} executor has no per-period planner")
     module = importlib.import_module(f"cbp.executors.{row.module}")
-    planner: Planner = module.make_planner(scenario, parts)
+    planner: Planner = module.make_planner(parts.scenario, parts)
     return planner
+
+
+def run_periodic(scenario: Scenario, method: str, gui: bool = False) -> Trace:
+    """Run ``scenario`` with periodic method ``method``; return the trace.
+
+    The one runner of every method that plans per command period (the
+    ``run_<name>`` of CAT, IK, MP and the hybrid): its parts from
+    :func:`~cbp.run.build_run`, its planner from the method's module, the
+    loop (:func:`~cbp.run.loop.run_loop`) timed by the scenario's
+    ``method:`` section.
+    """
+    from cbp.run import build_run
+    from cbp.run.loop import run_loop
+
+    timing = scenario.spec.method.timing(method)
+    parts = build_run(scenario, method=method, gui=gui, clock=timing.clock)
+    try:
+        planner = make_planner(method, parts)
+    except BaseException:
+        parts.close()
+        raise
+    return run_loop(parts, planner, timing)

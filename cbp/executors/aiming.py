@@ -14,11 +14,11 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.collision.world import CollisionWorld
-from cbp.executors.clock import Budget
 from cbp.executors.ik_search import solve_pose
 from cbp.perception.kernels import FREE, UNKNOWN
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray, RobotModel
+from cbp.run.budget import Budget
 from cbp.state import RobotState
 
 __all__ = ["clear_line", "looking_at", "solve_camera", "unseen_held"]

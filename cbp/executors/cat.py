@@ -2,7 +2,7 @@
 """The CAT executor: many validated QP steps per command period (CAT Sec. IV).
 
 Each command period, from the starting point chosen by the trajectory loop
-(:mod:`cbp.executors.trajectory`), the engine takes QP steps toward the current
+(:mod:`cbp.run.loop`), the engine takes QP steps toward the current
 goal until the period's time budget is spent, the motion has converged, the
 path reaches past what the arm could follow before the next period's plan
 replaces it (``reach_periods``), or a step cannot be made. Every step is
@@ -22,13 +22,14 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.errors import CbpError
-from cbp.executors.clock import Budget
+from cbp.executors import run_periodic
 from cbp.executors.stepping import ValidatedStepper
-from cbp.executors.trajectory import Plan, run_periodic
 from cbp.methods.settings import CatSettings
 from cbp.plugin import HoldsContacts
 from cbp.robot import FloatArray
+from cbp.run.budget import Budget
 from cbp.run.parts import RunParts
+from cbp.run.plan import Plan
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 
@@ -82,10 +83,10 @@ class CatPlanner:
         if goal is None:
             return Plan(None, 0, "no goal yet")
         stepper = self._stepper
-        if stepper is None:  # one per run: an easing is said once per change
+        if stepper is None:  # one per run: easings are said once per episode
             world = run.world if self.scenario.needs_collision_world else None
             stepper = self._stepper = ValidatedStepper(
-                self.engine, world, lambda message: run.event(run.sim.t, message)
+                self.engine, world, run.event, lambda: run.sim.t
             )
         # A step is kept if it penetrates no deeper than the tolerance, or than
         # where it started (so a robot that starts in collision can leave it).
@@ -171,7 +172,9 @@ class CatPlanner:
         return self._dt
 
     def close(self) -> None:
-        """Nothing to release (the engine is the scenario's)."""
+        """Say the easing episode under way (the engine is the run's)."""
+        if self._stepper is not None:
+            self._stepper.eased.flush()
 
     def _say_if_unseen_space_holds(self, run: RunParts) -> None:
         """An event when contacts with space no camera has seen hold the arm.

@@ -25,9 +25,15 @@ are the planner's, up to ``planning_budget`` for one goal):
    times it within the same limits as every executor and splices it in.
 
 While a plan runs, each period checks that the rest of it is still free in the
-current world and that the goal has not moved more than ``goal_moved`` from the
-one planned for; otherwise, and when the plan has been followed to its end,
-control returns to CAT at that period (CAT starts from the point the loop
+current world (:class:`~cbp.executors.plan_watch.PlanWatch`: against a map,
+within half a cell of the planner's rule, so that a still scene's noise does
+not make a fresh plan stale) and that the goal has not moved more than
+``goal_moved`` from the one planned for. A plan that is no longer free is
+braked on and planned again at once, from where the arm comes to rest (a
+plan found counts as a search that succeeded: it is planned again however
+often the world changes; before, control returned to CAT and the same goal
+was never planned for again). A goal that moved, and a plan followed to its
+end, return control to CAT at that period (CAT starts from the point the loop
 gives it, so the motion stays continuous). Where no configuration or no plan
 is found within the budget, an event says so and CAT's safe stop stays; the
 same goal is searched again after ``retry_after`` (fresh random starts, a new
@@ -53,16 +59,18 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.engine import Engine
-from cbp.executors.backout import clear_padding
+from cbp.executors import run_periodic
 from cbp.executors.cat import CatPlanner
-from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch, check_work
 from cbp.executors.look import Looker
 from cbp.executors.mp import RrtConnect, plan_size, record_plan
-from cbp.executors.trajectory import BACK_OUT_DT, Plan, run_periodic
+from cbp.executors.plan_watch import PlanWatch
 from cbp.methods.settings import CatSettings, HybridSettings
 from cbp.robot import FloatArray
+from cbp.run.backout import BACK_OUT_DT, clear_padding
+from cbp.run.budget import Budget
 from cbp.run.parts import RunParts
+from cbp.run.plan import Plan
 from cbp.scenario.runtime import Scenario
 from cbp.trace import Trace
 
@@ -149,6 +157,7 @@ class HybridPlanner:
             seeded=self.cat_settings.timing.clock == "virtual",
         )
         self.detector = StallDetector(self.settings)
+        self.watch = PlanWatch(self.search)
         self.looker = Looker(scenario, run, planner, "hybrid")
         self._look_path: FloatArray | None = None  # a look's plan, to splice
         self.frame_id = self.robot.frame_id(run.ee_frame)
@@ -297,7 +306,7 @@ class HybridPlanner:
                     self.rrt.begin(self._from[-1], self._target)
                     return Plan(None, 0, f"hybrid: {note}")
                 points = np.vstack([lead[:-1], self._from[:-1], points])
-                return self._splice(points, note, t, run)
+                return self._splice(points, len(lead) + len(self._from) - 2, note)
         finally:
             self._spent += budget.elapsed()
         if self.mode == "planning" and self._spent > self.settings.planning_budget:
@@ -412,12 +421,18 @@ class HybridPlanner:
             return out
         return None
 
-    def _splice(self, points: FloatArray, note: str, t: float, run: RunParts) -> Plan:
-        """Hand the plan to the loop; from the next period, follow it."""
+    def _splice(self, points: FloatArray, lead: int, note: str) -> Plan:
+        """Hand the plan to the loop; from the next period, follow it.
+
+        ``lead``: the points before the plan's own start (the way there from
+        where the arm is, :class:`~cbp.executors.plan_watch.PlanWatch`).
+        """
         self.mode = "following"
         self._plan = points
         self._taken = False
         self._note = note
+        self._tries = 0  # a search that found its plan
+        self.watch.start(points, lead)
         return Plan(points, self.rrt.checks, f"hybrid: {note}")
 
     # ------------------------------------------------------------------ following
@@ -464,20 +479,18 @@ class HybridPlanner:
             self._to_cat()
             return None
         # The rest of the plan must still be free in the world as it is now
-        # (with cameras the map may have grown).
-        ahead = np.linalg.norm(self._plan - q, axis=1)
-        rest = self._plan[int(np.argmin(ahead)) :]
-        search = self.search
-        if not search.collision_free(rest[0], budget) or not search.path_free(
-            rest, budget
-        ):
+        # (with cameras the map may have grown): else brake and plan again.
+        if self.watch.stale(q, budget):
+            target = self._target if self._target is not None else q
             run.event(
                 t,
-                "hybrid: the rest of the plan is no longer free; control "
-                "returns to CAT",
+                "hybrid: the rest of the plan is no longer free; braking to plan again",
             )
             self._to_cat()
-            return None
+            run.log.counters["planning_attempts"] += 1
+            self._tries += 1
+            self._begin_planning(target, goal)
+            return Plan(None, 0, "hybrid: plan no longer free, braking", stop=True)
         return Plan(None, 0, "hybrid: following the plan")
 
     def _give_up(self, t: float) -> None:

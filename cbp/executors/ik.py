@@ -16,12 +16,14 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.errors import UnsafeStepError
-from cbp.executors.clock import Budget
-from cbp.executors.ik_search import IkSearch, SearchEvents
-from cbp.executors.trajectory import Plan, run_periodic
+from cbp.executors import run_periodic
+from cbp.executors.ik_search import IkSearch
+from cbp.executors.search_events import SearchEvents
 from cbp.methods.settings import IkSettings
 from cbp.robot import FloatArray, RobotModel
+from cbp.run.budget import Budget
 from cbp.run.parts import RunParts
+from cbp.run.plan import Plan
 from cbp.scenario.runtime import Scenario
 from cbp.trace import FULL_PERIOD_NOTE, Trace
 

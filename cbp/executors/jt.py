@@ -13,11 +13,14 @@ gravity compensation and joint damping). No collision avoidance, as in the paper
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
 from cbp.methods.settings import JtSettings
 from cbp.robot import FloatArray
+from cbp.run.loop import run_ticks
 from cbp.run.parts import RunParts, build_run
 from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import JointTrajectory
@@ -74,23 +77,35 @@ def _cap(vector: FloatArray, limit: float) -> FloatArray:
     return vector * (limit / norm) if norm > limit else vector
 
 
+class _Torques:
+    """JT's ticks: the simulator runs the torque law in slices of a command period."""
+
+    def __init__(self, run: RunParts) -> None:
+        self.run = run
+
+    def tick(self, t: float) -> None:
+        """Simulate up to ``t``."""
+        self.run.advance(t)
+
+    def hold(self, t: float) -> None:
+        """Hold where the robot is, under the joint impedance."""
+        sim = self.run.sim
+        sim.follow(JointTrajectory.hold(sim.t, sim.q.copy()))
+
+
+#: JT's slices [s]: the goal is sampled at the command rate.
+SLICE = 1.0 / 30.0
+
+
 def run_jt(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the JT method; return the trace."""
     run = build_run(scenario, method="jt", gui=gui)
     try:
-        run.sim.set_torque_controller(JacobianTransposeController(scenario, run))
-        # In slices of a command period, so that a failure is an event: the
-        # robot then holds where it is, under the joint impedance.
-        t = 0.0
-        while t < run.duration - 1e-9 and run.faults.aborted is None:
-            t = min(t + 1.0 / 30.0, run.duration)
-            try:
-                run.advance(t)
-            except Exception as exc:
-                run.faults.fault(run.sim.t, "torque control", exc)
-                run.sim.follow(JointTrajectory.hold(run.sim.t, run.sim.q.copy()))
-            else:
-                run.faults.ok()
+        run.sim.set_torque_controller(JacobianTransposeController(run.scenario, run))
+        # In slices of a command period, so that a failure is an event.
+        ends = np.arange(1, math.ceil(run.duration / SLICE - 1e-9) + 1) * SLICE
+        times = np.minimum(ends, run.duration)
+        run_ticks(_Torques(run), times, run.log, run.faults, "torque control")
     finally:
         trace = run.finish()
     return trace

@@ -49,7 +49,6 @@ import pinocchio as pin
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.executors.aiming import clear_line, looking_at, solve_camera, unseen_held
-from cbp.executors.clock import Budget
 from cbp.executors.ik_search import IkSearch, check_work
 from cbp.executors.visibility import CellStates, visibility
 from cbp.methods.settings import LookSettings, PlannerSettings
@@ -58,6 +57,7 @@ from cbp.perception.kernels import OCCUPIED
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray
+from cbp.run.budget import Budget
 from cbp.run.parts import RunParts
 from cbp.scenario.runtime import Scenario
 from cbp.state import RobotState

@@ -32,13 +32,15 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from cbp.executors.clock import Budget
-from cbp.executors.ik_search import IkSearch, SearchEvents
+from cbp.executors import run_periodic
+from cbp.executors.ik_search import IkSearch
 from cbp.executors.look import Looker
-from cbp.executors.trajectory import Plan, run_periodic
+from cbp.executors.search_events import SearchEvents
 from cbp.methods.settings import MpSettings, PlannerSettings
 from cbp.robot import FloatArray, RobotModel
+from cbp.run.budget import Budget
 from cbp.run.parts import RunParts
+from cbp.run.plan import Plan
 from cbp.scenario.runtime import Scenario
 from cbp.sim.trajectory import time_parameterize
 from cbp.trace import Trace

@@ -21,6 +21,7 @@ from cbp.collision.world import CollisionWorld
 from cbp.engine import Engine, StepResult
 from cbp.errors import PluginOutputError, SolveError
 from cbp.robot import FloatArray
+from cbp.run.events import Repeating
 
 __all__ = ["Step", "ValidatedStepper"]
 
@@ -58,9 +59,10 @@ class ValidatedStepper:
     Args:
         engine: the QP engine.
         world: the collision world that validates steps, or None (no check).
-        event: receives a message when the engine eases the QP differently
-            from the step before (a relaxation starts or changes), once per
-            change over the stepper's life.
+        event: records a message at a time (the run's events): when the
+            engine eases the QP, once per episode with a count
+            (:class:`~cbp.run.events.Repeating`).
+        now: the run's time [s], for the events.
 
     Attributes:
         last: what the engine's last solved step returned, or None.
@@ -70,15 +72,16 @@ class ValidatedStepper:
         self,
         engine: Engine,
         world: CollisionWorld | None,
-        event: Callable[[str], None],
+        event: Callable[[float, str], None],
+        now: Callable[[], float],
     ) -> None:
         """Keep the parts; the starting penetration is set by :meth:`start`."""
         self.engine = engine
         self.world = world
-        self._event = event
+        self.now = now
+        self.eased = Repeating(event, "QP eased")
         self.depth = 0.0
         self.last: StepResult | None = None
-        self._eased: str | None = None
 
     def start(self, q: FloatArray) -> None:
         """Begin from ``q``: its penetration is the depth a step may back out of."""
@@ -92,10 +95,8 @@ class ValidatedStepper:
         except (SolveError, PluginOutputError) as exc:
             return Step("failed", q, None, self.depth, str(exc))
         self.last = result
-        eased = None if result.eased is None else result.eased.description
-        if eased != self._eased and eased is not None:
-            self._event(f"QP eased: {eased}")
-        self._eased = eased
+        if result.eased is not None:
+            self.eased.happened(self.now(), result.eased.description)
         dq = result.dq
         robot = engine.robot
         # q + dq is pinocchio's integration on a Euclidean model, without its call.

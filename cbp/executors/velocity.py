@@ -40,11 +40,12 @@ from cbp.expressions import TimeFunction
 from cbp.methods import METHODS
 from cbp.methods.settings import VelocitySettings
 from cbp.plugin import Constraint, ReportsSignals, TakesInput, UsesCollisionWorld
-from cbp.progress import report_time
 from cbp.qp import Entry
 from cbp.robot import FloatArray
 from cbp.run.declared import DeclaredObjects
+from cbp.run.events import RunLog
 from cbp.run.faults import Faults
+from cbp.run.loop import run_ticks
 from cbp.scenario.runtime import Scenario
 from cbp.sim.mobile import MobileSimulation
 from cbp.sim.scene import simulate
@@ -65,22 +66,45 @@ def run_velocity(scenario: Scenario, gui: bool = False) -> Trace:
     METHODS["velocity"].refuse_source(
         scenario.spec.perception.source, f"{scenario.path}: perception.source"
     )
+    scenario = scenario.bound()  # this run's own plugins and world
     settings = scenario.spec.method.settings(VelocitySettings)
     sim = simulate(MobileSimulation, scenario, gui)
     loop = VelocityLoop(scenario, sim)
-    inputs = scenario.inputs()
+    run_log = RunLog("velocity", scenario.spec.duration)
     try:
-        for k in range(math.ceil(scenario.spec.duration / settings.dt)):
-            t = k * settings.dt
-            for plugin, functions in inputs:
-                loop.set_input(plugin, t, functools.partial(_evaluate, functions, t))
-            loop.tick(t)
-            report_time(t + settings.dt, scenario.spec.duration)
-            if loop.faults.aborted is not None:
-                break
+        times = np.arange(math.ceil(scenario.spec.duration / settings.dt))
+        # A tick counts its own faults (it brakes the robot and goes on);
+        # the loop ends when they abort the run.
+        run_ticks(
+            _Inputs(loop, scenario.inputs()),
+            times * settings.dt,
+            run_log,
+            Faults(run_log.event),
+            "control step",
+            stop=lambda: loop.faults.aborted is not None,
+        )
     finally:
         sim.close()
     return loop.trace()
+
+
+class _Inputs:
+    """Each tick, the operator's inputs (functions of time), then the loop's QP."""
+
+    def __init__(
+        self,
+        loop: VelocityLoop,
+        inputs: list[tuple[TakesInput, list[TimeFunction]]],
+    ) -> None:
+        self.loop, self.inputs = loop, inputs
+
+    def tick(self, t: float) -> None:
+        for plugin, functions in self.inputs:
+            self.loop.set_input(plugin, t, functools.partial(_evaluate, functions, t))
+        self.loop.tick(t)
+
+    def hold(self, t: float) -> None:
+        """Nothing to do: a tick brakes the robot itself when its QP fails."""
 
 
 class VelocityLoop:

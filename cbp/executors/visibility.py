@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from cbp.collision.geometry import WorldShapes, inside_convex
-from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
+from cbp.perception.kernels import OCCUPIED, UNKNOWN
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray, IntArray
 
@@ -35,9 +35,10 @@ UNSEEN_DEPTH = 0.05
 class CellStates(NamedTuple):
     """A map's cell states as :func:`visibility` reads them.
 
-    Cell ``(i, j, k)`` of ``cells`` (nx, ny, nz; :data:`FREE`,
+    Cell ``(i, j, k)`` of ``cells`` (nx, ny, nz; :data:`~cbp.perception.kernels.FREE`,
     :data:`UNKNOWN` or :data:`OCCUPIED`) spans ``lower + (i, j, k) * cell`` to
-    one cell beyond; outside the grid everything is free.
+    one cell beyond; outside the grid everything is unknown (the map's
+    bounds: nothing is seen there).
     """
 
     cells: np.ndarray
@@ -171,7 +172,7 @@ def _lines_of_sight(
             i = math.floor((eye[0] + t * dx - lower[0]) / cell)
             k = math.floor((eye[1] + t * dy - lower[1]) / cell)
             m = math.floor((eye[2] + t * dz - lower[2]) / cell)
-            state = FREE
+            state = UNKNOWN
             if 0 <= i < nx and 0 <= k < ny and 0 <= m < nz:
                 state = cells[i, k, m]
             if state == OCCUPIED:

@@ -177,8 +177,8 @@ def _solve(
     """
     if reach is not None and reach.beyond(pose[:3, 3]) is not None:
         return None
-    from cbp.executors.clock import VirtualBudget
     from cbp.methods.settings import VirtualCosts
+    from cbp.run.budget import VirtualBudget
 
     goal = pin.SE3(pose[:3, :3], pose[:3, 3])
     found: FloatArray | None = search.solve(

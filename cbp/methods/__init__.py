@@ -68,7 +68,7 @@ class Method:
         comparable: it tracks a goal in the simulator, so ``cbp compare`` can
             run it beside the others on one recorded goal stream.
         periodic: it plans a path each command period for the trajectory loop
-            (:mod:`cbp.executors.trajectory`); its module's ``make_planner``
+            (:mod:`cbp.run.loop`); its module's ``make_planner``
             gives the planner to other loops (``cbp teleop`` switches among
             these).
         timing: for a periodic method, the method whose settings section

@@ -96,7 +96,7 @@ class ExecutorTiming:
     clock: ClockKind = "wall"
     """How the budget is counted: ``wall`` (wall-clock time, as on a robot) or
     ``virtual`` (counted work at ``virtual_costs``: the same results on any
-    machine and load, faster than real time; :mod:`cbp.executors.clock`)."""
+    machine and load, faster than real time; :mod:`cbp.run.budget`)."""
     virtual_costs: VirtualCosts = field(default_factory=VirtualCosts)
     """Seconds charged per unit of work when ``clock`` is ``virtual``."""
 

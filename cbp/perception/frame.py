@@ -153,21 +153,26 @@ class DepthFrame:
         out[~self.valid()] = np.nan
         return np.asarray(out)
 
-    def points(self) -> tuple[FloatArray, np.ndarray]:
-        """World points (H, W, 3) of every pixel, and the mask of real hits (H, W)."""
+    def points(self, stride: int = 1) -> tuple[FloatArray, np.ndarray]:
+        """World points (H, W, 3) of every pixel, and the mask of real hits (H, W).
+
+        ``stride``: every so many pixels both ways only (then (H / stride, W /
+        stride, 3) and (H / stride, W / stride), rounded up).
+        """
         h, w = self.depth.shape
-        u = np.arange(w)
-        v = np.arange(h)
+        u = np.arange(0, w, stride)
+        v = np.arange(0, h, stride)
         x = 2.0 * u / w - 1.0
         y = 2.0 * (h - 1 - v) / h - 1.0
         X, Y = np.meshgrid(x, y)
-        Z = 2.0 * self.depth - 1.0
+        depth = self.depth[::stride, ::stride]
+        Z = 2.0 * depth - 1.0
         ndc = np.stack([X, Y, Z, np.ones_like(Z)], axis=-1).reshape(-1, 4)
         world = ndc.dot(self.unprojection.T)
         world = world[:, :3] / world[:, 3:4]
         with np.errstate(invalid="ignore"):
-            hit = self.valid() & (self.depth < _FAR_PLANE)
-        return world.reshape(h, w, 3), hit
+            hit = self.valid()[::stride, ::stride] & (depth < _FAR_PLANE)
+        return world.reshape(len(v), len(u), 3), hit
 
     def project(self, points: FloatArray) -> tuple[np.ndarray, np.ndarray, FloatArray]:
         """Pixel (row, column) of world points (n, 3) and their depth along the axis.

@@ -324,7 +324,10 @@ def swept_snapshot(
     lower = np.asarray(lower, dtype=float)
     centres = np.vstack([mapped.centres, lower + (ijk + 0.5) * cell])
     out = OccupancyEnvironment(
-        centres, cell, mapped.refiner, blocked=BlockedGrid(blocked, lower, cell)
+        centres,
+        cell,
+        mapped.refiner,
+        blocked=BlockedGrid(blocked, lower, cell, outside=mapped.blocked.outside),
     )
     out.stamp = mapped.stamp
     return out

@@ -61,7 +61,6 @@ from cbp.collision.map_environment import (
 )
 from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import (
-    FREE,
     KEPT_NONE,
     OCCUPIED,
     UNKNOWN,
@@ -137,6 +136,13 @@ class FrameSummary:
 class OccupancyGrid:
     """A dense three-state voxel grid over the mapped region.
 
+    The grid covers the spec's bounds (:attr:`PerceptionSpec.region`) and a
+    layer of cells around them that no camera sees through and the robot never
+    frees: space outside the bounds is unknown, as is space no camera has
+    seen, and with ``unknown: occupied`` the arm stays within the bounds. (It
+    was free: a box wholly below a map's floor was "reached" with the hand
+    inside its padding.)
+
     Args:
         spec: resolution, bounds, range, clearing and unknown-space settings.
         geometry: the robot's shapes, for filtering it out and for the space it
@@ -144,7 +150,10 @@ class OccupancyGrid:
 
     Attributes:
         cells: cell states (nx, ny, nz): :data:`~cbp.perception.kernels.UNKNOWN`,
-            ``FREE`` or ``OCCUPIED``.
+            ``FREE`` or ``OCCUPIED``; from :attr:`lower` (a cell outside the
+            bounds) to :attr:`upper`.
+        bounds: the mapped region's lower and upper corners (3,) each [m]
+            (the spec's, its size rounded up to whole cells).
         frames: frames integrated so far.
         robot_points_removed: readings filtered out as the robot, over all frames.
         hidden_cells: free cells made unknown again because something came
@@ -163,9 +172,14 @@ class OccupancyGrid:
         """Allocate the grid, all unknown."""
         self.spec = spec
         self.cell = spec.cell_size
-        self.lower = np.asarray(spec.bounds[0], dtype=float)
-        upper = np.asarray(spec.bounds[1], dtype=float)
-        self.shape = tuple(int(n) for n in np.ceil((upper - self.lower) / self.cell))
+        # The mapped region, and a layer of cells around it that stays
+        # unknown: the space outside the bounds (no pass sees through it or
+        # frees it; a reading may make it occupied).
+        region = np.asarray(spec.region, dtype=float)
+        inner = np.ceil((region[1] - region[0]) / self.cell).astype(int)
+        self.bounds = (region[0], region[0] + inner * self.cell)
+        self.lower = region[0] - self.cell
+        self.shape = tuple(int(n) + 2 for n in inner)
         self.upper = self.lower + np.array(self.shape) * self.cell
         self.cells = np.full(self.shape, UNKNOWN, dtype=np.uint8)
         self.misses = np.zeros(self.shape, dtype=np.uint8)
@@ -342,14 +356,14 @@ class OccupancyGrid:
         return float(np.mean(met.reshape(len(far), -1).any(axis=1)))
 
     def state_at(self, points: FloatArray) -> np.ndarray:
-        """The state of the cell of each point (n, 3); outside the grid: FREE.
+        """The state of the cell of each point (n, 3); outside the grid: UNKNOWN.
 
-        (Outside the mapped region nothing is mapped: it is not an obstacle.)
+        (Outside the mapped region nothing is seen: it may hold anything.)
         """
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         idx = np.floor((points - self.lower) / self.cell).astype(np.intp)
         inside = np.all((idx >= 0) & (idx < np.array(self.shape)), axis=1)
-        out = np.full(len(points), FREE, dtype=np.uint8)
+        out = np.full(len(points), UNKNOWN, dtype=np.uint8)
         i = idx[inside]
         out[inside] = self.cells[i[:, 0], i[:, 1], i[:, 2]]
         return out
@@ -566,7 +580,11 @@ class OccupancyGrid:
         R, t = shapes.frames[:, :3, :3], shapes.frames[:, :3, 3]
         centre = np.einsum("sij,sj->si", R, self._box_centres) + t
         half = np.einsum("sij,sj->si", np.abs(R), self._box_halves) + grow
-        boxes = np.hstack([centre - half, centre + half])
+        # Within the bounds: the layer of cells around them stays unknown.
+        inner = self.lower + self.cell, self.upper - self.cell
+        boxes = np.hstack(
+            [np.maximum(centre - half, inner[0]), np.minimum(centre + half, inner[1])]
+        )
         return int(
             carve_shapes(
                 self.arrays,
@@ -640,8 +658,8 @@ class OccupancyGrid:
         pts = np.array(corners)
         lo = np.floor((pts.min(axis=0) - self.lower) / self.cell).astype(int)
         hi = np.floor((pts.max(axis=0) - self.lower) / self.cell).astype(int) + 1
-        lo = np.maximum(lo, 0)
-        hi = np.minimum(hi, self.shape)
+        lo = np.maximum(lo, 1)  # not the layer of cells around the bounds
+        hi = np.minimum(hi, np.array(self.shape) - 1)
         if np.any(hi <= lo):
             return None
         return np.array([lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]], dtype=np.int64)
@@ -707,7 +725,9 @@ class OccupancyGrid:
             self.cell,
             refiner,
             index=index,
-            blocked=BlockedGrid(blocked, self.lower.copy(), self.cell),
+            blocked=BlockedGrid(
+                blocked, self.lower.copy(), self.cell, outside=s.unknown_blocks
+            ),
         )
 
     @property

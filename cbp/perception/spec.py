@@ -17,6 +17,10 @@ Vec3 = tuple[float, float, float]
 MAX_CELLS = 1 << 27
 """The largest map: three bytes a cell, so about 400 MB."""
 
+DEFAULT_BOUNDS: tuple[Vec3, Vec3] = ((-1.0, -1.0, -0.1), (1.5, 1.0, 1.5))
+"""The region mapped when no bounds are given and no reach bounds the robot
+(a base that moves) [m]."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class DepthNoise:
@@ -201,8 +205,17 @@ class PerceptionSpec:
     comparison)."""
     cell_size: float = 0.01
     """Occupancy map resolution [m]."""
-    bounds: tuple[Vec3, Vec3] = ((-1.0, -1.0, -0.1), (1.5, 1.0, 1.5))
-    """Lower and upper corners of the mapped region [m]."""
+    bounds: tuple[Vec3, Vec3] | None = None
+    """Lower and upper corners of the mapped region [m]. Space outside it is
+    unknown (an obstacle with ``unknown: occupied``): the map holds a layer of
+    unknown cells around it that no camera sees through and the robot never
+    frees, and a camera that sees surfaces outside it within the arm's reach
+    says so in an event. None (the default): the box the padded robot can
+    ever reach (every shape's bounding sphere about the reach of its centre,
+    :func:`~cbp.scenario.reach.reach_box`: for the Panda on its base, 2.0 x
+    2.0 x 2.0 m, 8 M cells at 1 cm); :data:`DEFAULT_BOUNDS` for a robot whose
+    base moves. Give smaller bounds to make the map cheaper where the scene
+    confines the arm (``configs/cat.yaml``: the table's side of the arm)."""
     max_range: float = 2.5
     """Depth readings farther than this are ignored [m]."""
     misses_to_clear: int = 2
@@ -383,18 +396,19 @@ class PerceptionSpec:
             raise ConfigError(
                 f"must be in [0.001, 0.2] m, got {self.cell_size}", "cell_size"
             )
-        lo, hi = self.bounds
-        if not all(a < b for a, b in zip(lo, hi, strict=True)):
-            raise ConfigError(
-                f"lower corner must be below upper, got {lo}, {hi}", "bounds"
-            )
-        cells = np.prod(np.ceil((np.subtract(hi, lo)) / self.cell_size))
-        if cells > MAX_CELLS:
-            raise ConfigError(
-                f"the map would have {cells:.3g} cells (bounds / cell_size); at most "
-                f"{MAX_CELLS:.3g}: shrink the bounds or grow the cells",
-                "bounds",
-            )
+        if self.bounds is not None:
+            lo, hi = self.bounds
+            if not all(a < b for a, b in zip(lo, hi, strict=True)):
+                raise ConfigError(
+                    f"lower corner must be below upper, got {lo}, {hi}", "bounds"
+                )
+            cells = np.prod(np.ceil((np.subtract(hi, lo)) / self.cell_size) + 2)
+            if cells > MAX_CELLS:
+                raise ConfigError(
+                    f"the map would have {cells:.3g} cells (bounds / cell_size); "
+                    f"at most {MAX_CELLS:.3g}: shrink the bounds or grow the cells",
+                    "bounds",
+                )
         if not 1 <= self.whole_frame_every <= 1000:
             raise ConfigError(
                 f"must be in [1, 1000], got {self.whole_frame_every}",
@@ -419,6 +433,25 @@ class PerceptionSpec:
             c if c.name else replace(c, name=f"camera{i}")
             for i, c in enumerate(cameras)
         ]
+
+    @property
+    def region(self) -> tuple[Vec3, Vec3]:
+        """The mapped region: ``bounds``, or :data:`DEFAULT_BOUNDS` when None.
+
+        A run resolves None to the box about the arm's reach first
+        (:meth:`with_bounds`); a grid built from a spec it did not resolve
+        maps the default box.
+        """
+        return self.bounds if self.bounds is not None else DEFAULT_BOUNDS
+
+    def with_bounds(self, lower: FloatArray, upper: FloatArray) -> PerceptionSpec:
+        """This spec mapping the box from ``lower`` to ``upper`` [m], checked.
+
+        Raises ConfigError (``bounds``) when the box would hold too many cells.
+        """
+        lo = (float(lower[0]), float(lower[1]), float(lower[2]))
+        hi = (float(upper[0]), float(upper[1]), float(upper[2]))
+        return replace(self, bounds=(lo, hi))
 
     @property
     def unknown_blocks(self) -> bool:

@@ -12,6 +12,11 @@ holds the robot until it gives one again. A frame is valid when it is well
 formed (:meth:`~cbp.perception.frame.DepthFrame.problem`) and believable
 (:mod:`cbp.perception.plausibility`: not blind, not frozen, not seeing
 through the robot).
+
+The map's bounds default to the box the arm can reach
+(:func:`~cbp.scenario.reach.reach_box`); space outside them is unknown. A
+camera that sees surfaces outside them within that box (where the arm could
+meet them, but the map cannot hold them) says so, once, in an event.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from cbp.perception.spec import PerceptionSpec
 from cbp.robot import FloatArray
 from cbp.run.events import RunLog
 from cbp.run.separation import SeparationMonitor
+from cbp.scenario.reach import Bounds, reach_box
 from cbp.sim.camera import DepthCamera
 from cbp.sim.raycast import RayCaster
 from cbp.sim.simulation import Simulation
@@ -44,6 +50,15 @@ __all__ = ["KEPT_CAPTURES", "Cameras"]
 
 #: Capture times kept per camera (:meth:`Cameras.mapped_since` counts up to it).
 KEPT_CAPTURES = 16
+
+#: A camera's frames are searched for surfaces outside the map's bounds this
+#: often [s], every :data:`OUTSIDE_STRIDE`-th pixel both ways; at least
+#: :data:`OUTSIDE_READINGS` such readings are said.
+OUTSIDE_EVERY, OUTSIDE_STRIDE, OUTSIDE_READINGS = 1.0, 4, 4
+
+#: Readings within this of a robot shape's bounding sphere are the robot's,
+#: not a surface outside the bounds [m].
+OUTSIDE_ROBOT_MARGIN = 0.05
 
 
 class Cameras:
@@ -83,9 +98,13 @@ class Cameras:
     ) -> None:
         """Build the cameras and the grid; map the first frames."""
         self._sim = sim
+        robot = world.geometry.robot
+        #: The box the arm can reach (None: no fixed reach).
+        self.reach = reach_box(world.geometry, sim.q.copy())
+        if spec.bounds is None and self.reach is not None:
+            spec = spec.with_bounds(*self._whole_cells(self.reach, spec.cell_size))
         self._spec = spec
         self._log = log
-        robot = world.geometry.robot
         self._state = RobotState(robot)
         world.set_environment(PrimitiveEnvironment([]))
         caster = RayCaster(sim.client)  # one for all: meshes read once
@@ -100,6 +119,9 @@ class Cameras:
         #: Per camera: time of its last valid frame, and whether it is failing.
         self._last_valid = [0.0] * n
         self._failing = [False] * n
+        #: Per camera: when its frames are next searched for surfaces outside
+        #: the bounds (inf: said already).
+        self._outside_next = [0.0] * n
         self._stale: str | None = None
         grid = self._grid = OccupancyGrid(spec, world.geometry)
         first = MapUpdater(grid, world, synchronous=True)
@@ -258,6 +280,10 @@ class Cameras:
         except Exception as exc:  # a camera that fails is a camera without frames
             frame, problem = None, f"capture failed ({type(exc).__name__}: {exc})"
         if problem is None:
+            assert frame is not None
+            if t >= self._outside_next[i]:
+                self._outside_next[i] = t + OUTSIDE_EVERY
+                self._say_outside(i, frame, t)
             if self._failing[i]:
                 self._log.event(t, f"camera '{camera.name}' gives valid frames again")
                 self._failing[i] = False
@@ -267,6 +293,46 @@ class Cameras:
             self._log.event(t, f"camera '{camera.name}': frame dropped, {problem}")
             self._failing[i] = True
         return None
+
+    @staticmethod
+    def _whole_cells(box: Bounds, cell: float) -> Bounds:
+        """``box`` grown to whole cells from a multiple of ``cell`` [m]."""
+        lower = np.floor(box[0] / cell) * cell
+        upper = np.ceil(box[1] / cell) * cell
+        return lower, upper
+
+    def _say_outside(self, i: int, frame: DepthFrame, t: float) -> None:
+        """Say (once per camera) that ``frame`` sees surfaces outside the bounds.
+
+        Readings outside the map's bounds, within the box the arm can reach
+        (:attr:`reach`; anywhere when None), and not the robot's (farther than
+        :data:`OUTSIDE_ROBOT_MARGIN` from its shapes' bounding spheres).
+        """
+        grid = self._grid
+        lower, upper = grid.bounds
+        points, hit = frame.points(OUTSIDE_STRIDE)
+        points = points[hit]
+        out = np.any((points < lower) | (points > upper), axis=1)
+        if self.reach is not None:
+            out &= np.all((points >= self.reach[0]) & (points <= self.reach[1]), axis=1)
+        points = points[out]
+        if len(points) and grid.geometry is not None:
+            shapes = grid.geometry.world_shapes(self._state)
+            gap = np.linalg.norm(points[:, None] - shapes.centres[None], axis=2)
+            near = gap < shapes.radii + OUTSIDE_ROBOT_MARGIN
+            points = points[~near.any(axis=1)]
+        if len(points) < OUTSIDE_READINGS:
+            return
+        self._outside_next[i] = np.inf
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        self._log.event(
+            t,
+            f"camera '{frame.camera}' sees surfaces outside the map's bounds "
+            f"{np.round(lower, 3).tolist()}...{np.round(upper, 3).tolist()} m "
+            f"within the arm's reach (readings from {np.round(lo, 2).tolist()} to "
+            f"{np.round(hi, 2).tolist()} m): the map holds them as unknown "
+            "space (perception.bounds)",
+        )
 
     def _capture(self, camera: DepthCamera) -> DepthFrame:
         """One frame of ``camera``; a mounted one from the robot as it is now.

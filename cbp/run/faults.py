@@ -13,11 +13,9 @@ stopped, the run ends early, and the trace, metrics and report say why
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import signal
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 __all__ = [
     "EXIT_ABORTED",
@@ -28,7 +26,6 @@ __all__ = [
     "clear_stop",
     "describe",
     "request_stop",
-    "stop_on_signals",
 ]
 
 log = logging.getLogger(__name__)
@@ -68,37 +65,6 @@ def clear_stop() -> None:
     """Forget a stop asked before (a new run may start)."""
     _STOP.clear()
     _STOP_REASON[0] = ""
-
-
-@contextlib.contextmanager
-def stop_on_signals() -> Iterator[None]:
-    """While inside, SIGINT, SIGTERM and SIGHUP stop the runs, which save.
-
-    The first signal asks the runs to stop (:func:`request_stop`): they brake
-    and their outputs are written. A second SIGINT interrupts at once
-    (KeyboardInterrupt), as Ctrl-C does outside. Only from the main thread
-    (elsewhere, nothing is installed).
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    names = {signal.SIGINT: "SIGINT (Ctrl-C)", signal.SIGTERM: "SIGTERM"}
-    if hasattr(signal, "SIGHUP"):
-        names[signal.SIGHUP] = "SIGHUP"
-
-    def handler(signum: int, frame: object) -> None:
-        if signum == signal.SIGINT and _STOP.is_set():
-            raise KeyboardInterrupt
-        request_stop(names.get(signal.Signals(signum), f"signal {signum}"))
-
-    before = {sig: signal.signal(sig, handler) for sig in names}
-    clear_stop()
-    try:
-        yield
-    finally:
-        for sig, old in before.items():
-            signal.signal(sig, old)
-        clear_stop()
 
 
 class Faults:

@@ -3,8 +3,10 @@
 
 A run samples its goal source (a scenario's stream, or the teleop page's live
 goal) at the source's rate, like an operator's input device. A malformed
-sample (NaN, not a rotation) is rejected with an event and the previous goal
-stays; a source that raises keeps the previous goal too. Each accepted goal
+sample (NaN, not a rotation) is rejected and the previous goal stays; a source
+that raises keeps the previous goal too. Either is said once per episode: when
+it starts, and with the count of samples when a valid goal comes again (the
+run's counter ``rejected_goal_samples`` holds the total). Each accepted goal
 that differs from the one before is kept with its time, for the trace and for
 replay. Whether the goal lies in an obstacle (or in space no camera has seen)
 is said as it changes: the arm then stops short of it.
@@ -61,8 +63,10 @@ class GoalBounds:
     @classmethod
     def of(cls, scenario: Scenario) -> GoalBounds:
         """The bounds of ``scenario``'s robot and world (``perception.bounds``)."""
+        bounds = scenario.spec.perception.bounds  # None: the reach bounds it
         lower, upper = (
-            np.asarray(c, dtype=float) for c in scenario.spec.perception.bounds
+            np.asarray(c, dtype=float)
+            for c in (bounds if bounds is not None else (-np.inf, np.inf))
         )
         reach = scenario.reach()
         if reach is None:
@@ -95,6 +99,41 @@ class _Sampled:
     t: float = -math.inf
     pose: pin.SE3 | None = None
     changes: list[tuple[float, pin.SE3]] = field(default_factory=list)
+
+
+class _Rejections:
+    """Rejected goal samples, said once per episode with their count.
+
+    As deadline misses are (:class:`cbp.run.periods.DeadlineMisses`):
+    the first with its reason, at once; the count when a valid goal is taken
+    again. The run's counter ``rejected_goal_samples`` holds the total.
+    """
+
+    def __init__(self, log: RunLog) -> None:
+        self._log = log
+        self._since: float | None = None
+        self._count = 0
+
+    def rejected(self, t: float, reason: str) -> None:
+        """The sample at ``t`` was rejected for ``reason``."""
+        counters = self._log.counters
+        counters["rejected_goal_samples"] = counters.get("rejected_goal_samples", 0) + 1
+        self._count += 1
+        if self._since is None:
+            self._since = t
+            self._log.event(t, f"goal rejected, previous goal kept: {reason}")
+
+    def accepted(self, t: float) -> None:
+        """A valid sample was taken at ``t``: the episode, if any, ends."""
+        if self._since is None:
+            return
+        self._log.event(
+            t,
+            f"goal accepted again after {self._count} rejected sample(s) since "
+            f"{self._since:.2f} s",
+        )
+        self._since = None
+        self._count = 0
 
 
 class GoalInput:
@@ -135,6 +174,7 @@ class GoalInput:
         self._perceived = perceived
         self._sampled = _Sampled()
         self._failing = False
+        self._rejections = _Rejections(log)
         self._space_checked: tuple[object, FloatArray] = (None, np.zeros(0))
         self._blocked = False
         self._bounds = bounds
@@ -179,8 +219,9 @@ class GoalInput:
             if self._bounds is not None:
                 pose = self._bounded(t, pose)
         except InvalidTargetError as exc:
-            self._log.event(t, f"goal rejected, previous goal kept: {exc}")
+            self._rejections.rejected(t, str(exc))
         else:
+            self._rejections.accepted(t)
             if sampled.pose is None or not pose.isApprox(sampled.pose, 1e-9):
                 changes = sampled.changes
                 if changes and changes[-1][0] >= sample_t:

@@ -21,7 +21,6 @@ from cbp.collision.world import CollisionWorld
 from cbp.goals import GoalSource
 from cbp.methods import method_info
 from cbp.methods.settings import ClockKind
-from cbp.progress import report_time
 from cbp.robot import FloatArray, RobotModel
 from cbp.run.cameras import Cameras
 from cbp.run.declared import DeclaredObjects
@@ -125,7 +124,7 @@ class RunParts:
                 meets [s] (a trajectory executor: two command periods), for
                 the separation declared moving objects need.
         """
-        report_time(t, self.duration)
+        self.log.progress(t)
         declared = self.declared
         sim = self.sim
         if declared is not None and declared.dynamic:
@@ -188,6 +187,10 @@ def build_run(
 ) -> RunParts:
     """Assemble the parts of a simulated run of ``scenario`` by ``method``.
 
+    The run binds its own plugins and world (:meth:`Scenario.bound`): the
+    same scenario builds any number of runs, and :attr:`RunParts.scenario` is
+    this run's binding of it.
+
     Args:
         scenario: the loaded scenario.
         method: the method that runs (:data:`cbp.methods.METHODS`).
@@ -206,14 +209,15 @@ def build_run(
             with the depth cameras.
     """
     row = method_info(method)
+    scenario = scenario.bound()  # this run's own plugins and world
     spec = scenario.spec
     row.refuse_source(spec.perception.source, f"{scenario.path}: perception.source")
     use_cameras = spec.perception.source == "depth_camera"
-    log = RunLog(method)
+    log = RunLog(method, spec.duration)
     sim = simulate(Simulation, scenario, gui)
     try:
         world = (
-            scenario.world_for_run()
+            scenario.world or scenario.new_world()
             if needs_world
             or row.checks_collisions
             or scenario.needs_collision_world

@@ -27,7 +27,7 @@ from cbp.collision.objects import EnvironmentObject, PrimitiveEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.engine import Engine
 from cbp.expressions import TimeFunction, compile_time_function
-from cbp.goals import GoalStream
+from cbp.goals import GoalStream, goal_stream
 from cbp.perception.frame import camera_parent
 from cbp.plugin import GoalReceiver, TakesInput, Task, UsesCollisionWorld
 from cbp.qp import Entry
@@ -139,6 +139,25 @@ class Scenario:
         environment = PrimitiveEnvironment(self.environment_objects())
         return CollisionWorld(geometry, environment, self.spec.collision)
 
+    def bound(self) -> Scenario:
+        """This scenario with fresh plugins and a fresh collision world, for one run.
+
+        The scenario is data: each run binds its own plugin instances (their
+        targets and latches) from the same parameters, and its own world, so
+        one :class:`Scenario` runs any number of times with the same result.
+        """
+        entries = tuple(
+            dataclasses.replace(e, plugin=_rebound(e.plugin, self.robot))
+            for e in self.entries
+        )
+        world = None
+        if self.world is not None:
+            world = self.new_world()
+            for entry in entries:
+                if isinstance(entry.plugin, UsesCollisionWorld):
+                    entry.plugin.attach_world(world)
+        return dataclasses.replace(self, entries=entries, world=world)
+
     def make_engine(self) -> Engine:
         """A new engine for these entries.
 
@@ -157,7 +176,7 @@ class Scenario:
         """The goal stream, if the scenario has one."""
         if self.spec.goal is None:
             return None
-        return GoalStream(self.spec.goal, self.path.parent)
+        return goal_stream(self.spec.goal, self.path.parent)
 
     def inputs(self) -> list[tuple[TakesInput, list[TimeFunction]]]:
         """Each input's plugin and its compiled functions of time."""
@@ -198,6 +217,18 @@ class Scenario:
         chain (:func:`~cbp.scenario.reach.arm_reach`).
         """
         return arm_reach(self.robot, self.q0, self.ee_frame)
+
+
+def _rebound(plugin: Any, robot: RobotModel) -> Any:
+    """A new instance of ``plugin``, bound from the same parameters.
+
+    What the loader said of an entry it added (``added_because``) stays.
+    """
+    fresh = type(plugin)(plugin.params, robot, plugin.name)
+    added = getattr(plugin, "added_because", None)
+    if added is not None:
+        fresh.added_because = added
+    return fresh
 
 
 def goal_receivers(entries: Sequence[Entry], name: str | None) -> list[Any]:

@@ -16,7 +16,14 @@ import pinocchio as pin
 from cbp.errors import ConfigError, require, require_between
 from cbp.spatial import Pose
 
-__all__ = ["ObjectMotion", "ObjectSpec", "SimulationSettings"]
+__all__ = ["MAX_OBJECT_SPEED", "ObjectMotion", "ObjectSpec", "SimulationSettings"]
+
+#: Fastest a declared object may move [m/s]. Faster than anything tracked near
+#: an arm: ISO 13855 takes 2 m/s for a hand reaching into a machine, and a tool
+#: dropped from 3 m lands at under 8 m/s. At the simulator's 1 kHz it moves 2 cm
+#: a step, about the arm's thinnest part (a finger): a faster object may pass
+#: through the arm between two steps and leave no contact (1e6 m/s did).
+MAX_OBJECT_SPEED = 20.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -30,14 +37,15 @@ class ObjectMotion:
     """
 
     velocity: tuple[float, float, float]
-    """World-frame velocity [m/s]."""
+    """World-frame velocity [m/s]; its speed at most 20 m/s
+    (:data:`MAX_OBJECT_SPEED`)."""
     start: float = 0.0
     """When it starts moving [s]."""
     stop: float
     """When it stops [s]."""
 
     def __post_init__(self) -> None:
-        """Times are ordered and finite; the velocity is finite."""
+        """Times are ordered; the speed finite and at most :data:`MAX_OBJECT_SPEED`."""
         if not 0.0 <= self.start < self.stop < math.inf:
             raise ConfigError(
                 f"needs 0 <= start < stop < inf, got start {self.start}, "
@@ -46,6 +54,15 @@ class ObjectMotion:
             )
         if not all(math.isfinite(v) for v in self.velocity):
             raise ConfigError(f"must be finite, got {list(self.velocity)}", "velocity")
+        speed = math.hypot(*self.velocity)
+        if speed > MAX_OBJECT_SPEED:
+            raise ConfigError(
+                f"{speed:.3g} m/s is faster than any obstacle tracked near an arm "
+                f"(at most {MAX_OBJECT_SPEED:g} m/s; a tool dropped from 3 m lands "
+                "at 8 m/s); faster, the simulator may move it through the arm "
+                "between two steps",
+                "velocity",
+            )
 
     def offset(self, t: float) -> np.ndarray:
         """Displacement from the declared pose at time ``t`` [m]."""

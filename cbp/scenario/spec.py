@@ -46,9 +46,9 @@ class RobotSpec:
     initial: dict[str, float] = field(default_factory=dict)
     """Initial joint positions by name [rad or m]; others start at home."""
     allow_initial_contact: bool = False
-    """Accept an initial configuration that penetrates a declared object (the
-    arm then backs out); by default the scenario is refused, naming the link,
-    the object and the depth."""
+    """Accept an initial configuration that penetrates a declared object by up
+    to 40 mm (the arm then backs out); by default, or deeper, the scenario is
+    refused, naming the link, the object and the depth."""
 
 
 @dataclass(frozen=True, kw_only=True)

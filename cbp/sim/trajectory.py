@@ -24,7 +24,12 @@ import numpy as np
 
 from cbp.robot import FloatArray
 
-__all__ = ["JointTrajectory", "SpliceError", "time_parameterize"]
+__all__ = [
+    "JointTrajectory",
+    "SpliceError",
+    "stopping_trajectory",
+    "time_parameterize",
+]
 
 
 class SpliceError(ValueError):
@@ -429,3 +434,30 @@ def _quintic(
 _sample(np.array([0.0, 1.0]), np.zeros((2, 1)), np.zeros((2, 1)), np.zeros((2, 1)), 0.5)
 _ONE = np.ones(1)
 _timing(_moved(np.array([[0.0], [1.0], [2.0]])), 0.0, _ONE, _ONE, _ONE, _ONE, 0.0)
+
+
+def stopping_trajectory(
+    current: JointTrajectory, i: int, vmax: FloatArray, amax: FloatArray
+) -> JointTrajectory | None:
+    """Brake along ``current`` from its point ``i``, as soon as the limits allow.
+
+    The path ahead was validated when it was planned; the shortest part of it
+    from point ``i`` on which the robot can stop, timed by
+    :func:`time_parameterize`, replaces the rest. None when the trajectory
+    already stops no later than that (nothing to change).
+    """
+    t_s, _, v_s, a_s = current.point(i)
+    ahead = current.positions[i:]
+    # Binary search for the shortest prefix that can be stopped on (stoppable
+    # prefixes are upward closed: a longer path leaves more room to brake). The
+    # whole rest is not tried: when only it is stoppable, nothing changes.
+    found: JointTrajectory | None = None
+    lo, hi = 2, len(ahead)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        timed = time_parameterize(ahead[:mid], t_s, v_s, a_s, vmax, amax)
+        if timed is None:
+            lo = mid + 1
+        else:
+            hi, found = mid, timed
+    return found

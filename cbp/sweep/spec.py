@@ -129,7 +129,7 @@ class SweepSpec:
     """Random draws of values, combined with the grid."""
     clock: Literal["wall", "virtual"] = "virtual"
     """How trajectory executors count their planning budget
-    (:mod:`cbp.executors.clock`): ``virtual`` gives the same results on any
+    (:mod:`cbp.run.budget`): ``virtual`` gives the same results on any
     machine and load."""
     retries: int = 2
     """A run whose worker dies is tried this many more times, then recorded as

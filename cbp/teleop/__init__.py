@@ -22,6 +22,7 @@ drives either kind of session through an input profile
 (:mod:`cbp.teleop.profiles`) and a deadman (:class:`DeviceDriver`).
 """
 
+from cbp.goals import LiveGoal
 from cbp.teleop.device_driver import DeviceDriver, GoalTarget, VelocityTarget
 from cbp.teleop.goal_session import (
     GOAL_FILE,
@@ -31,7 +32,6 @@ from cbp.teleop.goal_session import (
     latency_summary,
 )
 from cbp.teleop.input_session import InputSession, InputSnapshot
-from cbp.teleop.live_goal import LiveGoal
 from cbp.teleop.profiles import InputProfile, load_profile
 from cbp.teleop.switching import SwitchingPlanner
 

@@ -2,7 +2,7 @@
 """A goal session: a scenario driven live toward the operator's goal.
 
 The run is assembled like every other (:func:`cbp.run.build_run`) with the
-operator's :class:`~cbp.teleop.live_goal.LiveGoal` as its goal source, driven
+operator's :class:`~cbp.goals.LiveGoal` as its goal source, driven
 by the trajectory loop paced to the wall clock, with a
 :class:`~cbp.teleop.switching.SwitchingPlanner` that hands control between
 methods at a period's start. :meth:`TeleopSession.snapshot` is what a page
@@ -25,17 +25,18 @@ import pinocchio as pin
 
 from cbp.collision.contacts import ContactSet
 from cbp.errors import ConfigError, require_choice
-from cbp.executors.trajectory import run_trajectory_executor
-from cbp.files import OutputClaim
-from cbp.goals import write_recorded
+from cbp.files import OutputClaim, claim_output_folder
+from cbp.goals import LiveGoal, write_recorded
 from cbp.methods import PERIODIC
 from cbp.robot import FloatArray
 from cbp.run import RunParts, WallClockPacer, build_run
+from cbp.run.events import RunListener
+from cbp.run.loop import run_loop
+from cbp.run.pacing import LoopClock
 from cbp.scenario import load_scenario
 from cbp.sim.trajectory import JointTrajectory
 from cbp.state import RobotState
 from cbp.teleop.changes import Changes
-from cbp.teleop.live_goal import LiveGoal
 from cbp.teleop.switching import SwitchingPlanner
 from cbp.trace import Trace
 
@@ -133,7 +134,7 @@ class Snapshot:
     recent_misses: int = 0
 
 
-class TeleopSession:
+class TeleopSession(RunListener):
     """A scenario driven live: the simulation, the executor and the goal.
 
     Args:
@@ -175,12 +176,14 @@ class TeleopSession:
         self.parts: RunParts = build_run(
             self.scenario, method=method, goal=self.goal, needs_world=True
         )
+        self.scenario = self.parts.scenario  # the run's own binding of it
         try:
             self.planner = SwitchingPlanner(self.scenario, self.parts, method)
         except BaseException:
             self.parts.close()
             raise
         self.timing = self.scenario.spec.method.timing("cat")
+        self.parts.log.listeners.append(self)  # told of commands and motion
         self._stopping = threading.Event()
         #: Told at each change a page shows: a command period's end (the
         #: arm's state at it is now), a new goal, a new trajectory.
@@ -206,14 +209,11 @@ class TeleopSession:
 
     def _loop(self) -> None:
         try:
-            self.trace = run_trajectory_executor(
+            self.trace = run_loop(
                 self.parts,
                 self.planner,
                 self.timing,
-                pacer=self._pacer,
-                stop_requested=self._stop_requested,
-                commanded=self._commanded,
-                reached=self._reached,
+                LoopClock.paced(self._pacer, self._stop_requested),
             )
         except BaseException as exc:  # kept for stop() to raise in the caller
             self.error = exc
@@ -223,17 +223,17 @@ class TeleopSession:
         sim = self.parts.sim
         return self._stopping.is_set() and sim.trajectory.end_time <= sim.t
 
-    def _reached(self, t: float) -> None:
+    def reached(self, t: float) -> None:
         """The arm's motion is simulated up to now (a period's end): tell."""
         self.changes.notify()
 
-    def _commanded(self, t_start: float) -> None:
+    def commanded(self, t: float) -> None:
         """Measure the latency of the goal this trajectory was planned for."""
         taken = self.goal.take_sampled()
         self.changes.notify()
         if not self._pacer.started:
             return
-        starts = max(time.perf_counter(), self._pacer.wall_time(t_start))
+        starts = max(time.perf_counter(), self._pacer.wall_time(t))
         planned = self.planner.planned_at
         if taken is None:
             # Planned for again, for the same goal (taken by the period's
@@ -331,12 +331,18 @@ class TeleopSession:
         """Write the outputs of ``cbp run`` and the operator's goal stream.
 
         ``claim``: the folder claimed for ``out`` when the session began
-        (:func:`cbp.files.claim_output_folder`); None: claimed now.
+        (:func:`cbp.files.claim_output_folder`); None: claimed now. A
+        session never replaces another's outputs: ``out`` must be new or
+        empty.
+
+        Raises:
+            ConfigError: ``out`` is not empty.
         """
         from cbp.report import write_outputs
 
         if self.trace is None:
             raise RuntimeError("stop the session before writing it")
+        claim = claim or claim_output_folder(out, refuse_live=False, replace=False)
         changes = self.parts.goal.changes
         if not changes:
             changes = [(0.0, pin.SE3(self.home[1], self.home[0]))]

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from cbp.errors import ConfigError, require_choice
-from cbp.files import OutputClaim
+from cbp.files import OutputClaim, claim_output_folder
 from cbp.methods import METHODS
 from cbp.robot import FloatArray
 from cbp.run import WallClockPacer
@@ -235,8 +235,14 @@ class InputSession:
         """Write each configuration's run as ``cbp run`` would, in one folder.
 
         ``claim``: the folder claimed for ``out`` when the session began
-        (:func:`cbp.files.claim_output_folder`); None: claimed now.
+        (:func:`cbp.files.claim_output_folder`); None: claimed now. A
+        session never replaces another's outputs: ``out`` must be new or
+        empty.
+
+        Raises:
+            ConfigError: ``out`` is not empty.
         """
         from cbp.report import write_outputs
 
+        claim = claim or claim_output_folder(out, refuse_live=False, replace=False)
         write_outputs(self.scenarios[0], traces, out, claim=claim)

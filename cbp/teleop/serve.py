@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from cbp.errors import CbpError, ConfigError
+from cbp.files import OutputClaim, claim_new_output_folder, claim_output_folder
 from cbp.teleop.goal_page import TeleopPage
 from cbp.teleop.goal_session import TeleopSession, latency_summary
 from cbp.teleop.input_session import InputSession
@@ -115,16 +116,73 @@ def serve_teleop(
     (:class:`InputsPage`). Then the outputs are written. Exit 2 for a scenario
     or method that cannot start (nothing runs).
 
+    A session never replaces an earlier one: ``out`` must be new or empty
+    (else exit 2); without it, the session gets the first free folder of
+    ``out/<name>_teleop``, ``out/<name>_teleop_2``...
+
     With an input ``profile`` (``--device``, ``--profile``), the page also
     reads that device and streams it to the session
     (:mod:`cbp.teleop.device_link`), through its deadman; with ``hid``
     (``--hid``), this process reads the 6-DOF mouse instead
     (:mod:`cbp.teleop.hid_reader`).
     """
-    from cbp.files import OutputClaim, claim_output_folder
+    try:
+        session, page, claim, opened = _start(
+            scenarios, method, host, port, out, overrides, profile, hid
+        )
+    except CbpError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    device = None
+    if profile is not None:
+        device = _drive_with(profile, page, session, host, opened)
+    print(
+        f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)",
+        flush=True,
+    )
+    try:
+        with contextlib.suppress(KeyboardInterrupt), _stopping_on_signals(page):
+            page.run()
+        if device is not None:
+            device()
+        page.say("**Stopping**: the arm brakes to rest, then the session is saved.")
+        said = _save(session, page, claim, scenarios[0])
+        _let_the_page_show_it()
+    finally:
+        page.close()
+    print(said)
+    if isinstance(session, TeleopSession):
+        latency = latency_summary(session.latency_ms())
+        if latency["n"]:
+            print(
+                f"goal-to-command latency: median {latency['median_ms']:.1f} ms, "
+                f"p95 {latency['p95_ms']:.1f} ms over {latency['n']} goals"
+            )
+    return 0
+
+
+def _start(
+    scenarios: list[Path],
+    method: str,
+    host: str,
+    port: int,
+    out: Path | None,
+    overrides: dict[str, str],
+    profile: InputProfile | None,
+    hid: bool,
+) -> tuple[
+    TeleopSession | InputSession,
+    TeleopPage | InputsPage,
+    OutputClaim,
+    tuple[HidDevice, str] | None,
+]:
+    """The session started, its page, its output folder claimed, the HID device.
+
+    Raises:
+        CbpError: nothing started (the claim, if made, is released).
+    """
     from cbp.scenario import load_scenario
 
-    page: TeleopPage | InputsPage
     claim: OutputClaim | None = None
     try:
         opened = None
@@ -142,57 +200,44 @@ def serve_teleop(
                 "several scenarios are configurations of the velocity executor "
                 "to switch between; a goal session takes one"
             )
-        out = out or Path("out") / f"{first.spec.name}_teleop"
         # Claimed for the whole session: a second session (or run) with the
-        # same folder is refused while this one lives, instead of one saving
-        # over the other.
-        claim = claim_output_folder(out)
+        # same folder is refused while this one lives, and an earlier
+        # session's folder is never replaced.
+        claim = (
+            claim_output_folder(out, replace=False)
+            if out is not None
+            else claim_new_output_folder(Path("out") / f"{first.spec.name}_teleop")
+        )
+        session: TeleopSession | InputSession
+        page: TeleopPage | InputsPage
         if velocity:
-            inputs = InputSession(scenarios, overrides)
-            page = InputsPage(inputs, host=host, port=port)
-            inputs.start()
+            session = InputSession(scenarios, overrides)
+            page = InputsPage(session, host=host, port=port)
         else:
             session = TeleopSession(scenarios[0], method, overrides)
             page = TeleopPage(session, host=host, port=port)
-            session.start()
-    except CbpError as exc:
+        session.start()
+    except CbpError:
         if claim is not None:
             claim.release(remove=True)
-        print(exc, file=sys.stderr)
-        return 2
-    device = None
-    if profile is not None:
-        device = _drive_with(
-            profile, page, inputs if velocity else session, host, opened
-        )
-    print(
-        f"teleoperation of {scenarios[0]}: {page.url} (stop on the page or Ctrl-C)",
-        flush=True,
-    )
-    try:
-        with contextlib.suppress(KeyboardInterrupt), _stopping_on_signals(page):
-            page.run()
-        if device is not None:
-            device()
-        page.say("**Stopping**: the arm brakes to rest, then the session is saved.")
-        if velocity:
-            inputs.write(inputs.stop(), out, claim)
-            page.say(f"**Saved** to `{out}`.")
-            print(f"wrote {out}")
-            _let_the_page_show_it()
-            return 0
-        session.stop()
-        goal_file = session.write(out, claim)
-        replay = f"cbp compare {scenarios[0]} --goal {goal_file}"
-        page.say(f"**Saved** to `{out}`. Replay to every method: `{replay}`")
-        _let_the_page_show_it()
-    finally:
-        page.close()
-    latency = latency_summary(session.latency_ms())
-    print(f"wrote {out}; the operator's goals: {goal_file} (replay: {replay})")
-    if latency["n"]:
-        print(
-            f"goal-to-command latency: median {latency['median_ms']:.1f} ms, "
-            f"p95 {latency['p95_ms']:.1f} ms over {latency['n']} goals"
-        )
-    return 0
+        raise
+    return session, page, claim, opened
+
+
+def _save(
+    session: TeleopSession | InputSession,
+    page: TeleopPage | InputsPage,
+    claim: OutputClaim,
+    scenario: Path,
+) -> str:
+    """Stop the session and write its outputs; what to print about them."""
+    out = claim.out
+    if isinstance(session, InputSession):
+        session.write(session.stop(), out, claim)
+        page.say(f"**Saved** to `{out}`.")
+        return f"wrote {out}"
+    session.stop()
+    goal_file = session.write(out, claim)
+    replay = f"cbp compare {scenario} --goal {goal_file}"
+    page.say(f"**Saved** to `{out}`. Replay to every method: `{replay}`")
+    return f"wrote {out}; the operator's goals: {goal_file} (replay: {replay})"

@@ -11,11 +11,11 @@ from cbp.collision.contacts import ContactSet
 from cbp.engine import Engine
 from cbp.errors import CbpError
 from cbp.executors import make_planner
-from cbp.executors.clock import Budget
-from cbp.executors.trajectory import Plan, Planner, StepsAnEngine
 from cbp.plugin import HoldsContacts
 from cbp.robot import FloatArray
 from cbp.run import RunParts
+from cbp.run.budget import Budget
+from cbp.run.plan import Plan, Planner, StepsAnEngine
 from cbp.scenario import Scenario
 
 __all__ = ["SwitchingPlanner", "held_by"]
@@ -60,7 +60,7 @@ class SwitchingPlanner:
         """Method ``method``'s planner (made on first use)."""
         planner = self._planners.get(method)
         if planner is None:
-            planner = make_planner(method, self.scenario, self.parts)
+            planner = make_planner(method, self.parts)
             self._planners[method] = planner
         return planner
 

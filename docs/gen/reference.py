@@ -172,32 +172,54 @@ def _anchor(path: str) -> str:
 class _Section:
     paths: list[str]
     cls: type
+    #: Where the section's keys are in a file (a variant's: its section's).
+    key_path: str
+    #: The fields it lists (a variant's: those its tagged section has not).
+    fields: list[dataclasses.Field[Any]]
 
     @property
     def path(self) -> str:
         return self.paths[0]
 
 
+def _variants(cls: type) -> dict[str, type]:
+    """A tagged section's variants by type name ({} for another section)."""
+    from cbp.schema import Tagged
+
+    if not isinstance(cls, Tagged):
+        return {}
+    variants = dict(cls.variants())
+    return {} if cls in variants.values() else variants
+
+
 def _sections(root: type) -> list[_Section]:
     """Every dataclass reachable from ``root``, depth first, with its key paths.
 
     A dataclass used in several places (the executors' ``timing``) is one section,
-    at the first path it is met, that lists the others.
+    at the first path it is met, that lists the others. A tagged section (the
+    goal's kinds) is followed by a section per variant, ``goal (type: step)``,
+    with the keys that variant adds.
     """
     out: dict[type, _Section] = {}
 
-    def visit(cls: type, path: str) -> None:
+    def visit(cls: type, path: str, key_path: str, shown: set[str]) -> None:
         if cls in out:
-            out[cls].paths.append(path)
+            if path not in out[cls].paths:
+                out[cls].paths.append(path)
             return
-        out[cls] = _Section([path], cls)
+        fields = [f for f in dataclasses.fields(cls) if f.name not in shown]
+        out[cls] = _Section([path], cls, key_path, fields)
         hints = typing.get_type_hints(cls)
-        for f in dataclasses.fields(cls):
+        for f in fields:
             for inner in _dataclasses_in(hints[f.name]):
-                key = f"{path}.{f.name}" if path else f.name
-                visit(inner, key + _suffix(hints[f.name]))
+                key = f"{key_path}.{f.name}" if key_path else f.name
+                key += _suffix(hints[f.name])
+                visit(inner, key, key, set())
+        own = {f.name for f in dataclasses.fields(cls)}
+        for name, variant in _variants(cls).items():
+            visit(variant, f"{path} (type: {name})", key_path, own)
 
-    visit(root, "")
+    visit(root, "", "", set())
     return list(out.values())
 
 
@@ -216,7 +238,7 @@ def schema_fields(root: type) -> list[tuple[str, str]]:
     """Every (key path, field name) of a schema, for checks of the reference."""
     fields = []
     for section in _sections(root):
-        for f in dataclasses.fields(section.cls):
+        for f in section.fields:
             fields.append((section.path, f.name))
     return fields
 
@@ -258,13 +280,16 @@ def schema_page(
         lines += ["| Key | Type | Default | Description |", "|---|---|---|---|"]
         hints = typing.get_type_hints(cls)
         docs = field_docs(cls)
-        for f in dataclasses.fields(cls):
+        variants = _variants(cls)
+        for f in section.fields:
             tp = hints[f.name]
+            if variants and f.name == "type":  # the names of the variants
+                tp = typing.Literal[tuple(variants)]
             described = _cell(type_name(tp))
             inner = _dataclasses_in(tp)
             if inner:
                 described = f"[{described}](#{anchors[inner[0]]})"
-            key = f"{section.path}.{f.name}" if section.path else f.name
+            key = f"{section.key_path}.{f.name}" if section.key_path else f.name
             doc = notes.get(key, docs.get(f.name, ""))
             lines.append(
                 f"| `{f.name}` | {described} | {_cell(_default(f))} | {_cell(doc)} |"
@@ -409,30 +434,11 @@ def plugins_page() -> str:
     return "\n".join(lines)
 
 
-class _CapturedError(Exception):
-    """Carries the parser out of ``cbp.cli.main``."""
-
-    def __init__(self, parser: argparse.ArgumentParser) -> None:
-        super().__init__("parser captured")
-        self.parser = parser
-
-
 def cli_parser() -> argparse.ArgumentParser:
-    """The parser ``cbp`` builds, taken from ``cbp.cli.main`` as it parses."""
-    from cbp import cli
+    """The parser ``cbp`` builds (``cbp.cli.build_parser``)."""
+    from cbp.cli import build_parser
 
-    def capture(self: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> Any:
-        raise _CapturedError(self)
-
-    original = argparse.ArgumentParser.parse_args
-    argparse.ArgumentParser.parse_args = capture  # type: ignore[assignment]
-    try:
-        cli.main([])
-    except _CapturedError as captured:
-        return captured.parser
-    finally:
-        argparse.ArgumentParser.parse_args = original  # type: ignore[method-assign]
-    raise RuntimeError("cbp.cli.main returned without parsing its arguments")
+    return build_parser()
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:

@@ -6,23 +6,35 @@ spheres, cylinders, capsules and a mesh hull. What is compared:
 - separated pairs (coal's distance above ``SEPARATED``): the distance within
   1e-6 m of coal's and the normal within 1e-3 rad (coal's GJK tolerance set to
   1e-10; its default stops within 1e-6 of the distance, relative). python-fcl
-  0.7 stops its GJK earlier, and its tolerance cannot be set from Python: on
-  these pairs its distances are up to 0.3 mm long and its normals up to 0.03
-  rad off (hull against hull, cylinders). Its distance is realised by a pair
-  of points of the two shapes, so it bounds the true one from above: the
-  kernel's must never exceed it, and must be within ``FCL_DISTANCE`` of it;
-  its normals within ``FCL_ANGLE``;
+  0.7 stops its GJK earlier, and its tolerance cannot be set from Python: over
+  30 samples of this test its distances were up to 7 cm long and its normals
+  up to 0.9 rad off. Its distance is realised by a pair of points of the two
+  shapes, so it bounds the true one from above: the kernel's must never
+  exceed it;
 - penetrating pairs (below ``-SEPARATED``): the depth within 1e-6 m of coal's
   EPA (1e-5 m against a cylinder, whose curved side both EPAs approximate to
-  their tolerance) and within 1e-5 m of fcl's. Where the deepest direction is not unique
-  the normals may differ, so the normal is checked by what it must do: moving
-  shape A out along it by the depth plus 10 um separates the pair, by the
-  depth less 10 um does not;
+  their tolerance) and within 1e-5 m of fcl's. Where the deepest direction is
+  not unique the normals may differ, so the normal is checked by what it must
+  do: moving shape A out along it by the depth plus 10 um separates the pair,
+  by the depth less 10 um does not;
 - near-degenerate pairs (within ``SEPARATED`` of touching): the distance
-  within 1e-6 m of coal's; the normal is not compared (it turns fast there);
+  within 1e-6 m of coal's (1e-5 m against a cylinder); the normal is not
+  compared (it turns fast there);
 - every pair: the witness points satisfy ``point_a - point_b = distance *
-  normal`` and lie on the shapes' surfaces (coal's distance from a point to
-  each shape is about 0).
+  normal`` to 1e-9 m (EPA's witnesses on a long, thin face, two support
+  points a few um apart on a curved side, were up to 14 um off before), and
+  near-degenerate ones lie on the shapes' surfaces.
+
+Each check holds for every sample, not for one: the tests pass for every seed
+of the generator (checked over 100), so their verdict does not hang on the
+last bits of a processor's arithmetic. Coal is wrong in three kinds of
+cylinder pair, which the checks work around and
+:func:`test_known_hard_cylinder_cases_are_exact` pins with exact answers: a
+point inside a cylinder, or on it, is as deep as below its side, also on a cap
+(a witness on a cap seemed 2.8 mm inside); a sphere in a cylinder likewise
+(up to 2.9 cm too deep near a cap, over 30 samples); and its GJK found 7 and
+12 nm of clearance between a hull and a cylinder that overlap by 1.3 and
+4.5 um (a point lies inside both).
 """
 
 from __future__ import annotations
@@ -36,6 +48,7 @@ import fcl
 import numpy as np
 import pinocchio as pin
 import pytest
+from scipy.spatial import ConvexHull
 
 from cbp.collision import (
     CollisionSettings,
@@ -59,9 +72,6 @@ from cbp.testing import sample_configurations
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 #: Pairs nearer than this to touching [m] are near-degenerate (see above).
 SEPARATED = 1e-4
-#: How far python-fcl's early-stopping GJK was seen from the true distance
-#: (0.27 mm) and normal (0.03 rad), with room [m, rad].
-FCL_DISTANCE, FCL_ANGLE = 5e-4, 0.05
 
 
 @pytest.fixture(scope="module")
@@ -177,12 +187,61 @@ def _angle(u: np.ndarray, v: np.ndarray) -> float:
     return math.acos(min(1.0, max(-1.0, float(np.dot(u, v)))))
 
 
-def _on_surface(shape, M, point, request, result) -> float:
-    """Coal's distance from ``point`` to the shape's surface (unsigned)."""
-    probe = coal.Sphere(1e-12)
-    result.clear()
-    d = coal.distance(shape, M, probe, pin.SE3(np.eye(3), point), request, result)
-    return abs(float(d))
+def _surface_distance(shape: coal.CollisionGeometry, local: np.ndarray) -> float:
+    """How far a point (in the shape's frame) lies from the shape's surface [m].
+
+    Closed forms for the primitives; for a hull, the depth below its nearest
+    face inside, coal's distance outside. Coal's distance from a point inside
+    a cylinder, or on its surface (on either side by a rounding), is the depth
+    below its side, also for a point on a cap: 1.2 cm for a point on a cap.
+    """
+    if isinstance(shape, coal.Box):
+        beyond = np.abs(local) - np.asarray(shape.halfSide)
+        if beyond.max() <= 0.0:
+            return float(-beyond.max())
+        return float(np.linalg.norm(np.maximum(beyond, 0.0)))
+    if isinstance(shape, coal.Sphere):
+        return abs(float(np.linalg.norm(local)) - shape.radius)
+    if isinstance(shape, coal.Capsule):
+        on_axis = min(max(float(local[2]), -shape.halfLength), shape.halfLength)
+        axis = float(np.linalg.norm(local - [0.0, 0.0, on_axis]))
+        return abs(axis - shape.radius)
+    if isinstance(shape, coal.Cylinder):
+        side = math.hypot(local[0], local[1]) - shape.radius
+        cap = abs(float(local[2])) - shape.halfLength
+        if side <= 0.0 and cap <= 0.0:
+            return -max(side, cap)
+        return math.hypot(max(side, 0.0), max(cap, 0.0))
+    planes = ConvexHull(np.asarray(shape.points(), dtype=float)).equations
+    excess = float((planes[:, :3] @ local + planes[:, 3]).max())
+    if excess <= 0.0:
+        return -excess
+    probe, request, result = (
+        coal.Sphere(1e-12),
+        coal.DistanceRequest(),
+        coal.DistanceResult(),
+    )
+    return abs(
+        coal.distance(
+            shape, pin.SE3.Identity(), probe, pin.SE3(np.eye(3), local), request, result
+        )
+    )
+
+
+def _on_surface(shape, M, point) -> float:
+    """How far ``point`` lies from the shape at placement M's surface [m]."""
+    return _surface_distance(shape, M.actInv(point))
+
+
+def _coal_depth_is_right(*shapes: coal.CollisionGeometry) -> bool:
+    """Whether coal's penetration depth holds for the pair.
+
+    Not a sphere in a cylinder: coal takes its depth below the side, also
+    where the sphere is nearer a cap (up to 2.9 cm too deep over 30 samples
+    of the test below; fcl's is right there).
+    """
+    kinds = {type(shape) for shape in shapes}
+    return kinds != {coal.Sphere, coal.Cylinder}
 
 
 def _pairs(geometry, rng, count, spread):
@@ -214,10 +273,8 @@ def test_separated_pairs_match_coal_and_fcl(geometry, rng) -> None:
         d, n = out[0], out[7:]
         assert d == pytest.approx(d_coal, abs=1e-6)
         assert _angle(n, n_coal) < 1e-3, (a, b, d)
-        d_fcl, n_fcl = reference(a, Ma, b, Mb)
+        d_fcl, _ = reference(a, Ma, b, Mb)
         assert d <= d_fcl + 1e-9, (a, b)
-        assert d == pytest.approx(d_fcl, abs=FCL_DISTANCE)
-        assert _angle(n, n_fcl) < FCL_ANGLE, (a, b, d)
         np.testing.assert_allclose(out[1:4] - out[4:7], d * n, atol=1e-9)
         kinds.add((int(packed_a.kind[a]), int(packed_b.kind[b])))
         checked += 1
@@ -240,10 +297,11 @@ def test_penetrating_pairs_match_coal_and_fcl_depths(geometry, rng) -> None:
         assert status == 0
         d, n = out[0], out[7:]
         tolerance = 1e-5 if _curved(shapes_a[a], shapes_b[b]) else 1e-6
-        assert d == pytest.approx(d_coal, abs=tolerance), (a, b)
+        if _coal_depth_is_right(shapes_a[a], shapes_b[b]):
+            assert d == pytest.approx(d_coal, abs=tolerance), (a, b)
         d_fcl, _ = reference(a, Ma, b, Mb)
         assert d == pytest.approx(d_fcl, abs=1e-5), (a, b)
-        np.testing.assert_allclose(out[1:4] - out[4:7], d * n, atol=1e-6)
+        np.testing.assert_allclose(out[1:4] - out[4:7], d * n, atol=1e-9)
         for extra, separated in ((1e-5, True), (-1e-5, False)):
             moved = pin.SE3(Ma.rotation, Ma.translation + (-d + extra) * n)
             after = _measure(packed_a, a, moved, packed_b, b, Mb)[1][0]
@@ -259,7 +317,7 @@ def test_touching_and_near_pairs_agree_on_distance(geometry, rng) -> None:
     request, result = coal.DistanceRequest(), coal.DistanceResult()
     request.gjk_tolerance = 1e-10
     checked = 0
-    for a, Ma, b, Mb in _pairs(geometry, rng, 300, 0.3):
+    for a, Ma, b, Mb in _pairs(geometry, rng, 1000, 0.3):
         # Slide A toward B until coal finds them within 0.1 mm of touching.
         d_coal, _, _, n = signed_distance(
             shapes_b[b], Mb, shapes_a[a], Ma, request, result
@@ -273,14 +331,94 @@ def test_touching_and_near_pairs_agree_on_distance(geometry, rng) -> None:
             continue  # a corner moved past another face
         status, out = _measure(packed_a, a, Ma, packed_b, b, Mb)
         assert status == 0
-        tolerance = 1e-5 if d_coal < 0.0 and _curved(shapes_a[a], shapes_b[b]) else 1e-6
+        # Coal's GJK near a cylinder can miss a few um of overlap (see above).
+        tolerance = 1e-5 if _curved(shapes_a[a], shapes_b[b]) else 1e-6
         assert out[0] == pytest.approx(d_coal, abs=tolerance), (a, b)
-        np.testing.assert_allclose(out[1:4] - out[4:7], out[0] * out[7:], atol=1e-6)
-        probe = coal.DistanceRequest()
-        assert _on_surface(shapes_a[a], Ma, out[1:4], probe, result) < 1e-6
-        assert _on_surface(shapes_b[b], Mb, out[4:7], probe, result) < 1e-6
+        np.testing.assert_allclose(out[1:4] - out[4:7], out[0] * out[7:], atol=1e-9)
+        # EPA's witnesses of an overlap interpolate support points: on a hull
+        # they may lie inside by a small weight times how deep the chord
+        # between two of its vertices runs (0.7 um at most in 92,000 pairs).
+        on_surface = 1e-6 if out[0] >= 0.0 else 2e-6
+        assert _on_surface(shapes_a[a], Ma, out[1:4]) < on_surface
+        assert _on_surface(shapes_b[b], Mb, out[4:7]) < on_surface
         checked += 1
-    assert checked > 100
+    assert checked > 600
+
+
+def _hard_case(case: str, gap: float) -> tuple[list, list, float, np.ndarray]:
+    """Shapes A and B placed ``gap`` apart along world z, A above, where coal errs.
+
+    ``rim_on_cap``: a tilted cylinder's rim over another's cap (a witness on the
+    cap); ``edge_on_side``: a box's edge along a lying cylinder's side;
+    ``sphere_at_cap``: a sphere in a cylinder, poking ``gap`` out of its cap.
+    Returns the shapes, their placements, the exact signed distance and the
+    normal from B toward A.
+    """
+    up = np.array([0.0, 0.0, 1.0])
+    if case == "rim_on_cap":
+        a, b = coal.Cylinder(0.05, 0.3), coal.Cylinder(0.04, 0.1)
+        R = pin.AngleAxis(0.8, np.array([1.0, 0.3, 0.0]) / math.hypot(1.0, 0.3))
+        R = R.matrix()
+        local = R.T @ -up  # the rim point lowest along z
+        across = math.hypot(local[0], local[1])
+        lowest = R @ [0.05 * local[0] / across, 0.05 * local[1] / across, -0.15]
+        Ma = pin.SE3(R, np.array([0.01, -0.005, gap]) - lowest)
+        Mb = pin.SE3(np.eye(3), np.array([0.0, 0.0, -0.05]))  # its cap at z = 0
+        return [a, b], [Ma, Mb], gap, up
+    if case == "edge_on_side":
+        a, b = coal.Box(0.1, 0.1, 0.1), coal.Cylinder(0.05, 0.4)
+        turned = pin.AngleAxis(math.pi / 4, np.array([0.0, 1.0, 0.0])).matrix()
+        lying = pin.AngleAxis(math.pi / 2, np.array([1.0, 0.0, 0.0])).matrix()
+        Ma = pin.SE3(turned, np.array([0.0, 0.0, 0.05 + 0.05 * math.sqrt(2) + gap]))
+        return [a, b], [Ma, pin.SE3(lying, np.zeros(3))], gap, up
+    assert case == "sphere_at_cap"
+    a, b = coal.Sphere(0.02), coal.Cylinder(0.05, 0.1)
+    Ma = pin.SE3(np.eye(3), np.array([0.02, 0.0, 0.05 - 0.02 + gap]))
+    # Out through the cap: the sphere's depth below it and its diameter.
+    return [a, b], [Ma, pin.SE3.Identity()], gap - 0.04, up
+
+
+@pytest.mark.parametrize("gap", [-3e-5, -1e-6, 0.0, 1e-6, 3e-5])
+@pytest.mark.parametrize("case", ["rim_on_cap", "edge_on_side", "sphere_at_cap"])
+def test_known_hard_cylinder_cases_are_exact(case, gap) -> None:
+    """Where coal errs near a cylinder: the exact distance, witnesses on the surfaces."""
+    (a, b), (Ma, Mb), expected, normal = _hard_case(case, gap)
+    packed_a, packed_b = pack_shapes([a]), pack_shapes([b])
+    status, out = _measure(packed_a, 0, Ma, packed_b, 0, Mb)
+    assert status == 0
+    assert out[0] == pytest.approx(expected, abs=1e-8)
+    if gap != 0.0:  # touching, the normal turns fast (the module's docstring)
+        np.testing.assert_allclose(out[7:], normal, atol=1e-3)
+    np.testing.assert_allclose(out[1:4] - out[4:7], out[0] * out[7:], atol=1e-9)
+    assert _on_surface(a, Ma, out[1:4]) < 1e-8
+    assert _on_surface(b, Mb, out[4:7]) < 1e-8
+
+
+def test_a_sphere_inside_a_cylinder_is_as_deep_as_the_closed_form(rng) -> None:
+    """A sphere anywhere inside a cylinder: its depth within 1 mm, most to 10 um.
+
+    EPA approximates the side by faces between rim points, and its support
+    points crowd there; where one more would break its polytope (round-off on
+    faces a few um wide) it stops at the nearest face. It used to take the
+    step: 1.6 % of these depths came out up to 22 cm short.
+    """
+    sphere, cylinder = (
+        pack_shapes([coal.Sphere(0.04)]),
+        pack_shapes([coal.Cylinder(0.05, 0.3)]),
+    )
+    errors = []
+    for _ in range(500):
+        radial, angle = rng.uniform(0.0, 0.045), rng.uniform(0.0, 2.0 * math.pi)
+        z = rng.uniform(-0.14, 0.14)
+        Mc = pin.SE3(_rotation(rng), rng.uniform(-0.05, 0.05, 3))
+        centre = [radial * math.cos(angle), radial * math.sin(angle), z]
+        Ms = pin.SE3(np.eye(3), Mc.act(np.array(centre)))
+        status, out = _measure(sphere, 0, Ms, cylinder, 0, Mc)
+        assert status == 0
+        exact = -(0.04 + min(0.05 - radial, 0.15 - abs(z)))
+        errors.append(abs(out[0] - exact))
+    assert max(errors) < 1e-3
+    assert np.mean(np.array(errors) < 1e-5) > 0.95
 
 
 def test_faces_in_contact_give_the_face_normal() -> None:

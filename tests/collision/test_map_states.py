@@ -121,6 +121,48 @@ def test_a_second_camera_sees_the_shadow_free(scene, robots) -> None:
     assert not world.environment.inside(BEHIND)[0]
 
 
+def test_space_outside_the_bounds_is_unknown_never_free(robots) -> None:
+    """A box wholly below the map's floor is an obstacle, seen or not.
+
+    Cameras see through the space outside the bounds to it, and the robot's
+    first frame frees two cells around it, up to the floor: the layer of cells
+    around the bounds stays unknown, the snapshot holds it as an obstacle, and
+    points beyond the grid are in an obstacle too (``unknown: free``: none).
+    """
+    robot = robots["panda"]
+    geometry = RobotGeometry(robot)
+    below = ObjectSpec(
+        name="below",
+        shape="box",
+        size=(0.3, 0.3, 0.1),
+        pose=Pose(position=(0.6, 0.0, -0.2)),
+    )
+    home = robot.home()
+    with PybulletScene(robot, [below]) as scene:
+        scene.set_configuration(home)
+        frame = DepthCamera(scene.client, FRONT).capture()
+    state = RobotState(robot, home)
+    for unknown, blocked in (("occupied", True), ("free", False)):
+        grid = OccupancyGrid(replace(SPEC, unknown=unknown), geometry)
+        grid.integrate(frame, state)
+        lower, upper = grid.bounds
+        np.testing.assert_allclose(lower, SPEC.region[0])
+        assert np.all(upper >= SPEC.region[1])
+        layer = np.ones(grid.shape, dtype=bool)
+        layer[1:-1, 1:-1, 1:-1] = False
+        assert not np.any(grid.cells[layer] == FREE)
+        assert grid.state_at(BEFORE)[0] == FREE  # inside, seen through
+        box = np.array([[0.6, 0.0, -0.16], [0.6, -0.1, -0.2], [0.6, 0.0, -5.0]])
+        assert np.all(grid.state_at(box) == UNKNOWN)
+        env = grid.environment()
+        assert env.inside(box).tolist() == [blocked] * 3
+        floor = np.array([[0.6, -0.35, lower[2] - 0.5 * grid.cell]])
+        assert bool(env.inside(floor)[0]) is blocked
+        # The floor's layer under the space seen free is in the shell.
+        shell = env.centres
+        assert bool(np.any(shell[:, 2] < lower[2])) is blocked
+
+
 def _shell_from_scratch(grid: OccupancyGrid) -> set[tuple[int, int, int]]:
     """The obstacle cells with a neighbour inside the grid that is not blocked."""
     blocked = (grid.cells == OCCUPIED) | (

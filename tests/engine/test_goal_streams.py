@@ -11,7 +11,7 @@ import pytest
 
 from cbp.errors import ConfigError, ScenarioError
 from cbp.expressions import compile_time_function
-from cbp.goals import GoalSpec, GoalStream, write_recorded
+from cbp.goals import RecordedGoal, RecordedGoalSpec, write_recorded
 from cbp.scenario import load_scenario
 
 GOAL_TASK = """\
@@ -74,17 +74,17 @@ def test_function_goal(tmp_path: Path) -> None:
     )
 
 
-def test_recorded_goal_round_trip_and_nan_rows(tmp_path: Path) -> None:
-    """A written recording replays; a NaN row comes out as NaN (rejected later)."""
+def test_recorded_goal_round_trip(tmp_path: Path) -> None:
+    """A written recording replays, interpolated between its samples."""
     times = [0.0, 0.5, 1.0]
-    positions = np.array([[0.3, 0.0, 0.5], [0.4, 0.1, 0.5], [np.nan, 0.2, 0.5]])
+    positions = np.array([[0.3, 0.0, 0.5], [0.4, 0.1, 0.5], [0.5, 0.2, 0.5]])
     rotations = np.array([np.diag([1.0, -1.0, -1.0])] * 3)
     write_recorded(tmp_path / "goal.csv", times, positions, rotations)
-    stream = GoalStream(GoalSpec(type="recorded", file="goal.csv"), tmp_path)
+    stream = RecordedGoal(RecordedGoalSpec(file="goal.csv"), tmp_path)
     p, R = stream.sample(0.25)
     np.testing.assert_allclose(p, [0.35, 0.05, 0.5])
     np.testing.assert_allclose(R, rotations[0], atol=1e-9)
-    assert np.isnan(stream.sample(1.0)[0][0])
+    np.testing.assert_allclose(stream.sample(1.0)[0], [0.5, 0.2, 0.5])
     assert stream.end_time == 1.0
 
 
@@ -118,8 +118,14 @@ def test_goal_type_needs_its_fields(tmp_path: Path) -> None:
         """,
         GOAL_TASK,
     )
-    with pytest.raises(ScenarioError, match="a 'function' goal needs 'function:'"):
+    with pytest.raises(ScenarioError) as info:
         load_scenario(path)
+    assert info.value.problems == [
+        "line 4: goal.file: unknown key 'file' Accepted: type, task, rate_hz, "
+        "function.",
+        "line 4: goal.function: missing required key 'function' (a mapping "
+        "(PoseExpressions))",
+    ]
 
 
 def test_include_merges_and_locates_problems_in_the_included_file(
@@ -212,3 +218,80 @@ def test_set_with_an_unknown_key_on_the_way_is_a_located_problem(
     with pytest.raises(ScenarioError) as info:
         load_scenario(path, overrides={"perception.cameras[2].near": "0.1"})
     assert "unknown key 'cameras[2]'" in str(info.value)
+
+
+def test_every_goal_kind_is_in_the_table_once_and_sorted() -> None:
+    """Each GoalStream of cbp/goals/ is a row, its section's type its name."""
+    import importlib
+    import pkgutil
+
+    import cbp.goals
+    from cbp.goals import GOAL_KINDS, GoalSpec, GoalStream
+
+    defined = set()
+    for module in pkgutil.iter_modules(cbp.goals.__path__):
+        found = importlib.import_module(f"cbp.goals.{module.name}")
+        defined |= {
+            cls
+            for cls in vars(found).values()
+            if isinstance(cls, type)
+            and issubclass(cls, GoalStream)
+            and cls is not GoalStream
+            and cls.__module__ == found.__name__
+        }
+    assert defined == set(GOAL_KINDS.values())
+    assert list(GOAL_KINDS) == sorted(GOAL_KINDS)
+    for name, kind in GOAL_KINDS.items():
+        assert kind.type_name == name
+        assert kind.Spec.__dataclass_fields__["type"].default == name
+        assert GoalSpec.variants()[name] is kind.Spec
+
+
+def _goal_problems(tmp_path: Path, goal: str) -> list[str]:
+    """The problems of a scenario whose goal section is ``goal`` (YAML lines)."""
+    path = tmp_path / "s.yaml"
+    path.write_text(
+        "name: t\nrobot: {name: franka_panda}\nduration: 1.0\n" + goal + GOAL_TASK
+    )
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    return info.value.problems
+
+
+def test_a_goal_type_not_in_the_table_lists_the_kinds(tmp_path: Path) -> None:
+    """A misspelt type: the nearest kind and every kind, at its line."""
+    assert _goal_problems(tmp_path, "goal:\n  type: keyfrmes\n  keyframes: []\n") == [
+        "line 5: goal.type: got 'keyfrmes', expected one of 'function', "
+        "'keyframes', 'recorded', 'step'; did you mean 'keyframes'?"
+    ]
+    assert _goal_problems(tmp_path, "goal: {rate_hz: 10}\n") == [
+        "line 4: goal.type: missing required key 'type' (one of 'function', "
+        "'keyframes', 'recorded', 'step')"
+    ]
+
+
+def test_a_goal_section_is_read_as_its_kind(tmp_path: Path) -> None:
+    """Only the kind's own keys; its checks at their line."""
+    assert _goal_problems(
+        tmp_path,
+        "goal:\n  type: step\n  keyframes: []\n  function: {position: [0, 0, 0]}\n",
+    ) == [
+        "line 7: goal.function: unknown key 'function' Accepted: type, task, "
+        "rate_hz, keyframes.",
+    ]
+    assert _goal_problems(tmp_path, "goal:\n  type: step\n  keyframes: []\n") == [
+        "line 6: goal.keyframes: needs at least one keyframe"
+    ]
+
+
+def test_a_goal_section_made_in_python_is_its_kinds() -> None:
+    """The same rule as in a file: the base section names no kind of its own."""
+    from cbp.goals import GoalSpec, Keyframe, KeyframesGoalSpec, StepGoalSpec
+    from cbp.spatial import Pose
+
+    with pytest.raises(ConfigError, match=r"not the section of a 'step' goal \(Step"):
+        GoalSpec(type="step")
+    with pytest.raises(ConfigError, match="kinds: function, keyframes, recorded"):
+        KeyframesGoalSpec(type="spline", keyframes=[])
+    keyframe = Keyframe(t=0.0, pose=Pose(position=(0.4, 0.0, 0.4)))
+    assert StepGoalSpec(keyframes=[keyframe]).type == "step"

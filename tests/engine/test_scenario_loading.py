@@ -365,7 +365,11 @@ def test_unknown_key_from_set_is_reported_against_set(tmp_path: Path) -> None:
 def test_a_keyframe_beyond_the_arms_reach_is_warned_of(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    """A goal beyond the links' lengths: a warning at its keyframe; others: none."""
+    """A goal beyond the arm's reach: a warning at its keyframe; others: none.
+
+    The Panda's hand reaches 0.858 m from its shoulder: a goal 0.92 m away
+    (within the 0.99 m of its joint origins' distances added up) is warned of.
+    """
     path = tmp_path / "s.yaml"
     path.write_text(
         HEADER
@@ -376,8 +380,8 @@ def test_a_keyframe_beyond_the_arms_reach_is_warned_of(
               keyframes:
                 - {t: 0.0, pose: {position: [0.45, 0.0, 0.40]}}
                 - t: 1.0
-                  pose: {position: [1.5, 0.0, 0.3]}
-                - {t: 2.0, pose: {position: [0.0, 0.0, 1.30]}}
+                  pose: {position: [0.92, 0.0, 0.333]}
+                - {t: 2.0, pose: {position: [0.0, 0.0, 1.18]}}
             tasks:
               - type: goal_pose
             """
@@ -387,10 +391,10 @@ def test_a_keyframe_beyond_the_arms_reach_is_warned_of(
         load_scenario(path)
     warnings = [r.getMessage() for r in caplog.records]
     assert warnings == [
-        f"{path}, line 8: goal.keyframes[1].pose.position: the goal [1.5, 0.0, 0.3] "
-        "at t = 1 s is out of reach of panda_hand: 1.50 m from the arm's first "
-        "joint, beyond its reach (0.99 m, its links' lengths added up); the arm "
-        "stops short of it"
+        f"{path}, line 8: goal.keyframes[1].pose.position: the goal [0.92, 0.0, "
+        "0.333] at t = 1 s is out of reach of panda_hand: 0.92 m from the arm's "
+        "first joint, beyond its reach (0.86 m, its links' lengths between their "
+        "joints' axes); the arm stops short of it"
     ]
 
 
@@ -413,6 +417,8 @@ def test_shipped_scenarios_warn_only_of_goals_out_of_reach(
 
 def test_the_reach_bounds_every_configuration(robots: dict[str, Any]) -> None:
     """No configuration puts the hand farther from the first joint than the reach."""
+    from scipy.optimize import minimize
+
     from cbp.scenario.reach import arm_reach
     from cbp.state import RobotState
 
@@ -428,6 +434,15 @@ def test_the_reach_bounds_every_configuration(robots: dict[str, Any]) -> None:
             farthest, reach.distance(RobotState(robot, q).frame_position(frame))
         )
     assert 0.8 * reach.radius < farthest <= reach.radius
+    assert reach.radius == pytest.approx(0.858, abs=5e-4)  # Franka: 855 mm
+    # Within its joint limits the hand comes within 2 mm of the bound.
+    stretched = minimize(
+        lambda q: -reach.distance(RobotState(robot, q).frame_position(frame)),
+        robot.middle(),
+        bounds=list(zip(robot.lower_limits, robot.upper_limits, strict=True)),
+    )
+    assert -stretched.fun > reach.radius - 0.002
+    np.testing.assert_allclose(reach.centre, [0.0, 0.0, 0.333], atol=1e-6)
     assert (
         arm_reach(
             robots["panda_planar"], robots["panda_planar"].neutral(), "panda_hand"

@@ -11,7 +11,6 @@ import pinocchio as pin
 import pytest
 
 from cbp.collision import CollisionWorld, PrimitiveEnvironment, RobotGeometry
-from cbp.executors.clock import WallBudget
 from cbp.executors.ik import interpolate_checked
 from cbp.executors.ik_search import IkSearch
 from cbp.executors.jt import run_jt
@@ -19,6 +18,7 @@ from cbp.executors.mp import MpPlanner, RrtConnect
 from cbp.methods.settings import IkSearchSettings, PlannerSettings
 from cbp.metrics import run_metrics
 from cbp.run import build_run
+from cbp.run.budget import WallBudget
 from cbp.scenario import Scenario, load_scenario
 from tests.collision.test_motion import plate_across_the_hand
 from tests.conftest import VIRTUAL_CLOCK, run_cbp
@@ -354,8 +354,8 @@ def test_a_search_cut_short_goes_on_where_it_stopped(
     then it is searched again only in the next new world.
     """
     from cbp.collision import PrimitiveEnvironment
-    from cbp.executors.clock import VirtualBudget
     from cbp.methods.settings import VirtualCosts
+    from cbp.run.budget import VirtualBudget
 
     run = build_run(boards, method="ik")
     try:

@@ -10,9 +10,11 @@ import numpy as np
 
 from cbp.engine import Engine
 from cbp.errors import SolveError
+from cbp.executors import make_planner
 from cbp.executors.cat import REACHED_NOTE, run_cat
-from cbp.goals import write_recorded
+from cbp.goals import LiveGoal, write_recorded
 from cbp.metrics import run_metrics
+from cbp.run import RunListener, build_run, run_loop
 from tests.conftest import load_virtual, run_cbp
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -78,20 +80,38 @@ def _scenario_with_goal_file(tmp_path: Path, goal: str, extra: str = "") -> Path
     return path
 
 
-def test_nan_goal_keeps_the_previous_goal_and_says_so(tmp_path: Path) -> None:
-    """A NaN sample in a recording is rejected; the run goes on to the next goal."""
-    times = np.arange(0.0, 1.01, 1 / 30)
-    positions = np.array([[0.307, 0.0, 0.59]] * len(times))
-    positions[times > 0.3] = [0.45, 0.15, 0.45]
-    positions[10:14] = np.nan  # a glitch of the input device
-    write_recorded(
-        tmp_path / "goal.csv", times, positions, np.array([DOWN] * len(times))
+def test_nan_goal_keeps_the_previous_goal_and_says_so_once() -> None:
+    """An operator's NaN goal held for a while is rejected: one event, one count.
+
+    A recording cannot hold one (its cells are checked at load), so the goal
+    is an operator's, set as each trajectory is commanded in simulated time.
+    """
+    scenario = load_virtual(SCENARIOS / "cat_free_step.yaml", {"duration": "1.5"})
+    live = LiveGoal(np.array([0.307, 0.0, 0.59]), DOWN)
+    parts = build_run(scenario, method="cat", goal=live, clock="virtual")
+
+    def operator(t: float) -> None:
+        if 0.3 <= t < 0.5:  # a glitch of the input device
+            live.set(np.array([np.nan, 0.15, 0.45]), DOWN)
+        elif t >= 0.5:
+            live.set(np.array([0.45, 0.15, 0.45]), DOWN)
+
+    class Operator(RunListener):
+        def commanded(self, t: float) -> None:
+            operator(t)
+
+    parts.log.listeners.append(Operator())
+    trace = run_loop(
+        parts, make_planner("cat", parts), scenario.spec.method.timing("cat")
     )
-    trace = run_cat(load_virtual(_scenario_with_goal_file(tmp_path, "goal.csv")))
     rejected = [m for _, m in trace.events if m.startswith("goal rejected")]
-    assert len(rejected) == 4
+    assert len(rejected) == 1
+    [again] = [m for _, m in trace.events if m.startswith("goal accepted again")]
+    count = trace.counters["rejected_goal_samples"]
+    assert count >= 5
+    assert again.startswith(f"goal accepted again after {count:g} rejected sample")
     assert np.all(np.isfinite(trace.q))
-    assert np.all(np.isfinite(trace.goal_position[10:]))
+    assert np.all(np.isfinite(trace.goal_position))  # the rejected goal is not in it
     assert run_metrics(trace)["reached"]
 
 

@@ -22,7 +22,7 @@ from cbp.executors import cat as cat_module
 from cbp.executors.cat import run_cat
 from cbp.executors.kinematic import run_kinematic
 from cbp.executors.velocity import run_velocity
-from cbp.goals import GoalStream
+from cbp.goals import KeyframesGoal
 from cbp.metrics import run_metrics
 from cbp.perception.frame import DepthFrame
 from cbp.report import write_outputs
@@ -169,14 +169,14 @@ def test_cat_aborts_when_the_simulator_keeps_failing(monkeypatch) -> None:
 
 
 def test_a_goal_input_that_raises_keeps_the_previous_goal(monkeypatch) -> None:
-    sample = GoalStream.sample
+    sample = KeyframesGoal.sample  # the step goal of cat_free_step samples so
 
     def faulty(self, t):
         if 1.0 <= t < 1.5:
             raise InjectedError("device unplugged")
         return sample(self, t)
 
-    monkeypatch.setattr(GoalStream, "sample", faulty)
+    monkeypatch.setattr(KeyframesGoal, "sample", faulty)
     scenario = load_virtual(
         SCENARIOS / "cat_free_step.yaml", overrides={"duration": "2.5"}
     )

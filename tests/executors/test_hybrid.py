@@ -241,3 +241,33 @@ def test_control_returns_to_cat_within_a_period_of_the_goal_moving(
     # sampled at 30 Hz and acted on at the next command period.
     crossing = 3.5 + 0.05 / 0.2
     assert crossing <= returned <= crossing + 2 * PERIOD + 1e-6
+
+
+@pytest.mark.slow
+def test_a_plan_that_goes_stale_is_planned_again() -> None:
+    """A box appears over the wall on the plan's way: brake, plan again, reach.
+
+    Before, control returned to CAT, which stalled behind the wall again, and
+    the goal (planned for once) was never planned for again.
+    """
+    objects = (
+        "[{name: table, shape: box, size: [0.60, 1.20, 0.04],"
+        " pose: {position: [0.55, 0.0, -0.02]}},"
+        " {name: wall, shape: box, size: [0.60, 0.02, 0.55],"
+        " pose: {position: [0.55, 0.0, 0.275]}},"
+        " {name: lid, shape: box, size: [0.12, 0.12, 0.12],"
+        " pose: {position: [0.57, 0.0, 0.74]}, appear_at: 2.7}]"
+    )
+    scenario = load_virtual(
+        SCENARIOS / "cat_local_minimum.yaml",
+        overrides={"duration": "12", "world.objects": objects},
+    )
+    trace = run_hybrid(scenario)
+    m = run_metrics(trace, scenario.robot)
+    events = [msg for _, msg in trace.events if msg.startswith("hybrid:")]
+    stale = [k for k, msg in enumerate(events) if "no longer free" in msg]
+    assert stale, events
+    assert any("following it" in msg for msg in events[stale[0] :]), events
+    assert m["plans"] >= 2
+    assert m["reached"], m
+    assert m["peak_contact_force_n"] == 0.0

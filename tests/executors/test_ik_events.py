@@ -10,7 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from cbp.executors.ik_search import REPORT_AFTER, SearchEvents
+from cbp.executors.search_events import REPORT_AFTER, SearchEvents
 from cbp.scenario import Scenario, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
@@ -19,7 +19,7 @@ PERIOD = 1.0 / 30.0  # [s]
 
 @pytest.fixture(scope="module")
 def reach_scenario() -> Scenario:
-    """The Panda reaching, on a fixed base (its reach is about 0.99 m)."""
+    """The Panda reaching, on a fixed base (its reach is 0.858 m)."""
     return load_scenario(SCENARIOS / "panda_reach.yaml")
 
 
@@ -73,7 +73,7 @@ def test_a_goal_that_moves_every_period_is_said_once(reach_scenario: Scenario) -
 
 
 def test_a_goal_out_of_reach_is_called_out_of_reach(reach_scenario: Scenario) -> None:
-    """Beyond the links' lengths: said at once, as out of reach, once however it moves."""
+    """Beyond the reach: said at once, as out of reach, once however it moves."""
     run = FakeRun(reach_scenario)
     events = SearchEvents("ik")
     far = [_goal(1.5, 0.01 * k, 0.3) for k in range(20)]
@@ -82,7 +82,7 @@ def test_a_goal_out_of_reach_is_called_out_of_reach(reach_scenario: Scenario) ->
     message = run.messages()[0]
     assert message.startswith(
         "ik: no IK solution for the goal, out of reach: 1.50 m from the arm's first "
-        "joint, beyond its reach (0.99 m"
+        "joint, beyond its reach (0.86 m"
     )
     assert events.beyond_reach(run, _goal(1.5)) is not None  # type: ignore[arg-type]
     assert events.beyond_reach(run, _goal(0.5)) is None  # type: ignore[arg-type]
@@ -138,7 +138,7 @@ def test_mp_says_a_failure_still_going_on_when_it_closes(
 
     parts = build_run(reach_scenario, method="mp", clock="virtual")
     try:
-        planner = make_planner("mp", reach_scenario, parts)
+        planner = make_planner("mp", parts)
         run = FakeRun(reach_scenario)
         _fail(planner.events, run, [_goal(1.5)] * 30, exhausted=True)
         planner.close()

@@ -12,13 +12,13 @@ from cbp.collision.geometry import WorldShapes
 from cbp.errors import ConfigError, ScenarioError
 from cbp.executors import load_executor
 from cbp.executors.aiming import looking_at, solve_camera
-from cbp.executors.clock import VirtualBudget, VirtualCosts
 from cbp.executors.visibility import UNSEEN_DEPTH, CellStates, in_view, visibility
 from cbp.methods.settings import LookSettings
 from cbp.metrics import run_metrics
 from cbp.perception.kernels import FREE, OCCUPIED, UNKNOWN
 from cbp.perception.spec import CameraSpec
 from cbp.robot import RobotModel
+from cbp.run.budget import VirtualBudget, VirtualCosts
 from cbp.scenario import load_scenario
 from tests.conftest import VIRTUAL_CLOCK
 
@@ -52,19 +52,27 @@ def test_a_camera_sees_points_in_its_view_not_behind_an_occupied_cell() -> None:
 
 
 def test_unseen_space_on_the_line_makes_a_point_less_likely_seen() -> None:
-    """Each UNSEEN_DEPTH of unseen cells before a point: a factor e less; the robot hides."""
+    """Each UNSEEN_DEPTH of unseen space before a point: a factor e less; the robot hides.
+
+    Space outside the grid is unseen as well.
+    """
     camera = pin.SE3(np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]]), np.zeros(3))
     spec = CameraSpec(name="c", position=(0, 0, 0), target=(1, 0, 0), fov_deg=60.0)
     cell = 0.01
-    # Unseen beyond x = 0.5 (the grid's cells), free before it (outside it).
-    cells = np.full((30, 20, 20), UNKNOWN, dtype=np.uint8)
-    grid = CellStates(cells, np.array([0.5, -0.1, -0.1]), cell)
+    # Free from x = -0.1 to 0.5, unseen from there to the grid's end at 0.8.
+    cells = np.full((90, 20, 20), UNKNOWN, dtype=np.uint8)
+    cells[:60] = FREE
+    grid = CellStates(cells, np.array([-0.1, -0.1, -0.1]), cell)
 
     points = np.array([[0.505, 0.0, 0.0], [0.6, 0.0, 0.0], [0.7, 0.0, 0.0]])
     got = visibility(camera, spec, points, grid)
     assert got[0] == 1.0  # on the frontier
     depth = points[1:, 0] - 0.5 - 1.5 * cell  # the unseen length before each
     np.testing.assert_allclose(got[1:], np.exp(-depth / UNSEEN_DEPTH), rtol=0.1)
+    # Outside the grid is unseen too: beyond its end as beyond x = 0.5.
+    far = visibility(camera, spec, np.array([[0.9, 0.0, 0.0]]), grid)
+    depth = 0.9 - 0.5 - 1.5 * cell
+    np.testing.assert_allclose(far, np.exp(-depth / UNSEEN_DEPTH), rtol=0.1)
 
     # A link across the line at x = 0.3: a slab 4 cm thick.
     slab = WorldShapes(
@@ -103,7 +111,7 @@ def _visibility_by_numpy(camera, spec, points, grid, body):  # type: ignore[no-u
     before = at < length[:, None] - 1.5 * grid.cell
     idx = np.floor((along.reshape(-1, 3) - grid.lower) / grid.cell).astype(int)
     ok = np.all((idx >= 0) & (idx < grid.cells.shape), axis=1)
-    state = np.full(len(idx), FREE, dtype=np.uint8)
+    state = np.full(len(idx), UNKNOWN, dtype=np.uint8)  # outside: unseen
     state[ok] = grid.cells[idx[ok, 0], idx[ok, 1], idx[ok, 2]]
     state = state.reshape(len(d), k)
     blocked = np.any((state == OCCUPIED) & before, axis=1)

@@ -136,3 +136,26 @@ def test_every_method_backs_out_of_an_allowed_start_in_contact(
     messages = [m for _, m in trace.events]
     assert any(m.startswith("in contact with an obstacle") for m in messages)
     assert any(m.startswith("out of contact after") for m in messages)
+
+
+def test_a_start_too_deep_to_back_out_of_is_refused_at_load(tmp_path) -> None:
+    """Allowed contact deeper than backing out can leave: exit at load, how deep, where."""
+    from cbp.scenario.checks import ALLOWED_INITIAL_DEPTH
+
+    _, head = _box_in_the_arm(ALLOWED_INITIAL_DEPTH + 0.01)
+    deep = tmp_path / "deep.yaml"
+    deep.write_text(
+        head.replace("  initial:", "  allow_initial_contact: true\n  initial:", 1)
+    )
+    with pytest.raises(ScenarioError) as refused:
+        load_scenario(deep)
+    message = str(refused.value)
+    assert "robot.initial" in message
+    assert "mm deep into 'box', deeper than the 40 mm an arm backs out of" in message
+    assert "panda_" in message  # the link
+    _, head = _box_in_the_arm(0.02)  # shallower: allowed
+    shallow = tmp_path / "shallow.yaml"
+    shallow.write_text(
+        head.replace("  initial:", "  allow_initial_contact: true\n  initial:", 1)
+    )
+    load_scenario(shallow)

@@ -7,9 +7,9 @@ import dataclasses
 import pytest
 
 from cbp.executors import make_planner
-from cbp.executors.trajectory import run_trajectory_executor
 from cbp.methods import METHODS, PERIODIC, MethodSpec
 from cbp.run import build_run
+from cbp.run.loop import run_loop
 from cbp.scenario import load_scenario
 from tests.executors.test_cat import SCENARIOS
 
@@ -19,7 +19,7 @@ def test_periodic_methods_are_the_trajectory_loop_planners() -> None:
     assert PERIODIC == ("cat", "ik", "mp", "hybrid")
     scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
     with pytest.raises(ValueError, match="no per-period planner"):
-        make_planner("jt", scenario, None)  # type: ignore[arg-type]
+        make_planner("jt", None)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="no per-period planner"):
         scenario.spec.method.timing("jt")
 
@@ -52,9 +52,9 @@ def test_make_planner_gives_a_planner_the_trajectory_loop_runs(method: str) -> N
         overrides={"method.name": method, "duration": "0.5"},
     )
     parts = build_run(scenario, method=method, needs_world=True)
-    planner = make_planner(method, scenario, parts)
+    planner = make_planner(method, parts)
     assert type(planner).__name__.lower().startswith(method)
-    trace = run_trajectory_executor(parts, planner, scenario.spec.method.timing("cat"))
+    trace = run_loop(parts, planner, scenario.spec.method.timing("cat"))
     assert trace.t[-1] == pytest.approx(0.5, abs=0.05)
     assert trace.aborted is None
     assert not any("robot held" in message for _, message in trace.events), trace.events

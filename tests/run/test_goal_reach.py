@@ -33,7 +33,8 @@ def test_a_goal_leaving_and_coming_back_within_reach_is_said_twice() -> None:
     assert 0.5 < out < 0.52
     assert said.startswith("goal out of reach: 0.51 m from the arm's first joint")
     assert said.endswith(
-        "(0.50 m, its links' lengths added up); the arm stops short of it"
+        "(0.50 m, its links' lengths between their joints' axes); the arm stops "
+        "short of it"
     )
     assert 1.49 < back < 1.51
     assert again == "goal within the arm's reach again"
@@ -48,5 +49,5 @@ def test_an_operator_goal_is_clamped_not_said_out_of_reach() -> None:
     goals = GoalInput(
         _Line(), None, log, bounds=GoalBounds.of(scenario), reach=scenario.reach()
     )
-    goals.send(1.0)  # 1 m ahead of the first joint's x: beyond the Panda's 0.99 m
+    goals.send(1.0)  # 1 m ahead of the first joint's x: beyond the Panda's 0.86 m
     assert [m.split(":")[0] for _, m in log.events] == ["goal clamped"]
