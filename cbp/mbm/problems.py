@@ -52,8 +52,6 @@ ROBOT = "franka_panda"
 TIP = "panda_link8"
 #: When the goal is given, and the run's length [s].
 GOAL_TIME, DURATION = 0.5, 10.0
-#: The map covers the objects and the robot's space, within this box [m].
-MAP_LIMITS = ((-1.1, -1.1, -0.8), (1.1, 1.1, 1.4))
 #: Attempts per wanted problem before a family is given up.
 ATTEMPTS = 40
 #: How far the goal is moved back along the hand's approach axis (its z) from
@@ -108,26 +106,6 @@ def _object(o: Primitive) -> dict[str, Any]:
     }
 
 
-def _corners(o: Primitive) -> FloatArray:
-    if o.shape == "box":
-        half = np.asarray(o.dimensions) / 2.0
-    else:
-        height, radius = o.dimensions
-        half = np.array([radius, radius, height / 2.0])
-    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-    return np.asarray((signs * half) @ o.pose[:3, :3].T + o.pose[:3, 3])
-
-
-def _bounds(objects: Sequence[Primitive]) -> list[list[float]]:
-    """The map's bounds: the objects and the robot's space, within MAP_LIMITS."""
-    points = np.vstack(
-        [*(_corners(o) for o in objects), [[-0.3, -0.3, -0.05], [0.3, 0.3, 1.2]]]
-    )
-    lo = np.maximum(points.min(axis=0) - 0.1, MAP_LIMITS[0])
-    hi = np.minimum(points.max(axis=0) + 0.1, MAP_LIMITS[1])
-    return [[round(float(v), 2) for v in lo], [round(float(v), 2) for v in hi]]
-
-
 def problem_document(
     problem: Problem, cameras: list[dict[str, Any]], timeout: float = 0.5
 ) -> dict[str, Any]:
@@ -159,7 +137,6 @@ def problem_document(
             "unknown": "occupied",
             "cameras": cameras,
             "cell_size": 0.01,
-            "bounds": _bounds(problem.objects),
             "camera_timeout": timeout,
         },
     }
