@@ -64,9 +64,14 @@ from cbp.perception.frame import (
     look_at,
     perspective,
 )
-from cbp.perception.mapper import Publication, SnapshotPublisher, cluster_motion
+from cbp.perception.mapper import (
+    Publication,
+    SnapshotPublisher,
+    cluster_motion,
+    integrate_frames,
+)
 from cbp.perception.motion import ApproachEstimator, MovingCluster, swept_snapshot
-from cbp.perception.moving import moving_growth, with_moving
+from cbp.perception.moving import frame_period, moving_growth, with_moving
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
@@ -120,6 +125,7 @@ class _Snapshot(NamedTuple):
     speeds: FloatArray | None  # the approach estimate per robot shape [m/s]
     moving: list[MovingCluster]  # clusters that move (cluster_motion)
     entered: FloatArray  # centres of the cells something entered lately
+    entered_at: float  # when the newest of them was entered [s] (-inf: none)
     taken: int  # frames it took in
     skipped: int  # frames replaced before it took them
     timings: tuple[float, float, float, int]  # received, integrate, snapshot, n
@@ -192,6 +198,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         self._speeds: FloatArray | None = None
         self._moving: list[MovingCluster] = []
         self._entered: FloatArray = np.zeros((0, 3))
+        self._entered_at = -np.inf
         self._mapped: OccupancyEnvironment | None = None
         self._process: BaseProcess | None = None
         self._receiver: threading.Thread | None = None
@@ -405,6 +412,7 @@ class ProcessMapUpdater(SnapshotPublisher):
         self._speeds = snapshot.speeds
         self._moving = snapshot.moving
         self._entered = snapshot.entered
+        self._entered_at = snapshot.entered_at
         self.world.set_environment(self._ahead(mapped))
         self.stamp = max(self.stamp, stamp)
         self.updates += 1
@@ -433,7 +441,14 @@ class ProcessMapUpdater(SnapshotPublisher):
         out = with_moving(
             out,
             self._entered,
-            moving_growth(grid.spec.moving_speed, self.look_ahead, age),
+            moving_growth(
+                grid.spec.moving_speed,
+                self.look_ahead,
+                age,
+                (mapped.stamp or 0.0) - self._entered_at,
+                grid.cell,
+                frame_period(grid.spec),
+            ),
             grid.cells,
             grid.lower,
         )
@@ -565,9 +580,7 @@ def _child(setup: _Setup, wake: Any, conn: Connection) -> None:
             taken = len(pending) + skipped
             received = time.perf_counter()
             try:
-                for frame, q, t in pending:
-                    state.update(q)
-                    grid.integrate(frame, state, t)
+                integrate_frames(grid, state, pending)
                 integrated = time.perf_counter()
                 new = grid.environment()
                 stamp = max(t for _, _, t in pending)
@@ -598,7 +611,7 @@ def _child(setup: _Setup, wake: Any, conn: Connection) -> None:
                                 0,
                             )
                         )
-                entered = grid.moving_centres(stamp)
+                entered, entered_at = grid.moving(stamp)
                 mapped = new
                 done = time.perf_counter()
             except Exception as exc:  # reported, the previous map kept
@@ -618,7 +631,16 @@ def _child(setup: _Setup, wake: Any, conn: Connection) -> None:
                 (
                     "snapshot",
                     _Snapshot(
-                        slot, n, stamp, speeds, moving, entered, taken, skipped, timings
+                        slot,
+                        n,
+                        stamp,
+                        speeds,
+                        moving,
+                        entered,
+                        entered_at,
+                        taken,
+                        skipped,
+                        timings,
                     ),
                 )
             )

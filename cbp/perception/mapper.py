@@ -32,12 +32,18 @@ from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.collision.world import CollisionWorld
 from cbp.perception.frame import DepthFrame
 from cbp.perception.motion import ApproachEstimator, ClusterMotion, swept_snapshot
-from cbp.perception.moving import moving_growth, with_moving
+from cbp.perception.moving import frame_period, moving_growth, with_moving
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.robot import FloatArray
 from cbp.state import RobotState
 
-__all__ = ["MapUpdater", "Publication", "SnapshotPublisher", "cluster_motion"]
+__all__ = [
+    "MapUpdater",
+    "Publication",
+    "SnapshotPublisher",
+    "cluster_motion",
+    "integrate_frames",
+]
 
 #: Publications kept in :attr:`SnapshotPublisher.published`.
 KEPT_PUBLICATIONS = 4096
@@ -72,6 +78,32 @@ def cluster_motion(grid: OccupancyGrid) -> ClusterMotion | None:
     if not spec.cluster_motion or spec.motion_window <= 0:
         return None
     return ClusterMotion(grid.lower, grid.cell, spec.motion_window)
+
+
+def integrate_frames(
+    grid: OccupancyGrid,
+    state: RobotState,
+    frames: list[tuple[DepthFrame, FloatArray, float]],
+) -> None:
+    """Integrate ``frames`` (frame, configuration, capture time) in time order.
+
+    The frames of one capture time together
+    (:meth:`~cbp.perception.occupancy.OccupancyGrid.integrate_together`): a
+    cell one camera sees through at an instant is free, whatever another
+    camera's reading of that instant hides. ``state`` is updated to each
+    frame's configuration in turn (the last one's after).
+    """
+    ordered = sorted(frames, key=lambda f: f[2])
+    k = 0
+    while k < len(ordered):
+        t = ordered[k][2]
+        group: list[tuple[DepthFrame, RobotState | None, float | None]] = []
+        while k < len(ordered) and ordered[k][2] == t:
+            frame, q, _ = ordered[k]
+            group.append((frame, RobotState(state.robot, q), t))
+            k += 1
+        grid.integrate_together(group)
+        state.update(ordered[k - 1][1])
 
 
 class SnapshotPublisher:
@@ -163,10 +195,8 @@ class MapUpdater(SnapshotPublisher):
         """Start the worker (unless synchronous)."""
         super().__init__()
         self.batch = batch and synchronous
-        #: Frames integrated and not yet in a snapshot (``batch``), and the
-        #: CPU time integrating them took [s].
+        #: Frames of one instant, not yet integrated (``batch``).
         self._held: list[tuple[DepthFrame, FloatArray, float]] = []
-        self._held_s = (0.0, 0.0)
         self.grid = grid
         self.world = world
         self.synchronous = synchronous
@@ -201,11 +231,6 @@ class MapUpdater(SnapshotPublisher):
         if self.batch:
             if self._held and t > self._held[-1][2]:
                 self._publish_held()
-            start = time.perf_counter()
-            self._state.update(q)
-            self.grid.integrate(frame, self._state, t)
-            first = self._held_s[0] if self._held else start
-            self._held_s = (first, self._held_s[1] + time.perf_counter() - start)
             self._held.append((frame, q, t))
             return
         if self.synchronous:
@@ -254,16 +279,13 @@ class MapUpdater(SnapshotPublisher):
 
     def _integrate(self, frames: list[tuple[DepthFrame, FloatArray, float]]) -> None:
         start = time.perf_counter()
-        for frame, q, t in frames:
-            self._state.update(q)
-            self.grid.integrate(frame, self._state, t)
+        integrate_frames(self.grid, self._state, frames)
         self._publish(frames, start, time.perf_counter())
 
     def _publish_held(self) -> None:
-        """Snapshot the frames integrated and held (``batch``)."""
+        """Integrate the frames held, of one instant, and snapshot (``batch``)."""
         frames, self._held = self._held, []
-        start, integrate_s = self._held_s
-        self._publish(frames, start, start + integrate_s)
+        self._integrate(frames)
 
     def _publish(
         self,
@@ -304,12 +326,21 @@ class MapUpdater(SnapshotPublisher):
                     f"approach estimate failed, map published without it: {exc}"
                 )
         self._mapped = mapped
+        grid = self.grid
+        entered, newest = grid.moving(stamp)
         published = with_moving(
             published,
-            self.grid.moving_centres(stamp),
-            moving_growth(self.grid.spec.moving_speed, self.look_ahead, self.latency),
-            self.grid.cells,
-            self.grid.lower,
+            entered,
+            moving_growth(
+                grid.spec.moving_speed,
+                self.look_ahead,
+                self.latency,
+                stamp - newest,
+                grid.cell,
+                frame_period(grid.spec),
+            ),
+            grid.cells,
+            grid.lower,
         )
         published.stamp = stamp
         if self.latency > 0.0:

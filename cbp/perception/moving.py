@@ -37,6 +37,7 @@ from cbp.collision.environment import NarrowPhase
 from cbp.collision.geometry import LinkShape, PlacedShapes
 from cbp.collision.map_environment import OccupancyEnvironment
 from cbp.perception.kernels import OCCUPIED
+from cbp.perception.spec import PerceptionSpec
 from cbp.robot import FloatArray
 
 __all__ = [
@@ -44,6 +45,7 @@ __all__ = [
     "PREPARED_LOOK_AHEAD",
     "REACH_STEP",
     "MovingCellsEnvironment",
+    "frame_period",
     "moving_growth",
     "prepare_moving_tables",
     "with_moving",
@@ -72,16 +74,49 @@ class _MovingCells(OccupancyEnvironment):
     reach_step = REACH_STEP
 
 
-def moving_growth(speed: float, look_ahead: float, age: float) -> float:
+def frame_period(spec: PerceptionSpec) -> float:
+    """The slowest fixed camera's frame period [s] (0: no fixed camera).
+
+    Only fixed cameras tell which cells something entered
+    (:meth:`~cbp.perception.occupancy.OccupancyGrid.moving_centres`).
+    """
+    rates = [c.rate_hz for c in spec.all_cameras if c.parent is None]
+    return 1.0 / min(rates) if rates else 0.0
+
+
+def moving_growth(
+    speed: float,
+    look_ahead: float,
+    age: float,
+    still: float = 0.0,
+    cell: float = 0.0,
+    frame: float = 0.0,
+) -> float:
     """How much nearer moving cells are measured [m]: 0 without a look-ahead.
 
     ``speed`` [m/s] over the look-ahead and the snapshot's age [s], rounded
     up to :data:`GROWTH_STEP`. An executor that plans nothing ahead (a
     look-ahead of 0: JT, a run's last stretch) measures them where they are.
+
+    Once what moved stands still, the growth shrinks. Something that moves at
+    v enters a new cell at least every ``cell`` / v seconds (its leading face
+    crosses one), and the cameras see each entered cell within a frame; so
+    when no cell has been entered for ``still`` seconds (before the
+    snapshot's stamp), nothing seen moves faster than ``cell / still``, and
+    the look-ahead is measured at that speed (at most ``speed``). What
+    starts again is seen within a frame (``frame`` [s], the slowest fixed
+    camera's period) and the snapshot's age: the arm keeps ``speed`` times
+    that from it however long it stood, as it would from an obstacle first
+    seen moving then. A moving obstacle (``still`` under ``cell / speed``)
+    is measured as before: ``speed`` x (look-ahead + age). Before, a stopped
+    obstacle kept the whole growth (19 cm at 0.25 m/s) for
+    ``perception.shadow_hold`` (1 s) after it stopped, and the arm fled it.
     """
     if not look_ahead > 0.0 or not speed > 0.0:
         return 0.0
-    growth = speed * (look_ahead + max(0.0, age))
+    moving = speed if not still > 0.0 else min(speed, cell / still)
+    ahead = max(moving * look_ahead, speed * min(frame, look_ahead))
+    growth = speed * max(0.0, age) + ahead
     return math.ceil(growth / GROWTH_STEP - 1e-9) * GROWTH_STEP
 
 

@@ -133,6 +133,27 @@ class FrameSummary:
     hidden: int = 0
 
 
+@dataclass
+class _Prepared:
+    """One frame as :meth:`OccupancyGrid.integrate_together` passes it on."""
+
+    frame: DepthFrame
+    t: float | None
+    readings: FrameArrays
+    robot: RobotShapes
+    kept: KeptPixels
+    todo: np.ndarray
+    motion: FloatArray
+    windows: np.ndarray
+    since: int
+    tiles: np.ndarray
+    carved: int
+    valid: int = 0
+    removed: int = 0
+    inserted: int = 0
+    hidden: int = 0
+
+
 class OccupancyGrid:
     """A dense three-state voxel grid over the mapped region.
 
@@ -228,9 +249,17 @@ class OccupancyGrid:
         self._noise = {c.name: c.noise for c in spec.all_cameras}
         # Per camera: the view its pixel history was taken from, and the history.
         self._moved: dict[str, tuple[FloatArray, PixelHistory]] = {}
-        # How far beyond each robot shape hidden space stops (its padding).
+        # How far beyond each robot shape hidden space stops: its padding and
+        # two cells. The contact rows hold the arm a cell from a cell's
+        # centre (half a cell of inflation, half the cell's size), and the
+        # march that hides a ray's cells stops at a point up to a cell from
+        # the centre of the cell it hides last. Hidden space that came within
+        # that pushed the arm away from it, frame after frame, while what hid
+        # it moved: a post receding from the hand along a camera's rays
+        # pushed the hand 6 cm off its goal. (The robot's first frame frees
+        # as much.)
         self._held = (
-            np.full(len(geometry.shapes), geometry.padding)
+            np.full(len(geometry.shapes), geometry.padding + 2.0 * self.cell)
             if geometry is not None
             else np.zeros(0)
         )
@@ -301,6 +330,22 @@ class OccupancyGrid:
         flat, when = self._recent
         oldest = t - self.spec.shadow_hold
         return occupied_centres(flat, when, oldest, self.cells, self.lower, self.cell)
+
+    def moving(self, t: float) -> tuple[FloatArray, float]:
+        """:meth:`moving_centres`, and when the newest of them was entered [s].
+
+        -inf when there are none. How long nothing has been entered bounds
+        how fast what the cameras saw move still moves
+        (:func:`~cbp.perception.moving.moving_growth`).
+        """
+        centres = self.moving_centres(t)
+        flat, when = self._recent
+        if not len(centres) or not len(flat):
+            return centres, -np.inf
+        live = (when >= t - self.spec.shadow_hold) & (
+            self.cells.reshape(-1)[flat] == OCCUPIED
+        )
+        return centres, float(when[live].max()) if live.any() else -np.inf
 
     def _remember_entered(self, n: int, t: float) -> None:
         """Keep the ``n`` cells the last frame entered, at time ``t``."""
@@ -384,6 +429,53 @@ class OccupancyGrid:
                 again (``perception.shadow_hold``; the module's docstring).
                 None: not tracked for this frame.
         """
+        return self.integrate_together([(frame, state, t)])[0]
+
+    def integrate_together(
+        self, frames: list[tuple[DepthFrame, RobotState | None, float | None]]
+    ) -> list[FrameSummary]:
+        """Add frames captured at one instant: readings first, then what each sees.
+
+        Each frame's robot space and readings (and the space they hide), then
+        the space each sees through: a cell one camera sees through is free at
+        that instant, whatever another camera's nearer reading hides behind
+        it. Frame by frame, a cell seen through by one camera and then hidden
+        by the next was unknown in the snapshot, and back and forth at every
+        frame while the surface that hid it moved or stood within
+        ``shadow_hold``: beside a hand whose goal a post had just passed,
+        200-600 cells near the hand flipped at every instant and held it
+        6 cm off its goal. ``state`` is read at once (it may be updated for
+        the next frame).
+        """
+        prepared = [self._prepare(frame, state, t) for frame, state, t in frames]
+        seen = {}
+        if len(prepared) == 1:  # one frame: what it sees and hides are apart
+            seen[0] = self._see(prepared[0])
+        for p in prepared:
+            self._insert(p)
+        out = []
+        for k, p in enumerate(prepared):
+            if k not in seen:
+                seen[k] = self._see(p)
+            self.frames += 1
+            self.last = FrameSummary(
+                camera=p.frame.camera,
+                valid_fraction=p.valid / p.frame.depth.size
+                if p.frame.depth.size
+                else 0.0,
+                robot_points=p.removed,
+                inserted=p.inserted,
+                seen=seen[k],
+                carved=p.carved,
+                hidden=p.hidden,
+            )
+            out.append(self.last)
+        return out
+
+    def _prepare(
+        self, frame: DepthFrame, state: RobotState | None, t: float | None
+    ) -> _Prepared:
+        """A frame as the passes take it, and the robot's space freed."""
         self._clock[0] += 1  # this frame's stamp (before the passes)
         robot = _NO_ROBOT
         carved = 0
@@ -400,8 +492,7 @@ class OccupancyGrid:
                 self._held,
             )
         depth = np.ascontiguousarray(frame.depth, dtype=float)
-        limits = frame.buffer_limits
-        nearest, far_plane, far_buffer = limits
+        nearest, far_plane, far_buffer = frame.buffer_limits
         if self._entered.size < depth.size:  # one entry a pixel at most
             self._entered = np.empty(depth.size, np.int64)
         clip = frame.projection.dot(frame.view)[[0, 1, 3]]
@@ -426,34 +517,36 @@ class OccupancyGrid:
             if whole
             else tile_windows(tiles, TILE, h, w)
         )
-        seen = self._see_through(frame, readings, limits, windows, since, tiles)
+        return _Prepared(
+            frame, t, readings, robot, kept, todo, motion, windows, since, tiles, carved
+        )
+
+    def _see(self, p: _Prepared) -> int:
+        """The space the frame sees through (:meth:`_see_through`)."""
+        return self._see_through(
+            p.frame, p.readings, p.frame.buffer_limits, p.windows, p.since, p.tiles
+        )
+
+    def _insert(self, p: _Prepared) -> None:
+        """The frame's readings into the grid (and the space they hide)."""
+        t = p.t
         valid, removed, inserted, hidden, entered = insert_readings(
-            readings,
-            robot,
+            p.readings,
+            p.robot,
             self.arrays,
-            self._pixels(frame, t),
+            self._pixels(p.frame, t),
             0.0 if t is None else float(t),
             float(self.spec.shadow_hold),
             self._entered,
-            todo,
-            kept,
-            motion,
+            p.todo,
+            p.kept,
+            p.motion,
         )
         if t is not None:
             self._remember_entered(entered, t)
         self.robot_points_removed += removed
         self.hidden_cells += hidden
-        self.frames += 1
-        self.last = FrameSummary(
-            camera=frame.camera,
-            valid_fraction=valid / frame.depth.size if frame.depth.size else 0.0,
-            robot_points=removed,
-            inserted=inserted,
-            seen=seen,
-            carved=carved,
-            hidden=hidden,
-        )
-        return self.last
+        p.valid, p.removed, p.inserted, p.hidden = valid, removed, inserted, hidden
 
     def _spread(self, frame: DepthFrame) -> FloatArray:
         """How far the camera noise spreads a reading: self-filter, hidden space.

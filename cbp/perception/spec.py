@@ -304,13 +304,19 @@ class PerceptionSpec:
     look-ahead (and the snapshot's age) nearer, in every direction
     (:mod:`cbp.perception.moving`): the arm keeps the separation it needs to
     get away from an obstacle at that speed, as speed and separation
-    monitoring counts it. Set it to the fastest obstacle the robot must outrun;
+    monitoring counts it. Once no cell has been entered for a while, the
+    look-ahead is measured at the speed that could have gone unseen (a cell
+    per that while), and at least this speed over a fixed camera's frame
+    period and the snapshot's age
+    (:func:`~cbp.perception.moving.moving_growth`). Set it to the fastest
+    obstacle the robot must outrun;
     an obstacle faster than the arm can retreat is reported as it comes
     (``docs/moving_scenes.md``). 0: moving cells are measured where they are."""
     shadow_hold: float = 1.0
     """Space a fixed camera saw free and now sees hidden behind a nearer
     surface (something came between: an obstacle moved in) is unknown again,
-    from that surface to the robot's padded shapes, while the surface moves and
+    from that surface to two cells beyond the robot's padded shapes (where the
+    contact rows would not push the arm out of it), while the surface moves and
     this long after it stops [s]; then, as any shadow, it keeps the state it
     was last seen in. Without it an obstacle that comes at the arm is mapped by
     the faces the cameras see, and the rest of it moves into space the map

@@ -176,7 +176,10 @@ world:
         "  initial:", "  allow_initial_contact: true\n  initial:"
     )
     path.write_text(allowed)
-    assert load_scenario(path).spec.robot.allow_initial_contact
+    # The hand in the block's middle: deeper than backing out leaves, refused
+    # even when allowed (a shallow allowed start loads: test_start_in_contact).
+    with pytest.raises(ScenarioError, match="deeper than the 40 mm an arm backs out"):
+        load_scenario(path)
 
 
 def test_a_camera_on_an_unknown_frame_is_refused_at_its_line(tmp_path) -> None:

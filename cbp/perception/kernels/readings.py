@@ -243,6 +243,9 @@ def insert_readings(
                 continue
             inserted += 1
             kept.cell[r, c] = (i * ny + j) * nz + k
+            # Entered: the reading came nearer and its cell was not occupied
+            # (a surface uncovered by the robot, mapped by another pixel, is not).
+            came = came and cells[i, j, k] != OCCUPIED
             if cells[i, j, k] != OCCUPIED or misses[i, j, k] != 0:
                 _occupy(grid, i, j, k)
             if came and n_entered < entered.shape[0]:
