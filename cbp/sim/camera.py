@@ -9,6 +9,10 @@ default) or with a compiled ray cast against the PyBullet scene's shapes
 driver would give the map (:mod:`cbp.perception`), which does not know what
 rendered it. The pixel convention and the clipping plane are
 described in :mod:`cbp.perception.frame`.
+
+:class:`SimulatedCamera` is what every simulator's cameras share (the
+matrices, the mount, the noise); MuJoCo's renders with OpenGL
+(:mod:`cbp.sim.mujoco.camera`).
 """
 
 from __future__ import annotations
@@ -21,43 +25,35 @@ import pinocchio as pin
 from cbp.errors import ConfigError, FrameNotFoundError
 from cbp.perception.frame import RENDER_NEAR_FRACTION, DepthFrame, camera_parent
 from cbp.perception.spec import CameraSpec
-from cbp.robot import RobotModel
+from cbp.robot import FloatArray, RobotModel
 from cbp.sim.bullet import pb
 from cbp.sim.depth_noise import NoisyDepth
 from cbp.sim.raycast import RayCaster
 from cbp.state import RobotState
 
-__all__ = ["DepthCamera"]
+__all__ = ["DepthCamera", "SimulatedCamera"]
 
 
-class DepthCamera:
-    """A camera rendering depth images of a PyBullet client: fixed or mounted.
+class SimulatedCamera:
+    """A simulated depth camera, fixed or mounted, whatever renders its images.
+
+    It keeps the camera's matrices (PyBullet's, so that every simulator's
+    frames carry the same ones), follows the robot frame it is mounted on, and
+    turns each rendered depth buffer into a
+    :class:`~cbp.perception.frame.DepthFrame` with the camera's noise. A
+    subclass renders (:meth:`_render`).
 
     Args:
-        client: PyBullet client id.
         spec: pose (or parent frame and offset), resolution, field of view and
             clipping planes.
         robot: the robot a mounted camera's ``parent`` frame belongs to.
-        caster: the ray caster of ``client`` to render with (``renderer:
-            raycast``); cameras of one client may share one. Default: a
-            camera's own.
 
     Raises:
         ConfigError: a mounted camera without a robot, or with an unknown frame.
     """
 
-    def __init__(
-        self,
-        client: int,
-        spec: CameraSpec,
-        robot: RobotModel | None = None,
-        caster: RayCaster | None = None,
-    ) -> None:
+    def __init__(self, spec: CameraSpec, robot: RobotModel | None = None) -> None:
         """Compute the projection (and a fixed camera's view) once."""
-        self.client = client
-        self._caster = (
-            (caster or RayCaster(client)) if spec.renderer == "raycast" else None
-        )
         self.spec = spec
         self.name = spec.name
         self._clip_near = min(spec.near, RENDER_NEAR_FRACTION * spec.far)
@@ -120,21 +116,7 @@ class DepthCamera:
             eye = M.translation
             self._set_view(eye, eye + M.rotation[:, 2], -M.rotation[:, 1])
         s = self.spec
-        if self._caster is not None:
-            buffer = self._caster.render(
-                self.view, self.projection, s.width, s.height, self._clip_near, s.far
-            )
-        else:
-            _, _, _, depth, _ = pb.getCameraImage(
-                s.width,
-                s.height,
-                viewMatrix=self._view_list,
-                projectionMatrix=self._projection_list,
-                renderer=pb.ER_TINY_RENDERER,
-                flags=pb.ER_NO_SEGMENTATION_MASK,
-                physicsClientId=self.client,
-            )
-            buffer = np.asarray(depth, dtype=float).reshape(s.height, s.width)
+        buffer = self._render()
         frame = DepthFrame(
             buffer,
             self.view.copy(),
@@ -150,6 +132,14 @@ class DepthCamera:
         noisy = self._noise.apply(buffer, self._clip_near, s.far, far_plane)
         return dataclasses.replace(frame, depth=noisy)
 
+    def _render(self) -> FloatArray:
+        """The depth buffer (height, width) through :attr:`view` now.
+
+        In [0, 1] as PyBullet gives it (:mod:`cbp.perception.frame`): 0 at the
+        clipping plane, 1 where nothing is seen up to the far plane.
+        """
+        raise NotImplementedError(f"{type(self).__name__} renders nothing")
+
     def _set_view(self, eye: object, target: object, up: object) -> None:
         self._view_list = pb.computeViewMatrix(
             [float(v) for v in eye],  # type: ignore[attr-defined]
@@ -157,3 +147,52 @@ class DepthCamera:
             [float(v) for v in up],  # type: ignore[attr-defined]
         )
         self.view = np.array(self._view_list).reshape(4, 4).T
+
+
+class DepthCamera(SimulatedCamera):
+    """A camera rendering depth images of a PyBullet client: fixed or mounted.
+
+    Args:
+        client: PyBullet client id.
+        spec: pose (or parent frame and offset), resolution, field of view and
+            clipping planes.
+        robot: the robot a mounted camera's ``parent`` frame belongs to.
+        caster: the ray caster of ``client`` to render with (``renderer:
+            raycast``); cameras of one client may share one. Default: a
+            camera's own.
+
+    Raises:
+        ConfigError: a mounted camera without a robot, or with an unknown frame.
+    """
+
+    def __init__(
+        self,
+        client: int,
+        spec: CameraSpec,
+        robot: RobotModel | None = None,
+        caster: RayCaster | None = None,
+    ) -> None:
+        """Compute the projection (and a fixed camera's view) once."""
+        super().__init__(spec, robot)
+        self.client = client
+        self._caster = (
+            (caster or RayCaster(client)) if spec.renderer == "raycast" else None
+        )
+
+    def _render(self) -> FloatArray:
+        """The ray caster's depth buffer, or PyBullet's tiny renderer's."""
+        s = self.spec
+        if self._caster is not None:
+            return self._caster.render(
+                self.view, self.projection, s.width, s.height, self._clip_near, s.far
+            )
+        _, _, _, depth, _ = pb.getCameraImage(
+            s.width,
+            s.height,
+            viewMatrix=self._view_list,
+            projectionMatrix=self._projection_list,
+            renderer=pb.ER_TINY_RENDERER,
+            flags=pb.ER_NO_SEGMENTATION_MASK,
+            physicsClientId=self.client,
+        )
+        return np.asarray(depth, dtype=float).reshape(s.height, s.width)

@@ -1,0 +1,162 @@
+"""MuJoCo's depth camera: known surfaces within a map cell, PyBullet's pixels."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import cbp.sim.mujoco  # noqa: F401  (OpenGL through EGL before mujoco loads)
+from cbp.perception.spec import CameraSpec, DepthNoise, PerceptionSpec
+
+mujoco = pytest.importorskip("mujoco")
+
+from cbp.sim.mujoco.camera import MujocoDepthCamera, Renderers  # noqa: E402
+
+EXACT = DepthNoise(enabled=False)
+CELL = PerceptionSpec().cell_size
+
+#: The scene: a floor plane at z = 0, a box, a sphere, a cylinder and a cube
+#: given as a mesh, each (type, position, rotation, size as MuJoCo takes it).
+BOX = (np.array([1.0, 0.0, 0.15]), pin.rpy.rpyToMatrix(0.0, 0.0, 0.3), (0.1, 0.2, 0.15))
+SPHERE = (np.array([0.8, -0.45, 0.12]), 0.12)
+CYLINDER = (np.array([0.85, 0.45, 0.2]), pin.rpy.rpyToMatrix(0.4, 0.2, 0.0), 0.07, 0.2)
+CUBE = (np.array([0.6, 0.0, 0.3]), pin.rpy.rpyToMatrix(0.3, 0.5, 0.2), 0.05)
+
+
+def _quaternion(rotation: np.ndarray) -> list[float]:
+    q = pin.Quaternion(rotation)
+    return [q.w, q.x, q.y, q.z]
+
+
+def _scene() -> tuple[Any, Any]:
+    """The model and data of the scene, built with MuJoCo's spec."""
+    spec = mujoco.MjSpec()
+    world = spec.worldbody
+    world.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 1.0])
+    position, rotation, half = BOX
+    world.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_BOX, pos=position, quat=_quaternion(rotation),
+        size=half,
+    )  # fmt: skip
+    world.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=SPHERE[0], size=[SPHERE[1], 0, 0]
+    )
+    position, rotation, radius, half_length = CYLINDER
+    world.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER, pos=position,
+        quat=_quaternion(rotation), size=[radius, half_length, 0.0],
+    )  # fmt: skip
+    position, rotation, half = CUBE
+    corners = np.array([[(i >> k & 1) * 2 - 1 for k in range(3)] for i in range(8)])
+    faces = [
+        [0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
+        [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5],
+    ]  # fmt: skip
+    spec.add_mesh(
+        name="cube",
+        uservert=(half * corners).ravel().tolist(),
+        userface=np.ravel(faces).tolist(),
+    )
+    world.add_geom(
+        type=mujoco.mjtGeom.mjGEOM_MESH, meshname="cube", pos=position,
+        quat=_quaternion(rotation),
+    )  # fmt: skip
+    model = spec.compile()
+    return model, mujoco.MjData(model)
+
+
+def _box_distance(
+    points: np.ndarray, position: np.ndarray, rotation: np.ndarray, half: object
+) -> np.ndarray:
+    """Distance of points (n, 3) to a box's surface [m]."""
+    local = np.abs((points - position).dot(rotation)) - np.asarray(half, dtype=float)
+    outside = np.linalg.norm(np.maximum(local, 0.0), axis=1)
+    return np.where(np.any(local > 0, axis=1), outside, -np.max(local, axis=1))
+
+
+def _surface_distance(points: np.ndarray) -> np.ndarray:
+    """Distance of world points (n, 3) to the scene's nearest surface [m]."""
+    floor = np.abs(points[:, 2])
+    box = _box_distance(points, *BOX)
+    cube = _box_distance(points, CUBE[0], CUBE[1], (CUBE[2],) * 3)
+    ball = np.abs(np.linalg.norm(points - SPHERE[0], axis=1) - SPHERE[1])
+    position, rotation, radius, half_length = CYLINDER
+    local = (points - position).dot(rotation)
+    radial = np.linalg.norm(local[:, :2], axis=1) - radius
+    axial = np.abs(local[:, 2]) - half_length
+    outside = np.hypot(np.maximum(radial, 0.0), np.maximum(axial, 0.0))
+    can = np.where((radial > 0) | (axial > 0), outside, -np.maximum(radial, axial))
+    return np.asarray(np.min([floor, box, cube, ball, can], axis=0))
+
+
+def _camera(model: Any, data: Any, **kwargs: Any) -> MujocoDepthCamera:
+    spec = CameraSpec(
+        name="c", position=(-0.2, 0.0, 0.7), target=(0.8, 0.0, 0.1), width=160,
+        height=120, fov_deg=60.0, far=2.5, noise=EXACT,
+    )  # fmt: skip
+    return MujocoDepthCamera(model, data, replace(spec, **kwargs))
+
+
+def test_a_box_face_at_a_known_distance_is_seen_there_within_a_cell() -> None:
+    """The conformance check: a box face 1.2 m ahead reads 1.2 m (within a cell)."""
+    model, data = _scene()
+    camera = _camera(model, data, position=(-0.2, 0.0, 0.15), target=(1.0, 0.0, 0.15))
+    # The box's nearest face, turned 0.3 rad: its centre lies 1.2 - 0.1 / cos(0.3)
+    # ahead; the pixel on the axis sees it there.
+    ranges = camera.capture().ranges()
+    h, w = ranges.shape
+    expected = 1.2 - BOX[2][0] / np.cos(0.3)
+    assert abs(ranges[h // 2, w // 2] - expected) < CELL
+    # ... and every pixel's point lies on a surface of the scene.
+    points, hit = camera.capture().points()
+    assert hit.mean() > 0.5
+    assert np.max(_surface_distance(points[hit])) < CELL
+
+
+def test_every_pixel_lies_on_the_surface_it_sees() -> None:
+    """Plane, box, sphere, cylinder and mesh: within 0.5 mm (facets), most exact."""
+    model, data = _scene()
+    points, hit = _camera(model, data).capture().points()
+    distance = _surface_distance(points[hit])
+    assert hit.mean() > 0.7  # the floor up to 2.5 m, and the objects
+    assert np.max(distance) < 5e-4  # spheres and cylinders are drawn as facets
+    assert np.median(distance) < 1e-5  # pixels sample where the frame says
+
+
+def test_nearer_than_the_clipping_plane_is_cut_and_beyond_far_unseen() -> None:
+    """The far plane bounds what is seen; the minimum range gives no reading."""
+    model, data = _scene()
+    far = _camera(model, data, far=1.0).capture()
+    assert np.all(np.isinf(far.ranges()) | (far.ranges() < 1.0))
+    assert np.isinf(far.ranges()).mean() > 0.1  # the floor beyond 1 m
+    near = _camera(model, data, near=0.8).capture()
+    ranges = near.ranges()
+    assert np.isnan(ranges).mean() > 0.1  # the floor nearer than 0.8 m
+    assert np.all(np.isnan(ranges) | (ranges >= 0.8))
+
+
+def test_cameras_of_one_size_share_one_renderer() -> None:
+    """One OpenGL context per image size, whatever the number of cameras."""
+    model, data = _scene()
+    renderers = Renderers(model)
+    specs = [
+        CameraSpec(name=f"c{i}", position=p, target=(0.8, 0.0, 0.1), width=w,
+                   height=h, noise=EXACT)
+        for i, (p, w, h) in enumerate([
+            ((-0.2, 0.0, 0.7), 64, 48), ((0.8, -1.0, 0.6), 64, 48),
+            ((0.8, 1.0, 0.6), 32, 24),
+        ])
+    ]  # fmt: skip
+    cameras = [MujocoDepthCamera(model, data, s, None, renderers) for s in specs]
+    frames = [c.capture() for c in cameras]
+    assert [f.depth.shape for f in frames] == [(48, 64), (48, 64), (24, 32)]
+    assert renderers.count == 2
+    for frame in frames:  # each from its own place
+        points, hit = frame.points()
+        assert hit.mean() > 0.5
+        assert np.max(_surface_distance(points[hit])) < 1e-3
+    renderers.close()
