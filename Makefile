@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	touch $@
 
 $(DEV_STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e ".[dev,bench,sweep,viewer]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,bench,sweep,viewer,mujoco]"
 	touch $@ $(STAMP)
 
 $(DOCS_STAMP): pyproject.toml | $(BIN)/python

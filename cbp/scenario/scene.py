@@ -16,7 +16,17 @@ import pinocchio as pin
 from cbp.errors import ConfigError, require, require_between
 from cbp.spatial import Pose
 
-__all__ = ["MAX_OBJECT_SPEED", "ObjectMotion", "ObjectSpec", "SimulationSettings"]
+__all__ = [
+    "MAX_OBJECT_SPEED",
+    "ObjectMotion",
+    "ObjectSpec",
+    "SimulationSettings",
+    "SimulatorName",
+]
+
+#: The physics engines a scenario can name (``simulator:``;
+#: :data:`cbp.sim.physics.SIMULATORS`).
+SimulatorName = Literal["pybullet", "mujoco"]
 
 #: Fastest a declared object may move [m/s]. Faster than anything tracked near
 #: an arm: ISO 13855 takes 2 m/s for a hand reaching into a machine, and a tool

@@ -20,7 +20,7 @@ from cbp.goals import GoalSpec
 from cbp.methods import MethodSpec
 from cbp.perception.spec import PerceptionSpec
 from cbp.robot import BaseType
-from cbp.scenario.scene import ObjectSpec, SimulationSettings
+from cbp.scenario.scene import ObjectSpec, SimulationSettings, SimulatorName
 from cbp.solvers import SOLVERS
 
 __all__ = [
@@ -118,6 +118,9 @@ class ScenarioSpec:
     """The objects around the robot."""
     simulation: SimulationSettings = field(default_factory=SimulationSettings)
     """Physics rate and the joint impedance of the simulated robot."""
+    simulator: SimulatorName = "pybullet"
+    """The physics engine: ``pybullet``, or ``mujoco`` (the ``mujoco`` extra;
+    fixed-base robots)."""
     collision: CollisionSettings = field(default_factory=CollisionSettings)
     """Contact queries and step validation."""
     perception: PerceptionSpec = field(default_factory=PerceptionSpec)

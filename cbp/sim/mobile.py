@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cbp.errors import ConfigError
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.sim.bullet import pb
@@ -37,6 +38,7 @@ class MobileSimulation:
         settings: physics rate.
         folder: where mesh files of objects are resolved from.
         gui: open PyBullet's window.
+        simulator: the physics engine: PyBullet only (``pybullet``).
     """
 
     def __init__(
@@ -47,8 +49,16 @@ class MobileSimulation:
         settings: SimulationSettings | None = None,
         folder: Path | None = None,
         gui: bool = False,
+        *,
+        simulator: str = "pybullet",
     ) -> None:
         """Load the scene, place the base and the arm, switch on velocity motors."""
+        if simulator != "pybullet":
+            raise ConfigError(
+                f"a robot on a planar base runs on PyBullet only, not on "
+                f"'{simulator}' (docs/simulators.md says why)",
+                "simulator",
+            )
         if robot.base != "planar":
             raise ValueError(
                 f"MobileSimulation drives a planar base; '{robot.name}' has "

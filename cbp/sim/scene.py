@@ -8,9 +8,8 @@ The robot comes from its folder's URDF and the objects from the scenario's
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -24,9 +23,26 @@ from cbp.urdf_files import missing_meshes
 if TYPE_CHECKING:
     from cbp.scenario.runtime import Scenario
 
-__all__ = ["PybulletScene", "simulate"]
+__all__ = ["PybulletScene", "SimulationKind", "simulate"]
 
-S = TypeVar("S")
+S = TypeVar("S", covariant=True)
+
+
+class SimulationKind(Protocol[S]):
+    """A simulation class: built from a scenario's robot, objects and settings."""
+
+    def __call__(
+        self,
+        robot: RobotModel,
+        objects: list[ObjectSpec],
+        q0: FloatArray,
+        settings: SimulationSettings | None = None,
+        folder: Path | None = None,
+        gui: bool = False,
+        *,
+        simulator: str = "pybullet",
+    ) -> S:
+        """The simulation, on the physics engine named ``simulator``."""
 
 
 def _unloadable(robot: RobotModel, urdf: Path) -> ConfigError:
@@ -44,21 +60,14 @@ def _unloadable(robot: RobotModel, urdf: Path) -> ConfigError:
     )
 
 
-def simulate(
-    kind: Callable[
-        [RobotModel, list[ObjectSpec], FloatArray, SimulationSettings, Path, bool],
-        S,
-    ],
-    scenario: Scenario,
-    gui: bool = False,
-) -> S:
+def simulate(kind: SimulationKind[S], scenario: Scenario, gui: bool = False) -> S:
     """A simulation of ``scenario``: its robot at its start, its objects.
 
     Args:
         kind: the simulation class (:class:`~cbp.sim.simulation.Simulation`,
             :class:`~cbp.sim.mobile.MobileSimulation`).
         scenario: the loaded scenario (its ``simulation:`` settings, its
-            folder for object meshes).
+            ``simulator:``, its folder for object meshes).
         gui: open a window instead of running headless.
     """
     spec = scenario.spec
@@ -69,6 +78,7 @@ def simulate(
         spec.simulation,
         scenario.path.parent,
         gui,
+        simulator=spec.simulator,
     )
 
 

@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """The simulated robot: 1 kHz physics, a joint trajectory follower, torque control.
 
-:class:`Simulation` steps PyBullet at a fixed rate (1 kHz by default) with the
-robot in torque mode. Each physics step runs one low-level controller:
+:class:`Simulation` steps a physics engine (:mod:`cbp.sim.physics`: PyBullet
+by default, or MuJoCo) at a fixed rate (1 kHz by default) with the robot in
+torque mode. Each physics step runs one low-level controller:
 
 * **trajectory following** (:meth:`Simulation.follow`): the commanded trajectory's
   position, velocity and acceleration at the step's time, through a joint
@@ -15,7 +16,7 @@ robot in torque mode. Each physics step runs one low-level controller:
   executor).
 
 Every physics step also measures contact between the robot and the scene: the
-sum of PyBullet's contact normal forces and the deepest penetration, and the
+sum of the engine's contact normal forces and the deepest penetration, and the
 part of the force on the hand (the robot's ``wrist_link`` and the links beyond
 it), which is what a wrist force sensor would read from contacts.
 """
@@ -26,6 +27,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -33,10 +35,13 @@ import pinocchio as pin
 
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
-from cbp.sim.bullet import pb
+from cbp.sim.physics import Physics, make_physics
 from cbp.sim.recorder import Recorder
-from cbp.sim.scene import PybulletScene
 from cbp.sim.trajectory import JointTrajectory
+
+if TYPE_CHECKING:
+    from cbp.sim.bullet_physics import BulletPhysics
+    from cbp.sim.scene import PybulletScene
 
 __all__ = ["ContactSample", "Simulation", "TorqueController"]
 
@@ -66,7 +71,10 @@ TRAJECTORY_HISTORY = 1.0
 
 
 class Simulation:
-    """A PyBullet simulation of the robot among the scenario's objects.
+    """The simulated robot among the scenario's objects, on a physics engine.
+
+    The controller is this class's; the engine (:class:`cbp.sim.physics.Physics`)
+    is a part, PyBullet by default.
 
     Args:
         robot: the robot model (the controlled joints are its joints).
@@ -75,10 +83,11 @@ class Simulation:
         q0: initial configuration.
         settings: rate, gains, recording.
         folder: where mesh files of objects are resolved from.
-        gui: open PyBullet's window.
+        gui: open the engine's window (PyBullet's).
+        simulator: the engine, by name (:data:`cbp.sim.physics.SIMULATORS`).
 
     Attributes:
-        scene: the PyBullet scene (client, body ids).
+        physics: the engine.
         t: simulated time [s].
         steps: physics steps taken.
     """
@@ -91,8 +100,10 @@ class Simulation:
         settings: SimulationSettings | None = None,
         folder: Path | None = None,
         gui: bool = False,
+        *,
+        simulator: str = "pybullet",
     ) -> None:
-        """Load the scene, set the robot at ``q0`` and switch it to torque mode."""
+        """Build the engine's scene with the robot at ``q0``, torque-driven."""
         if robot.nq != robot.nv:
             raise NotImplementedError(
                 "Simulation drives fixed-base robots with scalar joints; "
@@ -100,75 +111,45 @@ class Simulation:
             )
         self.robot = robot
         self.settings = settings or SimulationSettings()
-        self.scene = PybulletScene(robot, objects, folder, gui)
-        c = self.scene.client
-        self.client = c
+        self.simulator = simulator
         self.dt = 1.0 / self.settings.rate_hz
-        pb.setTimeStep(self.dt, physicsClientId=c)
-        pb.setGravity(0.0, 0.0, -9.81, physicsClientId=c)
-        body = self.scene.robot_id
-        model = robot.model
-        self._indices = [
-            self.scene.joint_index(model.names[j])
-            for j in range(1, model.njoints)
-            if model.joints[j].nv == 1
-        ]
-        self._effort = np.array(
-            [pb.getJointInfo(body, j, physicsClientId=c)[10] for j in self._indices]
+        self.physics: Physics = make_physics(
+            simulator, robot, objects, q0, self.settings, folder, gui
         )
+        self._effort = np.asarray(self.physics.effort, dtype=float).copy()
         self._effort[self._effort <= 0] = np.inf
-        # No joint damping either: the torque law (pinocchio's RNEA) has no model
-        # of a URDF's <dynamics damping>, which held an xArm's light wrist
-        # 0.67 rad away from its command.
-        for link in range(-1, pb.getNumJoints(body, physicsClientId=c)):
-            pb.changeDynamics(
-                body,
-                link,
-                linearDamping=0.0,
-                angularDamping=0.0,
-                jointDamping=0.0,
-                lateralFriction=self.settings.friction,
-                physicsClientId=c,
-            )
-        for obj in self.scene.object_ids.values():
-            pb.changeDynamics(
-                obj, -1, lateralFriction=self.settings.friction, physicsClientId=c
-            )
-        # Locked joints (fingers) are held by PyBullet's position motors; the
-        # controlled joints' velocity motors are switched off for torque control.
-        self.scene.set_configuration(q0)
-        pb.setJointMotorControlArray(
-            body,
-            self._indices,
-            pb.VELOCITY_CONTROL,
-            forces=[0.0] * len(self._indices),
-            physicsClientId=c,
-        )
-        locked = robot.description.locked_joints if robot.description else {}
-        for name, value in locked.items():
-            pb.setJointMotorControl2(
-                body,
-                self.scene.joint_index(name),
-                pb.POSITION_CONTROL,
-                targetPosition=value,
-                force=100.0,
-                physicsClientId=c,
-            )
-        self._hand_links = self._links_beyond_wrist()
-        self._fixed_links = self._links_fixed_to_world()
-        self._data = model.createData()
+        self._data = robot.model.createData()
         self.t = 0.0
         self.steps = 0
         #: The sum of the normal forces of the last physics step [N].
         self.contact_force = 0.0
         self._trajectory = JointTrajectory.hold(0.0, np.asarray(q0, dtype=float))
         self._torque: TorqueController | None = None
-        self._last_command = np.asarray(q0, dtype=float).copy()
         n = robot.nq
         # t, q, v, q_cmd, contact force, penetration, wrist force
         self._record = Recorder(1 + 3 * n + 3)
-        self._q, self._v = self._read_state()
+        self._q, self._v = self.physics.state()
         self._interval = ContactSample()
+
+    @property
+    def scene(self) -> PybulletScene:
+        """The PyBullet scene (client, body ids); PyBullet only."""
+        return self._bullet().scene
+
+    @property
+    def client(self) -> int:
+        """The PyBullet client id; PyBullet only."""
+        return int(self._bullet().client)
+
+    def _bullet(self) -> BulletPhysics:
+        from cbp.sim.bullet_physics import BulletPhysics
+
+        if not isinstance(self.physics, BulletPhysics):
+            raise AttributeError(
+                f"this simulation runs on {self.simulator}, not PyBullet: "
+                "use its physics (Simulation.physics)"
+            )
+        return self.physics
 
     # ------------------------------------------------------------------ control
 
@@ -206,7 +187,6 @@ class Simulation:
 
     def step(self) -> None:
         """One physics step: control, simulate, measure, maybe record."""
-        c, body = self.client, self.scene.robot_id
         q, v = self._q, self._v
         if self._torque is not None:
             tau = np.asarray(self._torque(self.t, q, v), dtype=float)
@@ -216,20 +196,13 @@ class Simulation:
             s = self.settings
             a = _impedance(a_cmd, q_cmd, q, v_cmd, v, s.stiffness, s.damping)
             tau = pin.rnea(self.robot.model, self._data, q, v, a)
-        pb.setJointMotorControlArray(
-            body,
-            self._indices,
-            pb.TORQUE_CONTROL,
-            forces=_clipped(tau, self._effort),
-            physicsClientId=c,
-        )
-        if self.scene.dynamic:
-            self.scene.update_objects(self.t + self.dt, self.settings.friction)
-        pb.stepSimulation(physicsClientId=c)
+        physics = self.physics
+        physics.apply(_clipped(tau, self._effort))
+        physics.step(self.t + self.dt)
         self.t = (self.steps + 1) * self.dt
         self.steps += 1
-        self._q, self._v = self._read_state()
-        force, depth, wrist = self._contact()
+        self._q, self._v = physics.state()
+        force, depth, wrist = physics.contact()
         self.contact_force = force
         interval = self._interval
         interval.force = max(interval.force, force)
@@ -277,79 +250,9 @@ class Simulation:
             "wrist_force": rows[:, 3 + 3 * n].copy(),
         }
 
-    # ------------------------------------------------------------------ internals
-
-    def _read_state(self) -> tuple[FloatArray, FloatArray]:
-        states = pb.getJointStates(
-            self.scene.robot_id, self._indices, physicsClientId=self.client
-        )
-        q = np.array([s[0] for s in states])
-        v = np.array([s[1] for s in states])
-        return q, v
-
-    def _contact(self) -> tuple[float, float, float]:
-        """Sum of normal forces, deepest penetration, and the hand's share."""
-        robot = self.scene.robot_id
-        points = pb.getContactPoints(bodyA=robot, physicsClientId=self.client)
-        force = depth = hand = 0.0
-        fixed = self._fixed_links
-        for p in points:
-            if p[2] == robot:  # self-contact is not contact with the scene
-                continue
-            if p[3] in fixed:  # a fixed base on the floor: no motion of the arm
-                continue
-            force += p[9]
-            depth = max(depth, -p[8])
-            if p[3] in self._hand_links:
-                hand += p[9]
-        return force, depth, hand
-
-    def _links_fixed_to_world(self) -> frozenset[int]:
-        """PyBullet's indices of the links no joint moves (the base: -1).
-
-        :meth:`cbp.robot.RobotModel.fixed_links`, by name: the floor they
-        stand on is not a contact of the arm.
-        """
-        fixed = self.robot.fixed_links()
-        if not fixed:
-            return frozenset()
-        c, body = self.client, self.scene.robot_id
-        base = pb.getBodyInfo(body, physicsClientId=c)[0].decode()
-        links = {
-            j
-            for j in range(pb.getNumJoints(body, physicsClientId=c))
-            if pb.getJointInfo(body, j, physicsClientId=c)[12].decode() in fixed
-        }
-        return frozenset(links | ({-1} if base in fixed else set()))
-
-    def _links_beyond_wrist(self) -> frozenset[int]:
-        description = self.robot.description
-        name = description.wrist_link if description is not None else None
-        if not name:
-            return frozenset()
-        c, body = self.client, self.scene.robot_id
-        parents = {}
-        wrist = None
-        for j in range(pb.getNumJoints(body, physicsClientId=c)):
-            info = pb.getJointInfo(body, j, physicsClientId=c)
-            parents[j] = info[16]
-            if info[12].decode() == name:
-                wrist = j
-        if wrist is None:
-            raise ValueError(f"wrist_link '{name}' is not a link of the URDF")
-        links = {wrist}
-        changed = True
-        while changed:
-            changed = False
-            for j, parent in parents.items():
-                if parent in links and j not in links:
-                    links.add(j)
-                    changed = True
-        return frozenset(links)
-
     def close(self) -> None:
-        """Disconnect from PyBullet; delete the recording's spool file."""
-        self.scene.close()
+        """Release the engine; delete the recording's spool file."""
+        self.physics.close()
         self._record.close()
 
     def __enter__(self) -> Simulation:
@@ -357,7 +260,7 @@ class Simulation:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        """Disconnect."""
+        """Release the engine."""
         self.close()
 
 
