@@ -1284,7 +1284,7 @@ def _virtual_run(
     from cbp.perception.mapper import MapUpdater
     from cbp.perception.occupancy import OccupancyGrid
     from cbp.scenario import load_scenario
-    from cbp.sim.camera import DepthCamera
+    from cbp.sim.camera import SimulatedCamera
     from cbp.sim.simulation import Simulation
 
     scenario = load_scenario(
@@ -1296,7 +1296,7 @@ def _virtual_run(
         },
     )
     targets = {
-        "rendering": (DepthCamera, "capture"),
+        "rendering": (SimulatedCamera, "capture"),
         "map integration": (MapUpdater, "submit"),
         "of it the snapshot": (OccupancyGrid, "environment"),
         "planning": (CatPlanner, "plan"),

@@ -41,8 +41,8 @@ from cbp.robot import FloatArray
 from cbp.run.events import RunLog
 from cbp.run.separation import SeparationMonitor
 from cbp.scenario.reach import Bounds, reach_box
-from cbp.sim.camera import DepthCamera
-from cbp.sim.raycast import RayCaster
+from cbp.sim.camera import SimulatedCamera
+from cbp.sim.cameras import depth_cameras
 from cbp.sim.simulation import Simulation
 from cbp.state import RobotState
 
@@ -107,10 +107,7 @@ class Cameras:
         self._log = log
         self._state = RobotState(robot)
         world.set_environment(PrimitiveEnvironment([]))
-        caster = RayCaster(sim.client)  # one for all: meshes read once
-        self.cameras = [
-            DepthCamera(sim.client, c, robot, caster) for c in spec.all_cameras
-        ]
+        self.cameras = depth_cameras(sim, spec.all_cameras, robot)
         n = len(self.cameras)
         limits = PlausibilityLimits(
             spec.max_far_fraction, spec.see_through_fraction, spec.see_through_tolerance
@@ -256,8 +253,10 @@ class Cameras:
         return reason
 
     def close(self) -> None:
-        """Stop the map's worker."""
+        """Stop the map's worker; release the cameras' renderers."""
         self.mapper.close()
+        for camera in self.cameras:
+            camera.close()
 
     def _checked_frame(self, i: int, t: float) -> DepthFrame | None:
         """Camera ``i``'s frame at ``t`` if it is valid; else None and an event.
@@ -334,7 +333,7 @@ class Cameras:
             "space (perception.bounds)",
         )
 
-    def _capture(self, camera: DepthCamera) -> DepthFrame:
+    def _capture(self, camera: SimulatedCamera) -> DepthFrame:
         """One frame of ``camera``; a mounted one from the robot as it is now.
 
         The robot's state is brought up to the capture (the checks read it).

@@ -132,6 +132,9 @@ class SimulatedCamera:
         noisy = self._noise.apply(buffer, self._clip_near, s.far, far_plane)
         return dataclasses.replace(frame, depth=noisy)
 
+    def close(self) -> None:
+        """Release what the camera renders with (nothing here)."""
+
     def _render(self) -> FloatArray:
         """The depth buffer (height, width) through :attr:`view` now.
 

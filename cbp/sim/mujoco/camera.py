@@ -166,6 +166,10 @@ class MujocoDepthCamera(SimulatedCamera):
         self._gl_camera = mujoco.MjvCamera()
         self._gl_camera.type = mujoco.mjtCamera.mjCAMERA_FREE
 
+    def close(self) -> None:
+        """Free the renderers (shared: every camera of the model is closed)."""
+        self._renderers.close()
+
     def _render(self) -> FloatArray:
         """MuJoCo's depth through :attr:`view`, as the frame's depth buffer."""
         s, m = self.spec, self.model

@@ -1,0 +1,82 @@
+# SPDX-License-Identifier: Apache-2.0
+"""A simulation's depth cameras, whichever engine it runs on.
+
+:func:`depth_cameras` builds the cameras of a scenario's ``perception:``
+section for a :class:`~cbp.sim.simulation.Simulation`: on PyBullet
+:class:`~cbp.sim.camera.DepthCamera` (the ray cast or the tiny renderer, as
+each camera's ``renderer`` says; one ray caster for all, so meshes are read
+once), on MuJoCo :class:`~cbp.sim.mujoco.camera.MujocoDepthCamera` (MuJoCo's
+OpenGL renderer, one context per image size). Their frames are the same
+record with the same matrices, so what reads them (the map) does not know
+which engine rendered them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+from cbp.errors import ConfigError
+from cbp.perception.spec import CameraSpec
+from cbp.robot import RobotModel
+from cbp.sim.camera import DepthCamera, SimulatedCamera
+from cbp.sim.simulation import Simulation
+
+__all__ = ["CAMERAS", "depth_cameras"]
+
+#: ``(simulation, specs, robot) -> cameras``: one builder per engine.
+CameraBuilder = Callable[
+    [Simulation, Sequence[CameraSpec], RobotModel | None], list[SimulatedCamera]
+]
+
+
+def _pybullet(
+    sim: Simulation, specs: Sequence[CameraSpec], robot: RobotModel | None
+) -> list[SimulatedCamera]:
+    """PyBullet's cameras, sharing one ray caster."""
+    from cbp.sim.raycast import RayCaster
+
+    caster = RayCaster(sim.client)
+    return [DepthCamera(sim.client, spec, robot, caster) for spec in specs]
+
+
+def _mujoco(
+    sim: Simulation, specs: Sequence[CameraSpec], robot: RobotModel | None
+) -> list[SimulatedCamera]:
+    """MuJoCo's cameras, sharing one renderer per image size."""
+    from cbp.sim.mujoco.camera import MujocoDepthCamera, Renderers
+    from cbp.sim.mujoco.physics import MujocoPhysics
+
+    physics = sim.physics
+    assert isinstance(physics, MujocoPhysics)
+    renderers = Renderers(physics.model)
+    return [
+        MujocoDepthCamera(physics.model, physics.data, spec, robot, renderers)
+        for spec in specs
+    ]
+
+
+#: The cameras' builder of each engine (:data:`cbp.sim.physics.SIMULATORS`).
+CAMERAS: dict[str, CameraBuilder] = {"pybullet": _pybullet, "mujoco": _mujoco}
+
+
+def depth_cameras(
+    sim: Simulation, specs: Sequence[CameraSpec], robot: RobotModel | None = None
+) -> list[SimulatedCamera]:
+    """The depth cameras ``specs`` of ``sim``, in their order.
+
+    Args:
+        sim: the simulation they render.
+        specs: the cameras (``perception.all_cameras``).
+        robot: the robot that mounted cameras' ``parent`` frames belong to.
+
+    Raises:
+        ConfigError: an engine without cameras, or a camera's mount unknown.
+    """
+    builder = CAMERAS.get(sim.simulator)
+    if builder is None:
+        raise ConfigError(
+            f"simulator '{sim.simulator}' has no depth cameras (those of "
+            f"{', '.join(sorted(CAMERAS))} have)",
+            "simulator",
+        )
+    return builder(sim, specs, robot)
