@@ -122,13 +122,15 @@ class CameraSpec:
     """Far clipping distance [m]; farther surfaces are not seen."""
     rate_hz: float = 15.0
     """Frames per second."""
-    renderer: Literal["tiny", "raycast"] = "raycast"
+    renderer: Literal["tiny", "raycast", "opengl"] = "raycast"
     """How a simulated camera renders: ``raycast``, a compiled ray cast against
-    the scene's shapes (:mod:`cbp.sim.raycast`: 1-2 ms a frame), or ``tiny``,
-    PyBullet's tiny renderer (10-35 ms a frame, in the control loop's process);
-    the pixels agree within 1 mm but on silhouette edges, and the ray cast
-    sees spheres and cylinders as they are, not as coarse hulls. A real
-    camera ignores it."""
+    the scene's shapes (:mod:`cbp.sim.raycast` on PyBullet,
+    :mod:`cbp.sim.mujoco.raycast` on MuJoCo: 1-2 ms a frame); ``tiny``,
+    PyBullet's tiny renderer (PyBullet only: 10-35 ms a frame, in the control
+    loop's process); ``opengl``, MuJoCo's OpenGL renderer (MuJoCo only, through
+    EGL: about twice the ray cast's time here, without a GPU). The pixels
+    agree within 1 mm but on silhouette edges; the ray cast sees spheres and
+    cylinders as they are, not as facets. A real camera ignores it."""
     body: Vec3 | None = (0.04, 0.04, 0.025)
     """A mounted camera's housing [m]: a box (width, height, depth) along the
     optical frame's x, y and z, its front face at the optical centre. It joins

@@ -165,7 +165,8 @@ class DepthCamera(SimulatedCamera):
             camera's own.
 
     Raises:
-        ConfigError: a mounted camera without a robot, or with an unknown frame.
+        ConfigError: a mounted camera without a robot, or with an unknown
+            frame; MuJoCo's renderer (``opengl``).
     """
 
     def __init__(
@@ -177,6 +178,12 @@ class DepthCamera(SimulatedCamera):
     ) -> None:
         """Compute the projection (and a fixed camera's view) once."""
         super().__init__(spec, robot)
+        if spec.renderer == "opengl":
+            raise ConfigError(
+                f"camera '{spec.name}': renderer 'opengl' is MuJoCo's; on PyBullet "
+                "choose 'raycast' or 'tiny'",
+                "renderer",
+            )
         self.client = client
         self._caster = (
             (caster or RayCaster(client)) if spec.renderer == "raycast" else None

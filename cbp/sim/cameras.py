@@ -5,8 +5,9 @@
 section for a :class:`~cbp.sim.simulation.Simulation`: on PyBullet
 :class:`~cbp.sim.camera.DepthCamera` (the ray cast or the tiny renderer, as
 each camera's ``renderer`` says; one ray caster for all, so meshes are read
-once), on MuJoCo :class:`~cbp.sim.mujoco.camera.MujocoDepthCamera` (MuJoCo's
-OpenGL renderer, one context per image size). Their frames are the same
+once), on MuJoCo :class:`~cbp.sim.mujoco.camera.MujocoDepthCamera` (the ray cast
+of MuJoCo's geoms, or MuJoCo's OpenGL renderer with one context per image
+size). Their frames are the same
 record with the same matrices, so what reads them (the map) does not know
 which engine rendered them.
 """
@@ -42,16 +43,19 @@ def _pybullet(
 def _mujoco(
     sim: Simulation, specs: Sequence[CameraSpec], robot: RobotModel | None
 ) -> list[SimulatedCamera]:
-    """MuJoCo's cameras, sharing one renderer per image size."""
+    """MuJoCo's cameras, sharing one ray caster and one renderer per image size."""
     from cbp.sim.mujoco.camera import MujocoDepthCamera, Renderers
     from cbp.sim.mujoco.physics import MujocoPhysics
+    from cbp.sim.mujoco.raycast import MujocoRayCaster
 
     physics = sim.physics
     assert isinstance(physics, MujocoPhysics)
-    renderers = Renderers(physics.model)
+    model, data = physics.model, physics.data
+    casts = any(spec.renderer == "raycast" for spec in specs)
+    caster = MujocoRayCaster(model, data) if casts else None
+    renderers = Renderers(model)  # no OpenGL context until a camera renders
     return [
-        MujocoDepthCamera(physics.model, physics.data, spec, robot, renderers)
-        for spec in specs
+        MujocoDepthCamera(model, data, spec, robot, renderers, caster) for spec in specs
     ]
 
 

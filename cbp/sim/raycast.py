@@ -42,34 +42,21 @@ import numpy as np
 from cbp.files import load_mesh
 from cbp.robot import FloatArray
 from cbp.sim.bullet import pb
-from cbp.sim.ray_kernels import CAPSULE, CYLINDER, SPHERE, cast, depth_buffer
+from cbp.sim.ray_kernels import CAPSULE, CYLINDER, SPHERE
+from cbp.sim.shape_caster import CastShape, ShapeCaster, box_triangles
 
 __all__ = ["RayCaster"]
-
-#: A box's triangles, as corner indices (corners: bit 0 x, bit 1 y, bit 2 z).
-_BOX_FACES = np.array(
-    [
-        [0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6],  # -z, +z
-        [0, 1, 5], [0, 5, 4], [2, 6, 7], [2, 7, 3],  # -y, +y
-        [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5],  # -x, +x
-    ],
-    dtype=np.intp,
-)  # fmt: skip
 
 
 @dataclass(frozen=True)
 class _Part:
-    """One visual shape of one body link: triangles or an analytic shape."""
+    """One visual shape of one body link."""
 
     body: int
     link: int
     local: FloatArray
     """The shape's frame in the link's frame (4, 4)."""
-    triangles: FloatArray | None
-    """(T, 3, 3) in the shape's frame, or None for an analytic shape."""
-    kind: int = -1
-    radius: float = 0.0
-    half_length: float = 0.0
+    shape: CastShape
 
 
 def _pose(position: Sequence[float], quaternion: Sequence[float]) -> FloatArray:
@@ -80,23 +67,12 @@ def _pose(position: Sequence[float], quaternion: Sequence[float]) -> FloatArray:
     return M
 
 
-def _box_triangles(size: FloatArray) -> FloatArray:
-    half = 0.5 * np.asarray(size, dtype=float)
-    corners = np.array(
-        [[(-1) ** (1 - (i >> k & 1)) * half[k] for k in range(3)] for i in range(8)]
-    )
-    return np.asarray(corners[_BOX_FACES])
-
-
-class RayCaster:
+class RayCaster(ShapeCaster):
     """Depth images of a PyBullet client's bodies, by a compiled ray cast.
 
     Bodies added to the client later (objects that appear) are found at the
     next capture; removed ones are dropped. Mesh files are read once each.
-    The parts that have never moved are drawn once per camera and kept; each
-    capture casts only the others over a copy (a fixed camera's shelf costs
-    nothing after its first frame, the arm as much as before). The images
-    are the same: each pixel keeps its nearest surface, in any order.
+    What never moved is drawn once per camera (:class:`ShapeCaster`).
 
     Args:
         client: the PyBullet client id.
@@ -104,85 +80,15 @@ class RayCaster:
 
     def __init__(self, client: int) -> None:
         """Nothing is read until the first capture."""
+        super().__init__()
         self.client = client
         self._parts: dict[int, list[_Part]] = {}
         self._meshes: dict[tuple[str, tuple[float, ...]], FloatArray] = {}
         self._layout: tuple[tuple[int, tuple[object, ...]], ...] | None = None
         self._inertia: dict[int, FloatArray] = {}
-        self._triangles = np.zeros((0, 3, 3))
-        self._tri_part = np.zeros(0, dtype=np.intp)
-        self._shapes = np.zeros((0, 3))
-        self._shape_part = np.zeros(0, dtype=np.intp)
         self._links: list[tuple[int, int]] = []
         self._part_link = np.zeros(0, dtype=np.intp)
         self._part_local = np.zeros((0, 4, 4))
-        # Parts that never moved: their first placements; which moved since.
-        self._first = np.zeros((0, 4, 4))
-        self._moved = np.zeros(0, dtype=np.bool_)
-        #: Per camera (its view, projection, size and planes): the depth of
-        #: the parts that never moved, drawn once (the triangle and shape
-        #: lists of the others are cast over a copy of it at each capture).
-        self._still: dict[bytes, FloatArray] = {}
-
-    def render(
-        self,
-        view: FloatArray,
-        projection: FloatArray,
-        width: int,
-        height: int,
-        near: float,
-        far: float,
-    ) -> FloatArray:
-        """The depth buffer (height, width) seen through ``view`` and ``projection``.
-
-        Args:
-            view: world to camera (OpenGL convention: looking along -z), (4, 4).
-            projection: a symmetric perspective projection (4, 4); only its
-                focal terms are read.
-            width: image width [px].
-            height: image height [px].
-            near: the clipping plane [m].
-            far: the far plane [m].
-        """
-        self._sync()
-        placements = self._placements()
-        moved = self._moved
-        now = np.any(placements != self._first, axis=(1, 2)) & ~moved
-        if now.any():  # a part moves for the first time: drawn anew each time
-            moved |= now
-            self._still.clear()
-        to_camera = np.einsum("ij,njk->nik", np.asarray(view, dtype=float), placements)
-        fx, fy = float(projection[0, 0]), float(projection[1, 1])
-        key = np.array([*np.ravel(view), fx, fy, width, height, near, far]).tobytes()
-        still = self._still.get(key)
-        if still is None:  # the parts that never moved, once per camera
-            still = np.full((height, width), np.inf)
-            cast(
-                *self._lists(~moved),
-                to_camera,
-                fx,
-                fy,
-                float(near),
-                float(far),
-                still,
-            )
-            self._still[key] = still
-        depth = still.copy()
-        cast(*self._lists(moved), to_camera, fx, fy, float(near), float(far), depth)
-        return depth_buffer(depth, float(near), float(far))
-
-    def _lists(
-        self, parts: np.ndarray
-    ) -> tuple[FloatArray, np.ndarray, FloatArray, np.ndarray]:
-        """The flagged ``parts`` triangles and shapes, as :func:`cast` takes them."""
-        tri = parts[self._tri_part]
-        shape = parts[self._shape_part]
-        return (
-            self._triangles[tri],
-            self._tri_part[tri],
-            self._shapes[shape],
-            self._shape_part[shape],
-        )
 
     def _sync(self) -> None:
         """Read the visual shapes of bodies new since the last capture.
@@ -206,42 +112,18 @@ class RayCaster:
             for b, data in layout
         }
         self._layout = layout
-        ids = [b for b, _ in layout]
         links: list[tuple[int, int]] = []
         part_link: list[int] = []
-        local: list[FloatArray] = []
-        triangles: list[FloatArray] = []
-        tri_part: list[FloatArray] = []
-        shapes: list[list[float]] = []
-        shape_part: list[int] = []
-        for b in ids:
-            for part in self._parts[b]:
-                key = (part.body, part.link)
-                if key not in links:
-                    links.append(key)
-                k = len(part_link)
-                part_link.append(links.index(key))
-                local.append(part.local)
-                if part.triangles is not None:
-                    triangles.append(part.triangles)
-                    tri_part.append(np.full(len(part.triangles), k, dtype=np.intp))
-                else:
-                    shapes.append([part.kind, part.radius, part.half_length])
-                    shape_part.append(k)
+        parts = [part for b, _ in layout for part in self._parts[b]]
+        for part in parts:
+            key = (part.body, part.link)
+            if key not in links:
+                links.append(key)
+            part_link.append(links.index(key))
         self._links = links
         self._part_link = np.array(part_link, dtype=np.intp)
-        self._part_local = np.array(local).reshape(-1, 4, 4)
-        self._triangles = (
-            np.concatenate(triangles) if triangles else np.zeros((0, 3, 3))
-        )
-        self._tri_part = (
-            np.concatenate(tri_part) if tri_part else np.zeros(0, dtype=np.intp)
-        )
-        self._shapes = np.array(shapes, dtype=float).reshape(-1, 3)
-        self._shape_part = np.array(shape_part, dtype=np.intp)
-        self._first = self._placements()
-        self._moved = np.zeros(len(self._first), dtype=np.bool_)
-        self._still.clear()
+        self._part_local = np.array([part.local for part in parts]).reshape(-1, 4, 4)
+        self._use([part.shape for part in parts])
 
     def _read(self, shapes: tuple[Any, ...]) -> list[_Part]:
         """A body's visual shapes (``getVisualShapeData``), each in its link's frame."""
@@ -251,14 +133,15 @@ class RayCaster:
             local = _pose(data[5], data[6])
             if kind == pb.GEOM_MESH:
                 triangles = self._mesh(filename.decode(), tuple(dims))
-                parts.append(_Part(body, link, local, triangles))
+                parts.append(_Part(body, link, local, CastShape(triangles)))
             elif kind == pb.GEOM_BOX:
-                parts.append(_Part(body, link, local, _box_triangles(dims)))
+                parts.append(_Part(body, link, local, CastShape(box_triangles(dims))))
             elif kind == pb.GEOM_SPHERE:
-                parts.append(_Part(body, link, local, None, SPHERE, dims[0]))
+                parts.append(_Part(body, link, local, CastShape(None, SPHERE, dims[0])))
             elif kind in (pb.GEOM_CYLINDER, pb.GEOM_CAPSULE):
                 code = CYLINDER if kind == pb.GEOM_CYLINDER else CAPSULE
-                parts.append(_Part(body, link, local, None, code, dims[1], dims[0] / 2))
+                shape = CastShape(None, code, dims[1], dims[0] / 2)
+                parts.append(_Part(body, link, local, shape))
             else:
                 raise ValueError(
                     f"body {body} link {link}: visual shape type {kind} cannot be "

@@ -1,4 +1,4 @@
-"""MuJoCo's depth camera: known surfaces within a map cell, PyBullet's pixels."""
+"""MuJoCo's depth cameras (ray cast, OpenGL): known surfaces within a cell, PyBullet's pixels."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import pinocchio as pin
 import pytest
 
 import cbp.sim.mujoco  # noqa: F401  (OpenGL through EGL before mujoco loads)
+from cbp.errors import ConfigError
 from cbp.perception.spec import CameraSpec, DepthNoise, PerceptionSpec
 from cbp.scenario import load_scenario
 from cbp.scenario.scene import SimulationSettings
@@ -24,6 +25,7 @@ mujoco = pytest.importorskip("mujoco")
 
 from cbp.sim.mujoco.camera import MujocoDepthCamera, Renderers  # noqa: E402
 from cbp.sim.mujoco.physics import MujocoPhysics  # noqa: E402
+from cbp.sim.mujoco.raycast import MujocoRayCaster  # noqa: E402
 
 EXACT = DepthNoise(enabled=False)
 CELL = PerceptionSpec().cell_size
@@ -109,18 +111,26 @@ def _surface_distance(points: np.ndarray) -> np.ndarray:
     return np.asarray(np.min([floor, box, cube, ball, can], axis=0))
 
 
-def _camera(model: Any, data: Any, **kwargs: Any) -> MujocoDepthCamera:
+RENDERERS = pytest.mark.parametrize("renderer", ["raycast", "opengl"])
+
+
+def _camera(model: Any, data: Any, renderer: str, **kwargs: Any) -> MujocoDepthCamera:
     spec = CameraSpec(
         name="c", position=(-0.2, 0.0, 0.7), target=(0.8, 0.0, 0.1), width=160,
-        height=120, fov_deg=60.0, far=2.5, noise=EXACT,
+        height=120, fov_deg=60.0, far=2.5, noise=EXACT, renderer=renderer,
     )  # fmt: skip
     return MujocoDepthCamera(model, data, replace(spec, **kwargs))
 
 
-def test_a_box_face_at_a_known_distance_is_seen_there_within_a_cell() -> None:
+@RENDERERS
+def test_a_box_face_at_a_known_distance_is_seen_there_within_a_cell(
+    renderer: str,
+) -> None:
     """The conformance check: a box face 1.2 m ahead reads 1.2 m (within a cell)."""
     model, data = _scene()
-    camera = _camera(model, data, position=(-0.2, 0.0, 0.15), target=(1.0, 0.0, 0.15))
+    camera = _camera(
+        model, data, renderer, position=(-0.2, 0.0, 0.15), target=(1.0, 0.0, 0.15)
+    )
     # The box's nearest face, turned 0.3 rad: its centre lies 1.2 - 0.1 / cos(0.3)
     # ahead; the pixel on the axis sees it there.
     ranges = camera.capture().ranges()
@@ -133,23 +143,27 @@ def test_a_box_face_at_a_known_distance_is_seen_there_within_a_cell() -> None:
     assert np.max(_surface_distance(points[hit])) < CELL
 
 
-def test_every_pixel_lies_on_the_surface_it_sees() -> None:
+@RENDERERS
+def test_every_pixel_lies_on_the_surface_it_sees(renderer: str) -> None:
     """Plane, box, sphere, cylinder and mesh: within 0.5 mm (facets), most exact."""
     model, data = _scene()
-    points, hit = _camera(model, data).capture().points()
+    points, hit = _camera(model, data, renderer).capture().points()
     distance = _surface_distance(points[hit])
     assert hit.mean() > 0.7  # the floor up to 2.5 m, and the objects
     assert np.max(distance) < 5e-4  # spheres and cylinders are drawn as facets
     assert np.median(distance) < 1e-5  # pixels sample where the frame says
 
 
-def test_nearer_than_the_clipping_plane_is_cut_and_beyond_far_unseen() -> None:
+@RENDERERS
+def test_nearer_than_the_clipping_plane_is_cut_and_beyond_far_unseen(
+    renderer: str,
+) -> None:
     """The far plane bounds what is seen; the minimum range gives no reading."""
     model, data = _scene()
-    far = _camera(model, data, far=1.0).capture()
+    far = _camera(model, data, renderer, far=1.0).capture()
     assert np.all(np.isinf(far.ranges()) | (far.ranges() < 1.0))
     assert np.isinf(far.ranges()).mean() > 0.1  # the floor beyond 1 m
-    near = _camera(model, data, near=0.8).capture()
+    near = _camera(model, data, renderer, near=0.8).capture()
     ranges = near.ranges()
     assert np.isnan(ranges).mean() > 0.1  # the floor nearer than 0.8 m
     assert np.all(np.isnan(ranges) | (ranges >= 0.8))
@@ -161,7 +175,7 @@ def test_cameras_of_one_size_share_one_renderer() -> None:
     renderers = Renderers(model)
     specs = [
         CameraSpec(name=f"c{i}", position=p, target=(0.8, 0.0, 0.1), width=w,
-                   height=h, noise=EXACT)
+                   height=h, noise=EXACT, renderer="opengl")
         for i, (p, w, h) in enumerate([
             ((-0.2, 0.0, 0.7), 64, 48), ((0.8, -1.0, 0.6), 64, 48),
             ((0.8, 1.0, 0.6), 32, 24),
@@ -202,7 +216,10 @@ def _boards() -> tuple[Any, Any, list[Any]]:
     return scenario, physics, configurations
 
 
-def test_mujoco_and_pybullet_frames_of_the_boards_agree_within_a_centimetre() -> None:
+@RENDERERS
+def test_mujoco_and_pybullet_frames_of_the_boards_agree_within_a_centimetre(
+    renderer: str,
+) -> None:
     """The Panda's meshes over the boards, five fixed cameras and the hand's.
 
     Compared as the ray cast is with the tiny renderer
@@ -222,9 +239,10 @@ def test_mujoco_and_pybullet_frames_of_the_boards_agree_within_a_centimetre() ->
             state.update(q)
             for spec in _raycast_cameras():
                 at = state if spec.parent else None
+                ours = replace(spec, renderer=renderer)
                 cast = DepthCamera(sim.client, spec, robot, caster).capture(at)
                 mj = MujocoDepthCamera(
-                    physics.model, physics.data, spec, robot, renderers
+                    physics.model, physics.data, ours, robot, renderers
                 ).capture(at)
                 a, b = cast.ranges(), mj.ranges()
                 with np.errstate(invalid="ignore"):
@@ -235,7 +253,8 @@ def test_mujoco_and_pybullet_frames_of_the_boards_agree_within_a_centimetre() ->
     assert min(np.mean(a) for a in agree) >= AGREEING_PER_IMAGE
 
 
-def test_a_camera_on_the_hand_moves_with_it() -> None:
+@RENDERERS
+def test_a_camera_on_the_hand_moves_with_it(renderer: str) -> None:
     """The hand's camera sits at its offset from the hand, wherever the arm is.
 
     Its frames see the board below from where the hand is: the points it
@@ -243,7 +262,7 @@ def test_a_camera_on_the_hand_moves_with_it() -> None:
     """
     scenario, physics, configurations = _boards()
     robot = scenario.robot
-    spec = next(c for c in _raycast_cameras() if c.parent)
+    spec = replace(next(c for c in _raycast_cameras() if c.parent), renderer=renderer)
     camera = MujocoDepthCamera(physics.model, physics.data, spec, robot)
     hand = robot.frame_id("panda_hand")
     state = RobotState(robot)
@@ -262,3 +281,29 @@ def test_a_camera_on_the_hand_moves_with_it() -> None:
         assert np.all(np.abs(points[hit][table][:, 0] - 0.55) <= 0.3 + 1e-3)
     assert np.linalg.norm(seen[1] - seen[0]) > 0.05  # the hand moved
     camera.close()
+
+
+def test_a_renderer_of_the_other_engine_is_refused_by_name() -> None:
+    """``tiny`` is PyBullet's, ``opengl`` MuJoCo's: each engine says so."""
+    model, data = _scene()
+    with pytest.raises(ConfigError, match="renderer 'tiny' is PyBullet's"):
+        _camera(model, data, "tiny")
+    robot = load_scenario(SCENARIOS / "cat_boards.yaml").robot
+    spec = CameraSpec(position=(1.0, 0.0, 1.0), target=(0, 0, 0), renderer="opengl")
+    refused = pytest.raises(ConfigError, match="renderer 'opengl' is MuJoCo's")
+    with PybulletScene(robot, []) as sim, refused:
+        DepthCamera(sim.client, spec)
+
+
+def test_a_geom_the_ray_cast_cannot_draw_is_named() -> None:
+    """An ellipsoid is refused with its name and body."""
+    spec = mujoco.MjSpec()
+    body = spec.worldbody.add_body(name="egg_holder")
+    body.add_geom(
+        name="egg", type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, size=[0.1, 0.2, 0.3]
+    )
+    model = spec.compile()
+    with pytest.raises(
+        ValueError, match=r"geom egg \(body 'egg_holder'\): type mjGEOM_ELLIPSOID"
+    ):
+        MujocoRayCaster(model, mujoco.MjData(model))

@@ -1,14 +1,17 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Depth cameras of a MuJoCo scene: MuJoCo's OpenGL renderer, PyBullet's frames.
+"""Depth cameras of a MuJoCo scene, by ray cast or OpenGL: PyBullet's frames.
 
-:class:`MujocoDepthCamera` renders a MuJoCo model's geoms with
-:class:`mujoco.Renderer` (depth only, OpenGL through EGL) and gives the same
+:class:`MujocoDepthCamera` renders a MuJoCo model's geoms by the compiled ray
+cast (:mod:`cbp.sim.mujoco.raycast`, ``renderer: raycast``, the default) or
+with :class:`mujoco.Renderer` (``renderer: opengl``: depth only, OpenGL
+through EGL), and gives the same
 :class:`~cbp.perception.frame.DepthFrame` as the PyBullet cameras
 (:class:`~cbp.sim.camera.DepthCamera`): the same view and projection
 matrices, the same clipping plane, the same depth buffer, the same noise. The
 map cannot tell which simulator rendered a frame.
 
-Three things make MuJoCo's image PyBullet's:
+Three things make MuJoCo's OpenGL image PyBullet's (the ray cast samples
+PyBullet's rays and gives its buffer as it is):
 
 - **The camera.** MuJoCo's own camera (``mjvGLCamera``, written after the
   scene is updated) is placed at the frame's view, with its frustum at the
@@ -35,9 +38,11 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from cbp.errors import ConfigError
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray, RobotModel
 from cbp.sim.camera import SimulatedCamera
+from cbp.sim.mujoco.raycast import MujocoRayCaster
 
 __all__ = ["DEFAULT_GEOM_GROUPS", "ROUND_FACETS", "MujocoDepthCamera", "Renderers"]
 
@@ -122,21 +127,28 @@ class Renderers:
 class MujocoDepthCamera(SimulatedCamera):
     """A camera rendering depth images of a MuJoCo scene: fixed or mounted.
 
-    A mounted camera follows the robot state passed to :meth:`capture` (the
-    robot's kinematics, as PyBullet's cameras do); the scene is drawn as
-    ``data`` holds it (its placements brought up to its positions first).
+    The spec's ``renderer`` chooses how: ``raycast`` (the default), the
+    compiled ray cast of the model's geoms
+    (:class:`~cbp.sim.mujoco.raycast.MujocoRayCaster`), or ``opengl``, MuJoCo's
+    renderer (this module); ``tiny`` is PyBullet's. A mounted camera follows
+    the robot state passed to :meth:`capture` (the robot's kinematics, as
+    PyBullet's cameras do); the scene is drawn as ``data`` holds it (its
+    placements brought up to its positions first).
 
     Args:
         model: the MuJoCo model.
         data: its data (the state drawn).
-        spec: pose (or parent frame and offset), resolution, field of view and
-            clipping planes (``renderer`` is PyBullet's choice: ignored).
+        spec: pose (or parent frame and offset), resolution, field of view,
+            clipping planes and renderer.
         robot: the robot a mounted camera's ``parent`` frame belongs to.
-        renderers: the renderers shared by the model's cameras. Default: the
-            camera's own.
+        renderers: the OpenGL renderers shared by the model's cameras
+            (``opengl``). Default: the camera's own.
+        caster: the ray caster shared by the model's cameras (``raycast``).
+            Default: the camera's own.
 
     Raises:
-        ConfigError: a mounted camera without a robot, or with an unknown frame.
+        ConfigError: a mounted camera without a robot, or with an unknown
+            frame; a renderer MuJoCo does not have.
     """
 
     def __init__(
@@ -146,12 +158,24 @@ class MujocoDepthCamera(SimulatedCamera):
         spec: CameraSpec,
         robot: RobotModel | None = None,
         renderers: Renderers | None = None,
+        caster: MujocoRayCaster | None = None,
     ) -> None:
         """Compute the projection (and a fixed camera's view) once."""
         super().__init__(spec, robot)
+        if spec.renderer not in ("raycast", "opengl"):
+            raise ConfigError(
+                f"camera '{spec.name}': renderer '{spec.renderer}' is PyBullet's; "
+                "on MuJoCo choose 'raycast' or 'opengl'",
+                "renderer",
+            )
         self.model = model
         self.data = data
-        self._renderers = renderers or Renderers(model)
+        self._caster: MujocoRayCaster | None = None
+        self._renderers: Renderers | None = None
+        if spec.renderer == "raycast":
+            self._caster = caster or MujocoRayCaster(model, data)
+        else:
+            self._renderers = renderers or Renderers(model)
         # The frustum's half extents at the clipping plane, and the half-pixel
         # shift that puts OpenGL's pixel centres on the frame's rays.
         near = self._clip_near
@@ -167,11 +191,22 @@ class MujocoDepthCamera(SimulatedCamera):
         self._gl_camera.type = mujoco.mjtCamera.mjCAMERA_FREE
 
     def close(self) -> None:
-        """Free the renderers (shared: every camera of the model is closed)."""
-        self._renderers.close()
+        """Free the OpenGL renderers (shared: the model's other cameras' too)."""
+        if self._renderers is not None:
+            self._renderers.close()
 
     def _render(self) -> FloatArray:
+        """The depth buffer through :attr:`view`: ray cast, or MuJoCo's renderer."""
+        s = self.spec
+        if self._caster is not None:
+            return self._caster.render(
+                self.view, self.projection, s.width, s.height, self._clip_near, s.far
+            )
+        return self._render_opengl()
+
+    def _render_opengl(self) -> FloatArray:
         """MuJoCo's depth through :attr:`view`, as the frame's depth buffer."""
+        assert self._renderers is not None
         s, m = self.spec, self.model
         near, far = self._clip_near, s.far
         extent = m.stat.extent
