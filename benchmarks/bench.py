@@ -13,7 +13,10 @@ is the median and 95th percentile of many repetitions after a warm-up. Rows:
    step validation) on the boards scene and against an octree of the shelf,
    and on the boards with each narrow phase (compiled, coal);
 4. scaling with contact rows and with the size of the scene and of the map;
-5. MP planning in the shelf, one orbit tick, one map update.
+5. MP planning in the shelf, one orbit tick, one map update;
+6. whole CAT runs on the virtual clock, with cameras and declared objects;
+7. one depth frame per renderer (PyBullet's tiny renderer, the ray cast,
+   MuJoCo's), and CAT runs on MuJoCo with cameras against their twins.
 
 Peers (pink) are bench extras: ``pip install -e ".[bench]"``.
 """
@@ -134,13 +137,19 @@ def measure(fn: Callable[[int], object], n: int, warmup: int) -> tuple[float, fl
 
 
 def measure_interleaved(
-    fns: list[Callable[[int], object]], n: int, warmup: int, rounds: int = 20
+    fns: list[Callable[[int], object]],
+    n: int,
+    warmup: int,
+    rounds: int = 20,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> list[tuple[float, float]]:
     """Like :func:`measure` for several functions, in alternating rounds.
 
     Each function runs ``n // rounds`` calls per round, the functions taking
     turns, so that a slow spell of the machine (another process, the CPU's
-    clock) falls on all of them alike and their ratios hold.
+    clock) falls on all of them alike and their ratios hold. ``clock``:
+    wall time by default, ``time.process_time`` for the process's CPU time
+    (all its threads).
     """
     for fn in fns:
         for i in range(warmup):
@@ -153,9 +162,9 @@ def measure_interleaved(
             for fn, out in zip(fns, samples, strict=True):
                 for j in range(per_round):
                     i = r * per_round + j
-                    start = time.perf_counter()
+                    start = clock()
                     fn(i)
-                    out[i] = time.perf_counter() - start
+                    out[i] = clock() - start
     finally:
         gc.enable()
     return [
@@ -1420,6 +1429,160 @@ def _run_rows(cfg: BenchConfig) -> list[Row]:
     return [ray_row, tiny_row, twin_row, camera_row, tiny_run, real, boards_row]
 
 
+# ---------------------------------------------------------------- cameras per simulator
+
+
+def _joint_setter(robot: Any, data: Any) -> Callable[[np.ndarray], None]:
+    """Puts MuJoCo's robot (``data``) at a configuration, its joints by name."""
+    model = robot.model
+    names = [model.names[j] for j in range(1, model.njoints) if model.joints[j].nv == 1]
+
+    def put(q: np.ndarray) -> None:
+        for name, value in zip(names, q, strict=True):
+            data.joint(name).qpos[0] = value
+
+    return put
+
+
+def _frame_rows(cfg: BenchConfig) -> list[Row]:
+    """One depth frame of the meshed Panda over the boards, four renderers.
+
+    The boards scene (``scenarios/cat_boards.yaml``) with its first fixed
+    camera (``overhead``, 320x240), its noise on; PyBullet's tiny renderer,
+    the ray cast of PyBullet's shapes, MuJoCo's OpenGL renderer and the ray
+    cast of MuJoCo's geoms, in alternating rounds, timed by the process's
+    CPU time (its threads': MuJoCo's renderer draws in Mesa's): what a frame
+    would cost on a core of its own, where wall time on a loaded machine
+    counts the waits for a core (the tiny renderer's tripled here). The arm
+    moves between frames (two configurations in turn): the ray casts draw
+    what never moved once per camera and the arm every frame, as in a run.
+    """
+    from cbp.scenario import load_scenario
+    from cbp.sim.camera import DepthCamera, SimulatedCamera
+    from cbp.sim.mujoco.camera import MujocoDepthCamera
+    from cbp.sim.mujoco.physics import MujocoPhysics
+    from cbp.sim.raycast import RayCaster
+    from cbp.sim.scene import PybulletScene
+
+    scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
+    robot, objects = scenario.robot, list(scenario.spec.world.objects)
+    spec = next(c for c in scenario.spec.perception.all_cameras if c.parent is None)
+    poses = [scenario.q0, scenario.q0 + 0.1]
+    physics = MujocoPhysics(robot, objects, scenario.q0, scenario.spec.simulation)
+    put = _joint_setter(robot, physics.data)
+    model, data = physics.model, physics.data
+    opengl = MujocoDepthCamera(model, data, replace(spec, renderer="opengl"))
+    mujoco_cast = MujocoDepthCamera(model, data, replace(spec, renderer="raycast"))
+    with PybulletScene(robot, objects, SCENARIOS) as scene:
+        tiny = DepthCamera(scene.client, replace(spec, renderer="tiny"))
+        cast = DepthCamera(
+            scene.client,
+            replace(spec, renderer="raycast"),
+            None,
+            RayCaster(scene.client),
+        )
+
+        def frames(
+            camera: SimulatedCamera, pose: Callable[[np.ndarray], None]
+        ) -> Callable[[int], object]:
+            def frame(i: int) -> object:
+                pose(poses[i % 2])
+                return camera.capture()
+
+            return frame
+
+        n = max(cfg.repetitions // 40, 4)
+        bullet = scene.set_configuration
+        times = measure_interleaved(
+            [
+                frames(tiny, bullet),
+                frames(cast, bullet),
+                frames(opengl, put),
+                frames(mujoco_cast, put),
+            ],
+            n,
+            2,
+            rounds=min(n, 10),
+            clock=time.process_time,
+        )
+    opengl.close()
+    size = f"{spec.width}x{spec.height}"
+    what = f"one {size} frame of the Panda over the boards"
+    tiny_row = Row(
+        "cameras", f"{what}, PyBullet's tiny renderer", *times[0], n,
+        note="CPU time; the overhead camera; noise included",
+    )  # fmt: skip
+    renderers = [
+        "ray cast of PyBullet's shapes",
+        "MuJoCo's OpenGL renderer (EGL, Mesa, no GPU)",
+        "MuJoCo, ray cast of its geoms",
+    ]
+    rows = [tiny_row]
+    for (median, p95), renderer in zip(times[1:], renderers, strict=True):
+        ratio = median / times[0][0]
+        case = f"{what}, {renderer}"
+        rows.append(Row("cameras", case, median, p95, n, tiny_row.case, ratio))
+    return rows
+
+
+def _mujoco_run_rows(cfg: BenchConfig) -> list[Row]:
+    """CAT runs on MuJoCo, virtual clock: the cameras against the declared twin.
+
+    The shelf reach with the five cameras of ``configs/cat.yaml`` and the
+    boards with their own three, each against the same scene with its
+    declared objects, all on MuJoCo (``simulator: mujoco``) with the ray cast;
+    each pair twice in turn, the lesser of each counting
+    (:func:`_virtual_run`). Then the shelf's cameras once with MuJoCo's
+    OpenGL renderer.
+    """
+    seconds = _run_seconds(cfg, 7.0, 3.0)
+    mujoco = {"simulator": "mujoco"}
+    shelf = SCENARIOS / "cat_shelf_reach.yaml"
+    boards = SCENARIOS / "cat_boards.yaml"
+    five = mujoco | _camera_overrides("raycast")
+    own = mujoco | {"perception.source": "depth_camera"}
+    if seconds > 1.0:  # the first camera run of a process loads the map's kernels
+        _virtual_run(shelf, 0.1, five)
+    rows: list[Row] = []
+    for path, cameras, what in ((shelf, five, "five"), (boards, own, "its three")):
+        runs: dict[str, list[tuple[float, dict[str, float]]]] = {"twin": [], "cams": []}
+        for _ in range(2):
+            runs["twin"].append(_virtual_run(path, seconds, mujoco))
+            runs["cams"].append(_virtual_run(path, seconds, cameras, True))
+        twin, _ = min(runs["twin"], key=lambda run: run[0])
+        cams, shares = min(runs["cams"], key=lambda run: run[0])
+        scene = path.stem.removeprefix("cat_").replace("_", " ")
+        twin_row = Row(
+            "cameras", f"MuJoCo: CAT {scene}, declared objects, virtual clock: CPU "
+            "per simulated second", twin * 1e6, twin * 1e6, 1,
+            note=f"{seconds:g} s simulated; the lesser of two runs",
+        )  # fmt: skip
+        account = ", ".join(f"{k} {100 * v:.0f} %" for k, v in shares.items())
+        camera_row = Row(
+            "cameras", f"MuJoCo: CAT {scene}, {what} cameras (ray cast), virtual "
+            "clock: CPU per simulated second", cams * 1e6, cams * 1e6, 1,
+            twin_row.case, cams / twin,
+            note=f"the lesser of two runs; of the CPU time: {account}",
+        )  # fmt: skip
+        rows += [twin_row, camera_row]
+        if path == shelf:
+            gl = mujoco | _camera_overrides("opengl")
+            cpu, parts = _virtual_run(path, seconds, gl, True)
+            account = ", ".join(f"{k} {100 * v:.0f} %" for k, v in parts.items())
+            case = (
+                f"MuJoCo: CAT {scene}, five cameras (OpenGL), virtual clock: CPU "
+                "per simulated second"
+            )
+            note = f"of the CPU time: {account}"
+            ratio = cpu / twin
+            rows.append(
+                Row(
+                    "cameras", case, cpu * 1e6, cpu * 1e6, 1, twin_row.case, ratio, note
+                )
+            )
+    return rows
+
+
 # ---------------------------------------------------------------- profile and output
 
 
@@ -1491,6 +1654,8 @@ def run_bench(
         _orbit_row,
         _map_row,
         _run_rows,
+        _frame_rows,
+        _mujoco_run_rows,
     ):
         for row in group(cfg):
             rows.append(row)
@@ -1840,6 +2005,41 @@ TARGETS: list[tuple[str, str, str, str, float | None, str]] = [
         "CAT in the shelf, declared objects",
         1.3,
         "a CAT run with the five cameras / its declared-object twin, virtual clock",
+    ),
+    (
+        "cameras",
+        "one 320x240 frame of the Panda over the boards, MuJoCo, ray cast",
+        "cameras",
+        "one 320x240 frame of the Panda over the boards, PyBullet's tiny",
+        1 / 5,
+        "a MuJoCo depth frame of the Panda over the boards (ray cast, the "
+        "default) / the tiny renderer's, CPU time (issue 53)",
+    ),
+    (
+        "cameras",
+        "one 320x240 frame of the Panda over the boards, MuJoCo's OpenGL",
+        "cameras",
+        "one 320x240 frame of the Panda over the boards, PyBullet's tiny",
+        1 / 5,
+        "the same with MuJoCo's OpenGL renderer (renderer: opengl)",
+    ),
+    (
+        "cameras",
+        "MuJoCo: CAT shelf reach, five cameras",
+        "cameras",
+        "MuJoCo: CAT shelf reach, declared objects",
+        1.5,
+        "a CAT run with the five cameras on MuJoCo / its declared twin on MuJoCo, "
+        "virtual clock (issue 53)",
+    ),
+    (
+        "cameras",
+        "MuJoCo: CAT boards, its three cameras",
+        "cameras",
+        "MuJoCo: CAT boards, declared objects",
+        1.5,
+        "the boards with their three cameras on MuJoCo / the declared twin on "
+        "MuJoCo, virtual clock (issue 53)",
     ),
     (
         "runs",

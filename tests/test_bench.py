@@ -22,6 +22,7 @@ def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:
         "orbit",
         "map",
         "runs",
+        "cameras",
     }
     cases = [row["case"] for row in result["rows"]]
     assert any(c.startswith("pink") for c in cases)
