@@ -8,7 +8,8 @@ fixed once compiled, so an object that appears or moves during a run
 start: parked far below the scene until it appears, then placed where its
 timeline puts it every step (kinematically: it pushes what it hits, as in
 PyBullet). Mesh objects collide as their convex hulls (MuJoCo's mesh
-collision); PyBullet takes them as concave triangle meshes.
+collision; a flat mesh is refused), where PyBullet takes them as concave
+triangle meshes.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
+from cbp.errors import ConfigError
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.sim.mujoco.robot_spec import robot_spec
@@ -74,7 +76,11 @@ class MujocoScene:
         self.folder = folder or Path.cwd()
         for obj in objects:
             self._add(spec, obj, settings.friction)
-        self.model = spec.compile()
+        try:
+            self.model = spec.compile()
+        except ValueError as exc:  # a mesh MuJoCo cannot take (fewer than 4 points)
+            message = " ".join(str(exc).split())
+            raise ConfigError(f"MuJoCo cannot build the scene: {message}") from None
         self.data = mujoco.MjData(self.model)
         model = self.model
 
