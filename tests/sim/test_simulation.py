@@ -205,13 +205,28 @@ def test_pybullet_names_stay_on_a_pybullet_simulation(panda: RobotModel) -> None
         _ = sim.client
 
 
-def test_a_planar_base_is_refused_on_mujoco() -> None:
-    """The youBot's planar base runs on PyBullet only: a ConfigError, not a crash."""
+@pytest.mark.parametrize("simulator", SIMULATORS)
+def test_the_youbot_follows_base_and_arm_velocities(simulator: str) -> None:
+    """The base goes where the command takes it; the arm tracks its reference."""
     from cbp.sim.mobile import MobileSimulation
 
     youbot = RobotModel.load("kuka_youbot", base="planar")
-    with pytest.raises(ConfigError, match="planar base runs on PyBullet only"):
-        MobileSimulation(youbot, [], youbot.home(), simulator="mujoco")
+    q0 = youbot.home()
+    v = np.zeros(youbot.nv)
+    v[0], v[2] = 0.3, 0.5  # forward at 0.3 m/s while turning at 0.5 rad/s
+    v[3:] = [0.5, -0.3, 0.4, 0.6, -0.8]
+    with MobileSimulation(youbot, [], q0, simulator=simulator) as sim:
+        sim.command(v)
+        errors = []
+        for k in range(1, 51):
+            sim.run_until(0.02 * k)
+            errors.append(np.abs(sim.q[4:] - (q0[4:] + v[3:] * sim.t)).max())
+        expected = youbot.integrate(q0, v)  # 1 s at the commanded twist
+        np.testing.assert_allclose(sim.q[:4], expected[:4], atol=1e-9)
+        assert max(errors[5:]) < 2e-3  # rad, once under way
+        sim.command(np.zeros(youbot.nv))
+        sim.run_until(1.5)
+        np.testing.assert_allclose(sim.q[4:], q0[4:] + v[3:], atol=1e-4)
 
 
 @pytest.mark.slow

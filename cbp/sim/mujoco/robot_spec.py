@@ -36,7 +36,10 @@ MESH_FORMATS = (".stl", ".obj", ".msh")
 
 
 def robot_spec(robot: RobotModel, friction: float) -> mujoco.MjSpec:
-    """The robot's URDF as a MuJoCo spec with a fixed base (see the module).
+    """The robot's URDF as a MuJoCo spec (see the module).
+
+    A fixed base is fixed to the world; another (planar) is a mocap body,
+    placed by the simulation.
 
     Args:
         robot: the robot (its URDF and locked joints).
@@ -70,6 +73,9 @@ def robot_spec(robot: RobotModel, friction: float) -> mujoco.MjSpec:
     for geom in spec.geoms:
         geom.friction = [friction * friction, *list(geom.friction)[1:]]
     _exclude_ancestors(spec)
+    if robot.base != "fixed":
+        # A base that moves is placed each step (kinematic), as in PyBullet.
+        spec.worldbody.first_body().mocap = True
     return spec
 
 

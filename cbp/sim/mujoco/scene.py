@@ -14,6 +14,7 @@ triangle meshes.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import mujoco
@@ -88,8 +89,10 @@ class MujocoScene:
             return int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name))
 
         self.link_bodies = {name: body(name) for name in links}
+        self._base = self.link_bodies[links[0]]  # the URDF's root link
         self.object_bodies = {o.name: body(OBJECT_PREFIX + o.name) for o in objects}
         self.dynamic = [o for o in objects if o.dynamic]
+
         self._mocap = {
             o.name: int(model.body_mocapid[self.object_bodies[o.name]])
             for o in self.dynamic
@@ -121,6 +124,14 @@ class MujocoScene:
                 scale=list(obj.scale),
             )
             geom.meshname = mesh.name
+
+    def place_base(self, x: float, y: float, yaw: float) -> None:
+        """Put a moving base (a mocap body) at (x, y) [m] turned by ``yaw`` [rad]."""
+        index = self.model.body_mocapid[self._base]
+        if index < 0:
+            raise ValueError("the robot's base is fixed to the world")
+        self.data.mocap_pos[index] = (x, y, 0.0)
+        self.data.mocap_quat[index] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
 
     def update_objects(self, t: float) -> None:
         """Put each dynamic object where its timeline has it at ``t`` [s].
