@@ -20,7 +20,7 @@ from cbp.sim.bullet import pb
 from cbp.sim.physics import links_beyond
 from cbp.sim.scene import PybulletScene
 
-__all__ = ["BulletPhysics"]
+__all__ = ["BulletMobilePhysics", "BulletPhysics"]
 
 
 class BulletPhysics:
@@ -173,6 +173,92 @@ class BulletPhysics:
             frozenset(index[name] for name in hand),
             frozenset(index[name] for name in fixed if name in index),
         )
+
+    def close(self) -> None:
+        """Disconnect from PyBullet."""
+        self.scene.close()
+
+
+class BulletMobilePhysics:
+    """A robot on a kinematic base in PyBullet, its arm on PyBullet's joint motors.
+
+    The base is placed where it is told each step (its wheels are not
+    simulated); the arm's joints track a position reference and a velocity
+    through PyBullet's position motors, limited by the URDF's effort.
+
+    Args:
+        robot: a model on a planar base.
+        objects: the scenario's objects.
+        q0: initial configuration (planar layout: x, y, cos yaw, sin yaw, arm).
+        settings: the rate.
+        folder: where mesh files of objects are resolved from.
+        gui: open PyBullet's window.
+
+    Attributes:
+        scene: the PyBullet scene (client, body ids).
+        client: the PyBullet client id.
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        objects: list[ObjectSpec],
+        q0: FloatArray,
+        settings: SimulationSettings,
+        folder: Path | None = None,
+        gui: bool = False,
+    ) -> None:
+        """Load the scene and set the arm at ``q0``'s joint positions."""
+        self.scene = PybulletScene(robot, objects, folder, gui)
+        c = self.client = self.scene.client
+        pb.setTimeStep(1.0 / settings.rate_hz, physicsClientId=c)
+        pb.setGravity(0.0, 0.0, -9.81, physicsClientId=c)
+        model = robot.model
+        self._indices = [
+            self.scene.joint_index(model.names[j])
+            for j in range(2, model.njoints)  # joint 1 is the planar base
+        ]
+        body = self.scene.robot_id
+        for k, j in enumerate(self._indices):
+            pb.resetJointState(body, j, float(q0[4 + k]), physicsClientId=c)
+        self._forces = [
+            max(float(pb.getJointInfo(body, j, physicsClientId=c)[10]), 1e-3)
+            for j in self._indices
+        ]
+
+    def place_base(self, x: float, y: float, yaw: float) -> None:
+        """Put the base at (x, y) [m] turned by ``yaw`` [rad]."""
+        pb.resetBasePositionAndOrientation(
+            self.scene.robot_id,
+            [x, y, 0.0],
+            pb.getQuaternionFromEuler([0.0, 0.0, yaw]),
+            physicsClientId=self.client,
+        )
+
+    def drive(self, reference: FloatArray, velocity: FloatArray) -> None:
+        """Servo the arm's joints to ``reference`` moving at ``velocity``."""
+        pb.setJointMotorControlArray(
+            self.scene.robot_id,
+            self._indices,
+            pb.POSITION_CONTROL,
+            targetPositions=reference.tolist(),
+            targetVelocities=velocity.tolist(),
+            forces=self._forces,
+            physicsClientId=self.client,
+        )
+
+    def step(self, t: float) -> None:
+        """Add or move the dynamic objects for time ``t`` [s]; step PyBullet."""
+        if self.scene.dynamic:
+            self.scene.update_objects(t)
+        pb.stepSimulation(physicsClientId=self.client)
+
+    def arm_positions(self) -> FloatArray:
+        """The arm's joint positions."""
+        states = pb.getJointStates(
+            self.scene.robot_id, self._indices, physicsClientId=self.client
+        )
+        return np.array([s[0] for s in states])
 
     def close(self) -> None:
         """Disconnect from PyBullet."""

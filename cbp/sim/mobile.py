@@ -1,35 +1,39 @@
 # SPDX-License-Identifier: Apache-2.0
-"""A mobile manipulator in PyBullet: a holonomic base and an arm, by velocity.
+"""A mobile manipulator: a holonomic base and an arm, by velocity.
 
 The base is driven like the youBot's omnidirectional base under its own
 velocity controller: each physics step moves the base by the commanded
 (v_x, v_y) [m/s, base frame] and yaw rate [rad/s] held over it, along the arc
 they trace, and places it there (a kinematic base: its wheels and their slip
 are not simulated). The arm's joints follow the
-commanded velocities through PyBullet's joint motors, which track the
-integrated position reference and the velocity, limited by the joints'
-effort. The configuration is pinocchio's planar one:
-``q = (x, y, cos yaw, sin yaw, arm...)``, ``v = (v_x, v_y, yaw rate, arm...)``.
+commanded velocities through the engine's joint servos
+(:class:`cbp.sim.physics.MobilePhysics`), which track the integrated
+position reference and the velocity, limited by the joints' effort. The
+configuration is pinocchio's planar one: ``q = (x, y, cos yaw, sin yaw,
+arm...)``, ``v = (v_x, v_y, yaw rate, arm...)``.
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cbp.errors import ConfigError
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
-from cbp.sim.bullet import pb
-from cbp.sim.scene import PybulletScene
+from cbp.sim.physics import make_mobile_physics
+
+if TYPE_CHECKING:
+    from cbp.sim.bullet_physics import BulletMobilePhysics
+    from cbp.sim.scene import PybulletScene
 
 __all__ = ["MobileSimulation"]
 
 
 class MobileSimulation:
-    """The robot on a planar base among the scene's objects.
+    """The robot on a planar base among the scene's objects, on a physics engine.
 
     Args:
         robot: a model on a planar base (``base: planar``).
@@ -37,8 +41,13 @@ class MobileSimulation:
         q0: initial configuration (planar layout).
         settings: physics rate.
         folder: where mesh files of objects are resolved from.
-        gui: open PyBullet's window.
-        simulator: the physics engine: PyBullet only (``pybullet``).
+        gui: open the engine's window (PyBullet's).
+        simulator: the engine, by name (:data:`cbp.sim.physics.SIMULATORS`).
+
+    Attributes:
+        physics: the engine (:class:`cbp.sim.physics.MobilePhysics`).
+        t: simulated time [s].
+        steps: physics steps taken.
     """
 
     def __init__(
@@ -52,13 +61,7 @@ class MobileSimulation:
         *,
         simulator: str = "pybullet",
     ) -> None:
-        """Load the scene, place the base and the arm, switch on velocity motors."""
-        if simulator != "pybullet":
-            raise ConfigError(
-                f"a robot on a planar base runs on PyBullet only, not on "
-                f"'{simulator}' (docs/simulators.md says why)",
-                "simulator",
-            )
+        """Load the scene, place the base and the arm, switch on the servos."""
         if robot.base != "planar":
             raise ValueError(
                 f"MobileSimulation drives a planar base; '{robot.name}' has "
@@ -66,31 +69,38 @@ class MobileSimulation:
             )
         self.robot = robot
         self.settings = settings or SimulationSettings()
-        self.scene = PybulletScene(robot, objects, folder, gui)
-        self.client = self.scene.client
+        self.simulator = simulator
         self.dt = 1.0 / self.settings.rate_hz
-        pb.setTimeStep(self.dt, physicsClientId=self.client)
-        pb.setGravity(0.0, 0.0, -9.81, physicsClientId=self.client)
-        model = robot.model
-        self._indices = [
-            self.scene.joint_index(model.names[j])
-            for j in range(2, model.njoints)  # joint 1 is the planar base
-        ]
-        body = self.scene.robot_id
-        self._effort = [
-            float(pb.getJointInfo(body, j, physicsClientId=self.client)[10])
-            for j in self._indices
-        ]
         q0 = np.asarray(q0, dtype=float)
+        self.physics = make_mobile_physics(
+            simulator, robot, objects, q0, self.settings, folder, gui
+        )
         self._base = np.array([q0[0], q0[1], math.atan2(q0[3], q0[2])])
-        for k, j in enumerate(self._indices):
-            pb.resetJointState(body, j, float(q0[4 + k]), physicsClientId=self.client)
         self._place_base()
         self._reference = np.array(q0[4:], dtype=float)
-        self._forces = [max(e, 1e-3) for e in self._effort]
         self._command = np.zeros(robot.nv)
         self.t = 0.0
         self.steps = 0
+
+    @property
+    def scene(self) -> PybulletScene:
+        """The PyBullet scene (client, body ids); PyBullet only."""
+        return self._bullet().scene
+
+    @property
+    def client(self) -> int:
+        """The PyBullet client id; PyBullet only."""
+        return int(self._bullet().client)
+
+    def _bullet(self) -> BulletMobilePhysics:
+        from cbp.sim.bullet_physics import BulletMobilePhysics
+
+        if not isinstance(self.physics, BulletMobilePhysics):
+            raise AttributeError(
+                f"this simulation runs on {self.simulator}, not PyBullet: "
+                "use its physics (MobileSimulation.physics)"
+            )
+        return self.physics
 
     def command(self, velocity: FloatArray) -> None:
         """Set the commanded velocity ``v`` (nv): base (v_x, v_y, yaw rate), arm."""
@@ -118,49 +128,31 @@ class MobileSimulation:
             # in velocity mode), so position errors do not accumulate.
             arm = self._command[3:]
             self._reference += self.dt * arm
-            pb.setJointMotorControlArray(
-                self.scene.robot_id,
-                self._indices,
-                pb.POSITION_CONTROL,
-                targetPositions=self._reference.tolist(),
-                targetVelocities=arm.tolist(),
-                forces=self._forces,
-                physicsClientId=self.client,
-            )
-            if self.scene.dynamic:
-                self.scene.update_objects(self.t + self.dt)
-            pb.stepSimulation(physicsClientId=self.client)
+            self.physics.drive(self._reference, arm)
+            self.physics.step(self.t + self.dt)
             self.steps += 1
             self.t = self.steps * self.dt
 
     @property
     def q(self) -> FloatArray:
         """Measured configuration (planar layout)."""
-        states = pb.getJointStates(
-            self.scene.robot_id, self._indices, physicsClientId=self.client
-        )
         x, y, yaw = self._base
         return np.concatenate(
-            [[x, y, math.cos(yaw), math.sin(yaw)], [s[0] for s in states]]
+            [[x, y, math.cos(yaw), math.sin(yaw)], self.physics.arm_positions()]
         )
 
     def _place_base(self) -> None:
         x, y, yaw = self._base
-        pb.resetBasePositionAndOrientation(
-            self.scene.robot_id,
-            [float(x), float(y), 0.0],
-            pb.getQuaternionFromEuler([0.0, 0.0, float(yaw)]),
-            physicsClientId=self.client,
-        )
+        self.physics.place_base(float(x), float(y), float(yaw))
 
     def close(self) -> None:
-        """Disconnect from PyBullet."""
-        self.scene.close()
+        """Release the engine."""
+        self.physics.close()
 
     def __enter__(self) -> MobileSimulation:
         """Use as a context manager."""
         return self
 
     def __exit__(self, *exc: object) -> None:
-        """Disconnect."""
+        """Release the engine."""
         self.close()

@@ -11,6 +11,8 @@ makes the model match PyBullet's (:class:`cbp.sim.scene.PybulletScene`):
   keeps the locked links' inertia the same way);
 * no joint damping, armature or friction loss (the torque law has no model of
   them; PyBullet's are set to zero too);
+* an inertia no body can have (A + B < C) balanced by MuJoCo, where
+  PyBullet zeroes it (pybullet_data's xArm6);
 * self-contact between a link and any of its ancestors is excluded
   (PyBullet's ``URDF_USE_SELF_COLLISION_EXCLUDE_ALL_PARENTS``);
 * mesh names resolved as the rest of cbp resolves them (``package://``).
@@ -34,7 +36,10 @@ MESH_FORMATS = (".stl", ".obj", ".msh")
 
 
 def robot_spec(robot: RobotModel, friction: float) -> mujoco.MjSpec:
-    """The robot's URDF as a MuJoCo spec with a fixed base (see the module).
+    """The robot's URDF as a MuJoCo spec (see the module).
+
+    A fixed base is fixed to the world; another (planar) is a mocap body,
+    placed by the simulation.
 
     Args:
         robot: the robot (its URDF and locked joints).
@@ -55,6 +60,9 @@ def robot_spec(robot: RobotModel, friction: float) -> mujoco.MjSpec:
         raise ConfigError(f"MuJoCo cannot read robot '{robot.name}': {exc}") from None
     spec.compiler.fusestatic = False
     spec.compiler.discardvisual = True
+    # An inertia that no body can have (the xArm's link2: A + B < C) is made
+    # one by MuJoCo (its nearest with A + B = C); PyBullet zeroes it.
+    spec.compiler.balanceinertia = True
     _resolve_meshes(spec, robot, urdf)
     locked = robot.description.locked_joints if robot.description else {}
     _lock(spec, locked)
@@ -65,6 +73,9 @@ def robot_spec(robot: RobotModel, friction: float) -> mujoco.MjSpec:
     for geom in spec.geoms:
         geom.friction = [friction * friction, *list(geom.friction)[1:]]
     _exclude_ancestors(spec)
+    if robot.base != "fixed":
+        # A base that moves is placed each step (kinematic), as in PyBullet.
+        spec.worldbody.first_body().mocap = True
     return spec
 
 

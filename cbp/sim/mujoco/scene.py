@@ -8,17 +8,20 @@ fixed once compiled, so an object that appears or moves during a run
 start: parked far below the scene until it appears, then placed where its
 timeline puts it every step (kinematically: it pushes what it hits, as in
 PyBullet). Mesh objects collide as their convex hulls (MuJoCo's mesh
-collision); PyBullet takes them as concave triangle meshes.
+collision; a flat mesh is refused), where PyBullet takes them as concave
+triangle meshes.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pinocchio as pin
 
+from cbp.errors import ConfigError
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.sim.mujoco.robot_spec import robot_spec
@@ -74,7 +77,11 @@ class MujocoScene:
         self.folder = folder or Path.cwd()
         for obj in objects:
             self._add(spec, obj, settings.friction)
-        self.model = spec.compile()
+        try:
+            self.model = spec.compile()
+        except ValueError as exc:  # a mesh MuJoCo cannot take (fewer than 4 points)
+            message = " ".join(str(exc).split())
+            raise ConfigError(f"MuJoCo cannot build the scene: {message}") from None
         self.data = mujoco.MjData(self.model)
         model = self.model
 
@@ -82,8 +89,10 @@ class MujocoScene:
             return int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name))
 
         self.link_bodies = {name: body(name) for name in links}
+        self._base = self.link_bodies[links[0]]  # the URDF's root link
         self.object_bodies = {o.name: body(OBJECT_PREFIX + o.name) for o in objects}
         self.dynamic = [o for o in objects if o.dynamic]
+
         self._mocap = {
             o.name: int(model.body_mocapid[self.object_bodies[o.name]])
             for o in self.dynamic
@@ -115,6 +124,14 @@ class MujocoScene:
                 scale=list(obj.scale),
             )
             geom.meshname = mesh.name
+
+    def place_base(self, x: float, y: float, yaw: float) -> None:
+        """Put a moving base (a mocap body) at (x, y) [m] turned by ``yaw`` [rad]."""
+        index = self.model.body_mocapid[self._base]
+        if index < 0:
+            raise ValueError("the robot's base is fixed to the world")
+        self.data.mocap_pos[index] = (x, y, 0.0)
+        self.data.mocap_quat[index] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
 
     def update_objects(self, t: float) -> None:
         """Put each dynamic object where its timeline has it at ``t`` [s].

@@ -1,0 +1,167 @@
+"""The CAT paper's eight scenes on each simulator: the same outcome, and its cost.
+
+Each scene is run by CAT on the virtual clock (the same outcome on any
+machine and load) with the declared objects, once per simulator, each run
+in a process of its own. The table gives, per scene and simulator: reached
+or not, the peak contact force, the final distance to the goal, and the CPU
+seconds the run took per simulated second (the run alone: loading the
+scenario and importing are left out), and the physics' share of it: the CPU
+seconds per simulated second of the same simulation holding the arm at its
+start for 2 s (the engine and the torque law, no planner). Against the
+first simulator, ``apart`` is the largest difference of any joint's position
+at the same time of the two runs [mrad].
+
+Run: PYTHONPATH=. .venv/bin/python -m benchmarks.simulators
+     [--scenes free_step,boards] [--simulators pybullet,mujoco]
+     [--source declared|cameras]
+Prints a markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.perception_tax import CAT_SCENES
+
+ROOT = Path(__file__).resolve().parents[1]
+SIMULATORS = ("pybullet", "mujoco")
+
+
+def one(path: Path, simulator: str, source: str, q_out: Path) -> dict[str, Any]:
+    """One CAT run of ``path`` on ``simulator``, virtual clock, as a record.
+
+    The run's joint positions are saved to ``q_out`` (``.npy``).
+    """
+    from cbp.executors import load_executor
+    from cbp.metrics import run_metrics
+    from cbp.scenario import load_scenario
+
+    overrides = {
+        "simulator": simulator,
+        "method.name": "cat",
+        "method.cat.timing.clock": "virtual",
+        "perception.source": "ground_truth" if source == "declared" else "depth_camera",
+    }
+    scenario = load_scenario(path, overrides=overrides)
+    cpu = time.process_time()
+    trace = load_executor("cat")(scenario, False)
+    cpu = time.process_time() - cpu
+    m = run_metrics(trace, scenario.robot)
+    error = m.get("final_position_error_m")
+    physics = _holding_cost(scenario)
+    np.save(q_out, trace.q)
+    return {
+        "scene": path.stem,
+        "simulator": simulator,
+        "source": source,
+        "reached": bool(m["reached"]),
+        "peak_n": round(float(m.get("peak_contact_force_n") or 0.0), 1),
+        "final_mm": None if error is None else round(1e3 * error, 1),
+        "cpu_per_s": round(cpu / scenario.spec.duration, 3),
+        "physics_per_s": round(physics, 4),
+        "events": len(trace.events),
+        "q": str(q_out),
+    }
+
+
+def _holding_cost(scenario: Any, seconds: float = 2.0) -> float:
+    """CPU seconds per simulated second of ``scenario``'s simulation, holding."""
+    from cbp.sim.scene import simulate
+    from cbp.sim.simulation import Simulation
+
+    with simulate(Simulation, scenario) as sim:
+        cpu = time.process_time()
+        sim.run_until(seconds)
+        return (time.process_time() - cpu) / seconds
+
+
+def spawn(path: Path, simulator: str, source: str, folder: Path) -> dict[str, Any]:
+    """:func:`one` in a process of its own, its joint positions saved in ``folder``."""
+    command = [sys.executable, "-m", "benchmarks.simulators", "--one", str(path)]
+    command += ["--simulators", simulator, "--source", source]
+    command += ["--q-out", str(folder / f"{path.stem}_{simulator}.npy")]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run(command, capture_output=True, text=True, env=env, cwd=ROOT)
+    if done.returncode != 0:
+        tail = done.stderr.strip().splitlines()[-1:] or ["no output"]
+        return {"scene": path.stem, "simulator": simulator, "error": tail[0]}
+    record: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
+    return record
+
+
+def table(records: list[dict[str, Any]], simulators: list[str]) -> str:
+    """The markdown table: one row per scene, one column group per simulator."""
+    head = "| scene |" + "".join(
+        f" {s}: reached | peak [N] | final [mm] | CPU s / s | physics |"
+        + (" apart [mrad] |" if k else "")
+        for k, s in enumerate(simulators)
+    )
+    rule = "|---|" + "".join("---|" * (6 if k else 5) for k in range(len(simulators)))
+    by = {(r["scene"], r["simulator"]): r for r in records}
+    rows = [head, rule]
+    for scene in dict.fromkeys(r["scene"] for r in records):
+        cells = []
+        first = by.get((scene, simulators[0]), {})
+        for k, s in enumerate(simulators):
+            r = by.get((scene, s))
+            if r is None or "error" in r:
+                why = "not run" if r is None else r["error"]
+                cells.append(f" {why} |" + " |" * (5 if k else 4))
+                continue
+            reached = "yes" if r["reached"] else "no"
+            cells.append(
+                f" {reached} | {r['peak_n']:g} | {r['final_mm']} "
+                f"| {r['cpu_per_s']:.2f} | {r['physics_per_s']:.3f} |"
+            )
+            if k:
+                cells.append(f" {_apart(first, r)} |")
+        rows.append(f"| {scene} |" + "".join(cells))
+    return "\n".join(rows)
+
+
+def _apart(a: dict[str, Any], b: dict[str, Any]) -> str:
+    """The largest joint position difference of two runs at the same times [mrad]."""
+    if "q" not in a or "q" not in b:
+        return ""
+    qa, qb = np.load(a["q"]), np.load(b["q"])
+    n = min(len(qa), len(qb))
+    return f"{1e3 * float(np.max(np.abs(qa[:n] - qb[:n]))):.2g}"
+
+
+def main() -> None:
+    """Run the scenes on each simulator (or one run, ``--one``); print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", default=",".join(CAT_SCENES))
+    parser.add_argument("--simulators", default=",".join(SIMULATORS))
+    parser.add_argument("--source", default="declared", choices=["declared", "cameras"])
+    parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--q-out", type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one is not None:
+        print(json.dumps(one(args.one, args.simulators, args.source, args.q_out)))
+        return
+    simulators = args.simulators.split(",")
+    records = []
+    folder = Path(tempfile.mkdtemp(prefix="cbp_simulators_"))
+    for scene in args.scenes.split(","):
+        path = ROOT / "scenarios" / f"cat_{scene}.yaml"
+        for simulator in simulators:
+            records.append(spawn(path, simulator, args.source, folder))
+            print(json.dumps(records[-1]), file=sys.stderr, flush=True)
+    print(table(records, simulators))
+    shutil.rmtree(folder)
+
+
+if __name__ == "__main__":
+    main()
