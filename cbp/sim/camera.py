@@ -1,9 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """Simulated depth cameras, fixed or on a robot link: ray cast or tiny renderer.
 
-A camera renders with PyBullet's tiny renderer (``renderer: tiny``, the
-default) or with a compiled ray cast against the PyBullet scene's shapes
-(:class:`~cbp.sim.raycast.RayCaster`, ``renderer: raycast``); their pixels agree within
+A PyBullet camera renders with a compiled ray cast against the scene's shapes
+(:class:`~cbp.sim.raycast.RayCaster`, ``renderer: raycast``, the default) or
+with PyBullet's tiny renderer (``renderer: tiny``); their pixels agree within
 1 mm of depth but on silhouette edges. Each capture is a
 :class:`~cbp.perception.frame.DepthFrame`, the same record a real sensor's
 driver would give the map (:mod:`cbp.perception`), which does not know what
@@ -11,8 +11,8 @@ rendered it. The pixel convention and the clipping plane are
 described in :mod:`cbp.perception.frame`.
 
 :class:`SimulatedCamera` is what every simulator's cameras share (the
-matrices, the mount, the noise); MuJoCo's renders with OpenGL
-(:mod:`cbp.sim.mujoco.camera`).
+matrices, the mount, the noise); MuJoCo's render by the same ray cast of its
+geoms or with its OpenGL renderer (:mod:`cbp.sim.mujoco.camera`).
 """
 
 from __future__ import annotations
