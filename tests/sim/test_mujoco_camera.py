@@ -12,11 +12,12 @@ import pytest
 import cbp.sim.mujoco  # noqa: F401  (OpenGL through EGL before mujoco loads)
 from cbp.errors import ConfigError
 from cbp.perception.spec import CameraSpec, DepthNoise, PerceptionSpec
-from cbp.scenario import load_scenario
+from cbp.scenario import ObjectSpec, load_scenario
 from cbp.scenario.scene import SimulationSettings
 from cbp.sim.camera import DepthCamera
 from cbp.sim.raycast import RayCaster
 from cbp.sim.scene import PybulletScene
+from cbp.spatial import Pose
 from cbp.state import RobotState
 from tests.sim.test_raycast import SCENARIOS
 from tests.sim.test_raycast import _cameras as _raycast_cameras
@@ -307,3 +308,33 @@ def test_a_geom_the_ray_cast_cannot_draw_is_named() -> None:
         ValueError, match=r"geom egg \(body 'egg_holder'\): type mjGEOM_ELLIPSOID"
     ):
         MujocoRayCaster(model, mujoco.MjData(model))
+
+
+@RENDERERS
+def test_an_object_that_appears_is_seen_once_it_is_there(renderer: str) -> None:
+    """A box appearing at 0.5 s: not in the frames before, in those after."""
+    scenario = load_scenario(SCENARIOS / "cat_boards.yaml")
+    wall = ObjectSpec(
+        name="wall", shape="box", size=(0.4, 0.06, 0.5),
+        pose=Pose(position=(0.5, 0.2, 0.25)), appear_at=0.5,
+    )  # fmt: skip
+    physics = MujocoPhysics(
+        scenario.robot, [wall], scenario.q0, SimulationSettings(rate_hz=100.0)
+    )
+    spec = CameraSpec(
+        name="c", position=(0.5, 1.2, 0.3), target=(0.5, 0.0, 0.25), width=64,
+        height=48, noise=EXACT, renderer=renderer,
+    )  # fmt: skip
+    camera = MujocoDepthCamera(physics.model, physics.data, spec)
+    centre, half = np.array(wall.pose.position), (0.2, 0.03, 0.25)
+
+    def on_wall() -> int:
+        points, hit = camera.capture().points()
+        distance = _box_distance(points[hit], centre, np.eye(3), half)
+        return int(np.count_nonzero(np.abs(distance) < 1e-3))
+
+    assert on_wall() == 0
+    for k in range(60):  # 0.6 s
+        physics.step(0.01 * (k + 1))
+    assert on_wall() > 200
+    camera.close()
