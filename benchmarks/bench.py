@@ -41,6 +41,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+# MuJoCo's OpenGL back end (EGL) is chosen here, before any row (a peer on
+# MuJoCo too) imports mujoco: after, it could not be.
+import cbp.sim.mujoco  # noqa: F401
+
 __all__ = [
     "TARGETS",
     "BenchConfig",
