@@ -5,21 +5,21 @@ machine and load) with the declared objects, once per simulator, each run
 in a process of its own. The table gives, per scene and simulator: reached
 or not, the peak contact force, the final distance to the goal, and the CPU
 seconds the run took per simulated second (the run alone: loading the
-scenario and importing are left out), and the physics' share of it: the CPU
-seconds per simulated second of the same simulation holding the arm at its
-start for 1 s, the least of three (the engine and the torque law, no
-planner). Against the
-first simulator, ``apart`` is the largest difference of any joint's position
-at the same time of the two runs [mrad].
+scenario and importing are left out). Against the first simulator,
+``apart`` is the largest difference of any joint's position at the same
+time of the two runs [mrad].
 
-``--contact`` measures contact instead: the Panda's hand pushed down into a
+``--physics`` measures the engines' own cost instead: per scene, CPU
+milliseconds per simulated second of its simulation holding the arm at its
+start (no planner), the simulators taking turns in one process, the least
+of five. ``--contact`` measures contact: the Panda's hand pushed down into a
 box (joint 2 commanded 0.5 rad past the home pose, through the box's top
 face), as ``tests/sim/test_simulation.py`` pushes it, on each simulator: the
 peak and settled contact force, the hand's share, the deepest penetration.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.simulators
      [--scenes free_step,boards] [--simulators pybullet,mujoco]
-     [--source declared|cameras] [--contact]
+     [--source declared|cameras] [--physics] [--contact]
 Prints a markdown table.
 """
 
@@ -65,7 +65,6 @@ def one(path: Path, simulator: str, source: str, q_out: Path) -> dict[str, Any]:
     cpu = time.process_time() - cpu
     m = run_metrics(trace, scenario.robot)
     error = m.get("final_position_error_m")
-    physics = _holding_cost(scenario)
     np.save(q_out, trace.q)
     return {
         "scene": path.stem,
@@ -75,28 +74,9 @@ def one(path: Path, simulator: str, source: str, q_out: Path) -> dict[str, Any]:
         "peak_n": round(float(m.get("peak_contact_force_n") or 0.0), 1),
         "final_mm": None if error is None else round(1e3 * error, 1),
         "cpu_per_s": round(cpu / scenario.spec.duration, 3),
-        "physics_per_s": round(physics, 4),
         "events": len(trace.events),
         "q": str(q_out),
     }
-
-
-def _holding_cost(scenario: Any, seconds: float = 1.0, repeats: int = 3) -> float:
-    """CPU seconds per simulated second of ``scenario``'s simulation, holding.
-
-    The least of ``repeats`` simulations of ``seconds`` each (the least
-    disturbed by other work on the machine).
-    """
-    from cbp.sim.scene import simulate
-    from cbp.sim.simulation import Simulation
-
-    costs = []
-    for _ in range(repeats):
-        with simulate(Simulation, scenario) as sim:
-            cpu = time.process_time()
-            sim.run_until(seconds)
-            costs.append((time.process_time() - cpu) / seconds)
-    return min(costs)
 
 
 def spawn(path: Path, simulator: str, source: str, folder: Path) -> dict[str, Any]:
@@ -116,11 +96,11 @@ def spawn(path: Path, simulator: str, source: str, folder: Path) -> dict[str, An
 def table(records: list[dict[str, Any]], simulators: list[str]) -> str:
     """The markdown table: one row per scene, one column group per simulator."""
     head = "| scene |" + "".join(
-        f" {s}: reached | peak [N] | final [mm] | CPU s / s | physics |"
+        f" {s}: reached | peak [N] | final [mm] | CPU s / s |"
         + (" apart [mrad] |" if k else "")
         for k, s in enumerate(simulators)
     )
-    rule = "|---|" + "".join("---|" * (6 if k else 5) for k in range(len(simulators)))
+    rule = "|---|" + "".join("---|" * (5 if k else 4) for k in range(len(simulators)))
     by = {(r["scene"], r["simulator"]): r for r in records}
     rows = [head, rule]
     for scene in dict.fromkeys(r["scene"] for r in records):
@@ -130,12 +110,12 @@ def table(records: list[dict[str, Any]], simulators: list[str]) -> str:
             r = by.get((scene, s))
             if r is None or "error" in r:
                 why = "not run" if r is None else r["error"]
-                cells.append(f" {why} |" + " |" * (5 if k else 4))
+                cells.append(f" {why} |" + " |" * (4 if k else 3))
                 continue
             reached = "yes" if r["reached"] else "no"
             cells.append(
                 f" {reached} | {r['peak_n']:g} | {r['final_mm']} "
-                f"| {r['cpu_per_s']:.2f} | {r['physics_per_s']:.3f} |"
+                f"| {r['cpu_per_s']:.2f} |"
             )
             if k:
                 cells.append(f" {_apart(first, r)} |")
@@ -192,6 +172,44 @@ def contact(simulators: list[str]) -> str:
     return "\n".join(rows)
 
 
+def physics(scenes: list[str], simulators: list[str], repeats: int = 5) -> str:
+    """The engines' own cost per scene, as a markdown table.
+
+    Each scene's simulation holds the arm at its start for 1 s (the engine
+    and the torque law, no planner), the simulators taking turns in this
+    process, ``repeats`` times; the least CPU time of each counts (the
+    least disturbed by other work on the machine).
+    """
+    from cbp.scenario import load_scenario
+    from cbp.sim.scene import simulate
+    from cbp.sim.simulation import Simulation
+
+    rows = [
+        "| scene |" + "".join(f" {s} [ms / s] |" for s in simulators) + " ratio |",
+        "|---|" + "---|" * (len(simulators) + 1),
+    ]
+    totals = dict.fromkeys(simulators, 0.0)
+    for scene in scenes:
+        costs: dict[str, list[float]] = {s: [] for s in simulators}
+        for _ in range(repeats):
+            for s in simulators:
+                path = ROOT / "scenarios" / f"cat_{scene}.yaml"
+                scenario = load_scenario(path, overrides={"simulator": s})
+                with simulate(Simulation, scenario) as sim:
+                    cpu = time.process_time()
+                    sim.run_until(1.0)
+                    costs[s].append(time.process_time() - cpu)
+        least = {s: min(c) for s, c in costs.items()}
+        for s in simulators:
+            totals[s] += least[s]
+        cells = "".join(f" {1e3 * least[s]:.1f} |" for s in simulators)
+        ratio = least[simulators[-1]] / least[simulators[0]]
+        rows.append(f"| cat_{scene} |{cells} {ratio:.2f} |")
+    ratio = totals[simulators[-1]] / totals[simulators[0]]
+    rows.append("| all |" + " |" * len(simulators) + f" {ratio:.2f} |")
+    return "\n".join(rows)
+
+
 def main() -> None:
     """Run the scenes on each simulator (or one run, ``--one``); print the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -199,6 +217,7 @@ def main() -> None:
     parser.add_argument("--simulators", default=",".join(SIMULATORS))
     parser.add_argument("--source", default="declared", choices=["declared", "cameras"])
     parser.add_argument("--contact", action="store_true", help="the contact probe")
+    parser.add_argument("--physics", action="store_true", help="the engines' cost")
     parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--q-out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -208,6 +227,9 @@ def main() -> None:
     simulators = args.simulators.split(",")
     if args.contact:
         print(contact(simulators))
+        return
+    if args.physics:
+        print(physics(args.scenes.split(","), simulators))
         return
     records = []
     folder = Path(tempfile.mkdtemp(prefix="cbp_simulators_"))
