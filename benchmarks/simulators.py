@@ -1,6 +1,6 @@
 """The CAT paper's eight scenes on each simulator: the same outcome, and its cost.
 
-Each scene is run by CAT on the virtual clock (the same outcome on any
+Each scene is run by CAT (or ``--method``) on the virtual clock (the same outcome on any
 machine and load) with the declared objects, once per simulator, each run
 in a process of its own. The table gives, per scene and simulator: reached
 or not, the peak contact force, the final distance to the goal, and the CPU
@@ -19,7 +19,7 @@ peak and settled contact force, the hand's share, the deepest penetration.
 
 Run: PYTHONPATH=. .venv/bin/python -m benchmarks.simulators
      [--scenes free_step,boards] [--simulators pybullet,mujoco]
-     [--source declared|cameras] [--physics] [--contact]
+     [--source declared|cameras] [--method cat] [--physics] [--contact]
 Prints a markdown table.
 """
 
@@ -38,14 +38,16 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.perception_tax import CAT_SCENES
+from benchmarks.perception_tax import CAT_SCENES, CLOCKED
 
 ROOT = Path(__file__).resolve().parents[1]
 SIMULATORS = ("pybullet", "mujoco")
 
 
-def one(path: Path, simulator: str, source: str, q_out: Path) -> dict[str, Any]:
-    """One CAT run of ``path`` on ``simulator``, virtual clock, as a record.
+def one(
+    path: Path, simulator: str, source: str, q_out: Path, method: str = "cat"
+) -> dict[str, Any]:
+    """One run of ``path`` by ``method`` on ``simulator``, virtual clock, as a record.
 
     The run's joint positions are saved to ``q_out`` (``.npy``).
     """
@@ -55,13 +57,13 @@ def one(path: Path, simulator: str, source: str, q_out: Path) -> dict[str, Any]:
 
     overrides = {
         "simulator": simulator,
-        "method.name": "cat",
-        "method.cat.timing.clock": "virtual",
+        "method.name": method,
+        **{f"method.{m}.timing.clock": "virtual" for m in CLOCKED},
         "perception.source": "ground_truth" if source == "declared" else "depth_camera",
     }
     scenario = load_scenario(path, overrides=overrides)
     cpu = time.process_time()
-    trace = load_executor("cat")(scenario, False)
+    trace = load_executor(method)(scenario, False)
     cpu = time.process_time() - cpu
     m = run_metrics(trace, scenario.robot)
     error = m.get("final_position_error_m")
@@ -79,10 +81,12 @@ def one(path: Path, simulator: str, source: str, q_out: Path) -> dict[str, Any]:
     }
 
 
-def spawn(path: Path, simulator: str, source: str, folder: Path) -> dict[str, Any]:
+def spawn(
+    path: Path, simulator: str, source: str, folder: Path, method: str
+) -> dict[str, Any]:
     """:func:`one` in a process of its own, its joint positions saved in ``folder``."""
     command = [sys.executable, "-m", "benchmarks.simulators", "--one", str(path)]
-    command += ["--simulators", simulator, "--source", source]
+    command += ["--simulators", simulator, "--source", source, "--method", method]
     command += ["--q-out", str(folder / f"{path.stem}_{simulator}.npy")]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     done = subprocess.run(command, capture_output=True, text=True, env=env, cwd=ROOT)
@@ -216,13 +220,15 @@ def main() -> None:
     parser.add_argument("--scenes", default=",".join(CAT_SCENES))
     parser.add_argument("--simulators", default=",".join(SIMULATORS))
     parser.add_argument("--source", default="declared", choices=["declared", "cameras"])
+    parser.add_argument("--method", default="cat", help="cat, ik, mp, hybrid, jt")
     parser.add_argument("--contact", action="store_true", help="the contact probe")
     parser.add_argument("--physics", action="store_true", help="the engines' cost")
     parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--q-out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one is not None:
-        print(json.dumps(one(args.one, args.simulators, args.source, args.q_out)))
+        record = one(args.one, args.simulators, args.source, args.q_out, args.method)
+        print(json.dumps(record))
         return
     simulators = args.simulators.split(",")
     if args.contact:
@@ -236,7 +242,7 @@ def main() -> None:
     for scene in args.scenes.split(","):
         path = ROOT / "scenarios" / f"cat_{scene}.yaml"
         for simulator in simulators:
-            records.append(spawn(path, simulator, args.source, folder))
+            records.append(spawn(path, simulator, args.source, folder, args.method))
             print(json.dumps(records[-1]), file=sys.stderr, flush=True)
     print(table(records, simulators))
     shutil.rmtree(folder)
