@@ -223,15 +223,17 @@ def test_the_control_loop_imports_no_reporting() -> None:
 
 
 def test_the_world_model_does_not_import_the_simulator() -> None:
-    """Perception and collision import no cbp.sim; loading a scenario no PyBullet."""
+    """Perception and collision import no cbp.sim; loading a scenario no simulator."""
     graph = _package_graph()
     assert "cbp.sim" not in graph["cbp.perception"]
     assert "cbp.sim" not in graph["cbp.collision"]
     assert "cbp.sim" not in graph["cbp.scenario"]
     code = (
         "import sys; from cbp.scenario import load_scenario; "
-        f"load_scenario({str(ROOT / 'scenarios' / 'cat_boards.yaml')!r}); "
-        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'pybullet' "
+        f"load_scenario({str(ROOT / 'scenarios' / 'cat_boards.yaml')!r}, "
+        "overrides={'simulator': 'mujoco'}); "
+        "print(sorted(m for m in sys.modules "
+        "if m.split('.')[0] in ('pybullet', 'mujoco') "
         "or m.startswith(('cbp.sim', 'cbp.executors', 'cbp.run'))))"
     )
     done = subprocess.run(

@@ -17,22 +17,18 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
-from cbp.sim.physics import make_mobile_physics
-
-if TYPE_CHECKING:
-    from cbp.sim.bullet_physics import BulletMobilePhysics
-    from cbp.sim.scene import PybulletScene
+from cbp.sim.bullet_access import PybulletAccess
+from cbp.sim.physics import MobilePhysics, make_mobile_physics
 
 __all__ = ["MobileSimulation"]
 
 
-class MobileSimulation:
+class MobileSimulation(PybulletAccess):
     """The robot on a planar base among the scene's objects, on a physics engine.
 
     Args:
@@ -72,7 +68,7 @@ class MobileSimulation:
         self.simulator = simulator
         self.dt = 1.0 / self.settings.rate_hz
         q0 = np.asarray(q0, dtype=float)
-        self.physics = make_mobile_physics(
+        self.physics: MobilePhysics = make_mobile_physics(
             simulator, robot, objects, q0, self.settings, folder, gui
         )
         self._base = np.array([q0[0], q0[1], math.atan2(q0[3], q0[2])])
@@ -81,26 +77,6 @@ class MobileSimulation:
         self._command = np.zeros(robot.nv)
         self.t = 0.0
         self.steps = 0
-
-    @property
-    def scene(self) -> PybulletScene:
-        """The PyBullet scene (client, body ids); PyBullet only."""
-        return self._bullet().scene
-
-    @property
-    def client(self) -> int:
-        """The PyBullet client id; PyBullet only."""
-        return int(self._bullet().client)
-
-    def _bullet(self) -> BulletMobilePhysics:
-        from cbp.sim.bullet_physics import BulletMobilePhysics
-
-        if not isinstance(self.physics, BulletMobilePhysics):
-            raise AttributeError(
-                f"this simulation runs on {self.simulator}, not PyBullet: "
-                "use its physics (MobileSimulation.physics)"
-            )
-        return self.physics
 
     def command(self, velocity: FloatArray) -> None:
         """Set the commanded velocity ``v`` (nv): base (v_x, v_y, yaw rate), arm."""

@@ -27,7 +27,6 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -35,13 +34,10 @@ import pinocchio as pin
 
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
+from cbp.sim.bullet_access import PybulletAccess
 from cbp.sim.physics import Physics, make_physics
 from cbp.sim.recorder import Recorder
 from cbp.sim.trajectory import JointTrajectory
-
-if TYPE_CHECKING:
-    from cbp.sim.bullet_physics import BulletPhysics
-    from cbp.sim.scene import PybulletScene
 
 __all__ = ["ContactSample", "Simulation", "TorqueController"]
 
@@ -70,7 +66,7 @@ class ContactSample:
 TRAJECTORY_HISTORY = 1.0
 
 
-class Simulation:
+class Simulation(PybulletAccess):
     """The simulated robot among the scenario's objects, on a physics engine.
 
     The controller is this class's; the engine (:class:`cbp.sim.physics.Physics`)
@@ -130,26 +126,6 @@ class Simulation:
         self._record = Recorder(1 + 3 * n + 3)
         self._q, self._v = self.physics.state()
         self._interval = ContactSample()
-
-    @property
-    def scene(self) -> PybulletScene:
-        """The PyBullet scene (client, body ids); PyBullet only."""
-        return self._bullet().scene
-
-    @property
-    def client(self) -> int:
-        """The PyBullet client id; PyBullet only."""
-        return int(self._bullet().client)
-
-    def _bullet(self) -> BulletPhysics:
-        from cbp.sim.bullet_physics import BulletPhysics
-
-        if not isinstance(self.physics, BulletPhysics):
-            raise AttributeError(
-                f"this simulation runs on {self.simulator}, not PyBullet: "
-                "use its physics (Simulation.physics)"
-            )
-        return self.physics
 
     # ------------------------------------------------------------------ control
 

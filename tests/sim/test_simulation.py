@@ -115,6 +115,23 @@ def test_measures_contact_force_when_pushed_into_a_box(
     assert 250.0 < rec["wrist_force"][-1] < 350.0
 
 
+@pytest.mark.parametrize("simulator", SIMULATORS)
+def test_a_joint_pushed_into_its_limit_stops_there(
+    panda: RobotModel, simulator: str
+) -> None:
+    """40 N m on joint 4 towards its upper limit: a hard stop, as PyBullet's."""
+    q0 = panda.home()
+    q0[3] = -0.3  # 0.23 rad below its limit
+    push = np.zeros(7)
+    push[3] = 40.0
+    with Simulation(panda, [], q0, simulator=simulator) as sim:
+        sim.set_torque_controller(lambda t, q, v: sim.gravity(q) + push)
+        sim.run_until(1.0)
+        past = sim.recording()["q"][:, 3] - panda.upper_limits[3]
+    assert past.max() < 0.01  # rad; MuJoCo's default soft limit: 0.074
+    assert past[-1] < 0.001  # rad; MuJoCo's default soft limit: 0.0037
+
+
 def _pressed(
     panda: RobotModel, simulator: str, obj: ObjectSpec
 ) -> tuple[np.ndarray, np.ndarray]:
