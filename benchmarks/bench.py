@@ -49,6 +49,8 @@ __all__ = [
     "TARGETS",
     "BenchConfig",
     "Row",
+    "frame_rows",
+    "mujoco_run_rows",
     "narrow_phase_rows",
     "run_bench",
     "targets_table",
@@ -1448,7 +1450,7 @@ def _joint_setter(robot: Any, data: Any) -> Callable[[np.ndarray], None]:
     return put
 
 
-def _frame_rows(cfg: BenchConfig) -> list[Row]:
+def frame_rows(cfg: BenchConfig) -> list[Row]:
     """One depth frame of the meshed Panda over the boards, four renderers.
 
     The boards scene (``scenarios/cat_boards.yaml``) with its first fixed
@@ -1529,7 +1531,7 @@ def _frame_rows(cfg: BenchConfig) -> list[Row]:
     return rows
 
 
-def _mujoco_run_rows(cfg: BenchConfig) -> list[Row]:
+def mujoco_run_rows(cfg: BenchConfig) -> list[Row]:
     """CAT runs on MuJoCo, virtual clock: the cameras against the declared twin.
 
     The shelf reach with the five cameras of ``configs/cat.yaml`` and the
@@ -1658,8 +1660,8 @@ def run_bench(
         _orbit_row,
         _map_row,
         _run_rows,
-        _frame_rows,
-        _mujoco_run_rows,
+        frame_rows,
+        mujoco_run_rows,
     ):
         for row in group(cfg):
             rows.append(row)

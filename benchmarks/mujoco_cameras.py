@@ -25,9 +25,9 @@ if str(HERE) not in sys.path:
 from bench import (  # noqa: E402
     BenchConfig,
     Row,
-    _frame_rows,
-    _mujoco_run_rows,
     format_row,
+    frame_rows,
+    mujoco_run_rows,
     targets_table,
 )
 from results_file import publish  # noqa: E402
@@ -69,7 +69,7 @@ def main() -> None:
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
     cfg = BenchConfig.quick() if args.quick else BenchConfig()
     rows = []
-    for group in (_frame_rows, _mujoco_run_rows):
+    for group in (frame_rows, mujoco_run_rows):
         for row in group(cfg):
             print(format_row(row), flush=True)
             rows.append(row)
