@@ -42,12 +42,9 @@ from cbp.errors import ConfigError
 from cbp.perception.spec import CameraSpec
 from cbp.robot import FloatArray, RobotModel
 from cbp.sim.camera import SimulatedCamera
-from cbp.sim.mujoco.raycast import MujocoRayCaster
+from cbp.sim.mujoco.raycast import DEFAULT_GEOM_GROUPS, MujocoRayCaster
 
 __all__ = ["DEFAULT_GEOM_GROUPS", "ROUND_FACETS", "MujocoDepthCamera", "Renderers"]
-
-DEFAULT_GEOM_GROUPS = (0, 1, 2)
-"""The geom groups a camera draws (MuJoCo's visible groups by default)."""
 
 ROUND_FACETS = 64
 """Facets around a sphere or a cylinder as the renderer draws them: a sphere

@@ -18,7 +18,10 @@ from cbp.robot import FloatArray
 from cbp.sim.ray_kernels import CAPSULE, CYLINDER, SPHERE
 from cbp.sim.shape_caster import CastShape, ShapeCaster, box_triangles
 
-__all__ = ["INFINITE_PLANE", "MujocoRayCaster"]
+__all__ = ["DEFAULT_GEOM_GROUPS", "INFINITE_PLANE", "MujocoRayCaster"]
+
+DEFAULT_GEOM_GROUPS = (0, 1, 2)
+"""The geom groups a camera draws (MuJoCo's visible groups by default)."""
 
 INFINITE_PLANE = 1e3
 """Half the side of the square an infinite plane is drawn as [m]."""
@@ -47,7 +50,7 @@ class MujocoRayCaster(ShapeCaster):
         self,
         model: mujoco.MjModel,
         data: mujoco.MjData,
-        geom_groups: tuple[int, ...] = (0, 1, 2),
+        geom_groups: tuple[int, ...] = DEFAULT_GEOM_GROUPS,
     ) -> None:
         """Read the geoms of the chosen groups."""
         super().__init__()
