@@ -16,10 +16,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
-from cbp.errors import ConfigError
 from cbp.perception.spec import CameraSpec
 from cbp.robot import RobotModel
 from cbp.sim.camera import DepthCamera, SimulatedCamera
+from cbp.sim.physics import SIMULATORS
 from cbp.sim.simulation import Simulation
 
 __all__ = ["CAMERAS", "depth_cameras"]
@@ -61,6 +61,7 @@ def _mujoco(
 
 #: The cameras' builder of each engine (:data:`cbp.sim.physics.SIMULATORS`).
 CAMERAS: dict[str, CameraBuilder] = {"pybullet": _pybullet, "mujoco": _mujoco}
+assert set(CAMERAS) == set(SIMULATORS)
 
 
 def depth_cameras(
@@ -74,13 +75,7 @@ def depth_cameras(
         robot: the robot that mounted cameras' ``parent`` frames belong to.
 
     Raises:
-        ConfigError: an engine without cameras, or a camera's mount unknown.
+        ConfigError: a camera's mount unknown, or its renderer not the
+            engine's.
     """
-    builder = CAMERAS.get(sim.simulator)
-    if builder is None:
-        raise ConfigError(
-            f"simulator '{sim.simulator}' has no depth cameras (those of "
-            f"{', '.join(sorted(CAMERAS))} have)",
-            "simulator",
-        )
-    return builder(sim, specs, robot)
+    return CAMERAS[sim.simulator](sim, specs, robot)
