@@ -169,7 +169,7 @@ def _engine(simulator: str, kind: str) -> Any:
     """The class that drives a ``kind`` of simulation on ``simulator``."""
     if simulator not in SIMULATORS:
         raise ConfigError(
-            f"unknown simulator '{simulator}' (one of {', '.join(SIMULATORS)})",
+            f"unknown: '{simulator}' (one of {', '.join(SIMULATORS)})",
             "simulator",
         )
     extra, classes = SIMULATORS[simulator]
@@ -180,8 +180,7 @@ def _engine(simulator: str, kind: str) -> Any:
         if not extra or exc.name != simulator:
             raise
         raise ConfigError(
-            f"simulator '{simulator}' needs the '{extra}' extra: "
-            f"pip install 'cbp[{extra}]'",
+            f"'{simulator}' needs the '{extra}' extra: pip install 'cbp[{extra}]'",
             "simulator",
         ) from None
     return getattr(module, class_name)

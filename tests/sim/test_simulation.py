@@ -197,6 +197,23 @@ def test_mujoco_places_links_where_pinocchio_does(panda: RobotModel) -> None:
         )
 
 
+@pytest.mark.skipif(NO_MUJOCO, reason="the mujoco extra")
+def test_every_engine_in_the_table_has_what_its_simulation_calls() -> None:
+    """Each ``module:class`` of SIMULATORS imports and has its protocol's methods."""
+    import importlib
+
+    from cbp.sim.physics import SIMULATORS, MobilePhysics, Physics
+
+    protocols = {"fixed": Physics, "mobile": MobilePhysics}
+    for _, classes in SIMULATORS.values():
+        assert set(classes) == set(protocols)
+        for kind, where in classes.items():
+            module, name = where.split(":")
+            engine = getattr(importlib.import_module(module), name)
+            wanted = {m for m in vars(protocols[kind]) if not m.startswith("_")}
+            assert wanted <= set(dir(engine)), (where, wanted - set(dir(engine)))
+
+
 def test_a_missing_mujoco_names_its_extra(
     panda: RobotModel, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -79,6 +79,16 @@ class MujocoMobilePhysics:
         self.scene.data.qpos[self._qadr] = np.asarray(q0, dtype=float)[4:]
         mujoco.mj_forward(m, self.scene.data)
 
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The compiled model."""
+        return self.scene.model
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """The model's state."""
+        return self.scene.data
+
     def place_base(self, x: float, y: float, yaw: float) -> None:
         """Put the base at (x, y) [m] turned by ``yaw`` [rad]."""
         self.scene.place_base(x, y, yaw)

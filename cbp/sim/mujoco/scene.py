@@ -45,7 +45,12 @@ _SHAPES = {
 
 
 class MujocoScene:
-    """The robot (fixed base) and the scenario's objects in one MuJoCo model.
+    """The robot and the scenario's objects in one MuJoCo model.
+
+    A fixed base is fixed to the world; a planar one is a mocap body that
+    :meth:`place_base` puts where the simulation says. Joint limits are as
+    stiff as MuJoCo makes them (a time constant of two steps), as PyBullet's
+    are hard.
 
     Args:
         robot: the robot model (its URDF; its locked joints welded).
@@ -97,7 +102,6 @@ class MujocoScene:
         self._base = self.link_bodies[links[0]]  # the URDF's root link
         self.object_bodies = {o.name: body(OBJECT_PREFIX + o.name) for o in objects}
         self.dynamic = [o for o in objects if o.dynamic]
-
         self._mocap = {
             o.name: int(model.body_mocapid[self.object_bodies[o.name]])
             for o in self.dynamic
