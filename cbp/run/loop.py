@@ -67,7 +67,7 @@ class _ForcedOff:
     def check(self, t: float, current: JointTrajectory) -> None:
         """Compare the measured configuration with the command at ``t``."""
         run = self.run
-        off = np.abs(run.robot.difference(current.sample(t)[0], run.sim.q))
+        off = np.abs(run.robot.difference(current.sample(t)[0], run.arm.q))
         k = int(np.argmax(off))
         if self.since is None and off[k] > FORCED_OFF:
             self.since = t
@@ -117,7 +117,10 @@ def run_loop(
             the motion while it plans, then commands the plan.
     """
     if clock is None:
-        clock = LoopClock.unpaced(run.cameras is not None and run.clock == "wall")
+        # A robot that runs on its own keeps the wall clock's pace itself.
+        clock = LoopClock.unpaced(
+            run.cameras is not None and run.clock == "wall" and run.arm.lockstep
+        )
     pacer, world_pacer, stop_requested = clock.live, clock.world, clock.stop
     log = run.log
     shown = log.reached if log.listeners else None
@@ -127,7 +130,7 @@ def run_loop(
     period = timing.period
     stop_time = robot.stopping_time(vmax, amax)
     t = 0.0
-    sim = run.sim
+    sim = run.arm
     faults = run.faults
     adapter = PeriodAdapter(lo, hi, timing.growth, timing.shrink)
     leads = LeadAdapter(
@@ -273,7 +276,9 @@ def run_loop(
             run.log.periods.append(
                 PeriodRecord(t, period, steps, compute, missed, spliced, note)
             )
-            t, period = t_f, next_period
+            # A robot that runs on its own did not wait for a late period.
+            t = t_f if run.arm.lockstep else max(t_f, run.arm.t)
+            period = next_period
         misses.flush(t)
         if faults.aborted is None and not stop_requested():
             run.advance(run.duration)
