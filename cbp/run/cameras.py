@@ -9,8 +9,9 @@ handed with the robot's configuration to the map
 the frames of one instant making one snapshot (the map a planner sees then
 depends on simulated time only), in the map's worker on the wall clock (never
 blocking the loop). A camera whose last valid frame is older than
-``perception.camera_timeout`` holds the robot until it gives one again. A frame is valid when it is well
-formed (:meth:`~cbp.perception.frame.DepthFrame.problem`) and believable
+``perception.camera_timeout`` holds the robot until it gives one again. A
+frame is valid when it is well formed
+(:meth:`~cbp.perception.frame.DepthFrame.problem`) and believable
 (:mod:`cbp.perception.plausibility`: not blind, not frozen, not seeing
 through the robot).
 
