@@ -7,21 +7,23 @@ is the median and 95th percentile of many repetitions after a warm-up. Rows:
 
 1. one engine step of the Panda's reaching task (goal pose, posture, joint step,
    joint position and velocity limits), daqp, piqp and cvxpy backends;
-2. the same task on peers: pink (``solve_ik``, daqp), placo
-   (``KinematicsSolver``) and a hand-written pinocchio + numpy + daqp step;
+2. the same task on peers: pink (``solve_ik``, daqp), mink (``solve_ik`` on
+   MuJoCo, daqp), placo (``KinematicsSolver``) and a hand-written pinocchio +
+   numpy + daqp step;
 3. one CAT step with collisions (kinematics, contact query, contact rows, QP,
    step validation) on the boards scene and against an octree of the shelf,
    and on the boards with each narrow phase (compiled, coal);
 4. scaling with contact rows and with the size of the scene and of the map;
 5. MP planning in the shelf, one orbit tick, one map update.
 
-Peers (pink) are bench extras: ``pip install -e ".[bench]"``.
+Peers (pink, mink, placo) are bench extras: ``pip install -e ".[bench]"``.
 """
 
 from __future__ import annotations
 
 import cProfile
 import gc
+import importlib
 import io
 import json
 import platform
@@ -261,7 +263,7 @@ Step = tuple[str, Callable[[int], object], str]
 
 
 def _reaching_rows(cfg: BenchConfig) -> list[Row]:
-    """The reaching step: ours on each backend, pink, placo, hand-written.
+    """The reaching step: ours on each backend, pink, mink, placo, hand-written.
 
     Every row but cvxpy's (a hundred times slower) is timed in alternating
     rounds with the others, so that their ratios hold on a busy machine.
@@ -298,6 +300,8 @@ def _reaching_rows(cfg: BenchConfig) -> list[Row]:
     )
     if not _has_pink():
         rows.append(Row("reaching", "pink: not installed (bench extra)", 0.0, 0.0, 0))
+    if not _sibling("mink_peer").has_mink():
+        rows.append(Row("reaching", "mink: not installed (bench extra)", 0.0, 0.0, 0))
     daqp = "cbp Engine.step, solver=daqp"
     for row in rows:
         if row.case != daqp and row.median_us > 0:
@@ -329,8 +333,43 @@ def _has_pink() -> bool:
     return True
 
 
+def _sibling(name: str) -> Any:
+    """The module ``name`` of this folder, however this one was loaded.
+
+    ``cbp bench`` loads this file by its path, the tests as
+    ``benchmarks.bench``: the folder goes on ``sys.path`` for its siblings.
+    """
+    here = str(Path(__file__).resolve().parent)
+    if here not in sys.path:
+        sys.path.append(here)
+    return importlib.import_module(name)
+
+
+def _mink_steps(robot: Any, q0: np.ndarray) -> list[Step]:
+    """The reaching step on mink (``benchmarks/mink_peer.py``), if installed.
+
+    A reach of the first goal from ``q0`` on a model of its own checks first
+    that mink's step gets there (within :data:`cbp.metrics.REACH_POSITION`
+    and ``REACH_ROTATION``); the note says in how many steps.
+    """
+    peer = _sibling("mink_peer")
+    if not peer.has_mink():
+        return []
+    steps = peer.MinkReach(robot, q0, GOALS, DT).reach(0, 500)
+    if steps is None:
+        raise RuntimeError("mink's reaching step did not reach GOALS[0] in 500 steps")
+    return [
+        (
+            "mink.solve_ik + integrate (MuJoCo, daqp)",
+            peer.MinkReach(robot, q0, GOALS, DT).stepper(64),
+            "FrameTask, PostureTask, ConfigurationLimit, VelocityLimit as pink's; "
+            f"reaches the first goal in {steps} steps",
+        )
+    ]
+
+
 def _peer_steps(robot: Any, q0: np.ndarray) -> list[Step]:
-    """The peers on the reaching task: pink (if installed) and placo."""
+    """The peers on the reaching task: pink and mink (if installed), placo."""
     steps: list[Step] = []
     if _has_pink():
         import pink
@@ -359,6 +398,7 @@ def _peer_steps(robot: Any, q0: np.ndarray) -> list[Step]:
                 "FrameTask, PostureTask, ConfigurationLimit, VelocityLimit",
             )
         )
+    steps += _mink_steps(robot, q0)
     import placo
 
     wrapper = placo.RobotWrapper(str(robot.urdf_path), placo.Flags.ignore_collisions)
@@ -1515,6 +1555,8 @@ def _machine() -> dict[str, str]:
         "ompl",
         "placo",
         "pin-pink",
+        "mink",
+        "mujoco",
     ):
         try:
             out[dist] = version(dist)
@@ -1570,13 +1612,9 @@ def write_results(result: dict[str, Any], path: Path, command: str) -> None:
     lines += ["## Profile of the CAT step (boards): largest own-time shares", ""]
     lines += [f"1. {name}: {pct:.0f} %" for name, pct in result["profile_cat_step"]]
     lines.append("")
-    here = str(Path(__file__).resolve().parent)
-    if here not in sys.path:  # loaded by file path (cbp bench) or as a package
-        sys.path.append(here)
-    from results_file import keep_other_sections
-
     # The other scripts' sections (collision.py, sweep.py, ...) stay.
-    path.write_text(keep_other_sections(path, "\n".join(lines)))
+    keep = _sibling("results_file").keep_other_sections
+    path.write_text(keep(path, "\n".join(lines)))
 
 
 def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
@@ -1749,6 +1787,14 @@ TARGETS: list[tuple[str, str, str, str, float | None, str]] = [
         "placo",
         None,
         "engine step / placo's (C++; issue 40's moonshot: 3)",
+    ),
+    (
+        "reaching",
+        "cbp Engine.step, solver=daqp",
+        "reaching",
+        "mink",
+        None,
+        "engine step / mink's (MuJoCo; issue 53)",
     ),
     (
         "query",

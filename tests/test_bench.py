@@ -25,6 +25,7 @@ def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:
     }
     cases = [row["case"] for row in result["rows"]]
     assert any(c.startswith("pink") for c in cases)
+    assert any(c.startswith("mink") for c in cases)
     assert any(c.startswith("placo") for c in cases)
     assert any(c.startswith("hand-written") for c in cases)
     assert all(row["median_us"] > 0 for row in result["rows"])
@@ -75,6 +76,7 @@ def test_targets_table_judges_each_target_by_its_ratio() -> None:
         row("reaching", "cbp Engine.step, solver=daqp", 36.0),
         row("reaching", "pink.solve_ik + integrate (daqp)", 180.0),
         row("reaching", "placo KinematicsSolver.solve", 6.0),
+        row("reaching", "mink: not installed (bench extra)", 0.0),
     ]
     lines = targets_table(rows)
     assert lines[:6] == [
@@ -95,4 +97,6 @@ def test_targets_table_judges_each_target_by_its_ratio() -> None:
     assert body[2] == (
         "| engine step / placo's (C++; issue 40's moonshot: 3) | 6 | reported |"
     )
-    assert all(line.endswith("| | not measured |") for line in body[3:])
+    # A peer that is not installed has a row with no time: not measured.
+    assert body[3] == "| engine step / mink's (MuJoCo; issue 53) | | not measured |"
+    assert all(line.endswith("| | not measured |") for line in body[4:])
