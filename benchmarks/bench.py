@@ -299,9 +299,9 @@ def _reaching_rows(cfg: BenchConfig) -> list[Row]:
             note="timed on its own",
         ),
     )
-    if not _has_pink():
+    if not _installed("pink"):
         rows.append(Row("reaching", "pink: not installed (bench extra)", 0.0, 0.0, 0))
-    if not _sibling("mink_peer").has_mink():
+    if not _installed("mink", "mujoco"):
         rows.append(Row("reaching", "mink: not installed (bench extra)", 0.0, 0.0, 0))
     daqp = "cbp Engine.step, solver=daqp"
     for row in rows:
@@ -326,9 +326,11 @@ def _engine_step(robot: Any, solver: str) -> Callable[[int], object]:
     return step
 
 
-def _has_pink() -> bool:
+def _installed(*modules: str) -> bool:
+    """True when each of ``modules`` imports (peers are bench extras)."""
     try:
-        import pink  # noqa: F401
+        for module in modules:
+            importlib.import_module(module)
     except ImportError:
         return False
     return True
@@ -353,9 +355,9 @@ def _mink_steps(robot: Any, q0: np.ndarray) -> list[Step]:
     that mink's step gets there (within :data:`cbp.metrics.REACH_POSITION`
     and ``REACH_ROTATION``); the note says in how many steps.
     """
-    peer = _sibling("mink_peer")
-    if not peer.has_mink():
+    if not _installed("mink", "mujoco"):
         return []
+    peer = _sibling("mink_peer")
     steps = peer.MinkReach(robot, q0, GOALS, DT).reach(0, 500)
     if steps is None:
         raise RuntimeError("mink's reaching step did not reach GOALS[0] in 500 steps")
@@ -372,7 +374,7 @@ def _mink_steps(robot: Any, q0: np.ndarray) -> list[Step]:
 def _peer_steps(robot: Any, q0: np.ndarray) -> list[Step]:
     """The peers on the reaching task: pink and mink (if installed), placo."""
     steps: list[Step] = []
-    if _has_pink():
+    if _installed("pink"):
         import pink
         from pink.limits import ConfigurationLimit, VelocityLimit
         from pink.tasks import FrameTask, PostureTask

@@ -29,23 +29,13 @@ from cbp.errors import ConfigError
 from cbp.metrics import REACH_POSITION, REACH_ROTATION
 from cbp.robot import RobotModel
 
-__all__ = ["MinkReach", "has_mink", "mujoco_model"]
+__all__ = ["MinkReach", "mujoco_model"]
 
 #: Costs and gains of the reaching task, as in pink's row of ``bench.py``.
 POSITION_COST = 1.0
 ORIENTATION_COST = 0.3
 POSTURE_COST = 1e-2
 LIMIT_GAIN = 0.5
-
-
-def has_mink() -> bool:
-    """True when mink and mujoco import (the bench extra is installed)."""
-    try:
-        import mink  # noqa: F401
-        import mujoco  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 def mujoco_model(robot: RobotModel) -> Any:

@@ -101,3 +101,20 @@ def test_targets_table_judges_each_target_by_its_ratio() -> None:
     # A peer that is not installed has a row with no time: not measured.
     assert body[3] == "| engine step / mink's (MuJoCo; issue 53) | | not measured |"
     assert all(line.endswith("| | not measured |") for line in body[4:])
+
+
+def test_a_peer_not_installed_has_a_row_saying_so(monkeypatch) -> None:
+    """Without mink the reaching table says so; the other rows keep their ratios."""
+    import sys
+
+    from benchmarks.bench import _reaching_rows
+
+    monkeypatch.setitem(sys.modules, "mink", None)  # import mink: ImportError
+    rows = _reaching_rows(BenchConfig.tiny())
+    cases = [row.case for row in rows]
+    assert cases[-1] == "mink: not installed (bench extra)"
+    assert rows[-1].median_us == 0.0
+    assert rows[-1].ratio is None
+    assert not any(c.startswith("mink.solve_ik") for c in cases)
+    assert any(c.startswith("pink.solve_ik") for c in cases)
+    assert all(row.ratio is not None for row in rows[:-1])
