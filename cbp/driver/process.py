@@ -9,8 +9,9 @@ camera captures at its own rate, and commands that go stale brake the arm
 (:data:`~cbp.driver.COMMAND_TIMEOUT`). The controller reaches it only through
 the seam: commands go down a pipe, and the robot's state (every
 :data:`STATE_EVERY`), frames and faults come up it, each stamped on the
-robot's clock. Both clocks are the machine's monotonic clock, from the
-moment :meth:`ProcessRobot.start` is called.
+robot's clock: its simulated time, which keeps the wall clock's pace from
+:meth:`ProcessRobot.start` on as long as the machine lets it (else it
+says so, and runs slower).
 
 A robot whose controller dies (killed, or hung so that its heartbeat stops)
 brakes on its watchdog, holds at rest for :data:`ORPHAN_HOLD`, writes its
@@ -129,6 +130,7 @@ class ProcessRobot:
         self._frames: list[CameraFrame] = list(frames)
         self._faults: list[Fault] = []
         self._t0: float | None = None
+        self._received = time.monotonic()
         self._recording: dict[str, FloatArray] | None = None
         self._latencies: list[float] = []
         self._ended = threading.Event()
@@ -151,12 +153,22 @@ class ProcessRobot:
     def start(self) -> None:
         """Start the robot's clock: from now on it runs in real time."""
         if self._t0 is None:
-            self._t0 = time.monotonic()
+            self._t0 = self._received = time.monotonic()
             self._post(("start", self._t0))
 
     def now(self) -> float:
-        """The robot's clock [s] (0 until :meth:`start`)."""
-        return 0.0 if self._t0 is None else time.monotonic() - self._t0
+        """The robot's clock [s] (0 until :meth:`start`).
+
+        The simulated time its last state was measured at, carried forward
+        by the wall clock for at most two of its state periods: a robot the
+        machine cannot keep at the wall clock's pace (a ``lag`` fault) runs
+        slower, and so does the run.
+        """
+        if self._t0 is None:
+            return 0.0
+        with self._lock:
+            stamp, received = self._state.stamp, self._received
+        return stamp + min(time.monotonic() - received, 2.0 * STATE_EVERY)
 
     def state(self) -> JointState:
         """The newest state the robot sent."""
@@ -226,6 +238,7 @@ class ProcessRobot:
             with self._lock:
                 if kind == "state":
                     self._state = message[1]
+                    self._received = time.monotonic()
                     self._frames.extend(message[2])
                     self._faults.extend(message[3])
                 elif kind == "recording":
@@ -280,6 +293,7 @@ class _RealTime:
         self.orphaned: float | None = None
         self.next_state = 0.0
         self.lagging = False
+        self.next_lag = 0.0
         #: Every fault the robot reported.
         self.said: list[Fault] = []
 
@@ -335,10 +349,11 @@ class _RealTime:
         return True
 
     def _keep_pace(self, now: float) -> None:
-        """Say once per episode when the physics falls behind the wall clock."""
+        """Say when the physics falls behind the wall clock (at most once a second)."""
         behind = now - self.robot.now()
-        if behind > LAG_LIMIT and not self.lagging:
+        if behind > LAG_LIMIT and not self.lagging and now >= self.next_lag:
             self.lagging = True
+            self.next_lag = now + 1.0
             self.robot.report(
                 "lag",
                 f"the simulated robot is {behind * 1e3:.0f} ms behind the wall "

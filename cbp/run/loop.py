@@ -176,6 +176,7 @@ def run_loop(
             failed = False
             compiled = compiles.count
             hold: str | None = None
+            seen: float | None = None
             # The latest goal accepted before this period's (a live goal that
             # arrives from now on is said new below).
             accepted = run.goal.changes
@@ -187,6 +188,7 @@ def run_loop(
                     plan = Plan(None, 0, hold)
                 else:
                     # One snapshot of the obstacles for the whole plan.
+                    seen = run.seen()
                     with held(run):
                         backing = leaving.plan(t, q_s)
                         plan = backing or planner.plan(q_s.copy(), goal, budget, run)
@@ -246,7 +248,7 @@ def run_loop(
                 misses.met(t)
             if new is not None:
                 # Live, the simulation is not past t: new starts after t_f.
-                sim.follow(sim.trajectory.splice(new))
+                sim.follow(sim.trajectory.splice(new), source=seen)
                 log.commanded(float(new.times[0]))
                 spliced = True
             if pacer is not None:

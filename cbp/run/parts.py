@@ -115,6 +115,10 @@ class RunParts:
         """
         return 0 if self.cameras is None else self.cameras.mapped_since(camera, t)
 
+    def seen(self) -> float | None:
+        """The capture time of the newest frame in the map [s] (None: no cameras)."""
+        return None if self.cameras is None else self.cameras.mapper.stamp
+
     def hold_reason(self, t: float) -> str | None:
         """Why the robot must hold at ``t`` (a camera without valid frames), or None."""
         return None if self.cameras is None else self.cameras.hold_reason(t)
@@ -156,6 +160,15 @@ class RunParts:
             self.cameras.close()
         recording = self.arm.recording()
         self.arm.close()
+        latencies = self.arm.latencies()
+        if latencies:
+            # From a frame's capture to the command planned on it reaching
+            # the robot.
+            ms = 1e3 * np.asarray(latencies)
+            self.log.counters["capture_to_command_median_ms"] = float(np.median(ms))
+            self.log.counters["capture_to_command_p95_ms"] = float(
+                np.percentile(ms, 95)
+            )
         return make_trace(
             self.scenario,
             recording,

@@ -63,6 +63,11 @@ class Recorded(Protocol):
         """The recorded samples (:meth:`cbp.sim.simulation.Simulation.recording`)."""
         ...
 
+    @property
+    def latencies(self) -> list[float]:
+        """Per command that carried a frame's capture time, capture to arrival [s]."""
+        ...
+
     def close(self) -> None:
         """End the robot (its process, its simulation)."""
         ...
@@ -212,6 +217,10 @@ class RobotLink:
         if not isinstance(self.driver, Recorded):
             raise TypeError(f"{type(self.driver).__name__} keeps no recording")
         return self.driver.recording()
+
+    def latencies(self) -> list[float]:
+        """Capture-to-command latencies the robot measured [s] (after the recording)."""
+        return self.driver.latencies if isinstance(self.driver, Recorded) else []
 
     def close(self) -> None:
         """Stop the heartbeat; end a simulated robot."""
