@@ -118,9 +118,9 @@ def _run_with_arrival(
     follow = sim.follow
     changes: list[tuple[float, JointTrajectory, JointTrajectory]] = []
 
-    def watched(trajectory: JointTrajectory) -> None:
+    def watched(trajectory: JointTrajectory, source: float | None = None) -> None:
         changes.append((sim.t, sim.trajectory, trajectory))
-        follow(trajectory)
+        follow(trajectory, source)
 
     sim.follow = watched  # type: ignore[method-assign]
     pacer = VirtualPacer(session.goal.arrived, [(at, lambda: session.jog("x", 0.02))])
