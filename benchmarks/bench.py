@@ -7,8 +7,9 @@ is the median and 95th percentile of many repetitions after a warm-up. Rows:
 
 1. one engine step of the Panda's reaching task (goal pose, posture, joint step,
    joint position and velocity limits), daqp, piqp and cvxpy backends;
-2. the same task on peers: pink (``solve_ik``, daqp), placo
-   (``KinematicsSolver``) and a hand-written pinocchio + numpy + daqp step;
+2. the same task on peers: pink (``solve_ik``, daqp), mink (``solve_ik`` on
+   MuJoCo, daqp), placo (``KinematicsSolver``) and a hand-written pinocchio +
+   numpy + daqp step;
 3. one CAT step with collisions (kinematics, contact query, contact rows, QP,
    step validation) on the boards scene and against an octree of the shelf,
    and on the boards with each narrow phase (compiled, coal);
@@ -18,15 +19,17 @@ is the median and 95th percentile of many repetitions after a warm-up. Rows:
 7. one depth frame per renderer (PyBullet's tiny renderer, the ray cast,
    MuJoCo's), and CAT runs on MuJoCo with cameras against their twins.
 
-Peers (pink) are bench extras: ``pip install -e ".[bench]"``.
+Peers (pink, mink, placo) are bench extras: ``pip install -e ".[bench]"``.
 """
 
 from __future__ import annotations
 
 import cProfile
 import gc
+import importlib
 import io
 import json
+import os
 import platform
 import pstats
 import sys
@@ -276,7 +279,7 @@ Step = tuple[str, Callable[[int], object], str]
 
 
 def _reaching_rows(cfg: BenchConfig) -> list[Row]:
-    """The reaching step: ours on each backend, pink, placo, hand-written.
+    """The reaching step: ours on each backend, pink, mink, placo, hand-written.
 
     Every row but cvxpy's (a hundred times slower) is timed in alternating
     rounds with the others, so that their ratios hold on a busy machine.
@@ -311,8 +314,10 @@ def _reaching_rows(cfg: BenchConfig) -> list[Row]:
             note="timed on its own",
         ),
     )
-    if not _has_pink():
+    if not _installed("pink"):
         rows.append(Row("reaching", "pink: not installed (bench extra)", 0.0, 0.0, 0))
+    if not _installed("mink", "mujoco"):
+        rows.append(Row("reaching", "mink: not installed (bench extra)", 0.0, 0.0, 0))
     daqp = "cbp Engine.step, solver=daqp"
     for row in rows:
         if row.case != daqp and row.median_us > 0:
@@ -336,18 +341,55 @@ def _engine_step(robot: Any, solver: str) -> Callable[[int], object]:
     return step
 
 
-def _has_pink() -> bool:
+def _installed(*modules: str) -> bool:
+    """True when each of ``modules`` imports (peers are bench extras)."""
     try:
-        import pink  # noqa: F401
+        for module in modules:
+            importlib.import_module(module)
     except ImportError:
         return False
     return True
 
 
+def _sibling(name: str) -> Any:
+    """The module ``name`` of this folder, however this one was loaded.
+
+    ``cbp bench`` loads this file by its path, the tests as
+    ``benchmarks.bench``: the folder goes on ``sys.path`` for its siblings.
+    """
+    here = str(Path(__file__).resolve().parent)
+    if here not in sys.path:
+        sys.path.append(here)
+    return importlib.import_module(name)
+
+
+def _mink_steps(robot: Any, q0: np.ndarray) -> list[Step]:
+    """The reaching step on mink (``benchmarks/mink_peer.py``), if installed.
+
+    A reach of the first goal from ``q0`` on a model of its own checks first
+    that mink's step gets there (within :data:`cbp.metrics.REACH_POSITION`
+    and ``REACH_ROTATION``); the note says in how many steps.
+    """
+    if not _installed("mink", "mujoco"):
+        return []
+    peer = _sibling("mink_peer")
+    steps = peer.MinkReach(robot, q0, GOALS, DT).reach(0, 500)
+    if steps is None:
+        raise RuntimeError("mink's reaching step did not reach GOALS[0] in 500 steps")
+    return [
+        (
+            "mink.solve_ik + integrate (MuJoCo, daqp)",
+            peer.MinkReach(robot, q0, GOALS, DT).stepper(64),
+            "FrameTask, PostureTask, ConfigurationLimit, VelocityLimit as pink's; "
+            f"reaches the first goal in {steps} steps",
+        )
+    ]
+
+
 def _peer_steps(robot: Any, q0: np.ndarray) -> list[Step]:
-    """The peers on the reaching task: pink (if installed) and placo."""
+    """The peers on the reaching task: pink and mink (if installed), placo."""
     steps: list[Step] = []
-    if _has_pink():
+    if _installed("pink"):
         import pink
         from pink.limits import ConfigurationLimit, VelocityLimit
         from pink.tasks import FrameTask, PostureTask
@@ -374,6 +416,7 @@ def _peer_steps(robot: Any, q0: np.ndarray) -> list[Step]:
                 "FrameTask, PostureTask, ConfigurationLimit, VelocityLimit",
             )
         )
+    steps += _mink_steps(robot, q0)
     import placo
 
     wrapper = placo.RobotWrapper(str(robot.urdf_path), placo.Flags.ignore_collisions)
@@ -1463,6 +1506,8 @@ def frame_rows(cfg: BenchConfig) -> list[Row]:
     moves between frames (two configurations in turn): the ray casts draw
     what never moved once per camera and the arm every frame, as in a run.
     """
+    if not _installed("mujoco"):
+        return [Row("cameras", "MuJoCo: not installed (mujoco extra)", 0.0, 0.0, 0)]
     from cbp.scenario import load_scenario
     from cbp.sim.camera import DepthCamera, SimulatedCamera
     from cbp.sim.mujoco.camera import MujocoDepthCamera
@@ -1541,6 +1586,8 @@ def mujoco_run_rows(cfg: BenchConfig) -> list[Row]:
     (:func:`_virtual_run`). Then the shelf's cameras once with MuJoCo's
     OpenGL renderer.
     """
+    if not _installed("mujoco"):
+        return [Row("cameras", "MuJoCo: not installed (mujoco extra)", 0.0, 0.0, 0)]
     seconds = _run_seconds(cfg, 7.0, 3.0)
     mujoco = {"simulator": "mujoco"}
     shelf = SCENARIOS / "cat_shelf_reach.yaml"
@@ -1646,6 +1693,7 @@ def run_bench(
     cfg: BenchConfig, progress: Callable[[Row], None] | None = None
 ) -> dict[str, Any]:
     """Run every row; return rows, profile and the machine's description."""
+    load = os.getloadavg()[0]
     rows: list[Row] = []
     for group in (
         _reaching_rows,
@@ -1667,10 +1715,13 @@ def run_bench(
             rows.append(row)
             if progress is not None:
                 progress(row)
+    profile = _profile_cat_step(cfg)
+    load_at_end = os.getloadavg()[0]
     return {
-        "machine": _machine(),
+        "machine": _machine()
+        | {"load": f"{load:.1f} at the start, {load_at_end:.1f} at the end"},
         "rows": [asdict(r) | {"per_period": r.per_period} for r in rows],
-        "profile_cat_step": _profile_cat_step(cfg),
+        "profile_cat_step": profile,
     }
 
 
@@ -1686,6 +1737,8 @@ def _machine() -> dict[str, str]:
         "ompl",
         "placo",
         "pin-pink",
+        "mink",
+        "mujoco",
     ):
         try:
             out[dist] = version(dist)
@@ -1707,14 +1760,15 @@ def write_results(result: dict[str, Any], path: Path, command: str) -> None:
     """Write benchmarks/RESULTS.md (or ``path``) from a run's result."""
     m = result["machine"]
     versions = ", ".join(
-        f"{k} {v}" for k, v in m.items() if k not in ("python", "machine")
+        f"{k} {v}" for k, v in m.items() if k not in ("python", "machine", "load")
     )
+    load = f", load average (1 min) {m['load']}" if "load" in m else ""
     lines = [
         "# Benchmarks",
         "",
         f"Generated by `{command}`. Every row ran in one process, one after the",
         "other: only ratios between rows of one run are meaningful.",
-        f"Machine: {m['machine']}, Python {m['python']}; {versions}.",
+        f"Machine: {m['machine']}, Python {m['python']}{load}; {versions}.",
         "",
     ]
     groups: dict[str, list[dict[str, Any]]] = {}
@@ -1741,13 +1795,9 @@ def write_results(result: dict[str, Any], path: Path, command: str) -> None:
     lines += ["## Profile of the CAT step (boards): largest own-time shares", ""]
     lines += [f"1. {name}: {pct:.0f} %" for name, pct in result["profile_cat_step"]]
     lines.append("")
-    here = str(Path(__file__).resolve().parent)
-    if here not in sys.path:  # loaded by file path (cbp bench) or as a package
-        sys.path.append(here)
-    from results_file import keep_other_sections
-
     # The other scripts' sections (collision.py, sweep.py, ...) stay.
-    path.write_text(keep_other_sections(path, "\n".join(lines)))
+    keep = _sibling("results_file").keep_other_sections
+    path.write_text(keep(path, "\n".join(lines)))
 
 
 def _where_the_time_goes(rows: list[dict[str, Any]]) -> list[str]:
@@ -1920,6 +1970,14 @@ TARGETS: list[tuple[str, str, str, str, float | None, str]] = [
         "placo",
         None,
         "engine step / placo's (C++; issue 40's moonshot: 3)",
+    ),
+    (
+        "reaching",
+        "cbp Engine.step, solver=daqp",
+        "reaching",
+        "mink",
+        None,
+        "engine step / mink's (MuJoCo; issue 53)",
     ),
     (
         "query",

@@ -89,7 +89,7 @@ def soak(minutes: float, source: str, seed: int, folder: Path) -> dict[str, Any]
 
     def watch() -> None:
         while not done.wait(2.0):
-            samples.append((run.sim.t, _rss_mb()))
+            samples.append((run.arm.t, _rss_mb()))
 
     watcher = threading.Thread(target=watch, daemon=True)
     start = time.perf_counter()

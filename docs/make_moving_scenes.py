@@ -36,6 +36,10 @@ MODES: dict[str, dict[str, str]] = {
     "virtual": CAMERAS | {"method.cat.timing.clock": "virtual"},
     "clusters": CAMERAS
     | {"perception.map_process": "true", "perception.cluster_motion": "true"},
+    # The simulated robot in a process of its own, in real time (cbp.driver).
+    "robot_declared": {"simulation.own_process": "true"},
+    "robot": CAMERAS
+    | {"perception.map_process": "true", "simulation.own_process": "true"},
 }
 #: Events worth naming in the table (substrings).
 NAMED = ("map failed", "behind the cameras", "aborted")
@@ -54,6 +58,8 @@ def run_one(path: Path, mode: str) -> dict[str, Any]:
         "mode": mode,
         "peak_contact_force_n": float(m["peak_contact_force_n"]),
         "events": len(trace.events),
+        "latency_median_ms": m.get("capture_to_command_median_ms"),
+        "latency_p95_ms": m.get("capture_to_command_p95_ms"),
         "named": named,
         "wall_s": wall,
         "load": os.getloadavg()[0],
@@ -77,7 +83,10 @@ def markdown(
         "own process), `thread` (cameras, wall clock, the map in a thread beside "
         "the control loop), `virtual` (cameras, virtual time: the map takes "
         "each frame in the loop), `clusters` (as `process`, with "
-        "`perception.cluster_motion`: moving clusters swept over the look-ahead).",
+        "`perception.cluster_motion`: moving clusters swept over the look-ahead), "
+        "`robot_declared` and `robot` (as `declared` and `process`, with the "
+        "simulated robot in a process of its own, in real time: "
+        "`simulation.own_process`).",
         "",
         f"Measured on a 2-core machine shared with other work: load average "
         f"{min(loads):.1f}-{max(loads):.1f} during the runs ({runs} run(s) per "
@@ -118,6 +127,23 @@ def markdown(
             zero = sum(r["peak_contact_force_n"] == 0.0 for r in rs)
             worst = max(r["peak_contact_force_n"] for r in rs)
             lines.append(f"| {m} | {len(rs)} | {zero} | {worst:.0f} |")
+    timed = [r for r in results if r.get("latency_median_ms") is not None]
+    if timed:
+        lines += [
+            "",
+            "From a frame's capture to the command planned on it reaching the "
+            "robot (the median over runs of each run's median and 95th "
+            "percentile):",
+            "",
+            "| mode | runs | capture to command, median ms | p95 ms |",
+            "|---|---:|---:|---:|",
+        ]
+        for m in modes:
+            rs = [r for r in timed if r["mode"] == m]
+            if rs:
+                med = sorted(r["latency_median_ms"] for r in rs)[len(rs) // 2]
+                p95 = sorted(r["latency_p95_ms"] for r in rs)[len(rs) // 2]
+                lines.append(f"| {m} | {len(rs)} | {med:.0f} | {p95:.0f} |")
     # The i-th run of a scene in each mode against its i-th declared run (the
     # same round of the campaign): a scene's declared runs can differ.
     declared = {

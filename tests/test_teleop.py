@@ -600,7 +600,7 @@ def test_the_page_sends_a_path_again_only_when_it_looks_different(
     import dataclasses
 
     session, page = boards_page
-    sim = session.parts.sim
+    sim = session.parts.arm
     q0 = np.array(sim.q, dtype=float)
     moving = dataclasses.replace(
         sim.trajectory,
@@ -626,7 +626,7 @@ def _moved_robot(session: TeleopSession, by: float) -> np.ndarray:
     """Simulate the (not started) session's arm moving every joint by ``by``."""
     import dataclasses
 
-    sim = session.parts.sim
+    sim = session.parts.arm
     q0 = np.array(sim.q, dtype=float)
     t = float(sim.t)
     sim.follow(
@@ -672,10 +672,10 @@ def test_the_page_never_shows_a_pose_before_its_time(
     assert drawn is not None
     _moved_robot(session, 0.02)
     # The loop's clock: the simulated state is a minute ahead of now.
-    session._pacer.start(session.parts.sim.t - 60.0)
+    session._pacer.start(session.parts.arm.t - 60.0)
     page.update()
     np.testing.assert_array_equal(page.state().robot_q, drawn)
-    session._pacer.start(session.parts.sim.t)  # its time is now
+    session._pacer.start(session.parts.arm.t)  # its time is now
     page.update()
     assert not np.allclose(page.state().robot_q, drawn)
 

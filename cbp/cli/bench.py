@@ -24,7 +24,7 @@ def _bench(args: argparse.Namespace) -> int:
     """Run the benchmark harness of the source checkout (``benchmarks/bench.py``).
 
     The harness is not part of the installed package: it times peers (pink,
-    placo) and scenes that only the repository has.
+    mink, placo) and scenes that only the repository has.
     """
     import importlib.util
 

@@ -86,7 +86,7 @@ class CatPlanner:
         if stepper is None:  # one per run: easings are said once per episode
             world = run.world if self.scenario.needs_collision_world else None
             stepper = self._stepper = ValidatedStepper(
-                self.engine, world, run.event, lambda: run.sim.t
+                self.engine, world, run.event, lambda: run.arm.t
             )
         # A step is kept if it penetrates no deeper than the tolerance, or than
         # where it started (so a robot that starts in collision can leave it).
@@ -103,13 +103,13 @@ class CatPlanner:
                 break
             steps += 1
             if run.goal.changed():  # a live goal moved: steer toward it now
-                run.goal.resend(run.sim.t)
+                run.goal.resend(run.arm.t)
             dt = self._step_dt(budget, covered)
             step = stepper.step(q, dt)
             budget.charge("qp_step")
             if step.outcome == "failed":
                 note = f"QP step failed, path ends here: {step.reason}"
-                run.event(run.sim.t, note)
+                run.event(run.arm.t, note)
                 break
             if step.outcome == "rejected":
                 rejections += 1
@@ -204,7 +204,7 @@ class CatPlanner:
             links += [shapes[i].link for i in contacts.shape[unseen]]
             k = np.flatnonzero(unseen)[np.argmin(contacts.distance[unseen])]
             nearest = contacts.other_point[k]
-        t = run.sim.t
+        t = run.arm.t
         started = nearest is not None and not self._unseen_holds
         self._unseen_holds = nearest is not None
         if nearest is None or not started or t - self._unseen_said < 1.0:

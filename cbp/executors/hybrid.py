@@ -203,7 +203,7 @@ class HybridPlanner:
         """This period's path: CAT's, the planner's, or none (a plan is running)."""
         if goal is None:
             return self.cat.plan(q, goal, budget, run)
-        t = run.sim.t
+        t = run.arm.t
         if self.mode != "cat" and self._goal_moved(goal):
             run.event(
                 t,
@@ -281,9 +281,9 @@ class HybridPlanner:
         self, q: FloatArray, goal: pin.SE3, budget: Budget, run: RunParts
     ) -> Plan:
         """One period of the search; the plan when it is ready and the arm at rest."""
-        t = run.sim.t
+        t = run.arm.t
         if self._start is None:
-            self._start = run.sim.trajectory.positions[-1].copy()
+            self._start = run.arm.trajectory.positions[-1].copy()
         start = self._start
         try:
             if self._target is None:
@@ -329,11 +329,11 @@ class HybridPlanner:
             self._from = self._free_start(run, budget)
             if self._from is None:
                 run.event(
-                    run.sim.t,
+                    run.arm.t,
                     "hybrid: the arm rests within the planner's padding of an "
                     "obstacle and no way out of it is free; no plan from here",
                 )
-                self._give_up(run.sim.t)
+                self._give_up(run.arm.t)
                 return
         while self._attempts and not budget.spent():
             seed, fixed = self._attempts.pop(0)
@@ -362,11 +362,11 @@ class HybridPlanner:
             if self.looker.pending:
                 return  # views left to try, next period
             run.event(
-                run.sim.t,
+                run.arm.t,
                 "hybrid: no collision-free configuration reaches the goal (the IK "
                 "search found none from any seed); CAT keeps the arm where it stopped",
             )
-            self._give_up(run.sim.t)
+            self._give_up(run.arm.t)
 
     def _time_to(self, q: FloatArray) -> float:
         """Shortest time [s] from the plan's start to ``q`` at the velocity limits."""
@@ -383,7 +383,7 @@ class HybridPlanner:
         ``q`` is not a point of that trajectory or it no longer ends at
         ``start``.
         """
-        positions = run.sim.trajectory.positions
+        positions = run.arm.trajectory.positions
         if not np.array_equal(positions[-1], start):
             return None
         if np.array_equal(q, start):
@@ -406,7 +406,7 @@ class HybridPlanner:
         assert self._start is not None
         if self.search.collision_free(self._start, budget):
             return self._start[None]
-        came = run.sim.trajectory.positions[::-1]
+        came = run.arm.trajectory.positions[::-1]
         for k in range(1, min(len(came), MAX_BACKTRACK)):
             if self.search.collision_free(came[k], budget):
                 return np.vstack([self._start[None], came[1 : k + 1]])
@@ -447,7 +447,7 @@ class HybridPlanner:
         for the goal begins again from there.
         """
         assert self._plan is not None
-        trajectory = run.sim.trajectory
+        trajectory = run.arm.trajectory
         look = self._look_path is not None
         if not self._taken:
             if not np.array_equal(trajectory.positions[-1], self._plan[-1]):

@@ -18,6 +18,8 @@ import math
 import numpy as np
 import pinocchio as pin
 
+from cbp.driver import TorqueDriven
+from cbp.errors import ConfigError
 from cbp.methods.settings import JtSettings
 from cbp.robot import FloatArray
 from cbp.run.loop import run_ticks
@@ -89,7 +91,7 @@ class _Torques:
 
     def hold(self, t: float) -> None:
         """Hold where the robot is, under the joint impedance."""
-        sim = self.run.sim
+        sim = self.run.arm
         sim.follow(JointTrajectory.hold(sim.t, sim.q.copy()))
 
 
@@ -101,7 +103,14 @@ def run_jt(scenario: Scenario, gui: bool = False) -> Trace:
     """Run ``scenario`` with the JT method; return the trace."""
     run = build_run(scenario, method="jt", gui=gui)
     try:
-        run.sim.set_torque_controller(JacobianTransposeController(run.scenario, run))
+        robot = run.arm.driver
+        if not isinstance(robot, TorqueDriven):
+            raise ConfigError(
+                f"jt drives the joints by torque every physics step; "
+                f"{type(robot).__name__} offers no torque interface",
+                "method",
+            )
+        robot.set_torque_controller(JacobianTransposeController(run.scenario, run))
         # In slices of a command period, so that a failure is an event.
         ends = np.arange(1, math.ceil(run.duration / SLICE - 1e-9) + 1) * SLICE
         times = np.minimum(ends, run.duration)

@@ -189,8 +189,8 @@ class Looker:
         if not self._looking:
             return False
         assert self.camera is not None
-        t = run.sim.t
-        arrived = run.sim.trajectory.end_time
+        t = run.arm.t
+        arrived = run.arm.trajectory.end_time
         if t < arrived - 1e-9:
             return True  # still on the way to the view
         mapped = run.mapped_since(self.camera.name, arrived)
@@ -251,7 +251,7 @@ class Looker:
         targets, share, through = found
         if share < self.settings.unseen_share and not through:
             return None  # what holds the search is not unseen space
-        t = run.sim.t
+        t = run.arm.t
         if not self._said:
             self._said = True
             cube = f"{share:.0%} of the {2 * self.settings.radius * 100:.0f} cm cube"
@@ -291,7 +291,7 @@ class Looker:
         self._looking = True
         self._watched = look.targets
         run.event(
-            run.sim.t,
+            run.arm.t,
             f"{self.method}: camera '{self.camera.name}' sees about {look.seen} of "
             f"{len(look.targets)} unseen points from a configuration "
             f"{float(np.max(np.abs(look.view - q))):.2f} rad away; moving there "

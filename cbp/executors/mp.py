@@ -318,7 +318,7 @@ class MpPlanner:
         self.events.solved(run)
         if np.max(np.abs(target - q)) < 1e-4:
             return Plan(None, 0, "at the goal")
-        if np.max(np.abs(run.sim.trajectory.positions[-1] - target)) < 1e-9:
+        if np.max(np.abs(run.arm.trajectory.positions[-1] - target)) < 1e-9:
             # The trajectory being followed already ends at this goal: replanning
             # would only swap one random path for another.
             return Plan(None, 0, "following the plan to this goal")
@@ -338,7 +338,7 @@ class MpPlanner:
                 break
             # A plan that touches between OMPL's states is dropped; a new tree
             # is grown while the budget lasts (the next period otherwise).
-            run.event(run.sim.t, f"mp: {note}; planning again")
+            run.event(run.arm.t, f"mp: {note}; planning again")
             if budget.spent():
                 return Plan(None, self.checks - checks, note)
         record_plan(run, points, *s.timing.limits(self.search.robot))

@@ -55,7 +55,7 @@ class SearchEvents:
 
     def failed(self, run: RunParts, goal: pin.SE3, exhausted: bool) -> None:
         """No solution for ``goal`` this period; ``exhausted``: every start tried."""
-        t = run.sim.t
+        t = run.arm.t
         if self._since is None or self._run is not run:
             self._since, self._periods, self._said, self._run = t, 0, None, run
         self._periods += 1
@@ -114,7 +114,7 @@ class SearchEvents:
         """End the episode; one reported in ``run`` is said to end with ``what``."""
         if self._said is not None and run is not None and self._run is run:
             run.event(
-                run.sim.t,
+                run.arm.t,
                 f"{self.method}: {what}, after {self._failures()} without one",
             )
         self._since, self._periods, self._said, self._run = None, 0, None, None
@@ -122,6 +122,6 @@ class SearchEvents:
     def _failures(self) -> str:
         """The episode's length: its periods without a solution and its time."""
         run, since = self._run, self._since
-        seconds = 0.0 if run is None or since is None else run.sim.t - since
+        seconds = 0.0 if run is None or since is None else run.arm.t - since
         periods = "period" if self._periods == 1 else "periods"
         return f"{self._periods} {periods} ({seconds:.1f} s)"

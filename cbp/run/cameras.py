@@ -1,15 +1,17 @@
 # SPDX-License-Identifier: Apache-2.0
-"""A run's depth cameras: frames captured on schedule, checked, and mapped.
+"""A run's depth cameras: the frames the robot captured, checked, and mapped.
 
-Each camera captures at its rate in simulated time; a frame is checked
-(:meth:`~cbp.perception.frame.DepthFrame.problem`) and handed with the robot's
-configuration to the map (:class:`~cbp.perception.mapper.MapUpdater`): at once
-on the virtual clock, the frames of one instant making one snapshot (the map a
-planner sees then depends on simulated time only), in the map's worker on the
-wall clock (never blocking the loop). A
-camera whose last valid frame is older than ``perception.camera_timeout``
-holds the robot until it gives one again. A frame is valid when it is well
-formed (:meth:`~cbp.perception.frame.DepthFrame.problem`) and believable
+Each camera captures at its rate on the robot's clock, on the robot's side
+of the seam (:class:`~cbp.driver.CameraFrame`, :mod:`cbp.driver.simulated`);
+a frame is checked (:meth:`~cbp.perception.frame.DepthFrame.problem`) and
+handed with the robot's configuration to the map
+(:class:`~cbp.perception.mapper.MapUpdater`): at once on the virtual clock,
+the frames of one instant making one snapshot (the map a planner sees then
+depends on simulated time only), in the map's worker on the wall clock (never
+blocking the loop). A camera whose last valid frame is older than
+``perception.camera_timeout`` holds the robot until it gives one again. A
+frame is valid when it is well formed
+(:meth:`~cbp.perception.frame.DepthFrame.problem`) and believable
 (:mod:`cbp.perception.plausibility`: not blind, not frozen, not seeing
 through the robot).
 
@@ -27,6 +29,7 @@ import numpy as np
 
 from cbp.collision.objects import PrimitiveEnvironment
 from cbp.collision.world import CollisionWorld
+from cbp.driver import CameraFrame
 from cbp.methods.settings import ClockKind
 from cbp.perception.frame import DepthFrame
 from cbp.perception.kernels import UNKNOWN
@@ -36,14 +39,12 @@ from cbp.perception.motion import ApproachEstimator
 from cbp.perception.moving import PREPARED_LOOK_AHEAD, prepare_moving_tables
 from cbp.perception.occupancy import OccupancyGrid
 from cbp.perception.plausibility import FrameCheck, PlausibilityLimits
-from cbp.perception.spec import PerceptionSpec
+from cbp.perception.spec import CameraSpec, PerceptionSpec
 from cbp.robot import FloatArray
 from cbp.run.events import RunLog
+from cbp.run.robot_link import RobotLink
 from cbp.run.separation import SeparationMonitor
 from cbp.scenario.reach import Bounds, reach_box
-from cbp.sim.camera import SimulatedCamera
-from cbp.sim.cameras import depth_cameras
-from cbp.sim.simulation import Simulation
 from cbp.state import RobotState
 
 __all__ = ["KEPT_CAPTURES", "Cameras"]
@@ -69,7 +70,7 @@ class Cameras:
     the robot (:meth:`hold_reason`).
 
     Args:
-        sim: the simulation the cameras render.
+        arm: the robot, whose cameras capture the frames.
         spec: the scenario's ``perception:`` section.
         world: the collision world whose environment becomes the map's
             snapshots.
@@ -89,30 +90,33 @@ class Cameras:
 
     def __init__(
         self,
-        sim: Simulation,
+        arm: RobotLink,
         spec: PerceptionSpec,
         world: CollisionWorld,
         clock: ClockKind,
         log: RunLog,
         predict_motion: bool,
     ) -> None:
-        """Build the cameras and the grid; map the first frames."""
-        self._sim = sim
+        """Build the grid; map the first frames."""
         robot = world.geometry.robot
+        arm.refresh()
         #: The box the arm can reach (None: no fixed reach).
-        self.reach = reach_box(world.geometry, sim.q.copy())
+        self.reach = reach_box(world.geometry, arm.q.copy())
         if spec.bounds is None and self.reach is not None:
             spec = spec.with_bounds(*self._whole_cells(self.reach, spec.cell_size))
         self._spec = spec
         self._log = log
         self._state = RobotState(robot)
         world.set_environment(PrimitiveEnvironment([]))
-        self.cameras = depth_cameras(sim, spec.all_cameras, robot)
+        self.cameras: list[CameraSpec] = list(spec.all_cameras)
+        self._index = {c.name: i for i, c in enumerate(self.cameras)}
         n = len(self.cameras)
         limits = PlausibilityLimits(
             spec.max_far_fraction, spec.see_through_fraction, spec.see_through_tolerance
         )
-        self._checks = [FrameCheck(c.name, c.mounted, limits) for c in self.cameras]
+        self._checks = [
+            FrameCheck(c.name, c.parent is not None, limits) for c in self.cameras
+        ]
         #: Per camera: time of its last valid frame, and whether it is failing.
         self._last_valid = [0.0] * n
         self._failing = [False] * n
@@ -122,10 +126,10 @@ class Cameras:
         self._stale: str | None = None
         grid = self._grid = OccupancyGrid(spec, world.geometry)
         first = MapUpdater(grid, world, synchronous=True)
-        for i in range(n):
-            frame = self._checked_frame(i, 0.0)
+        for captured in arm.frames():
+            frame = self._checked_frame(captured)
             if frame is not None:
-                first.submit(frame, sim.q.copy())
+                first.submit(frame, captured.q.copy())
         estimator = (
             ApproachEstimator(world, spec.motion_window)
             if spec.motion_window > 0 and predict_motion
@@ -159,7 +163,6 @@ class Cameras:
             if clock == "virtual"
             else updater(grid, world, estimator=estimator)
         )
-        self._next_frame = [1.0 / c.spec.rate_hz for c in self.cameras]
         #: Per camera: capture times of its latest frames handed to the map.
         self._submitted: list[deque[float]] = [
             deque(maxlen=KEPT_CAPTURES) for _ in self.cameras
@@ -183,35 +186,33 @@ class Cameras:
             return np.zeros(len(points), dtype=bool)
         return np.asarray(self.mapper.grid.state_at(points) == UNKNOWN)
 
-    def perceive_until(self, t: float, look_ahead: float) -> None:
-        """Capture the frames due before ``t`` and hand them to the map.
+    def take(
+        self, frames: list[CameraFrame], t: float, q: FloatArray, look_ahead: float
+    ) -> None:
+        """Check the frames the robot captured up to ``t`` and hand them to the map.
 
         Args:
-            t: simulated time to perceive up to [s].
+            frames: the frames, oldest first.
+            t: the robot's time now [s].
+            q: the robot's joint positions now.
             look_ahead: how far ahead the map measures approaching obstacles
                 [s] (the plan being made runs that long).
         """
         self.mapper.look_ahead = look_ahead
-        due = self._next_frame
-        sim = self._sim
-        while True:
-            i = min(range(len(due)), key=due.__getitem__)
-            if due[i] > t:
-                break
-            sim.run_until(due[i])
-            frame = self._checked_frame(i, due[i])
+        for captured in frames:
+            frame = self._checked_frame(captured)
             if frame is not None:
-                self.mapper.submit(frame, sim.q.copy(), due[i])
-                self._submitted[i].append(due[i])
-            if self.mapper.error is not None:
-                error, self.mapper.error = self.mapper.error, None
-                self._log.event(sim.t, f"map update: {error}")
-            due[i] += 1.0 / self.cameras[i].spec.rate_hz
+                self.mapper.submit(frame, captured.q.copy(), captured.stamp)
+                self._submitted[self._index[captured.camera]].append(captured.stamp)
+            self._say_map_error(t)
         self.mapper.release(t)  # the last instant's snapshot (batch)
+        self._say_map_error(t)
+        self.separation.check(t, q)
+
+    def _say_map_error(self, t: float) -> None:
         if self.mapper.error is not None:
             error, self.mapper.error = self.mapper.error, None
-            self._log.event(sim.t, f"map update: {error}")
-        self.separation.check(sim.t, sim.q)
+            self._log.event(t, f"map update: {error}")
 
     def mapped_since(self, name: str, t: float) -> int:
         """How many frames of camera ``name`` captured at or after ``t`` are mapped.
@@ -221,7 +222,7 @@ class Cameras:
         counts too: the newer one carries what it saw). Counts up to
         :data:`KEPT_CAPTURES`.
         """
-        i = next(k for k, c in enumerate(self.cameras) if c.name == name)
+        i = self._index[name]
         stamp = self.mapper.stamp
         return sum(1 for c in self._submitted[i] if t - 1e-9 <= c <= stamp + 1e-9)
 
@@ -253,43 +254,47 @@ class Cameras:
         return reason
 
     def close(self) -> None:
-        """Stop the map's worker; release the cameras' renderers."""
+        """Stop the map's worker."""
         self.mapper.close()
-        for camera in self.cameras:
-            camera.close()
 
-    def _checked_frame(self, i: int, t: float) -> DepthFrame | None:
-        """Camera ``i``'s frame at ``t`` if it is valid; else None and an event.
+    def _checked_frame(self, captured: CameraFrame) -> DepthFrame | None:
+        """The captured frame if it is valid; else None and an event.
 
         A frame is valid when at least ``perception.min_valid_fraction`` of its
-        pixels hold a reading (:meth:`DepthFrame.problem`). The first bad frame
-        of a run of them is an event, and so is the first good one after.
+        pixels hold a reading (:meth:`DepthFrame.problem`) and it is believable
+        (:mod:`cbp.perception.plausibility`). The first bad frame of a run of
+        them is an event, and so is the first good one after.
         """
-        camera = self.cameras[i]
-        try:
-            frame = self._capture(camera)
-            problem = frame.problem(self._spec.min_valid_fraction)
-            if problem is None:
-                problem = self._checks[i].check(
-                    frame,
-                    self._state.q,
-                    self._joint_positions(),
-                    self._grid.occupied_in_view,
-                )
-        except Exception as exc:  # a camera that fails is a camera without frames
-            frame, problem = None, f"capture failed ({type(exc).__name__}: {exc})"
+        i, t, frame = self._index[captured.camera], captured.stamp, captured.frame
+        self._state.update(captured.q.copy())
+        problem: str | None
+        if frame is None:
+            problem = f"capture failed ({captured.problem})"
+        else:
+            try:
+                problem = frame.problem(self._spec.min_valid_fraction)
+                if problem is None:
+                    problem = self._checks[i].check(
+                        frame,
+                        self._state.q,
+                        self._joint_positions(),
+                        self._grid.occupied_in_view,
+                    )
+            except Exception as exc:  # a frame that cannot be checked is dropped
+                problem = f"check failed ({type(exc).__name__}: {exc})"
+        name = captured.camera
         if problem is None:
             assert frame is not None
             if t >= self._outside_next[i]:
                 self._outside_next[i] = t + OUTSIDE_EVERY
                 self._say_outside(i, frame, t)
             if self._failing[i]:
-                self._log.event(t, f"camera '{camera.name}' gives valid frames again")
+                self._log.event(t, f"camera '{name}' gives valid frames again")
                 self._failing[i] = False
             self._last_valid[i] = t
             return frame
         if not self._failing[i]:
-            self._log.event(t, f"camera '{camera.name}': frame dropped, {problem}")
+            self._log.event(t, f"camera '{name}': frame dropped, {problem}")
             self._failing[i] = True
         return None
 
@@ -332,16 +337,6 @@ class Cameras:
             f"{np.round(hi, 2).tolist()} m): the map holds them as unknown "
             "space (perception.bounds)",
         )
-
-    def _capture(self, camera: SimulatedCamera) -> DepthFrame:
-        """One frame of ``camera``; a mounted one from the robot as it is now.
-
-        The robot's state is brought up to the capture (the checks read it).
-        """
-        self._state.update(self._sim.q.copy())
-        if not camera.mounted:
-            return camera.capture()
-        return camera.capture(self._state)
 
     def _joint_positions(self) -> FloatArray:
         """Where the robot's joints are at the last capture, (n, 3) [m]."""

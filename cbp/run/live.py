@@ -213,7 +213,7 @@ class _Showing:
                 return  # woken: a new goal
             if step >= t_f or self.shown is None or self._failed:
                 continue
-            sim = self.run.sim
+            sim = self.run.arm
             now = min(t_f, t_f - pacer.left(t_f))
             if now <= sim.t:
                 continue  # still within the lead simulated before the wait
@@ -258,7 +258,7 @@ def _command_while_waiting(
     """
     t_f = waiting.t_f
     steps, note, spliced, late = 0, None, False, 0
-    sim = run.sim
+    sim = run.arm
     fresh = waiting.pending
     while True:
         if not fresh:
@@ -316,7 +316,7 @@ def _command_while_waiting(
 
 def _brake_after(run: RunParts, t: float, vmax: FloatArray, amax: FloatArray) -> None:
     """Brake along the trajectory the robot follows from its first point after ``t``."""
-    sim = run.sim
+    sim = run.arm
     current = sim.trajectory
     i = current.first_point_after(t)
     if i is None:

@@ -67,7 +67,7 @@ class _ForcedOff:
     def check(self, t: float, current: JointTrajectory) -> None:
         """Compare the measured configuration with the command at ``t``."""
         run = self.run
-        off = np.abs(run.robot.difference(current.sample(t)[0], run.sim.q))
+        off = np.abs(run.robot.difference(current.sample(t)[0], run.arm.q))
         k = int(np.argmax(off))
         if self.since is None and off[k] > FORCED_OFF:
             self.since = t
@@ -117,7 +117,10 @@ def run_loop(
             the motion while it plans, then commands the plan.
     """
     if clock is None:
-        clock = LoopClock.unpaced(run.cameras is not None and run.clock == "wall")
+        # A robot that runs on its own keeps the wall clock's pace itself.
+        clock = LoopClock.unpaced(
+            run.cameras is not None and run.clock == "wall" and run.arm.lockstep
+        )
     pacer, world_pacer, stop_requested = clock.live, clock.world, clock.stop
     log = run.log
     shown = log.reached if log.listeners else None
@@ -127,7 +130,7 @@ def run_loop(
     period = timing.period
     stop_time = robot.stopping_time(vmax, amax)
     t = 0.0
-    sim = run.sim
+    sim = run.arm
     faults = run.faults
     adapter = PeriodAdapter(lo, hi, timing.growth, timing.shrink)
     leads = LeadAdapter(
@@ -173,6 +176,7 @@ def run_loop(
             failed = False
             compiled = compiles.count
             hold: str | None = None
+            seen: float | None = None
             # The latest goal accepted before this period's (a live goal that
             # arrives from now on is said new below).
             accepted = run.goal.changes
@@ -184,6 +188,7 @@ def run_loop(
                     plan = Plan(None, 0, hold)
                 else:
                     # One snapshot of the obstacles for the whole plan.
+                    seen = run.seen()
                     with held(run):
                         backing = leaving.plan(t, q_s)
                         plan = backing or planner.plan(q_s.copy(), goal, budget, run)
@@ -243,7 +248,7 @@ def run_loop(
                 misses.met(t)
             if new is not None:
                 # Live, the simulation is not past t: new starts after t_f.
-                sim.follow(sim.trajectory.splice(new))
+                sim.follow(sim.trajectory.splice(new), source=seen)
                 log.commanded(float(new.times[0]))
                 spliced = True
             if pacer is not None:
@@ -273,7 +278,9 @@ def run_loop(
             run.log.periods.append(
                 PeriodRecord(t, period, steps, compute, missed, spliced, note)
             )
-            t, period = t_f, next_period
+            # A robot that runs on its own did not wait for a late period.
+            t = t_f if run.arm.lockstep else max(t_f, run.arm.t)
+            period = next_period
         misses.flush(t)
         if faults.aborted is None and not stop_requested():
             run.advance(run.duration)

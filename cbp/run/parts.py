@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """One place that assembles a simulated run: :func:`build_run`.
 
-A run is made of parts: the PyBullet simulation, the collision world, the
+A run is made of parts: the robot behind the seam (:mod:`cbp.driver`; a
+simulated one, :class:`~cbp.driver.simulated.SimulatedRobot`), the collision world, the
 goal input (a scenario's stream or an operator's live goal), the cameras and
 their map, the declared objects that appear or move, the run's log and its
 fault counter, and the clock planning budgets are counted on. The scenario is
@@ -13,11 +14,16 @@ clock is an argument, not a subclass.
 
 from __future__ import annotations
 
+import os
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from cbp.collision.world import CollisionWorld
+from cbp.driver.process import ProcessRobot, RobotSetup
+from cbp.driver.simulated import SimulatedRobot
 from cbp.goals import GoalSource
 from cbp.methods import method_info
 from cbp.methods.settings import ClockKind
@@ -28,6 +34,7 @@ from cbp.run.events import RunLog
 from cbp.run.faults import STOPPED_EARLY, Faults
 from cbp.run.goal_input import GoalBounds, GoalInput
 from cbp.run.recording import make_trace
+from cbp.run.robot_link import RobotLink
 from cbp.scenario.runtime import Scenario
 from cbp.sim.scene import simulate
 from cbp.sim.simulation import Simulation
@@ -46,7 +53,7 @@ class RunParts:
 
     Attributes:
         scenario: the loaded scenario.
-        sim: the simulation.
+        arm: the robot, as the controller reaches it (:mod:`cbp.driver`).
         world: the collision world (None when neither an entry, the method
             nor the cameras need one).
         goal: the operator's goal as the run takes it.
@@ -59,7 +66,7 @@ class RunParts:
     """
 
     scenario: Scenario
-    sim: Simulation
+    arm: RobotLink
     world: CollisionWorld | None
     goal: GoalInput
     cameras: Cameras | None
@@ -108,6 +115,10 @@ class RunParts:
         """
         return 0 if self.cameras is None else self.cameras.mapped_since(camera, t)
 
+    def seen(self) -> float | None:
+        """The capture time of the newest frame in the map [s] (None: no cameras)."""
+        return None if self.cameras is None else self.cameras.mapper.stamp
+
     def hold_reason(self, t: float) -> str | None:
         """Why the robot must hold at ``t`` (a camera without valid frames), or None."""
         return None if self.cameras is None else self.cameras.hold_reason(t)
@@ -126,30 +137,38 @@ class RunParts:
         """
         self.log.progress(t)
         declared = self.declared
-        sim = self.sim
+        arm = self.arm
         if declared is not None and declared.dynamic:
             # Declared objects that appear or move: the world is brought up to
             # date every OBJECT_UPDATE of simulated time.
-            while sim.t + OBJECT_UPDATE < t:
-                self._perceive_until(sim.t + OBJECT_UPDATE, look_ahead)
-                sim.run_until(sim.t + OBJECT_UPDATE)
-                self._update_declared(sim.t, look_ahead, reaction)
-            self._perceive_until(t, look_ahead)
-            sim.run_until(t)
-            self._update_declared(sim.t, look_ahead, reaction)
+            while arm.t + OBJECT_UPDATE < t:
+                arm.run_until(arm.t + OBJECT_UPDATE)
+                self._update_declared(arm.t, look_ahead, reaction)
+            arm.run_until(t)
+            self._update_declared(arm.t, look_ahead, reaction)
         else:
-            self._perceive_until(t, look_ahead)
-            sim.run_until(t)
+            arm.run_until(t)
+            if self.cameras is not None:
+                self.cameras.take(arm.frames(), t, arm.q, look_ahead)
 
     def finish(self) -> Trace:
         """Stop the map and the simulator; return the trace."""
         aborted = self.faults.aborted
         if aborted is not None and aborted.startswith(STOPPED_EARLY):
-            self.event(self.sim.t, f"run {aborted}: the outputs hold it up to here")
+            self.event(self.arm.t, f"run {aborted}: the outputs hold it up to here")
         if self.cameras is not None:
             self.cameras.close()
-        recording = self.sim.recording()
-        self.sim.close()
+        recording = self.arm.recording()
+        self.arm.close()
+        latencies = self.arm.latencies()
+        if latencies:
+            # From a frame's capture to the command planned on it reaching
+            # the robot.
+            ms = 1e3 * np.asarray(latencies)
+            self.log.counters["capture_to_command_median_ms"] = float(np.median(ms))
+            self.log.counters["capture_to_command_p95_ms"] = float(
+                np.percentile(ms, 95)
+            )
         return make_trace(
             self.scenario,
             recording,
@@ -163,17 +182,13 @@ class RunParts:
         """Stop the map and the simulator without making a trace."""
         if self.cameras is not None:
             self.cameras.close()
-        self.sim.close()
-
-    def _perceive_until(self, t: float, look_ahead: float) -> None:
-        if self.cameras is not None:
-            self.cameras.perceive_until(t, look_ahead)
+        self.arm.close()
 
     def _update_declared(self, t: float, look_ahead: float, reaction: float) -> None:
         assert self.declared is not None
         for name in self.declared.update(t, look_ahead):
             self.log.event(t, f"object '{name}' appeared")
-        self.declared.watch(t, self.sim.q, reaction)
+        self.declared.watch(t, self.arm.q, reaction)
 
 
 def build_run(
@@ -214,7 +229,7 @@ def build_run(
     row.refuse_source(spec.perception.source, f"{scenario.path}: perception.source")
     use_cameras = spec.perception.source == "depth_camera"
     log = RunLog(method, spec.duration)
-    sim = simulate(Simulation, scenario, gui)
+    arm = _robot(scenario, gui, use_cameras, clock, log)
     try:
         world = (
             scenario.world or scenario.new_world()
@@ -226,7 +241,7 @@ def build_run(
         )
         cameras = (
             Cameras(
-                sim,
+                arm,
                 spec.perception,
                 world,
                 clock,
@@ -237,7 +252,7 @@ def build_run(
             else None
         )
     except BaseException:
-        sim.close()
+        arm.close()
         raise
     declared = (
         DeclaredObjects(scenario, world, log)
@@ -246,7 +261,7 @@ def build_run(
     )
     return RunParts(
         scenario=scenario,
-        sim=sim,
+        arm=arm,
         world=world,
         goal=GoalInput(
             scenario.goal_stream() if goal is None else goal,
@@ -263,3 +278,37 @@ def build_run(
         faults=Faults(log.event),
         clock=clock,
     )
+
+
+def _robot(
+    scenario: Scenario, gui: bool, cameras: bool, clock: ClockKind, log: RunLog
+) -> RobotLink:
+    """The run's simulated robot behind the seam, its cameras with it.
+
+    In lockstep with the loop, or in its own process on the wall clock with
+    ``simulation.own_process`` (:mod:`cbp.driver.process`).
+    """
+    spec = scenario.spec
+    specs = spec.perception.all_cameras if cameras else ()
+    driver: SimulatedRobot | ProcessRobot
+    if clock == "wall" and spec.simulation.own_process and not gui:
+        driver = ProcessRobot(
+            RobotSetup(
+                scenario.robot,
+                spec.world.objects,
+                scenario.q0,
+                spec.simulation,
+                scenario.path.parent,
+                tuple(specs),
+                # Where the robot writes what it did if this process dies.
+                record=Path(tempfile.gettempdir()) / f"cbp-robot-{os.getpid()}.npz",
+            )
+        )
+    else:
+        sim = simulate(Simulation, scenario, gui)
+        try:
+            driver = SimulatedRobot(sim, specs)
+        except BaseException:
+            sim.close()
+            raise
+    return RobotLink(driver, lambda fault: log.event(fault.stamp, fault.message))

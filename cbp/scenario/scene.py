@@ -174,6 +174,10 @@ class SimulationSettings:
     peaks are measured at every step regardless)."""
     friction: float = 0.5
     """Lateral friction of the robot's links and the scene's objects."""
+    own_process: bool = False
+    """On the wall clock, run the simulated robot in a process of its own, in
+    real time (:mod:`cbp.driver.process`): it does not wait for the controller,
+    and brakes when commands go stale. The virtual clock steps it in lockstep."""
 
     def __post_init__(self) -> None:
         """A rate of 100 Hz to 10 kHz, positive gains and recording stride."""

@@ -27,6 +27,7 @@ from cbp.robot import FloatArray
 __all__ = [
     "JointTrajectory",
     "SpliceError",
+    "braking_now",
     "stopping_trajectory",
     "time_parameterize",
 ]
@@ -461,3 +462,31 @@ def stopping_trajectory(
         else:
             hi, found = mid, timed
     return found
+
+
+#: A trajectory braked on from the middle of a segment is resampled this
+#: finely ahead [s]: its points are where the brake may end.
+BRAKE_SAMPLE = 0.005
+
+
+def braking_now(
+    current: JointTrajectory, t: float, vmax: FloatArray, amax: FloatArray
+) -> JointTrajectory | None:
+    """Brake along ``current`` from time ``t``, as soon as the limits allow.
+
+    As :func:`stopping_trajectory`, from the commanded state at ``t`` rather
+    than from a point of ``current``: the rest of the motion is resampled
+    every :data:`BRAKE_SAMPLE` so the brake can end between its points. None
+    when the motion already stops by its next sample.
+    """
+    if t >= current.end_time:
+        return None
+    times = np.append(np.arange(t, current.end_time, BRAKE_SAMPLE), current.end_time)
+    samples = [current.sample(float(u)) for u in times]
+    dense = JointTrajectory(
+        times,
+        np.array([p for p, _, _ in samples]),
+        np.array([v for _, v, _ in samples]),
+        np.array([a for _, _, a in samples]),
+    )
+    return stopping_trajectory(dense, 0, vmax, amax)

@@ -169,7 +169,7 @@ class GoalTarget:
     def event(self, message: str) -> None:
         """An event in the run's log, at the simulated time."""
         parts = self.session.parts
-        parts.event(parts.sim.t, message)
+        parts.event(parts.arm.t, message)
 
 
 class VelocityTarget:

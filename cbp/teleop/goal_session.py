@@ -220,7 +220,7 @@ class TeleopSession(RunListener):
 
     def _stop_requested(self) -> bool:
         """Stopping, and the robot at rest (its trajectory has ended)."""
-        sim = self.parts.sim
+        sim = self.parts.arm
         return self._stopping.is_set() and sim.trajectory.end_time <= sim.t
 
     def reached(self, t: float) -> None:
@@ -373,7 +373,7 @@ class TeleopSession(RunListener):
     def snapshot(self) -> Snapshot:
         """What the page shows now (read from the control thread's state)."""
         run = self.parts
-        q = np.array(run.sim.q, dtype=float)
+        q = np.array(run.arm.q, dtype=float)
         self._state.update(q)
         periods = run.log.periods
         # Deadline misses counted once per period (a session may run for hours).
@@ -382,21 +382,21 @@ class TeleopSession(RunListener):
         self._periods_counted = len(periods)
         recent = 0
         for period in reversed(periods[-200:]):
-            if period.t < run.sim.t - 1.0:
+            if period.t < run.arm.t - 1.0:
                 break
             recent += period.missed
         return Snapshot(
-            t=run.sim.t,
+            t=run.arm.t,
             q=q,
             hand=self._state.frame_position(self._frame).copy(),
             method=self.planner.method,
             paused=self.planner.paused,
             steps=periods[-1].steps if periods else 0,
             misses=self._misses,
-            contact_force=float(run.sim.contact_force),
+            contact_force=float(run.arm.contact_force),
             events=tuple(run.log.events[-5:]),
             contacts=self.planner.contacts(),
-            trajectory=run.sim.trajectory,
+            trajectory=run.arm.trajectory,
             held_by=self.planner.held_by,
             note=periods[-1].note if periods else "",
             recent_misses=recent,
@@ -411,7 +411,7 @@ class TeleopSession(RunListener):
             simulated ahead of the wall clock (by at most a command lead, so
             that a new goal can be commanded then), 0 before it starts.
         """
-        sim = self.parts.sim
+        sim = self.parts.arm
         # q before t: a physics step in between makes t later than q's time,
         # never earlier (due is then the later one).
         q = np.array(sim.q, dtype=float)

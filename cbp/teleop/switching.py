@@ -69,7 +69,7 @@ class SwitchingPlanner:
     ) -> Plan:
         """The selected planner's plan; a stop while paused."""
         if self.wanted != self.method:
-            run.event(run.sim.t, f"method switched from {self.method} to {self.wanted}")
+            run.event(run.arm.t, f"method switched from {self.method} to {self.wanted}")
             self.method = self.wanted
         if self.paused:
             self.held_by = frozenset()

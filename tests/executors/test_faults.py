@@ -127,7 +127,7 @@ def test_cat_holds_through_a_raising_planner_without_contact(monkeypatch) -> Non
     plan = cat_module.CatPlanner.plan
 
     def faulty(self, q, goal, budget, run):
-        if 0.8 <= run.sim.t < 0.95:
+        if 0.8 <= run.arm.t < 0.95:
             raise InjectedError("planner bug")
         return plan(self, q, goal, budget, run)
 

@@ -28,7 +28,7 @@ class FakeRun:
 
     def __init__(self, scenario: Scenario) -> None:
         """At t = 0, no events."""
-        self.sim = SimpleNamespace(t=0.0)
+        self.arm = SimpleNamespace(t=0.0)
         self.scenario = scenario
         self.events: list[tuple[float, str]] = []
 
@@ -50,7 +50,7 @@ def _fail(
 ) -> None:
     for goal in goals:
         events.failed(run, goal, exhausted=exhausted)
-        run.sim.t += PERIOD
+        run.arm.t += PERIOD
 
 
 def test_a_goal_that_moves_every_period_is_said_once(reach_scenario: Scenario) -> None:

@@ -32,7 +32,7 @@ def test_frames_count_as_mapped_once_the_map_is_as_new_as_their_capture(
     try:
         assert run.cameras is not None
         wrist = next(c for c in run.cameras.cameras if c.name == "wrist")
-        period = 1.0 / wrist.spec.rate_hz
+        period = 1.0 / wrist.rate_hz
 
         def captured(a: float, b: float) -> int:
             """The wrist camera's frames captured in [a, b] (at k periods)."""

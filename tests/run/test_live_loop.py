@@ -114,13 +114,13 @@ def _run_with_arrival(
     the trajectory before, the one after).
     """
     session = _fixed_period_session(**more)
-    sim = session.parts.sim
+    sim = session.parts.arm
     follow = sim.follow
     changes: list[tuple[float, JointTrajectory, JointTrajectory]] = []
 
-    def watched(trajectory: JointTrajectory) -> None:
+    def watched(trajectory: JointTrajectory, source: float | None = None) -> None:
         changes.append((sim.t, sim.trajectory, trajectory))
-        follow(trajectory)
+        follow(trajectory, source)
 
     sim.follow = watched  # type: ignore[method-assign]
     pacer = VirtualPacer(session.goal.arrived, [(at, lambda: session.jog("x", 0.02))])
@@ -217,7 +217,7 @@ class _OperatorDuringPlanning:
 
     def plan(self, q: Any, goal: Any, budget: Any, run: Any) -> Any:
         """Jog (once, in the chosen period), then plan as the session does."""
-        if not self.done and run.sim.t >= self.at - 1e-9:
+        if not self.done and run.arm.t >= self.at - 1e-9:
             self.done = True
             self.session.jog("x", 0.02)
         return self.session.planner.plan(q, goal, budget, run)
@@ -270,7 +270,7 @@ class _World:
 
     def __init__(self, pacer: VirtualPacer, cost: float) -> None:
         self.pacer, self.cost = pacer, cost
-        self.sim = self
+        self.arm = self
         self.t = 0.0
         #: (simulated time reached, the pacer's time then) per advance.
         self.advances: list[tuple[float, float]] = []

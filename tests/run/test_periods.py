@@ -128,9 +128,9 @@ class _SlowPlanner:
 
     def plan(self, q: Any, goal: Any, budget: Any, run: Any) -> Plan:
         """The move once (late); no motion otherwise."""
-        if self.calls or run.sim.t < self.at - 1e-9:
+        if self.calls or run.arm.t < self.at - 1e-9:
             return Plan(None, 0, "holding")
-        self.calls.append(run.sim.t)
+        self.calls.append(run.arm.t)
         budget.charge("ik_iteration", int(2.5 * self.period / 26e-6))
         path = np.vstack([q, q + np.eye(q.size)[0] * 0.05])
         return Plan(path, 1, "moved")
@@ -157,9 +157,9 @@ def test_a_late_plan_from_rest_is_commanded_when_ready_not_discarded(moving) -> 
     timing = scenario.spec.method.timing("ik")
     parts = build_run(scenario, method="ik", clock="virtual")
     if moving:  # a slow motion under way when the late plan is made
-        q0 = parts.sim.q.copy()
+        q0 = parts.arm.q.copy()
         path = np.vstack([q0, q0 + np.eye(q0.size)[6] * 0.4])  # the wrist turns
-        parts.sim.follow(
+        parts.arm.follow(
             time_parameterize(
                 path,
                 0.0,
