@@ -80,6 +80,7 @@ class RobotSetup:
         timeout: the watchdog's limit [s].
         record: where the robot writes its recording if its controller dies
             (None: nowhere).
+        simulator: the physics engine (:data:`cbp.sim.physics.SIMULATORS`).
     """
 
     robot: RobotModel
@@ -90,6 +91,7 @@ class RobotSetup:
     cameras: tuple[CameraSpec, ...] = ()
     timeout: float = COMMAND_TIMEOUT
     record: Path | None = None
+    simulator: str = "pybullet"
 
 
 class ProcessRobot:
@@ -270,7 +272,12 @@ def _child(setup: RobotSetup, conn: Connection) -> None:
 
     try:
         sim = Simulation(
-            setup.robot, setup.objects, setup.q0, setup.settings, setup.folder
+            setup.robot,
+            setup.objects,
+            setup.q0,
+            setup.settings,
+            setup.folder,
+            simulator=setup.simulator,
         )
         robot = SimulatedRobot(sim, setup.cameras, setup.timeout)
     except Exception as exc:  # said to the parent, which raises it

@@ -302,6 +302,7 @@ def _robot(
                 tuple(specs),
                 # Where the robot writes what it did if this process dies.
                 record=Path(tempfile.gettempdir()) / f"cbp-robot-{os.getpid()}.npz",
+                simulator=spec.simulator,
             )
         )
     else:

@@ -64,7 +64,7 @@ def _lockstep(scene: Scenario, simulator: str = "pybullet") -> Iterator[Bench]:
         robot.close()
 
 
-def _process(scene: Scenario) -> Iterator[Bench]:
+def _process(scene: Scenario, simulator: str = "pybullet") -> Iterator[Bench]:
     spec = scene.spec
     robot = ProcessRobot(
         RobotSetup(
@@ -74,6 +74,7 @@ def _process(scene: Scenario) -> Iterator[Bench]:
             spec.simulation,
             scene.path.parent,
             tuple(spec.perception.all_cameras),
+            simulator=simulator,
         )
     )
     robot.start()
@@ -94,10 +95,13 @@ def test_the_robot_in_lockstep_passes(
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("simulator", ["pybullet", "mujoco"])
 @pytest.mark.parametrize("check", CHECKS)
-def test_the_robot_in_its_own_process_passes(scene: Scenario, check: str) -> None:
-    """The simulated robot that runs on its own, in real time."""
-    for bench in _process(scene):
+def test_the_robot_in_its_own_process_passes(
+    scene: Scenario, check: str, simulator: str
+) -> None:
+    """The simulated robot that runs on its own, in real time, either engine."""
+    for bench in _process(scene, simulator):
         CHECKS[check](bench)
 
 
@@ -113,3 +117,16 @@ def test_a_robot_without_a_watchdog_fails_the_stale_brake_check(
             CHECKS["stale_brake"](bench)
     finally:
         robot.close()
+
+
+def test_the_robots_process_builds_the_engine_its_setup_names(
+    scene: Scenario,
+) -> None:
+    """The simulator reaches the robot's process: an unknown one is refused there."""
+    spec = scene.spec
+    setup = RobotSetup(
+        scene.robot, spec.world.objects, scene.q0, spec.simulation,
+        scene.path.parent, simulator="abacus",
+    )  # fmt: skip
+    with pytest.raises(RuntimeError, match=r"did not start: .*unknown: 'abacus'"):
+        ProcessRobot(setup)
