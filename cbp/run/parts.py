@@ -199,6 +199,7 @@ def build_run(
     gui: bool = False,
     goal: GoalSource | None = None,
     needs_world: bool = False,
+    lockstep: bool = False,
 ) -> RunParts:
     """Assemble the parts of a simulated run of ``scenario`` by ``method``.
 
@@ -218,6 +219,8 @@ def build_run(
             reach: :class:`~cbp.run.goal_input.GoalBounds`).
         needs_world: build the collision world even when neither an entry nor
             the method needs one (a session that may switch methods).
+        lockstep: step the simulated robot in the loop even on the wall clock
+            with ``simulation.own_process`` (a live session's wait steps it).
 
     Raises:
         ConfigError: an unknown method, or one that builds no map asked to run
@@ -229,7 +232,7 @@ def build_run(
     row.refuse_source(spec.perception.source, f"{scenario.path}: perception.source")
     use_cameras = spec.perception.source == "depth_camera"
     log = RunLog(method, spec.duration)
-    arm = _robot(scenario, gui, use_cameras, clock, log)
+    arm = _robot(scenario, gui, gui or lockstep, use_cameras, clock, log)
     try:
         world = (
             scenario.world or scenario.new_world()
@@ -281,17 +284,23 @@ def build_run(
 
 
 def _robot(
-    scenario: Scenario, gui: bool, cameras: bool, clock: ClockKind, log: RunLog
+    scenario: Scenario,
+    gui: bool,
+    stepped: bool,
+    cameras: bool,
+    clock: ClockKind,
+    log: RunLog,
 ) -> RobotLink:
     """The run's simulated robot behind the seam, its cameras with it.
 
     In lockstep with the loop, or in its own process on the wall clock with
-    ``simulation.own_process`` (:mod:`cbp.driver.process`).
+    ``simulation.own_process`` (:mod:`cbp.driver.process`) unless it must be
+    ``stepped`` (a window, a live session).
     """
     spec = scenario.spec
     specs = spec.perception.all_cameras if cameras else ()
     driver: SimulatedRobot | ProcessRobot
-    if clock == "wall" and spec.simulation.own_process and not gui:
+    if clock == "wall" and spec.simulation.own_process and not stepped:
         driver = ProcessRobot(
             RobotSetup(
                 scenario.robot,

@@ -173,8 +173,14 @@ class TeleopSession(RunListener):
         stream = self.scenario.goal_stream()
         self.goal = LiveGoal(*self.home, stream.rate_hz if stream else 30.0)
         #: The run's parts: its goal is the operator's, its clock the wall's.
+        # The live loop's wait steps the robot (lockstep even with
+        # simulation.own_process).
         self.parts: RunParts = build_run(
-            self.scenario, method=method, goal=self.goal, needs_world=True
+            self.scenario,
+            method=method,
+            goal=self.goal,
+            needs_world=True,
+            lockstep=True,
         )
         self.scenario = self.parts.scenario  # the run's own binding of it
         try:
