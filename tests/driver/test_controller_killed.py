@@ -26,7 +26,10 @@ PERIOD = 1.0 / 30.0
 
 
 @pytest.mark.slow
-def test_a_killed_controller_leaves_its_robot_braked_at_rest(tmp_path: Path) -> None:
+@pytest.mark.parametrize("simulator", ["pybullet", "mujoco"])
+def test_a_killed_controller_leaves_its_robot_braked_at_rest(
+    tmp_path: Path, simulator: str
+) -> None:
     """SIGKILL while the arm moves: braked within two periods, still after."""
     controller = subprocess.Popen(
         [
@@ -39,6 +42,8 @@ def test_a_killed_controller_leaves_its_robot_braked_at_rest(tmp_path: Path) -> 
             "cat",
             "--set",
             "simulation.own_process=true",
+            "--set",
+            f"simulator={simulator}",
             "--out",
             str(tmp_path / "out"),
         ],
