@@ -132,6 +132,50 @@ def test_a_joint_pushed_into_its_limit_stops_there(
     assert past[-1] < 0.001  # rad; MuJoCo's default soft limit: 0.0037
 
 
+def _cup(folder: Path) -> str:
+    """An OBJ file of an open box, 0.3 x 0.3 x 0.2 m, its centre at its origin."""
+    x, y, z = 0.15, 0.15, 0.1
+    corners = [(a * x, b * y, c * z) for c in (-1, 1) for b in (-1, 1) for a in (-1, 1)]
+    # Bottom and four walls; no top: the cup's inside is open space.
+    quads = [(1, 3, 4, 2), (1, 2, 6, 5), (3, 7, 8, 4), (1, 5, 7, 3), (2, 4, 8, 6)]
+    lines = [f"v {a} {b} {c}" for a, b, c in corners]
+    lines += [f"f {a} {b} {c}\nf {a} {c} {d}" for a, b, c, d in quads]
+    (folder / "cup.obj").write_text("\n".join(lines) + "\n")
+    return "cup.obj"
+
+
+@pytest.mark.parametrize("simulator", SIMULATORS)
+def test_a_concave_mesh_has_an_inside(
+    panda: RobotModel, simulator: str, tmp_path: Path
+) -> None:
+    """The hand held inside an open cup touches nothing: its hull would hold it."""
+    cup = ObjectSpec(
+        name="cup",
+        shape="mesh",
+        file=_cup(tmp_path),
+        pose=Pose(position=(0.307, 0, 0.5)),
+    )
+    with Simulation(
+        panda, [cup], panda.home(), folder=tmp_path, simulator=simulator
+    ) as sim:
+        sim.run_until(0.2)
+        assert sim.recording()["contact_force"].max() == 0.0
+        np.testing.assert_allclose(sim.q, panda.home(), atol=1e-4)
+    # The same cup flattened to 5 cm, its bottom (z 0.5 m) through the fingers.
+    tray = ObjectSpec(
+        name="tray",
+        shape="mesh",
+        file="cup.obj",
+        scale=(1.0, 1.0, 0.25),
+        pose=Pose(position=(0.307, 0, 0.525)),
+    )
+    with Simulation(
+        panda, [tray], panda.home(), folder=tmp_path, simulator=simulator
+    ) as sim:
+        sim.run_until(0.2)
+        assert sim.recording()["wrist_force"].max() > 1.0
+
+
 def _pressed(
     panda: RobotModel, simulator: str, obj: ObjectSpec
 ) -> tuple[np.ndarray, np.ndarray]:

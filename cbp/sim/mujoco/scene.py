@@ -7,9 +7,9 @@ fixed once compiled, so an object that appears or moves during a run
 (:attr:`cbp.scenario.scene.ObjectSpec.dynamic`) is a mocap body from the
 start: parked far below the scene until it appears, then placed where its
 timeline puts it every step (kinematically: it pushes what it hits, as in
-PyBullet). Mesh objects collide as their convex hulls (MuJoCo's mesh
-collision; a flat mesh is refused), where PyBullet takes them as concave
-triangle meshes.
+PyBullet). A mesh object that is not convex is one thin convex piece per
+triangle (:mod:`cbp.sim.mujoco.meshes`): concave, as PyBullet and the
+collision world take it.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import pinocchio as pin
 from cbp.errors import ConfigError
 from cbp.robot import FloatArray, RobotModel
 from cbp.scenario.scene import ObjectSpec, SimulationSettings
+from cbp.sim.mujoco.meshes import mesh_pieces
 from cbp.sim.mujoco.robot_spec import robot_spec
 
 __all__ = ["OBJECT_PREFIX", "PARKED", "MujocoScene"]
@@ -40,7 +41,6 @@ _SHAPES = {
     "box": mujoco.mjtGeom.mjGEOM_BOX,
     "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
     "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
-    "mesh": mujoco.mjtGeom.mjGEOM_MESH,
 }
 
 
@@ -117,22 +117,27 @@ class MujocoScene:
             pos=placement.translation,
             quat=_wxyz(placement.rotation),
         )
-        geom = body.add_geom(
-            type=_SHAPES[obj.shape], friction=[friction * friction, 0.005, 0.0001]
-        )
+        sliding = [friction * friction, 0.005, 0.0001]
+        if obj.shape == "mesh":
+            path = (self.folder / obj.file).resolve()
+            for k, piece in enumerate(mesh_pieces(path, obj.scale)):
+                mesh = spec.add_mesh(
+                    name=f"{OBJECT_PREFIX}{obj.name}/{k}",
+                    uservert=piece.ravel().tolist(),
+                )
+                body.add_geom(
+                    type=mujoco.mjtGeom.mjGEOM_MESH,
+                    meshname=mesh.name,
+                    friction=sliding,
+                )
+            return
+        geom = body.add_geom(type=_SHAPES[obj.shape], friction=sliding)
         if obj.shape == "box":
             geom.size = [0.5 * s for s in obj.size]
         elif obj.shape == "sphere":
             geom.size = [obj.size[0], 0.0, 0.0]
-        elif obj.shape == "cylinder":
-            geom.size = [obj.size[0], 0.5 * obj.size[1], 0.0]
         else:
-            mesh = spec.add_mesh(
-                name=OBJECT_PREFIX + obj.name,
-                file=str((self.folder / obj.file).resolve()),
-                scale=list(obj.scale),
-            )
-            geom.meshname = mesh.name
+            geom.size = [obj.size[0], 0.5 * obj.size[1], 0.0]
 
     def place_base(self, x: float, y: float, yaw: float) -> None:
         """Put a moving base (a mocap body) at (x, y) [m] turned by ``yaw`` [rad]."""
