@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from benchmarks.perception_tax import CAT_SCENES
 from cbp.errors import ConfigError
 from cbp.executors import load_executor
 from cbp.metrics import run_metrics
@@ -319,3 +320,23 @@ def test_cat_reaches_the_free_step_goal_without_contact(simulator: str) -> None:
     metrics = run_metrics(trace, scenario.robot)
     assert metrics["reached"]
     assert metrics["peak_contact_force_n"] == 0.0
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(NO_MUJOCO, reason="the mujoco extra")
+@pytest.mark.parametrize("scene", CAT_SCENES)
+def test_a_paper_scene_ends_alike_on_both_engines(scene: str) -> None:
+    """CAT with the declared objects: the same outcome, at 0 N, on the same path."""
+    runs = {}
+    for simulator in ("pybullet", "mujoco"):
+        scenario = load_virtual(
+            ROOT / "scenarios" / f"cat_{scene}.yaml", {"simulator": simulator}
+        )
+        trace = load_executor("cat")(scenario, False)
+        runs[simulator] = (trace, run_metrics(trace, scenario.robot))
+    (bullet, a), (mujoco, b) = runs["pybullet"], runs["mujoco"]
+    assert a["reached"] == b["reached"]
+    assert a["peak_contact_force_n"] == b["peak_contact_force_n"] == 0.0
+    assert abs(a["final_position_error_m"] - b["final_position_error_m"]) < 1e-4
+    n = min(len(bullet.q), len(mujoco.q))
+    assert np.abs(bullet.q[:n] - mujoco.q[:n]).max() < 1e-6  # rad; measured 1e-9
