@@ -30,7 +30,8 @@ def test_bench_runs_every_row_and_writes_results(tmp_path: Path) -> None:
     assert any(c.startswith("placo") for c in cases)
     assert any(c.startswith("hand-written") for c in cases)
     assert all(row["median_us"] > 0 for row in result["rows"])
-    assert len(result["profile_cat_step"]) == 3
+    # A sampling profile: on a busy machine fewer than three places may show.
+    assert 1 <= len(result["profile_cat_step"]) <= 3
     path = tmp_path / "RESULTS.md"
     write_results(result, path, "cbp bench --results RESULTS.md")
     text = path.read_text()
