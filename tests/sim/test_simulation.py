@@ -10,7 +10,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from benchmarks.perception_tax import CAT_SCENES
 from cbp.errors import ConfigError
 from cbp.executors import load_executor
 from cbp.metrics import run_metrics
@@ -322,9 +321,14 @@ def test_cat_reaches_the_free_step_goal_without_contact(simulator: str) -> None:
     assert metrics["peak_contact_force_n"] == 0.0
 
 
+#: Three of the paper's scenes, for CI's time: one reached through boards, one
+#: that stops short, one among shelves (docs/simulators.md has all eight).
+ALIKE = ("boards", "local_minimum", "shelf_retreat")
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(NO_MUJOCO, reason="the mujoco extra")
-@pytest.mark.parametrize("scene", CAT_SCENES)
+@pytest.mark.parametrize("scene", ALIKE)
 def test_a_paper_scene_ends_alike_on_both_engines(scene: str) -> None:
     """CAT with the declared objects: the same outcome, at 0 N, on the same path."""
     runs = {}
