@@ -216,11 +216,11 @@ def _blind_after(monkeypatch, t_blind: float, kind: str) -> None:
     clock = {"t": 0.0}
     from cbp.sim.simulation import Simulation
 
-    run_until = Simulation.run_until
+    step = Simulation.step
 
-    def tracking(self, t_end):
-        clock["t"] = t_end
-        return run_until(self, t_end)
+    def tracking(self):
+        step(self)
+        clock["t"] = self.t
 
     last: dict[str, DepthFrame] = {}
 
@@ -247,7 +247,7 @@ def _blind_after(monkeypatch, t_blind: float, kind: str) -> None:
             depth, frame.view, frame.projection, frame.near, frame.far, frame.camera
         )
 
-    monkeypatch.setattr(Simulation, "run_until", tracking)
+    monkeypatch.setattr(Simulation, "step", tracking)
     monkeypatch.setattr(DepthCamera, "capture", faulty)
 
 
