@@ -23,7 +23,7 @@ import pinocchio as pin
 from cbp.collision.contacts import ContactSet
 from cbp.collision.convex_kernels import RobotTable
 from cbp.collision.geometry import LinkShape, PlacedShapes
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, IntArray
 
 __all__ = ["Environment", "NarrowPhase", "WholeQuery", "signed_distance"]
 
@@ -84,6 +84,10 @@ class WholeQuery(NamedTuple):
     """Self pairs nearer than this are reported [m]."""
     self_padding: float
     """Subtracted from the self pairs' distances [m]."""
+    moving: IntArray | None = None
+    """The shapes whose obstacle contacts are wanted, by index: a map's
+    contacts on the shapes no joint moves (a fixed base on the floor) are
+    left out (:meth:`Environment.query_with_self`); None: every shape's."""
 
 
 class Environment(abc.ABC):
@@ -124,7 +128,8 @@ class Environment(abc.ABC):
         Obstacle contacts (as :meth:`query` with the compiled narrow phase,
         distances less ``whole.padding``) and the self contacts of the table's
         pairs within ``whole.self_margin`` (distances less
-        ``whole.self_padding``), stacked as :meth:`ContactSet.stack` does.
+        ``whole.self_padding``), stacked as :meth:`ContactSet.stack` does;
+        with ``whole.moving``, obstacle contacts on those shapes only.
         None (the default): the world queries the environment and the self
         pairs apart.
         """

@@ -25,7 +25,7 @@ from cbp.collision.convex_kernels import contact_buffers, self_contacts
 from cbp.collision.environment import Environment, NarrowPhase, WholeQuery
 from cbp.collision.geometry import LinkShape, PlacedShapes, ShapePlacements
 from cbp.collision.shape_table import CellContactQuery, ShapeTable, compile_kernels
-from cbp.robot import FloatArray
+from cbp.robot import FloatArray, IntArray
 
 __all__ = ["BlockedGrid", "MetaballRefiner", "OccupancyEnvironment"]
 
@@ -263,39 +263,53 @@ class OccupancyEnvironment(Environment):
         """
         if type(self).query is not OccupancyEnvironment.query:
             return None
-        frames, table = whole.frames, whole.table
-        own = ContactSet.empty()
-        if len(table.first):
+        frames, table, moving = whole.frames, whole.table, whole.moving
+        pairs = len(table.first)
+        own = 0
+        if pairs:
             centres_local, halves_local, radii, packed = table.bounds
             n = len(frames)
             centres, halves = np.empty((n, 3)), np.empty((n, 3))
             shape_bounds(frames, centres_local, halves_local, centres, halves)
-            index, floats, left = contact_buffers(len(table.first))
-            count, missed = self_contacts(
+            own_index, own_floats, left = contact_buffers(pairs)
+            own, missed = self_contacts(
                 (centres, halves, radii, frames, packed),
                 table.pairs(float(whole.self_margin), float(whole.self_padding)),
-                index,
-                floats,
+                own_index,
+                own_floats,
                 left,
             )
             if missed:
                 return None
-            own = ContactSet.packed(index, floats, 0, count)
-        found = self._cells(
-            whole.shapes, _Frames(frames), whole.margin, whole.per_shape
-        )
-        return ContactSet.stack(found, whole.padding, own)
+        # The cells' contacts first, then the self contacts, in one buffer:
+        # the set and its two parts are views of it (as ContactSet.stack).
+        query = self._bound(whole.shapes, whole.margin, whole.per_shape, moving)
+        index, floats, _ = contact_buffers((query.room if query else 0) + own)
+        count = 0
+        if query is not None:
+            count = query.into(
+                _Frames(frames if moving is None else frames[moving]),
+                index[0],
+                floats,
+            )
+            self._finish(index[0, :count], floats[:, :count], moving)
+            index[1, :count] = -1
+            floats[3, :count, 0] -= whole.padding
+        if own:
+            index[:, count : count + own] = own_index[:, :own]
+            floats[:, count : count + own] = own_floats[:, :own]
+        return ContactSet.packed(index, floats, count, count + own)
 
-    def _cells(
+    def _bound(
         self,
         shapes: list[LinkShape],
-        placements: ShapePlacements,
         margin: float,
         per_shape: int,
-    ) -> ContactSet:
-        """The cells' contacts of ``shapes`` at ``placements`` (:meth:`query`)."""
+        moving: IntArray | None,
+    ) -> CellContactQuery | None:
+        """The compiled query of ``shapes`` (those of ``moving``); None: no cells."""
         if not len(self.centres):
-            return ContactSet.empty()
+            return None
         refiner = self.refiner
         metaball = refiner if isinstance(refiner, MetaballRefiner) else None
         # The query bound to the last shapes and settings, kept as one tuple
@@ -307,14 +321,15 @@ class OccupancyEnvironment(Environment):
             or margin != last[1]
             or per_shape != last[2]
             or refiner is not last[3]
+            or moving is not last[4]
         ):
             # On the shape's surface, on the cell toward the shape, the normal
             # from the cell toward the shape; a few per shape, spread over
             # directions; a metaball refinement in the same compiled call,
-            # another after it.
-            table = ShapeTable.for_shapes(shapes, self.table_reach(margin))
+            # another after it (:meth:`_finish`).
+            measured = shapes if moving is None else [shapes[i] for i in moving]
             query = CellContactQuery(
-                table,
+                ShapeTable.for_shapes(measured, self.table_reach(margin)),
                 self.index,
                 margin,
                 per_shape,
@@ -327,18 +342,49 @@ class OccupancyEnvironment(Environment):
                     metaball.offset_cells * self.cell,
                 ),
             )
-            self._last_query = ((shapes, margin, per_shape, refiner), query)
-        hits = query(placements)
-        if not len(hits.shape):
-            return ContactSet.empty()
-        normal = hits.normal
-        if refiner is not None and metaball is None:
-            normal = refiner.refine(self.index, hits.obstacle, normal)
-        distance = hits.distance
+            self._last_query = ((shapes, margin, per_shape, refiner, moving), query)
+        return query
+
+    def _finish(
+        self, shape: IntArray, floats: FloatArray, moving: IntArray | None
+    ) -> None:
+        """A query's contacts (:meth:`CellContactQuery.into`) as reported, in place.
+
+        The shapes by their index among all (``moving``: the measured ones'),
+        normals refined by a refiner other than the metaball, distances
+        ``nearer``.
+        """
+        if moving is not None:
+            shape[:] = moving[shape]
+        refiner = self.refiner
+        metaball = refiner if isinstance(refiner, MetaballRefiner) else None
+        if refiner is not None and metaball is None:  # the metaball's is done
+            floats[2] = refiner.refine(self.index, floats[1], floats[2])
         if self.nearer is not None:
-            distance = distance - self.nearer[hits.shape]
+            floats[3, :, 0] -= self.nearer[shape]
+
+    def _cells(
+        self,
+        shapes: list[LinkShape],
+        placements: ShapePlacements,
+        margin: float,
+        per_shape: int,
+    ) -> ContactSet:
+        """The cells' contacts of ``shapes`` at ``placements`` (:meth:`query`)."""
+        query = self._bound(shapes, margin, per_shape, None)
+        if query is None:
+            return ContactSet.empty()
+        index, floats, _ = contact_buffers(query.room)
+        count = query.into(placements, index[0], floats)
+        if not count:
+            return ContactSet.empty()
+        self._finish(index[0, :count], floats[:, :count], None)
         return ContactSet.obstacles(
-            hits.shape, hits.robot, hits.obstacle, normal, distance
+            index[0, :count],
+            floats[0, :count],
+            floats[1, :count],
+            floats[2, :count],
+            floats[3, :count, 0],
         )
 
     def clearance(self, points: FloatArray) -> FloatArray:

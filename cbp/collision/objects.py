@@ -243,12 +243,13 @@ class PrimitiveEnvironment(Environment):
     def query_with_self(self, whole: WholeQuery) -> ContactSet | None:
         """The whole query in one compiled pass (:func:`declared_contacts`).
 
-        None for scenes so large that a k-d tree picks the objects first.
+        None for scenes so large that a k-d tree picks the objects first, and
+        for a query of some shapes' obstacle contacts only (``whole.moving``).
         """
-        if len(self.objects) > TREE_MIN_OBJECTS:
+        if len(self.objects) > TREE_MIN_OBJECTS or whole.moving is not None:
             return None
         frames, table, shapes, margin, per_shape, padding, self_margin, self_padding = (
-            whole
+            whole[:8]
         )
         candidates = self._all
         capacity = len(frames) * len(candidates) + len(table.first)

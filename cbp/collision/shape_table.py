@@ -353,7 +353,7 @@ class CellContactQuery:
     Holds no state between calls, so threads may share it.
     """
 
-    __slots__ = ("_leading", "_room", "_trailing")
+    __slots__ = ("_leading", "_trailing", "room")
 
     def __init__(
         self,
@@ -382,17 +382,29 @@ class CellContactQuery:
             float(offset),
             table.capacity,
         )
-        self._room = min(table.capacity, max(per_shape, 1) * len(table.kind))
+        #: The most contacts a query gives (``per_shape`` per shape).
+        self.room = min(table.capacity, max(per_shape, 1) * len(table.kind))
 
     def __call__(self, placements: list[pin.SE3]) -> Contacts:
         """The contacts of the shapes at ``placements`` (table order)."""
-        room = self._room
+        room = self.room
         shape = np.empty(room, dtype=np.intp)
         floats = np.empty((4, room, 3))
-        count = cell_contacts_flat(
-            *self._leading, _frames(placements), *self._trailing, shape, floats
+        return Contacts.packed(shape, floats, self.into(placements, shape, floats))
+
+    def into(
+        self, placements: list[pin.SE3], shape: IntArray, floats: FloatArray
+    ) -> int:
+        """Write the contacts to ``shape`` (K,) and ``floats`` (4, K, 3); count them.
+
+        As :meth:`__call__` gives them (:meth:`Contacts.packed`'s layout);
+        both C-contiguous, with room for :attr:`room` contacts.
+        """
+        return int(
+            cell_contacts_flat(
+                *self._leading, _frames(placements), *self._trailing, shape, floats
+            )
         )
-        return Contacts.packed(shape, floats, count)
 
 
 def _frames(placements: list[pin.SE3]) -> FloatArray:

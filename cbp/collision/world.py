@@ -112,6 +112,8 @@ class CollisionWorld:
         #: :meth:`~cbp.scenario.runtime.Scenario.environment_objects`.)
         fixed = geometry.robot.fixed_links()
         self._fixed = np.array([s.link in fixed for s in geometry.shapes], dtype=bool)
+        #: The others, by index, or None when every shape moves.
+        self._moving = np.flatnonzero(~self._fixed) if self._fixed.any() else None
         self._geometry_model = geometry.geometry_model()
         self._geometry_data = pin.GeometryData(self._geometry_model)
         # Bounding-sphere (and box) centres in the shapes' own frames, (n, 3).
@@ -396,6 +398,9 @@ class CollisionWorld:
         settings = self.settings
         if settings.narrow_phase == "compiled":
             pad2 = 2.0 * self.padding
+            # A map's contacts on the shapes no joint moves are not wanted
+            # (:meth:`_moving_part`): the map leaves them out.
+            moving = self._moving if environment.resolution > 0.0 else None
             found = environment.query_with_self(
                 WholeQuery(
                     frames=self.shape_frames(state),
@@ -406,10 +411,15 @@ class CollisionWorld:
                     padding=self.padding + environment.resolution,
                     self_margin=settings.activation_distance + pad2,
                     self_padding=pad2,
+                    moving=moving,
                 )
             )
             if found is not None:
-                return self._moving_part(found, environment)
+                return (
+                    found
+                    if moving is not None
+                    else self._moving_part(found, environment)
+                )
         robot = self.placed(state)
         margin, per_shape = self.margin(environment), settings.contacts_per_link
         # The default is not passed: an environment written before the setting

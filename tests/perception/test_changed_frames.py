@@ -153,16 +153,26 @@ def test_the_map_query_with_the_self_pairs_is_the_world_query_apart() -> None:
         def query_with_self(self, *args: object, **kwargs: object) -> None:
             return None
 
-    apart = Apart.__new__(Apart)
-    apart.__dict__.update(env.__dict__)
+    # Obstacles measured nearer by shape (a snapshot of moving cells).
+    nearer = np.linspace(0.0, 0.01, len(world.geometry.shapes))
+    pairs = []
+    for snapshot in (env, env.ahead(nearer)):
+        apart = Apart.__new__(Apart)
+        apart.__dict__.update(snapshot.__dict__)
+        pairs.append((snapshot, apart))
     rng = np.random.default_rng(3)
-    total = 0
-    for _ in range(40):
+    total = on_base = 0
+    for k in range(40):
         q = data["q5"] + rng.normal(0.0, 0.15, len(data["q5"]))
         state.update(q)
-        one = world.query(state, env)
+        snapshot, apart = pairs[k % 2]
+        one = world.query(state, snapshot)
         two = world.query(state, apart)
         total += len(one)
+        # The fixed base touches the table's cells: those contacts are left out.
+        found = snapshot.query(world.placed(state), world.margin(snapshot), 3)
+        on_base += int(np.count_nonzero(found.shape == 0))
+        assert not np.any((one.shape == 0) & (one.other_shape < 0))
         assert np.array_equal(one.shape, two.shape)
         assert np.array_equal(one.other_shape, two.other_shape)
         for name in ("point", "other_point", "normal", "distance"):
@@ -170,3 +180,4 @@ def test_the_map_query_with_the_self_pairs_is_the_world_query_apart() -> None:
                 getattr(one, name), getattr(two, name), atol=1e-9, err_msg=name
             )
     assert total > 40
+    assert on_base > 40  # the base's contacts were there to leave out
