@@ -129,12 +129,15 @@ def check_stale_brake(bench: Bench) -> None:
     assert moving > 0.2 * speed, f"the arm did not move ({moving:.3f})"
     silent_at = driver.now()
     bench.wait(0.5)  # no command: the watchdog brakes
-    faults = [f for f in driver.faults() if f.kind == "stale_command"]
-    assert faults, "no stale-command fault"
+    said = driver.faults()
+    faults = [f for f in said if f.kind == "stale_command"]
+    assert faults, f"no stale-command fault (faults: {said})"
     assert faults[0].stamp - silent_at <= COMMAND_TIMEOUT + 0.01, (
         f"braked {faults[0].stamp - silent_at:.3f} s after the last command"
     )
-    assert _at_rest(bench), f"still moving: {driver.state().v}"
+    assert _at_rest(bench), (
+        f"still moving: {driver.state().v} (faults: {said + driver.faults()})"
+    )
     q = driver.state().q.copy()
     bench.wait(0.3)
     assert float(np.max(np.abs(driver.state().q - q))) < 1e-3, "it moved after"

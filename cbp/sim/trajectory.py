@@ -200,9 +200,11 @@ def time_parameterize(
         ``v0`` within the acceleration limits (the caller keeps its previous
         trajectory, which does stop).
     """
-    # Contiguous, as the compiled passes are compiled for (once, on import).
-    path = np.ascontiguousarray(path, dtype=float)
-    v0 = np.ascontiguousarray(v0, dtype=float)
+    # Writeable contiguous copies, as the compiled passes are compiled for
+    # (once, on import): a read-only array (a robot's limits) is another type
+    # to numba, and compiled it for 1.7 s in the first brake of a fresh run.
+    path = np.array(path, dtype=float, order="C")
+    v0 = np.array(v0, dtype=float)
     path = _moved(path)  # without repeated points (steps that did not move)
     if len(path) < 2:
         if np.any(np.abs(v0) > 1e-9):
@@ -212,9 +214,9 @@ def time_parameterize(
         path,
         float(t0),
         v0,
-        np.ascontiguousarray(a0, dtype=float),
-        np.ascontiguousarray(max_velocity, dtype=float),
-        np.ascontiguousarray(max_acceleration, dtype=float),
+        np.array(a0, dtype=float),
+        np.array(max_velocity, dtype=float),
+        np.array(max_acceleration, dtype=float),
         _start_speed(v0, path[1] - path[0]),
     )
     if timed is None:
