@@ -21,17 +21,13 @@ from typing import Protocol, runtime_checkable
 
 from cbp.driver import HEARTBEAT, CameraFrame, Command, Fault, JointState, RobotDriver
 from cbp.robot import FloatArray
-from cbp.sim.trajectory import JointTrajectory
+from cbp.sim.trajectory import TRAJECTORY_HISTORY, JointTrajectory
 
 __all__ = ["LIVENESS", "Heartbeat", "Lockstep", "Recorded", "RobotLink", "Started"]
 
 #: A loop that gives no sign of life for this long is hung: the heartbeat
 #: stops, and the robot's watchdog brakes the arm [s].
 LIVENESS = 1.0
-
-#: The commanded trajectory's past kept by the link [s] (executors look back
-#: along the way the arm came, not further).
-TRAJECTORY_HISTORY = 1.0
 
 #: While waiting for a robot's clock, the link sleeps at most this long [s].
 WAIT_STEP = 0.002
@@ -153,18 +149,9 @@ class RobotLink:
         return self._state.q
 
     @property
-    def v(self) -> FloatArray:
-        """The joint velocities last measured."""
-        return self._state.v
-
-    @property
     def contact_force(self) -> float:
         """The contact force the robot last measured [N]."""
         return self._state.force
-
-    def state(self) -> JointState:
-        """The state last measured."""
-        return self._state
 
     def follow(self, trajectory: JointTrajectory, source: float | None = None) -> None:
         """Command ``trajectory`` from now on.

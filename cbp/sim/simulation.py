@@ -37,7 +37,7 @@ from cbp.scenario.scene import ObjectSpec, SimulationSettings
 from cbp.sim.bullet_access import PybulletAccess
 from cbp.sim.physics import Physics, make_physics
 from cbp.sim.recorder import Recorder
-from cbp.sim.trajectory import JointTrajectory
+from cbp.sim.trajectory import TRAJECTORY_HISTORY, JointTrajectory
 
 __all__ = ["ContactSample", "Simulation", "TorqueController"]
 
@@ -60,10 +60,6 @@ class ContactSample:
     force: float = 0.0
     penetration: float = 0.0
     wrist_force: float = 0.0
-
-
-#: How much of the followed trajectory's past is kept [s].
-TRAJECTORY_HISTORY = 1.0
 
 
 class Simulation(PybulletAccess):
@@ -132,9 +128,9 @@ class Simulation(PybulletAccess):
     def follow(self, trajectory: JointTrajectory) -> None:
         """Track ``trajectory`` with the joint impedance law from now on.
 
-        Points older than :data:`TRAJECTORY_HISTORY` are dropped (executors
-        look back along the way the arm came, not further): the trajectory
-        stays bounded over a long run.
+        Points older than :data:`~cbp.sim.trajectory.TRAJECTORY_HISTORY` are
+        dropped (executors look back along the way the arm came, not further):
+        the trajectory stays bounded over a long run.
         """
         self._trajectory = trajectory.since(self.t - TRAJECTORY_HISTORY)
         self._torque = None

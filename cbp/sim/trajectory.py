@@ -33,6 +33,11 @@ __all__ = [
 ]
 
 
+#: How much of a followed trajectory's past is kept [s]: executors look back
+#: along the way the arm came, not further (:meth:`JointTrajectory.since`).
+TRAJECTORY_HISTORY = 1.0
+
+
 class SpliceError(ValueError):
     """A trajectory cannot be spliced in: it is discontinuous or starts in the past."""
 
