@@ -26,7 +26,9 @@ SIMULATORS = [
     "pybullet",
     pytest.param(
         "mujoco",
-        marks=pytest.mark.skipif(NO_MUJOCO, reason="needs the mujoco extra: pip install -e '.[mujoco]'"),
+        marks=pytest.mark.skipif(
+            NO_MUJOCO, reason="needs the mujoco extra: pip install -e '.[mujoco]'"
+        ),
     ),
 ]
 #: A box under the home pose's hand: its top face at z = 0.45 m.
@@ -216,7 +218,9 @@ def test_a_moving_object_moves(panda: RobotModel, simulator: str) -> None:
     assert force[t > 0.35].min() > 0.0
 
 
-@pytest.mark.skipif(NO_MUJOCO, reason="needs the mujoco extra: pip install -e '.[mujoco]'")
+@pytest.mark.skipif(
+    NO_MUJOCO, reason="needs the mujoco extra: pip install -e '.[mujoco]'"
+)
 def test_mujoco_places_links_where_pinocchio_does(panda: RobotModel) -> None:
     """Every link (the welded fingers too) where the engine's model puts it at q."""
     from cbp.sim.mujoco.physics import MujocoPhysics
@@ -241,7 +245,9 @@ def test_mujoco_places_links_where_pinocchio_does(panda: RobotModel) -> None:
         )
 
 
-@pytest.mark.skipif(NO_MUJOCO, reason="needs the mujoco extra: pip install -e '.[mujoco]'")
+@pytest.mark.skipif(
+    NO_MUJOCO, reason="needs the mujoco extra: pip install -e '.[mujoco]'"
+)
 def test_every_engine_in_the_table_has_what_its_simulation_calls() -> None:
     """Each ``module:class`` of SIMULATORS imports and has its protocol's methods."""
     import importlib
@@ -327,7 +333,9 @@ ALIKE = ("boards", "local_minimum", "shelf_retreat")
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(NO_MUJOCO, reason="needs the mujoco extra: pip install -e '.[mujoco]'")
+@pytest.mark.skipif(
+    NO_MUJOCO, reason="needs the mujoco extra: pip install -e '.[mujoco]'"
+)
 @pytest.mark.parametrize("scene", ALIKE)
 def test_a_paper_scene_ends_alike_on_both_engines(scene: str) -> None:
     """CAT with the declared objects: the same outcome, at 0 N, on the same path."""
